@@ -1,0 +1,352 @@
+"""The ``bounce`` command line: thin wrappers that load a config, call an experiment or the
+engine, and write or print the result. No numerics here.
+
+User errors (bad YAML, unknown keys, out-of-range values, parameters without a fixed point,
+an output directory holding another config's results) print ONE line to stderr and exit 2.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from . import __version__
+from .artifacts import OutputDirError, RunDirectory
+from .config import (
+    ConfigError,
+    ModelOnlyConfig,
+    apply_overrides,
+    bundled_config_path,
+    load_config,
+    parse_override,
+    read_yaml,
+    to_yaml,
+    validate,
+)
+from .engine import ModelError, ModelParams, iterate_orbit, stability, wrap_phase
+from .experiments.base import Experiment, RunOptions
+
+USER_ERRORS = (ConfigError, ModelError, OutputDirError)
+
+app = typer.Typer(
+    name="bounce",
+    help="Reproduce the experiments of the ball bouncing map paper from YAML configs.",
+    no_args_is_help=True,
+    add_completion=False,
+    pretty_exceptions_enable=False,
+    context_settings={"help_option_names": ["-h", "--help"]},
+)
+stderr = Console(stderr=True)
+
+
+def fail(message: str) -> None:
+    """Print one line ``bounce: error: ...`` on stderr and exit 2."""
+    print(f"bounce: error: {message}", file=sys.stderr)
+    raise typer.Exit(code=2)
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"bounce {__version__}")
+        raise typer.Exit()
+
+
+@app.callback()
+def main_callback(
+    version: Annotated[
+        bool,
+        typer.Option("--version", callback=_version, is_eager=True, help="Show the version."),
+    ] = False,
+) -> None:
+    """Reproduce the experiments of the ball bouncing map paper from YAML configs."""
+
+
+# -- options shared by every command ---------------------------------------------------------
+ConfigOption = Annotated[
+    Optional[Path],
+    typer.Option(
+        "--config", "-c", help="YAML config (default: the bundled config of the paper's figure)."
+    ),
+]
+SetOption = Annotated[
+    Optional[list[str]],
+    typer.Option(
+        "--set",
+        "-s",
+        help="Override a config value: dotted.key=value (YAML scalar); repeatable.",
+        metavar="KEY=VALUE",
+    ),
+]
+OutOption = Annotated[
+    Optional[Path], typer.Option("--out", "-o", help="Output directory (default results/<name>).")
+]
+QuietOption = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or summary.")]
+ForceOption = Annotated[
+    bool, typer.Option("--force", help="Replace results of a different config in --out.")
+]
+PrintConfigOption = Annotated[
+    bool, typer.Option("--print-config", help="Print the resolved config as YAML and exit.")
+]
+JobsOption = Annotated[
+    Optional[int],
+    typer.Option("--jobs", "-j", help="Worker processes (default: all cores).", min=1),
+]
+
+
+class RichProgress:
+    """Progress bar on stderr (rich); shown only while work is under way."""
+
+    def __init__(self) -> None:
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            Progress,
+            TextColumn,
+            TimeElapsedColumn,
+            TimeRemainingColumn,
+        )
+
+        self._progress = Progress(
+            TextColumn("{task.description}"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            TimeRemainingColumn(),
+            console=stderr,
+            transient=True,
+        )
+        self._task = None
+
+    def start(self, total: int, description: str) -> None:
+        if self._task is None:
+            self._progress.start()
+            self._task = self._progress.add_task(description, total=total)
+        else:
+            self._progress.reset(self._task, total=total, description=description)
+
+    def advance(self, n: int = 1) -> None:
+        if self._task is not None:
+            self._progress.advance(self._task, n)
+
+    def stop(self) -> None:
+        self._progress.stop()
+
+
+def resolve_config_path(config: Path | None, name: str) -> Path:
+    return config if config is not None else bundled_config_path(name)
+
+
+def run_experiment(
+    experiment: Experiment,
+    *,
+    config: Path | None,
+    overrides: list[str] | None,
+    out: Path | None,
+    quiet: bool,
+    force: bool,
+    print_config: bool,
+    jobs: int | None = None,
+) -> None:
+    """Load and validate the config, run the experiment, write its files atomically."""
+    overrides = list(overrides or [])
+    try:
+        path = resolve_config_path(config, experiment.name)
+        cfg = load_config(experiment.schema, path, overrides)
+        if print_config:
+            typer.echo(to_yaml(cfg), nl=False)
+            return
+        cfg.params.fixed_point()  # every experiment needs the period-1 fixed point
+        name = path.stem if config is not None else experiment.name
+        run_dir = RunDirectory(
+            out if out is not None else Path("results") / name,
+            command=experiment.name,
+            resolved_config=cfg.model_dump(mode="json"),
+            overrides=overrides,
+            config_path=str(path),
+            seed=getattr(cfg, "seed", None),
+            force=force,
+        )
+        progress = RichProgress() if not quiet else None
+        options = RunOptions(jobs=jobs or os.cpu_count() or 1)
+        if progress is not None:
+            options.progress = progress
+        try:
+            result = experiment.run(cfg, options)
+        finally:
+            if progress is not None:
+                progress.stop()
+        for name_, frame in result.frames.items():
+            run_dir.add_csv(name_, frame)
+        for name_, figure in result.figures.items():
+            run_dir.add_figure(name_, figure)
+        written = run_dir.commit()
+    except USER_ERRORS as exc:
+        fail(str(exc))
+        return
+    if not quiet:
+        for line in result.summary:
+            stderr.print(line, highlight=False)
+        stderr.print(
+            f"wrote {len(written)} files to {run_dir.out_dir}/: "
+            + ", ".join(p.name for p in written),
+            highlight=False,
+        )
+
+
+# -- engine commands ------------------------------------------------------------------------
+def load_model(config: Path | None, overrides: list[str] | None) -> ModelParams:
+    """The ``model`` block of a config (any experiment's; other blocks are ignored here)."""
+    path = resolve_config_path(config, "model")
+    overrides = list(overrides or [])
+    for text in overrides:
+        keys, _ = parse_override(text)
+        if keys[0] != "model":
+            raise ConfigError(f"--set {'.'.join(keys)}: this command only uses the model block")
+    data = apply_overrides(read_yaml(path), overrides)
+    cfg = validate(ModelOnlyConfig, {"model": data.get("model") or {}}, str(path), overrides)
+    params = cfg.params
+    params.fixed_point()
+    return params
+
+
+def _model_or_fail(config: Path | None, overrides: list[str] | None) -> ModelParams:
+    try:
+        return load_model(config, overrides)
+    except USER_ERRORS as exc:
+        fail(str(exc))
+        raise  # unreachable
+
+
+def fixed_point_report(params: ModelParams) -> dict:
+    fp = params.fixed_point()
+    st = stability(params)
+    return {
+        "v_m_s": fp.v_m_s,
+        "theta_rad": fp.theta_rad,
+        "theta_deg": fp.theta_deg,
+        "ac_g": st.ac_g,
+        "eigenvalues": [[lam.real, lam.imag] for lam in st.eigenvalues],
+        "spectral_radius": st.spectral_radius,
+        "regime": st.regime,
+        "stable": st.stable,
+    }
+
+
+@app.command("fixed-point")
+def fixed_point_command(
+    config: ConfigOption = None,
+    overrides: SetOption = None,
+    as_json: Annotated[bool, typer.Option("--json", help="Print a JSON object.")] = False,
+) -> None:
+    """Period-1 fixed point (eqs. 7, 8), racket acceleration AC, eigenvalues (eq. 10)."""
+    params = _model_or_fail(config, overrides)
+    report = fixed_point_report(params)
+    if as_json:
+        typer.echo(json.dumps(report, indent=2))
+        return
+    table = Table(title="Period-1 fixed point", show_header=True)
+    table.add_column("quantity")
+    table.add_column("value", justify="right")
+    lam = report["eigenvalues"]
+    rows = [
+        ("alpha, g, a_r, tau", f"{params.alpha:g}, {params.g:g} m/s^2, "
+         f"{params.racket_amplitude:g} m, {params.racket_period:g} s"),
+        ("v~ (eq. 7)", f"{report['v_m_s']:.4f} m/s"),
+        ("theta~ (eq. 8)", f"{report['theta_deg']:.3f} deg = {report['theta_rad']:.5f} rad"),
+        ("AC (racket acceleration at impact)", f"{report['ac_g']:.4f} g"),
+        ("lambda+ (eq. 10)", f"{lam[0][0]:.4f} {lam[0][1]:+.4f}i"),
+        ("lambda- (eq. 10)", f"{lam[1][0]:.4f} {lam[1][1]:+.4f}i"),
+        ("spectral radius", f"{report['spectral_radius']:.4f}"),
+        ("regime", report["regime"]),
+        ("stable", "yes" if report["stable"] else "no"),
+    ]
+    for key, value in rows:
+        table.add_row(key, value)
+    Console().print(table)
+
+
+@app.command("orbit")
+def orbit_command(
+    theta0_deg: Annotated[
+        float, typer.Option("--theta0-deg", help="Phase at which the ball leaves the racket, deg.")
+    ],
+    v0: Annotated[float, typer.Option("--v0", help="Ball velocity leaving the racket, m/s.")],
+    n_impacts: Annotated[int, typer.Option("-n", "--impacts", min=1, help="Impacts.")] = 20,
+    sticking_interval: Annotated[
+        float,
+        typer.Option("--sticking-interval", min=0.0, help="Stop when a hop is shorter, s."),
+    ] = 1e-3,
+    config: ConfigOption = None,
+    overrides: SetOption = None,
+    as_csv: Annotated[bool, typer.Option("--csv", help="Write CSV to stdout.")] = False,
+) -> None:
+    """Iterate the map (eqs. 5, 6) from one initial condition."""
+    params = _model_or_fail(config, overrides)
+    if not (math.isfinite(theta0_deg) and math.isfinite(v0)):
+        fail("--theta0-deg and --v0 must be finite numbers")
+    orbit = iterate_orbit(math.radians(theta0_deg), v0, params, n_impacts, sticking_interval)
+    rows = orbit_rows(orbit, params)
+    if as_csv:
+        import pandas as pd
+
+        pd.DataFrame(rows).to_csv(sys.stdout, index=False, lineterminator="\n")
+    else:
+        table = Table(title=f"Orbit from theta0 = {theta0_deg:g} deg, v0 = {v0:g} m/s")
+        for col in ("k", "t_s", "theta_rad", "theta_deg", "v_m_s", "flight_s"):
+            table.add_column(col, justify="right")
+        for row in rows:
+            table.add_row(
+                str(row["k"]),
+                f"{row['t_s']:.5f}",
+                f"{row['theta_rad']:.5f}",
+                f"{row['theta_deg']:.4f}",
+                f"{row['v_m_s']:.5f}",
+                "" if math.isnan(row["flight_s"]) else f"{row['flight_s']:.5f}",
+            )
+        Console().print(table)
+    note = orbit_note(orbit, params, sticking_interval)
+    if note:
+        print(note, file=sys.stderr)
+
+
+def orbit_rows(orbit, params: ModelParams) -> list[dict]:
+    w = params.omega
+    return [
+        {
+            "k": k,
+            "t_s": orbit.theta[k] / w,
+            "theta_rad": orbit.theta[k],
+            "theta_deg": math.degrees(float(wrap_phase(orbit.theta[k]))),
+            "v_m_s": orbit.v[k],
+            "flight_s": orbit.hop_phase[k] / w,
+        }
+        for k in range(len(orbit.theta))
+    ]
+
+
+def orbit_note(orbit, params: ModelParams, sticking_interval: float) -> str:
+    if orbit.stop_reason == "below_racket":
+        v_r = float(params.racket_velocity(orbit.theta[0]))
+        return (
+            f"note: stopped: the initial velocity {orbit.v[0]:g} m/s is not above the racket's "
+            f"{v_r:.4f} m/s at that phase (below the racket)"
+        )
+    if orbit.stop_reason == "sticking":
+        k = len(orbit.theta) - 1
+        return (
+            f"note: stopped at impact {k}: the hop lasted {orbit.hop_phase[k] / params.omega:.3g} s"
+            f" < {sticking_interval:g} s (sticking)"
+        )
+    return ""
+
+
+def main() -> None:
+    app(prog_name="bounce")

@@ -1,0 +1,167 @@
+"""YAML configs -> validated pydantic models, with dotted ``--set key=value`` overrides.
+
+Every experiment config has the common ``model`` block; an experiment module subclasses
+``ExperimentConfig`` with its own blocks. All models forbid unknown keys.
+"""
+
+from __future__ import annotations
+
+import copy
+from importlib import resources
+from pathlib import Path
+from typing import Any, TypeVar
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from .engine import ModelParams
+
+
+class ConfigError(ValueError):
+    """A user error in a config or an override: one line naming the key and the reason."""
+
+
+class StrictModel(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+
+class ModelBlock(StrictModel):
+    """The common ``model`` block: parameters of eqs. 3-6."""
+
+    alpha: float = Field(0.5, ge=0.0, lt=1.0, description="coefficient of restitution")
+    g: float = Field(9.81, gt=0.0, description="gravitational acceleration, m/s^2")
+    racket_amplitude: float = Field(0.30, gt=0.0, description="a_r, m")
+    racket_period: float = Field(0.92, gt=0.0, description="tau = 2 pi / omega_r, s")
+
+    def to_params(self) -> ModelParams:
+        return ModelParams(self.alpha, self.g, self.racket_amplitude, self.racket_period)
+
+
+class ExperimentConfig(StrictModel):
+    """Base of every experiment config: the ``model`` block plus the experiment's own."""
+
+    model: ModelBlock = ModelBlock()
+
+    @property
+    def params(self) -> ModelParams:
+        return self.model.to_params()
+
+
+class ModelOnlyConfig(ExperimentConfig):
+    """A config holding just the model block (used by ``fixed-point`` and ``orbit``)."""
+
+
+C = TypeVar("C", bound=BaseModel)
+
+
+# -- bundled configs -------------------------------------------------------------------------
+def bundled_config_dir():
+    """The configs shipped inside the package (the repository's ``configs/``)."""
+    return resources.files("bounce_cli") / "configs"
+
+
+def bundled_config_path(name: str) -> Path:
+    """Path of the bundled config ``<name>.yaml``; works installed or from a checkout."""
+    path = Path(str(bundled_config_dir() / f"{name}.yaml"))
+    if not path.is_file():
+        raise ConfigError(f"bundled config {name}.yaml is missing from the installation")
+    return path
+
+
+# -- loading ---------------------------------------------------------------------------------
+def read_yaml(path: Path) -> dict[str, Any]:
+    """Parse a YAML config file with ``yaml.safe_load``; errors name the file and line."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: config file not found") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read config: {exc.strerror}") from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise ConfigError(f"{path}:{where}: malformed YAML: {problem}") from None
+    if data is None:
+        data = {}
+    if not isinstance(data, dict):
+        raise ConfigError(f"{path}: a config must be a mapping of keys, got {type(data).__name__}")
+    return data
+
+
+def parse_override(text: str) -> tuple[list[str], Any]:
+    """``dotted.key=value`` -> (["dotted", "key"], value parsed as a YAML scalar)."""
+    key, sep, raw = text.partition("=")
+    key = key.strip()
+    if not sep or not key or any(not part for part in key.split(".")):
+        raise ConfigError(f"--set {text!r}: expected dotted.key=value")
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else None
+    except yaml.YAMLError:
+        raise ConfigError(f"--set {key}: cannot parse value {raw!r} as YAML") from None
+    return key.split("."), value
+
+
+def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
+    """Return a copy of ``data`` with each ``dotted.key=value`` set (unknown keys are caught
+    by validation, which forbids extra keys)."""
+    data = copy.deepcopy(data)
+    for text in overrides:
+        path, value = parse_override(text)
+        node = data
+        for i, part in enumerate(path[:-1]):
+            child = node.get(part)
+            if child is None:
+                child = node[part] = {}
+            if not isinstance(child, dict):
+                dotted = ".".join(path[: i + 1])
+                raise ConfigError(f"--set {'.'.join(path)}: {dotted} is not a mapping")
+            node = child
+        node[path[-1]] = value
+    return data
+
+
+def format_validation_error(
+    exc: ValidationError, source: str, overridden: frozenset[str] = frozenset()
+) -> str:
+    """First validation problem as one line: ``source: dotted.key: reason`` (source is
+    ``--set`` when the key was set by an override)."""
+    err = exc.errors()[0]
+    loc = ".".join(str(part) for part in err["loc"]) or "(top level)"
+    if loc in overridden:
+        source = "--set"
+    if err["type"] == "extra_forbidden":
+        reason = "unknown key"
+    elif err["type"] == "missing":
+        reason = "required key is missing"
+    else:
+        reason = err["msg"]
+        if "input" in err and not isinstance(err["input"], (dict, list)):
+            reason += f" (got {err['input']!r})"
+    more = len(exc.errors()) - 1
+    tail = f" (and {more} more problem{'s' if more > 1 else ''})" if more else ""
+    return f"{source}: {loc}: {reason}{tail}"
+
+
+def validate(
+    schema: type[C], data: dict[str, Any], source: str, overrides: list[str] | None = None
+) -> C:
+    """Validate ``data`` against ``schema``; a failure raises ConfigError with one line."""
+    try:
+        return schema.model_validate(data)
+    except ValidationError as exc:
+        overridden = frozenset(".".join(parse_override(t)[0]) for t in overrides or [])
+        raise ConfigError(format_validation_error(exc, source, overridden)) from None
+
+
+def load_config(schema: type[C], path: Path, overrides: list[str] | None = None) -> C:
+    """Read ``path``, apply ``--set`` overrides, validate against ``schema``."""
+    data = apply_overrides(read_yaml(path), overrides or [])
+    return validate(schema, data, str(path), overrides)
+
+
+def to_yaml(config: BaseModel) -> str:
+    """The resolved config as YAML (what ``--print-config`` prints and ``run.json`` keeps)."""
+    return yaml.safe_dump(config.model_dump(mode="json"), sort_keys=False)

@@ -1,0 +1,153 @@
+"""The CLI through typer's CliRunner: exit codes, one-line errors, no tracebacks."""
+
+import io
+import json
+import math
+import os
+
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from bounce_cli import __version__
+from bounce_cli.cli import app
+
+runner = CliRunner()
+
+
+def run(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+def assert_user_error(result, *needles):
+    assert result.exit_code == 2, result.output
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("bounce: error: ")
+    for needle in needles:
+        assert needle in lines[0]
+    assert "Traceback" not in result.output
+
+
+def test_version_and_help():
+    result = run("--version")
+    assert result.exit_code == 0 and __version__ in result.stdout
+    result = run("--help")
+    assert result.exit_code == 0
+    for command in ("fixed-point", "orbit"):
+        assert command in result.stdout
+
+
+def test_fixed_point_json_paper_values():
+    result = run("fixed-point", "--json")
+    assert result.exit_code == 0, result.output
+    data = json.loads(result.stdout)
+    assert set(data) == {"v_m_s", "theta_rad", "theta_deg", "ac_g", "eigenvalues",
+                         "spectral_radius", "regime", "stable"}
+    assert round(data["v_m_s"], 3) == 4.513
+    assert round(data["theta_deg"], 2) == 42.76
+    assert round(data["ac_g"], 3) == -0.968
+    assert data["regime"] == "complex" and data["stable"] is True
+    assert data["spectral_radius"] == pytest.approx(0.5)
+    (re1, im1), (re2, im2) = data["eigenvalues"]
+    assert math.hypot(re1, im1) == pytest.approx(0.5) and im1 == pytest.approx(-im2)
+    assert data["theta_rad"] == pytest.approx(math.radians(data["theta_deg"]))
+
+
+def test_fixed_point_table_and_overrides():
+    result = run("fixed-point", "--set", "model.alpha=0.6")
+    assert result.exit_code == 0
+    assert "v~" in result.stdout and "4.5126" in result.stdout  # v~ does not depend on alpha
+    result = run("fixed-point", "--json", "--set", "model.racket_period=0.5")
+    assert json.loads(result.stdout)["v_m_s"] == pytest.approx(math.pi * 9.81 / (2 * math.pi / 0.5))
+
+
+@pytest.mark.parametrize(
+    "args, needles",
+    [
+        (["--set", "model.alpha=1.5"], ["model.alpha", "less than 1"]),
+        (["--set", "model.racket_amplitude=0.01"], ["no period-1 fixed point", "racket_amplitude"]),
+        (["--set", "model.nope=1"], ["model.nope", "unknown key"]),
+        (["--set", "model.g=-3"], ["model.g", "greater than 0"]),
+        (["--set", "nope=1"], ["nope"]),
+        (["--set", "model.alpha"], ["expected dotted.key=value"]),
+    ],
+)
+def test_fixed_point_user_errors(args, needles):
+    assert_user_error(run("fixed-point", *args), *needles)
+
+
+def test_config_file_errors(tmp_path):
+    wrong_type = tmp_path / "wrong.yaml"
+    wrong_type.write_text("model:\n  racket_period: fast\n")
+    assert_user_error(run("fixed-point", "--config", wrong_type), "model.racket_period", "number")
+    malformed = tmp_path / "bad.yaml"
+    malformed.write_text("model: {alpha: 0.5\n")
+    assert_user_error(run("fixed-point", "--config", malformed), "malformed YAML")
+    assert_user_error(run("fixed-point", "--config", tmp_path / "none.yaml"), "not found")
+
+
+def test_fixed_point_reads_the_model_block_of_any_config(tmp_path):
+    cfg = tmp_path / "other.yaml"
+    cfg.write_text("model:\n  alpha: 0.42\n  g: 5.8\n  racket_amplitude: 0.065\n"
+                   "  racket_period: 0.55\nnoise: {q_v: 0.04}\n")
+    result = run("fixed-point", "--json", "--config", cfg)
+    assert result.exit_code == 0, result.output
+    assert json.loads(result.stdout)["v_m_s"] == pytest.approx(math.pi * 5.8 * 0.55 / (2 * math.pi))
+
+
+def read_orbit_csv(result):
+    return pd.read_csv(io.StringIO(result.stdout))
+
+
+def test_orbit_period1_settles_on_fixed_point():
+    result = run("orbit", "--theta0-deg", 43.1, "--v0", 4.8, "-n", 40, "--csv")
+    assert result.exit_code == 0, result.output
+    df = read_orbit_csv(result)
+    assert list(df.columns) == ["k", "t_s", "theta_rad", "theta_deg", "v_m_s", "flight_s"]
+    assert len(df) == 41 and df.k.tolist() == list(range(41))
+    assert df.iloc[0].v_m_s == 4.8 and df.iloc[0].theta_deg == pytest.approx(43.1)
+    assert math.isnan(df.iloc[0].flight_s)
+    last = df.iloc[-1]
+    assert last.v_m_s == pytest.approx(4.5126, abs=1e-4)
+    assert last.theta_deg == pytest.approx(42.763, abs=1e-3)
+    assert last.flight_s == pytest.approx(0.92, abs=1e-4)
+    assert (df.theta_deg.between(0, 360)).all()
+    assert (df.theta_rad.diff().dropna() > 0).all()  # unwrapped
+    assert df.t_s.iloc[-1] == pytest.approx(df.theta_rad.iloc[-1] / (2 * math.pi / 0.92))
+    assert result.stderr.strip() == ""
+
+
+def test_orbit_sticking_stops_early_with_a_note():
+    result = run("orbit", "--theta0-deg", 43.1, "--v0", 5.7, "-n", 40, "--csv")
+    assert result.exit_code == 0
+    df = read_orbit_csv(result)
+    assert len(df) < 41
+    assert df.flight_s.iloc[-1] < 1e-3
+    assert "sticking" in result.stderr
+    # a coarser sticking interval stops earlier
+    coarse = read_orbit_csv(run("orbit", "--theta0-deg", 43.1, "--v0", 5.7, "-n", 40, "--csv",
+                                "--sticking-interval", 0.05))
+    assert len(coarse) < len(df)
+
+
+def test_orbit_below_racket():
+    result = run("orbit", "--theta0-deg", 0, "--v0", 0.5, "--csv")
+    assert result.exit_code == 0
+    assert len(read_orbit_csv(result)) == 1
+    assert "below the racket" in result.stderr
+
+
+def test_orbit_table_output():
+    result = run("orbit", "--theta0-deg", 43.1, "--v0", 4.8, "-n", 3)
+    assert result.exit_code == 0
+    assert "theta_deg" in result.stdout and "4.80000" in result.stdout
+
+
+def test_python_dash_m_entry_point():
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-m", "bounce_cli", "--version"], capture_output=True,
+                         text=True, cwd=os.path.dirname(os.path.dirname(__file__)))
+    assert out.returncode == 0 and __version__ in out.stdout

@@ -1,0 +1,99 @@
+"""YAML configs, --set overrides, one-line errors."""
+
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from bounce_cli.config import (
+    ConfigError,
+    ModelOnlyConfig,
+    apply_overrides,
+    bundled_config_path,
+    load_config,
+    parse_override,
+    to_yaml,
+)
+
+
+def write(tmp_path, text, name="c.yaml") -> Path:
+    path = tmp_path / name
+    path.write_text(textwrap.dedent(text))
+    return path
+
+
+def test_bundled_model_config_is_the_paper_fig3_fig4_model():
+    cfg = load_config(ModelOnlyConfig, bundled_config_path("model"))
+    assert (cfg.model.alpha, cfg.model.g, cfg.model.racket_amplitude, cfg.model.racket_period) == (
+        0.5, 9.81, 0.30, 0.92)
+
+
+def test_overrides_parse_as_yaml_scalars():
+    assert parse_override("model.alpha=0.4") == (["model", "alpha"], 0.4)
+    assert parse_override("a.b=[1, 2]") == (["a", "b"], [1, 2])
+    assert parse_override("a=true") == (["a"], True)
+    assert parse_override("a=hello") == (["a"], "hello")
+    data = apply_overrides({"model": {"alpha": 0.5}}, ["model.alpha=0.3", "model.g=5"])
+    assert data == {"model": {"alpha": 0.3, "g": 5}}
+
+
+@pytest.mark.parametrize("bad", ["model.alpha", "=3", "model..alpha=1", ""])
+def test_malformed_override(bad):
+    with pytest.raises(ConfigError, match="expected dotted.key=value"):
+        parse_override(bad)
+
+
+def test_override_into_scalar_is_an_error():
+    with pytest.raises(ConfigError, match="model.alpha is not a mapping"):
+        apply_overrides({"model": {"alpha": 0.5}}, ["model.alpha.x=1"])
+
+
+@pytest.mark.parametrize(
+    "text, expected",
+    [
+        ("model:\n  alpha: 1.5\n", "model.alpha: Input should be less than 1"),
+        ("model:\n  g: -1\n", "model.g: Input should be greater than 0"),
+        ("model:\n  alpha: abc\n", "model.alpha: Input should be a valid number"),
+        ("model:\n  nope: 1\n", "model.nope: unknown key"),
+        ("extra: 1\n", "extra: unknown key"),
+        ("model:\n  alpha: .nan\n", "model.alpha: Input should be a finite number"),
+        ("model: [1, 2]\n", "model: Input should be a valid dictionary"),
+    ],
+)
+def test_validation_errors_are_one_line_naming_the_key(tmp_path, text, expected):
+    path = write(tmp_path, text)
+    with pytest.raises(ConfigError) as info:
+        load_config(ModelOnlyConfig, path)
+    message = str(info.value)
+    assert expected in message
+    assert "\n" not in message
+    assert str(path) in message
+
+
+def test_override_errors_name_the_override(tmp_path):
+    path = write(tmp_path, "model:\n  alpha: 0.5\n")
+    with pytest.raises(ConfigError, match=r"^--set: model.alpha: Input should be less than 1"):
+        load_config(ModelOnlyConfig, path, ["model.alpha=2"])
+    with pytest.raises(ConfigError, match="model.typo: unknown key"):
+        load_config(ModelOnlyConfig, path, ["model.typo=2"])
+
+
+@pytest.mark.parametrize("text", ["model: [1\n", "model:\n  alpha: 0.5\n bad: : :\n", "a: b: c\n"])
+def test_malformed_yaml(tmp_path, text):
+    path = write(tmp_path, text)
+    with pytest.raises(ConfigError, match="malformed YAML") as info:
+        load_config(ModelOnlyConfig, path)
+    assert "\n" not in str(info.value)
+
+
+def test_not_a_mapping_and_missing_file(tmp_path):
+    with pytest.raises(ConfigError, match="must be a mapping"):
+        load_config(ModelOnlyConfig, write(tmp_path, "- 1\n- 2\n"))
+    with pytest.raises(ConfigError, match="not found"):
+        load_config(ModelOnlyConfig, tmp_path / "missing.yaml")
+
+
+def test_empty_file_gives_defaults_and_resolved_yaml_roundtrips(tmp_path):
+    cfg = load_config(ModelOnlyConfig, write(tmp_path, ""))
+    again = load_config(ModelOnlyConfig, write(tmp_path, to_yaml(cfg), "again.yaml"))
+    assert again == cfg
