@@ -350,3 +350,15 @@ def orbit_note(orbit, params: ModelParams, sticking_interval: float) -> str:
 
 def main() -> None:
     app(prog_name="bounce")
+
+
+@app.command("stability")
+def stability_command(config: ConfigOption = None, overrides: SetOption = None,
+                      out: OutOption = None, quiet: QuietOption = False,
+                      force: ForceOption = False, print_config: PrintConfigOption = False,
+                      jobs: JobsOption = None) -> None:
+    """Linear stability diagram and coarse-grained predictions (paper Fig. 5, sections 4-5)."""
+    from .experiments import stability as stability_experiment
+
+    run_experiment(stability_experiment.EXPERIMENT, config=config, overrides=overrides, out=out,
+                   quiet=quiet, force=force, print_config=print_config, jobs=jobs)

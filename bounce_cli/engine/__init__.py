@@ -2,7 +2,16 @@
 
 from .impact import can_fly, gap, gap_slope, launch_slope, next_impact_phase
 from .linear import (
+    ContractionFit,
+    MinimumRadius,
     Stability,
+    ac_explicit_g,
+    characteristic_c,
+    empirical_contraction_rate,
+    iterate_linear,
+    min_stable_spectral_radius,
+    racket_amplitude_for_ac,
+    stable_ac_range_g,
     complex_boundaries_g,
     eigenvalues,
     finite_difference_jacobian,
@@ -29,5 +38,7 @@ __all__ = [
     "flip_boundary_g", "gap", "gap_slope", "is_complex_regime", "iterate_map", "jacobian",
     "launch_slope", "map_step", "next_impact_phase", "phase_difference",
     "racket_acceleration_at_impact_g", "spectral_radius", "stability", "velocity_after_impact",
-    "wrap_phase",
+    "wrap_phase", "ContractionFit", "MinimumRadius", "ac_explicit_g", "characteristic_c",
+    "empirical_contraction_rate", "iterate_linear", "min_stable_spectral_radius",
+    "racket_amplitude_for_ac", "stable_ac_range_g",
 ]

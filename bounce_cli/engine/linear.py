@@ -72,7 +72,13 @@ def flip_boundary_g(alpha):
 
 
 def complex_boundaries_g(alpha):
-    """Boundaries of the complex regime (eq. 11): (-1, -((1-alpha)/(1+alpha))^2)."""
+    """Boundaries of the complex regime (eq. 11): (-1, -((1-alpha)/(1+alpha))^2).
+
+    The regime is the AC between the two. The paper prints eq. 11 as
+    -((1-alpha)/(1+alpha))^2 < AC < -1, the order that holds only for alpha < 0; for the
+    physical 0 <= alpha < 1 it reads -1 < AC < -((1-alpha)/(1+alpha))^2 (c^2 = alpha^2 at
+    both, c^2 < alpha^2 between them).
+    """
     alpha = np.asarray(alpha, dtype=float)
     return np.full_like(alpha, -1.0), -np.square((1.0 - alpha) / (1.0 + alpha))
 
@@ -117,3 +123,128 @@ def finite_difference_jacobian(params: ModelParams, rel_step: float = 1e-6) -> n
     dt_dv = (step.theta[0] - step.theta[1]) / (2 * h_v)
     dt_dt = (step.theta[2] - step.theta[3]) / (2 * h_t)
     return np.array([[dv_dv, dv_dt], [dt_dv, dt_dt]])
+
+
+def ac_explicit_g(alpha, g, racket_amplitude, racket_period):
+    """AC in explicit form (section 4, after the characteristic equation):
+
+        AC = -sqrt((a_r w^2 / g)^2 - pi^2 ((1-alpha)/(1+alpha))^2),   w = 2 pi / tau.
+
+    NaN where the radicand is negative (no fixed point).
+    """
+    w = 2.0 * np.pi / np.asarray(racket_period, dtype=float)
+    radicand = np.square(racket_amplitude * w**2 / g) - np.pi**2 * np.square(
+        (1.0 - np.asarray(alpha)) / (1.0 + np.asarray(alpha))
+    )
+    with np.errstate(invalid="ignore"):
+        return -np.sqrt(radicand)
+
+
+def racket_amplitude_for_ac(alpha, ac_g, g, racket_period):
+    """The a_r (m) that puts the fixed point at racket acceleration ``ac_g`` (<= 0, units of g):
+    the explicit AC formula solved for a_r,  a_r = (g/w^2) sqrt(AC^2 + pi^2 ((1-a)/(1+a))^2)."""
+    w = 2.0 * np.pi / np.asarray(racket_period, dtype=float)
+    ratio = (1.0 - np.asarray(alpha)) / (1.0 + np.asarray(alpha))
+    return g / w**2 * np.sqrt(np.square(ac_g) + np.pi**2 * np.square(ratio))
+
+
+def stable_ac_range_g(alpha):
+    """(lower, upper) AC of linear stability for |alpha| < 1: eq. 14, (flip boundary, 0)."""
+    flip = flip_boundary_g(alpha)
+    return flip, np.zeros_like(flip)
+
+
+@dataclass(frozen=True)
+class MinimumRadius:
+    """Minimum over the stable AC range of the spectral radius (section 4) on a grid."""
+
+    spectral_radius: float
+    ac_low_g: float  # the smallest and largest grid AC where the minimum is attained
+    ac_high_g: float
+
+
+def min_stable_spectral_radius(alpha: float, n_ac: int = 4001, rtol: float = 1e-9):
+    """min over AC in the stable range of max(|lambda+|, |lambda-|), found on a grid of ``n_ac``
+    points strictly inside eq. 14's interval, with the AC interval where it is attained (to
+    ``rtol``). Section 4 proves the minimum equals |alpha|, attained on the complex regime."""
+    low, high = stable_ac_range_g(alpha)
+    ac = np.linspace(float(low), float(high), n_ac + 2)[1:-1]
+    radius = spectral_radius(alpha, ac)
+    best = float(radius.min())
+    at = ac[radius <= best * (1.0 + rtol)]
+    return MinimumRadius(best, float(at.min()), float(at.max()))
+
+
+@dataclass(frozen=True)
+class ContractionFit:
+    """Empirical contraction (or growth) rate of the full map near the fixed point.
+
+    rate: exp of the least-squares slope of log ||deviation_k|| over the fitted impacts.
+    norms: ||deviation_k|| for k = 0..len-1 (deviation (dv / v~, dtheta in rad)).
+    fitted_from: first impact used in the fit (earlier ones are transient).
+    left_at: impact at which the deviation first exceeded ``ceiling`` (it left the linear
+        neighbourhood: growth), or None.
+    """
+
+    rate: float
+    norms: np.ndarray
+    fitted_from: int
+    left_at: int | None
+
+    @property
+    def n_fitted(self) -> int:
+        return len(self.norms) - self.fitted_from
+
+
+def empirical_contraction_rate(
+    params: ModelParams,
+    *,
+    perturbation: float = 1e-5,
+    max_impacts: int = 600,
+    floor: float = 1e-13,
+    ceiling: float = 1e-2,
+    skip: int = 2,
+) -> ContractionFit:
+    """Iterate the full map (eqs. 5, 6) from the fixed point with v_0 = v~ (1 + perturbation)
+    and fit the per-impact decay (or growth) of the deviation norm.
+
+    The norm is sqrt((dv/v~)^2 + dtheta^2); the phase is reduced by 2 pi each impact (the map
+    depends on the phase only modulo 2 pi), so rounding stays at the 1e-16 level. Iteration
+    stops when the norm falls below ``floor`` (rounding), rises above ``ceiling`` (it leaves
+    the neighbourhood where the linearisation holds), the ball cannot fly, or after
+    ``max_impacts``. Where stable the rate tends to the spectral radius; where unstable it is
+    the growth per impact while the deviation was still small.
+    """
+    fp = params.fixed_point()
+    theta, v = fp.theta_rad, fp.v_m_s * (1.0 + perturbation)
+    norms: list[float] = []
+    left_at = None
+    for k in range(max_impacts + 1):
+        norm = math.hypot((v - fp.v_m_s) / fp.v_m_s, theta - fp.theta_rad)
+        if not math.isfinite(norm):
+            break
+        norms.append(norm)
+        if norm > ceiling:
+            left_at = k
+            break
+        if norm < floor or k == max_impacts:
+            break
+        step = map_step(theta, v, params)
+        theta, v = float(step.theta) - 2.0 * math.pi, float(step.v)
+    arr = np.array(norms)
+    start = min(skip, max(len(arr) - 2, 0))
+    ks = np.arange(start, len(arr))
+    if len(ks) < 2 or np.any(arr[ks] <= 0.0):
+        return ContractionFit(float("nan"), arr, start, left_at)
+    slope = np.polyfit(ks, np.log(arr[ks]), 1)[0]
+    return ContractionFit(float(math.exp(slope)), arr, start, left_at)
+
+
+def iterate_linear(matrix: np.ndarray, y0, n_impacts: int) -> np.ndarray:
+    """The linearised map y_{k+1} = J y_k: rows k = 0..n_impacts of the deviation y_k."""
+    matrix = np.asarray(matrix, dtype=float)
+    out = np.empty((n_impacts + 1, matrix.shape[0]))
+    out[0] = np.asarray(y0, dtype=float)
+    for k in range(n_impacts):
+        out[k + 1] = matrix @ out[k]
+    return out
