@@ -362,3 +362,15 @@ def stability_command(config: ConfigOption = None, overrides: SetOption = None,
 
     run_experiment(stability_experiment.EXPERIMENT, config=config, overrides=overrides, out=out,
                    quiet=quiet, force=force, print_config=print_config, jobs=jobs)
+
+
+@app.command("impulse")
+def impulse_command(config: ConfigOption = None, overrides: SetOption = None,
+                    out: OutOption = None, quiet: QuietOption = False,
+                    force: ForceOption = False, print_config: PrintConfigOption = False,
+                    jobs: JobsOption = None) -> None:
+    """Impulse responses after a perturbation of alpha, full vs linear (paper Figs. 9, 10)."""
+    from .experiments import impulse
+
+    run_experiment(impulse.EXPERIMENT, config=config, overrides=overrides, out=out,
+                   quiet=quiet, force=force, print_config=print_config, jobs=jobs)

@@ -1,6 +1,13 @@
 """Pure numerics of the ball bouncing map: numpy/scipy only, no files, no printing."""
 
 from .impact import can_fly, gap, gap_slope, launch_slope, next_impact_phase
+from .impulse import (
+    ImpulseResponse,
+    impulse_response_full,
+    impulse_response_linear,
+    perturbed_velocity,
+    relaxation_impacts,
+)
 from .linear import (
     ContractionFit,
     MinimumRadius,
@@ -40,5 +47,6 @@ __all__ = [
     "racket_acceleration_at_impact_g", "spectral_radius", "stability", "velocity_after_impact",
     "wrap_phase", "ContractionFit", "MinimumRadius", "ac_explicit_g", "characteristic_c",
     "empirical_contraction_rate", "iterate_linear", "min_stable_spectral_radius",
-    "racket_amplitude_for_ac", "stable_ac_range_g",
+    "racket_amplitude_for_ac", "stable_ac_range_g", "ImpulseResponse", "impulse_response_full",
+    "impulse_response_linear", "perturbed_velocity", "relaxation_impacts",
 ]

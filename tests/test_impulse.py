@@ -1,0 +1,132 @@
+"""`bounce impulse`: section 7's perturbed velocity, full vs linear responses, threshold."""
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from bounce_cli.cli import app
+from bounce_cli.config import bundled_config_path, load_config
+from bounce_cli.engine import (
+    impulse_response_full,
+    impulse_response_linear,
+    jacobian,
+    map_step,
+    perturbed_velocity,
+    relaxation_impacts,
+    velocity_after_impact,
+)
+from bounce_cli.experiments import impulse as exp
+from bounce_cli.experiments.base import RunOptions
+
+FAST = ["threshold.scan_step=0.02", "threshold.bisection_tolerance=1e-3"]
+
+
+@pytest.fixture(scope="module")
+def result():
+    cfg = load_config(exp.ImpulseConfig, bundled_config_path("impulse"), FAST)
+    return exp.run(cfg, RunOptions())
+
+
+def test_v0_for_alpha_p_07_is_5_7(paper_params):
+    assert perturbed_velocity(paper_params, 0.7) == pytest.approx(5.7, abs=0.05)
+    assert perturbed_velocity(paper_params, 0.5) == pytest.approx(paper_params.fixed_point().v_m_s)
+
+
+@pytest.mark.parametrize("alpha_p", [0.0, 0.3, 0.4, 0.6, 0.7, 0.95])
+def test_closed_form_v0_is_eq5_with_alpha_p_at_the_fixed_point(paper_params, alpha_p):
+    """(1+alpha_p) a_r w cos(theta~) - alpha_p v~ + g alpha_p 2 pi / w, with cos(theta~) from
+    eq. 8 and v~ from eq. 7, reduces to (1 + 2 alpha_p - alpha_0)/(1 + alpha_0) v~."""
+    fp = paper_params.fixed_point()
+    general = velocity_after_impact(fp.theta_rad + 2 * math.pi, fp.v_m_s, 2 * math.pi,
+                                    paper_params, alpha=alpha_p)
+    assert perturbed_velocity(paper_params, alpha_p) == pytest.approx(float(general), rel=1e-12)
+    # and the same map step with alpha_0 instead returns the fixed point itself
+    step = map_step(fp.theta_rad, fp.v_m_s, paper_params)
+    assert float(step.v) == pytest.approx(fp.v_m_s, rel=1e-10)
+
+
+def test_linear_response_is_J_powers_and_odd_in_the_perturbation(paper_params):
+    up = impulse_response_linear(paper_params, 0.6, 10)
+    down = impulse_response_linear(paper_params, 0.4, 10)
+    np.testing.assert_allclose(up.dv, -down.dv, atol=1e-12)
+    np.testing.assert_allclose(up.dtheta, -down.dtheta, atol=1e-12)
+    J = jacobian(paper_params)
+    y3 = np.linalg.matrix_power(J, 3) @ [up.dv[0], 0.0]
+    np.testing.assert_allclose([up.dv[3], up.dtheta[3]], y3, atol=1e-12)
+    # eigenvalues 0.5 in absolute value at these parameters (section 7)
+    np.testing.assert_allclose(np.abs(np.linalg.eigvals(J)), 0.5, rtol=1e-12)
+
+
+def test_full_response_is_not_symmetric_but_agrees_for_tiny_perturbations(paper_params):
+    up = impulse_response_full(paper_params, 0.6, 10)
+    down = impulse_response_full(paper_params, 0.4, 10)
+    assert np.max(np.abs(up.dv[1:] + down.dv[1:])) > 0.3  # far from mirror images
+    for eps in (1e-4, -1e-4):
+        full = impulse_response_full(paper_params, 0.5 + eps, 10)
+        lin = impulse_response_linear(paper_params, 0.5 + eps, 10)
+        scale = abs(full.dv[0])
+        np.testing.assert_allclose(full.dv, lin.dv, atol=2e-3 * scale)
+
+
+def test_relaxation_impacts_counts_from_the_last_excursion():
+    dv = np.array([1.0, 0.01, 0.2, 0.0, 0.0])
+    assert relaxation_impacts(dv, np.zeros(5), 0.05, 1.0) == 3
+    assert relaxation_impacts(np.zeros(3), np.zeros(3), 0.05, 1.0) == 0
+    assert relaxation_impacts(np.array([0.0, 1.0]), np.zeros(2), 0.05, 1.0) == -1
+
+
+def test_tables(result):
+    imp = result.frames["impulse.csv"]
+    assert list(imp.columns) == ["alpha_p", "model", "k", "v_m_s", "theta_deg", "dv_m_s",
+                                 "dtheta_deg", "outcome"]
+    assert len(imp) == 4 * 2 * 11
+    full = imp[imp.model == "full"].groupby("alpha_p").outcome.first()
+    assert full[0.4] == full[0.6] == full[0.35] == "period-1" and full[0.65] != "period-1"
+    rel = result.frames["relaxation.csv"].set_index(["alpha_p", "model"])
+    # linear: equal relaxation for opposite signs; full: the increase relaxes more slowly
+    assert rel.asymmetry_impacts[(0.6, "linear")] == 0
+    assert rel.relaxation_impacts[(0.6, "full")] > rel.relaxation_impacts[(0.4, "full")]
+    assert rel.relaxation_impacts[(0.65, "full")] == -1
+    thr = result.frames["threshold.csv"].set_index("direction")
+    up = thr.loc["increase"]
+    assert 0.60 < up.alpha_p_threshold < 0.66  # paper: about 0.65
+    assert up.alpha_p_outside - up.alpha_p_inside <= 1e-3
+    assert up.v0_threshold_m_s == pytest.approx(
+        (1 + 2 * up.alpha_p_threshold - 0.5) / 1.5 * math.pi * 9.81 * 0.92 / (2 * math.pi))
+
+
+def test_classify_criteria(paper_params):
+    block = exp.ClassificationBlock()
+    fp = paper_params.fixed_point()
+    assert exp.classify(paper_params, fp.v_m_s, block) == ("period-1", 1)
+    assert exp.classify(paper_params, perturbed_velocity(paper_params, 0.7), block)[0] == "sticking"
+    racket = paper_params.racket_velocity(fp.theta_rad)
+    assert exp.classify(paper_params, racket - 0.1, block) == ("below-racket", 0)
+
+
+def test_figures_redraw_from_csv(result, tmp_path):
+    for name, frame in result.frames.items():
+        frame.to_csv(tmp_path / name, index=False)
+    figs = exp.draw({n: pd.read_csv(tmp_path / n) for n in result.frames})
+    assert set(figs) == {"impulse.png", "impulse_linear.png"}
+    assert "Fig. 9" in figs["impulse.png"]._suptitle.get_text()
+    assert "Fig. 10" in figs["impulse_linear.png"]._suptitle.get_text()
+    for fig in figs.values():
+        fig.savefig(tmp_path / "x.png")
+
+
+def test_cli(tmp_path):
+    runner = CliRunner()
+    args = ["impulse", "--out", str(tmp_path / "o"), "--quiet"]
+    for s in FAST:
+        args += ["--set", s]
+    r = runner.invoke(app, args)
+    assert r.exit_code == 0, r.output
+    assert {"impulse.csv", "relaxation.csv", "threshold.csv", "impulse.png",
+            "impulse_linear.png", "run.json"} <= {p.name for p in (tmp_path / "o").iterdir()}
+    bad = runner.invoke(app, ["impulse", "--out", str(tmp_path / "b"),
+                              "--set", "relaxation.tolerance_v_m_s=0"])
+    assert bad.exit_code == 2 and "relaxation.tolerance_v_m_s" in bad.stderr
