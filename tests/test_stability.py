@@ -76,6 +76,16 @@ def test_eigen_grid_against_numpy_on_the_jacobian(result):
         assert row.regime == ("complex" if abs(row.lambda1_im) > 0 else "real")
 
 
+def test_surface_follows_the_stable_region(result):
+    s = result.frames["surface.csv"]
+    assert (s.alpha.abs() < 1).all()
+    rim = s[s.fraction.isin([0.0, 1.0])]
+    np.testing.assert_allclose(rim.spectral_radius, 1.0, atol=1e-9)  # flip and fold boundaries
+    inner = s[(s.fraction > 0) & (s.fraction < 1)]
+    assert (inner.spectral_radius < 1).all()
+    np.testing.assert_allclose(inner.spectral_radius, spectral_radius(inner.alpha, inner.ac_g))
+
+
 def test_eigen_grid_matches_eq9_at_real_models():
     for alpha, ac, period in [(0.3, -0.7, 0.8), (0.5, -1.05, 0.6), (0.9, -0.2, 1.1)]:
         p = ModelParams(alpha, 9.81, float(racket_amplitude_for_ac(alpha, ac, 9.81, period)), period)
@@ -155,7 +165,7 @@ def test_cli_writes_files_and_rejects_bad_grid(tmp_path):
     r = runner.invoke(app, args + ["--set", "crosscheck.max_impacts=300"])
     assert r.exit_code == 0, r.output
     names = {p.name for p in (tmp_path / "o").iterdir()}
-    assert {"boundaries.csv", "eigen.csv", "predictions.csv", "crosscheck.csv",
+    assert {"boundaries.csv", "eigen.csv", "surface.csv", "predictions.csv", "crosscheck.csv",
             "stability.png", "run.json"} <= names
     bad = runner.invoke(app, ["stability", "--out", str(tmp_path / "b"),
                               "--set", "grid.alpha_max=-0.5"])

@@ -111,6 +111,19 @@ def eigen_frame(alpha: np.ndarray, ac: np.ndarray) -> pd.DataFrame:
     )
 
 
+def surface_frame(alpha: np.ndarray, n_ac: int) -> pd.DataFrame:
+    """max |lambda| on a grid that follows the stable region (Fig. 5 right): for each alpha
+    with |alpha| < 1, n_ac values of AC from the flip boundary to 0 (eq. 14), both ends
+    included, so the surface's rim lies on the stability boundary."""
+    alpha = alpha[np.abs(alpha) < 1.0]
+    low, high = stable_ac_range_g(alpha)
+    frac = np.linspace(0.0, 1.0, n_ac)
+    ac = low[:, None] + (high - low)[:, None] * frac[None, :]
+    aa = np.broadcast_to(alpha[:, None], ac.shape)
+    return pd.DataFrame({"alpha": aa.ravel(), "fraction": np.tile(frac, len(alpha)),
+                         "ac_g": ac.ravel(), "spectral_radius": spectral_radius(aa, ac).ravel()})
+
+
 def predictions_frame(params: ModelParams, block: PredictionsBlock) -> pd.DataFrame:
     alpha = params.alpha
     st = stability(params)
@@ -187,6 +200,7 @@ def run(config: StabilityConfig, options: RunOptions) -> ExperimentResult:
     frames = {
         "boundaries.csv": boundaries_frame(alpha),
         "eigen.csv": eigen_frame(alpha, ac),
+        "surface.csv": surface_frame(alpha, grid.n_ac),
         "predictions.csv": predictions_frame(config.params, config.predictions),
         "crosscheck.csv": crosscheck_frame(config.crosscheck, config.model.g, options.progress),
     }
@@ -226,7 +240,6 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     shape = (len(alpha), len(ac))
     stable = table["stable"].to_numpy(bool).reshape(shape)
     complex_ = (table["regime"] == "complex").to_numpy().reshape(shape)
-    radius = table["spectral_radius"].to_numpy(float).reshape(shape)
     region = np.where(stable, np.where(complex_, 2, 1), 0)
 
     fig, axes = new_figure(1, 2, width=13.0, height=5.6)
@@ -269,10 +282,12 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
 
     axes[0, 1].remove()
     ax3 = fig.add_subplot(1, 2, 2, projection="3d")
-    shown = np.where(stable, radius, np.nan)
-    A, C = np.meshgrid(alpha, ac, indexing="ij")
-    surf = ax3.plot_surface(A, C, shown, cmap="viridis", vmin=0.0, vmax=1.0,
-                            rstride=1, cstride=1, linewidth=0, antialiased=False)
+    surf_df = frames["surface.csv"].sort_values(["alpha", "fraction"])
+    n_frac = surf_df.fraction.nunique()
+    A, C, Z = (surf_df[c].to_numpy().reshape(-1, n_frac) for c in ("alpha", "ac_g",
+                                                                    "spectral_radius"))
+    surf = ax3.plot_surface(A, C, Z, cmap="viridis", vmin=0.0, vmax=1.0, rstride=1, cstride=1,
+                            linewidth=0, antialiased=False)
     ax3.set_xlabel("alpha")
     ax3.set_ylabel("AC (g)")
     ax3.set_zlabel("max |lambda|")
