@@ -14,6 +14,22 @@ from .linear import (
     stability,
 )
 from .maps import MapStep, Orbit, iterate_map, iterate_orbit, map_step, velocity_after_impact
+from .stochastic import (
+    PAIR_NAMES,
+    PAIRS,
+    VELOCITY_PHASES,
+    StochasticRuns,
+    Var1Theory,
+    correlations_from_covariances,
+    lagged_covariances,
+    map_noise_covariance,
+    paper_noise_covariance,
+    sample_correlations,
+    simulate_stochastic_map,
+    stationary_covariance,
+    stochastic_step,
+    var1_theory,
+)
 from .params import (
     FixedPoint,
     ModelError,
@@ -30,4 +46,9 @@ __all__ = [
     "launch_slope", "map_step", "next_impact_phase", "phase_difference",
     "racket_acceleration_at_impact_g", "spectral_radius", "stability", "velocity_after_impact",
     "wrap_phase",
+    # stochastic map and VAR(1) theory (section 6)
+    "PAIR_NAMES", "PAIRS", "VELOCITY_PHASES", "StochasticRuns", "Var1Theory",
+    "correlations_from_covariances", "lagged_covariances", "map_noise_covariance",
+    "paper_noise_covariance", "sample_correlations", "simulate_stochastic_map",
+    "stationary_covariance", "stochastic_step", "var1_theory",
 ]
