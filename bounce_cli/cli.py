@@ -350,3 +350,14 @@ def orbit_note(orbit, params: ModelParams, sticking_interval: float) -> str:
 
 def main() -> None:
     app(prog_name="bounce")
+
+
+@app.command("acf")
+def acf_command(config: ConfigOption = None, overrides: SetOption = None,
+                out: OutOption = None, quiet: QuietOption = False,
+                force: ForceOption = False, print_config: PrintConfigOption = False,
+                jobs: JobsOption = None) -> None:
+    """Correlation functions of the stochastic map vs the VAR(1) theory (paper Fig. 8)."""
+    from .experiments import acf
+    run_experiment(acf.EXPERIMENT, config=config, overrides=overrides, out=out,
+                   quiet=quiet, force=force, print_config=print_config, jobs=jobs)
