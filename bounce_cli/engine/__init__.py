@@ -14,6 +14,16 @@ from .linear import (
     stability,
 )
 from .maps import MapStep, Orbit, iterate_map, iterate_orbit, map_step, velocity_after_impact
+from .regression import (
+    LineFit,
+    TrialMeans,
+    eq15_amplitude,
+    eq15_slope,
+    ols_line,
+    period_for_height,
+    phase_from_slope,
+    simulate_trial,
+)
 from .stochastic import (
     PAIR_NAMES,
     PAIRS,
@@ -51,4 +61,7 @@ __all__ = [
     "correlations_from_covariances", "lagged_covariances", "map_noise_covariance",
     "paper_noise_covariance", "sample_correlations", "simulate_stochastic_map",
     "stationary_covariance", "stochastic_step", "var1_theory",
+    # amplitude-period relation (section 5, eq. 15)
+    "LineFit", "TrialMeans", "eq15_amplitude", "eq15_slope", "ols_line", "period_for_height",
+    "phase_from_slope", "simulate_trial",
 ]
