@@ -220,7 +220,7 @@ def run(config: RegressionConfig, options: RunOptions) -> ExperimentResult:
     lines = [f"{source}; OLS of a_r on tau^2, {pct} confidence intervals"]
     for row in fit.itertuples():
         lines.append(
-            f"[{row.condition}] slope {row.slope:.4f} m/s^2 [{row.slope_ci_low:.4f}, "
+            f"({row.condition}) slope {row.slope:.4f} m/s^2 [{row.slope_ci_low:.4f}, "
             f"{row.slope_ci_high:.4f}] vs eq. 15 {row.predicted_slope:.4f}; intercept "
             f"{row.intercept * 100:.2f} cm [{row.intercept_ci_low * 100:.2f}, "
             f"{row.intercept_ci_high * 100:.2f}] vs 0; R^2 {row.r2:.3f} (paper 0.98 / 0.90)")
