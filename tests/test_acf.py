@@ -4,17 +4,11 @@ import json
 
 import pandas as pd
 import pytest
-from typer.testing import CliRunner
+from test_cli import assert_user_error, run  # shared CliRunner helpers
 
-from bounce_cli.cli import app
 from bounce_cli.experiments import acf
 
-runner = CliRunner()
 SMALL = ["--set", "long_runs.runs=6", "--set", "long_runs.bounces=300", "--set", "burn_in=20"]
-
-
-def run(*args):
-    return runner.invoke(app, [str(a) for a in args])
 
 
 @pytest.fixture(scope="module")
@@ -72,7 +66,4 @@ def test_figure_redraws_from_csvs(small_run):
     (["--set", "long_runs.runs=1"], "long_runs.runs"),
 ])
 def test_user_errors(args, needle, tmp_path):
-    result = run("acf", "--out", tmp_path / "o", *args)
-    assert result.exit_code == 2, result.output
-    lines = [line for line in result.stderr.splitlines() if line.strip()]
-    assert len(lines) == 1 and needle in lines[0], result.stderr
+    assert_user_error(run("acf", "--out", tmp_path / "o", *args), needle)

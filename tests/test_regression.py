@@ -4,29 +4,15 @@ import json
 
 import pandas as pd
 import pytest
-from typer.testing import CliRunner
+from test_cli import assert_user_error, run  # shared CliRunner helpers
 
-from bounce_cli.cli import app
 from bounce_cli.experiments import regression
 
-runner = CliRunner()
 SMALL = ["--set", "design.subjects=2", "--set", "design.trials_per_height=2",
          "--set", "stochastic_map.duration_s=8"]
 NOISELESS = ["--set", "design.subject_phase_sd_deg=0", "--set", "design.phase_sd_deg=0",
              "--set", "design.period_sd_s=0", "--set", "design.amplitude_sd_m=0",
              "--set", "stochastic_map.q_v=0", "--set", "stochastic_map.q_theta=0"]
-
-
-def run(*args):
-    return runner.invoke(app, [str(a) for a in args])
-
-
-def assert_user_error(result, *needles):
-    assert result.exit_code == 2, result.output
-    lines = [line for line in result.stderr.splitlines() if line.strip()]
-    assert len(lines) == 1, result.stderr
-    for needle in needles:
-        assert needle in lines[0], lines[0]
 
 
 @pytest.fixture(scope="module")
