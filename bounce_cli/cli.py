@@ -374,3 +374,31 @@ def impulse_command(config: ConfigOption = None, overrides: SetOption = None,
 
     run_experiment(impulse.EXPERIMENT, config=config, overrides=overrides, out=out,
                    quiet=quiet, force=force, print_config=print_config, jobs=jobs)
+
+
+@app.command("acf")
+def acf_command(config: ConfigOption = None, overrides: SetOption = None,
+                out: OutOption = None, quiet: QuietOption = False,
+                force: ForceOption = False, print_config: PrintConfigOption = False,
+                jobs: JobsOption = None) -> None:
+    """Correlation functions of the stochastic map vs the VAR(1) theory (paper Fig. 8)."""
+    from .experiments import acf
+    run_experiment(acf.EXPERIMENT, config=config, overrides=overrides, out=out,
+                   quiet=quiet, force=force, print_config=print_config, jobs=jobs)
+
+
+@app.command("regression")
+def regression_command(
+    config: ConfigOption = None, overrides: SetOption = None,
+    data: Annotated[Optional[Path], typer.Option(
+        "--data", help="Trials CSV (a_r_m, tau_s; optional theta_deg, alpha, g, condition) "
+        "to fit instead of simulating (sets the config key `data`).")] = None,
+    out: OutOption = None, quiet: QuietOption = False, force: ForceOption = False,
+    print_config: PrintConfigOption = False, jobs: JobsOption = None) -> None:
+    """Racket amplitude vs squared period, OLS against eq. 15 (paper Fig. 7)."""
+    from .experiments import regression
+    overrides = list(overrides or [])
+    if data is not None:
+        overrides.append(f"data={json.dumps(str(data))}")
+    run_experiment(regression.EXPERIMENT, config=config, overrides=overrides, out=out,
+                   quiet=quiet, force=force, print_config=print_config, jobs=jobs)

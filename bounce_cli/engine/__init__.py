@@ -30,6 +30,32 @@ from .linear import (
     stability,
 )
 from .maps import MapStep, Orbit, iterate_map, iterate_orbit, map_step, velocity_after_impact
+from .regression import (
+    LineFit,
+    TrialMeans,
+    eq15_amplitude,
+    eq15_slope,
+    ols_line,
+    period_for_height,
+    phase_from_slope,
+    simulate_trial,
+)
+from .stochastic import (
+    PAIR_NAMES,
+    PAIRS,
+    VELOCITY_PHASES,
+    StochasticRuns,
+    Var1Theory,
+    correlations_from_covariances,
+    lagged_covariances,
+    map_noise_covariance,
+    paper_noise_covariance,
+    sample_correlations,
+    simulate_stochastic_map,
+    stationary_covariance,
+    stochastic_step,
+    var1_theory,
+)
 from .params import (
     FixedPoint,
     ModelError,
@@ -49,4 +75,13 @@ __all__ = [
     "empirical_contraction_rate", "iterate_linear", "min_stable_spectral_radius",
     "racket_amplitude_for_ac", "stable_ac_range_g", "ImpulseResponse", "impulse_response_full",
     "impulse_response_linear", "perturbed_velocity", "relaxation_impacts",
+    "wrap_phase",
+    # stochastic map and VAR(1) theory (section 6)
+    "PAIR_NAMES", "PAIRS", "VELOCITY_PHASES", "StochasticRuns", "Var1Theory",
+    "correlations_from_covariances", "lagged_covariances", "map_noise_covariance",
+    "paper_noise_covariance", "sample_correlations", "simulate_stochastic_map",
+    "stationary_covariance", "stochastic_step", "var1_theory",
+    # amplitude-period relation (section 5, eq. 15)
+    "LineFit", "TrialMeans", "eq15_amplitude", "eq15_slope", "ols_line", "period_for_height",
+    "phase_from_slope", "simulate_trial",
 ]

@@ -1,0 +1,268 @@
+"""Fig. 7 and eq. 15 (section 5): trial means of racket amplitude regressed on squared period.
+
+Either simulated trials (target heights -> periods, eq. 15 amplitudes at per-trial impact
+phases plus motor noise, each run through the stochastic map for a 40 s trial), or a
+researcher's CSV (``data:`` / ``--data``). Fit: ordinary least squares of a_r on tau^2 with
+t-based confidence intervals, per condition when the data has a ``condition`` column, against
+eq. 15's two predictions: slope (1/4 pi)(1-alpha)/(1+alpha) g / cos(theta) at the mean observed
+phase, and zero intercept.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Annotated, Optional
+
+import numpy as np
+import pandas as pd
+from pydantic import Field
+
+from ..config import ConfigError, ExperimentConfig, StrictModel
+from ..engine import (
+    ModelError,
+    ModelParams,
+    eq15_amplitude,
+    eq15_slope,
+    ols_line,
+    period_for_height,
+    phase_from_slope,
+    simulate_trial,
+    stability,
+)
+from ..plotting import new_figure
+from .base import Experiment, ExperimentResult, RunOptions
+
+REQUIRED = ("a_r_m", "tau_s")
+OPTIONAL = ("theta_deg", "alpha", "g", "condition")
+
+
+class DesignBlock(StrictModel):
+    target_heights_m: list[Annotated[float, Field(gt=0.0)]] = Field([0.4, 0.6, 0.8], min_length=2,
+                                          description="ball heights above impact, m")
+    subjects: int = Field(6, ge=1)
+    trials_per_height: int = Field(3, ge=1, description="trials per subject and height")
+    phase_mean_deg: float = Field(32.0, gt=0.0, lt=90.0, description="mean impact phase, deg")
+    subject_phase_sd_deg: float = Field(3.0, ge=0.0, description="spread of subjects' means")
+    phase_sd_deg: float = Field(2.0, ge=0.0, description="trial-to-trial phase spread, deg")
+    period_sd_s: float = Field(0.01, ge=0.0, description="trial-to-trial period spread, s")
+    amplitude_sd_m: float = Field(0.002, ge=0.0, description="motor noise in amplitude, m")
+
+
+class MapNoiseBlock(StrictModel):
+    q_v: float = Field(0.04, ge=0.0, description="m/s, eq. 16")
+    q_theta: float = Field(0.05, ge=0.0, description="rad, eq. 18")
+    duration_s: float = Field(40.0, gt=0.0, description="trial length, s")
+    burn_in: int = Field(20, ge=0, description="bounces dropped at the start of a trial")
+
+
+class RegressionConfig(ExperimentConfig):
+    design: DesignBlock = DesignBlock()
+    stochastic_map: MapNoiseBlock = MapNoiseBlock()
+    confidence: float = Field(0.95, gt=0.0, lt=1.0, description="confidence level of the CIs")
+    data: Optional[str] = Field(None, description="CSV of real trials; replaces the simulation")
+    seed: int = Field(0, ge=0)
+
+
+# -- synthetic trials --------------------------------------------------------------------------
+def simulate_trials(config: RegressionConfig, options: RunOptions) -> pd.DataFrame:
+    d, m = config.design, config.stochastic_map
+    alpha, g = config.model.alpha, config.model.g
+    cells = [(s, h, t) for s in range(1, d.subjects + 1) for h in d.target_heights_m
+             for t in range(1, d.trials_per_height + 1)]
+    design_seed, trial_seeds = np.random.SeedSequence(config.seed).spawn(2)
+    subject_rng = np.random.default_rng(design_seed)
+    subject_phase = d.phase_mean_deg + d.subject_phase_sd_deg * subject_rng.standard_normal(d.subjects)
+    options.progress.start(len(cells), "trials")
+    rows = []
+    for (subject, height, trial), seed in zip(cells, trial_seeds.spawn(len(cells))):
+        draw_seed, map_seed = seed.spawn(2)
+        rng = np.random.default_rng(draw_seed)
+        z_phase, z_period, z_amp = rng.standard_normal(3)
+        phase = math.radians(subject_phase[subject - 1] + d.phase_sd_deg * z_phase)
+        tau = float(period_for_height(height, g)) + d.period_sd_s * z_period
+        amplitude = float(eq15_amplitude(tau, phase, alpha, g)) + d.amplitude_sd_m * z_amp
+        where = f"subject {subject}, height {height:g} m, trial {trial}"
+        if not (tau > 0 and amplitude > 0):
+            raise ModelError(f"{where}: drew period {tau:.4g} s, amplitude {amplitude:.4g} m; "
+                             "reduce design.period_sd_s / design.amplitude_sd_m")
+        params = ModelParams(alpha, g, amplitude, tau)
+        try:
+            st = stability(params)
+        except ModelError as exc:
+            raise ModelError(f"{where}: {exc}; reduce design.amplitude_sd_m") from None
+        if not st.stable:
+            raise ModelError(f"{where}: fixed point unstable (spectral radius "
+                             f"{st.spectral_radius:.3g}) at a_r={amplitude:.4g} m, tau={tau:.4g} s")
+        means = simulate_trial(params, m.q_v, m.q_theta, m.duration_s, map_seed,
+                               burn_in=m.burn_in)
+        rows.append({
+            "subject": subject, "target_height_m": height, "trial": trial,
+            "a_r_m": amplitude, "tau_s": means.tau_s,
+            "theta_deg": math.degrees(means.theta_rad), "alpha": alpha, "g": g,
+            "racket_period_s": tau, "theta_drawn_deg": math.degrees(phase),
+            "bounces": means.bounces, "lost": means.lost,
+        })
+        options.progress.advance(1)
+    frame = pd.DataFrame(rows)
+    if frame["lost"].sum() > len(frame) / 2:
+        raise ModelError(f"{int(frame['lost'].sum())} of {len(frame)} simulated trials lost the "
+                         "ball (it left the period-1 basin and stuck to the racket); lower the "
+                         "map noise or move design.phase_mean_deg away from 0")
+    return frame
+
+
+# -- researcher's data -----------------------------------------------------------------------
+def read_trials(path_text: str) -> pd.DataFrame:
+    """Read and check a trials CSV: a_r_m, tau_s required; theta_deg, alpha, g, condition
+    optional. Any problem is a one-line ConfigError naming ``data`` and the column."""
+    path = Path(path_text)
+    try:
+        frame = pd.read_csv(path)
+    except FileNotFoundError:
+        raise ConfigError(f"data: {path}: file not found") from None
+    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ConfigError(f"data: {path}: cannot read as CSV: {first}") from None
+    frame.columns = [str(c).strip() for c in frame.columns]
+    missing = [c for c in REQUIRED if c not in frame.columns]
+    if missing:
+        raise ConfigError(f"data: {path}: missing column(s) {', '.join(missing)} "
+                          f"(required: {', '.join(REQUIRED)}; optional: {', '.join(OPTIONAL)})")
+    if frame.empty:
+        raise ConfigError(f"data: {path}: no rows")
+    checks = {"a_r_m": "> 0", "tau_s": "> 0", "theta_deg": "in (-90, 90)", "alpha": "in [0, 1)",
+              "g": "> 0"}
+    for column, rule in checks.items():
+        if column not in frame.columns:
+            continue
+        values = pd.to_numeric(frame[column], errors="coerce")
+        bad = values.isna() | ~np.isfinite(values.astype(float))
+        if bad.any():
+            row = int(np.flatnonzero(bad.to_numpy())[0])
+            raise ConfigError(f"data: {path}: column {column}: not a number in data row {row + 1} "
+                              f"(got {frame[column].iloc[row]!r})")
+        ok = {"> 0": values > 0, "in (-90, 90)": values.abs() < 90,
+              "in [0, 1)": (values >= 0) & (values < 1)}[rule]
+        if not ok.all():
+            row = int(np.flatnonzero(~ok.to_numpy())[0])
+            raise ConfigError(f"data: {path}: column {column}: must be {rule} "
+                              f"(data row {row + 1}: {values.iloc[row]!r})")
+        frame[column] = values.astype(float)
+    if "condition" in frame.columns:
+        if frame["condition"].isna().any():
+            row = int(np.flatnonzero(frame["condition"].isna().to_numpy())[0])
+            raise ConfigError(f"data: {path}: column condition: empty in data row {row + 1}")
+        frame["condition"] = frame["condition"].astype(str)
+    return frame
+
+
+# -- fit ----------------------------------------------------------------------------------
+def fit_frame(trials: pd.DataFrame, config: RegressionConfig) -> pd.DataFrame:
+    """fit.csv: one row per condition ("all" without a condition column); simulated trials
+    that lost the ball are left out."""
+    if "lost" in trials.columns:
+        trials = trials[~trials["lost"].astype(bool)]
+    groups = (trials.groupby("condition", sort=True) if "condition" in trials.columns
+              else [("all", trials)])
+    rows = []
+    for condition, group in groups:
+        x = group["tau_s"].to_numpy() ** 2
+        y = group["a_r_m"].to_numpy()
+        try:
+            fit = ols_line(x, y, config.confidence)
+        except ModelError as exc:
+            raise ConfigError(f"data: condition {condition!r}: {exc}") from None
+        alpha = _constant(group, "alpha", config.model.alpha, condition)
+        g = _constant(group, "g", config.model.g, condition)
+        theta = (math.radians(group["theta_deg"].mean()) if "theta_deg" in group.columns
+                 else math.nan)
+        predicted = float(eq15_slope(theta, alpha, g)) if math.isfinite(theta) else math.nan
+        rows.append({
+            "condition": condition, "n": len(group),
+            "slope": float(fit.slope), "slope_ci_low": float(fit.slope_ci_low),
+            "slope_ci_high": float(fit.slope_ci_high),
+            "intercept": float(fit.intercept), "intercept_ci_low": float(fit.intercept_ci_low),
+            "intercept_ci_high": float(fit.intercept_ci_high),
+            "r2": float(fit.r2), "predicted_slope": predicted,
+            "mean_theta_deg": math.degrees(theta) if math.isfinite(theta) else math.nan,
+            "implied_theta_deg": math.degrees(float(phase_from_slope(fit.slope, alpha, g))),
+            "alpha": alpha, "g": g, "confidence": config.confidence,
+            "slope_ci_covers_prediction": bool(fit.slope_ci_low <= predicted <= fit.slope_ci_high)
+            if math.isfinite(predicted) else None,
+            "intercept_ci_covers_zero": bool(fit.intercept_ci_low <= 0.0 <= fit.intercept_ci_high),
+        })
+    return pd.DataFrame(rows)
+
+
+def _constant(group: pd.DataFrame, column: str, default: float, condition) -> float:
+    if column not in group.columns:
+        return float(default)
+    values = group[column].unique()
+    if len(values) != 1:
+        raise ConfigError(f"data: column {column}: differs within condition {condition!r} "
+                          "(eq. 15's slope needs one value per condition)")
+    return float(values[0])
+
+
+def run(config: RegressionConfig, options: RunOptions) -> ExperimentResult:
+    if config.data is not None:
+        trials = read_trials(config.data)
+        source = f"data {config.data}"
+    else:
+        trials = simulate_trials(config, options)
+        source = (f"{len(trials)} simulated trials ({int(trials['lost'].sum())} lost the ball "
+                  "and are not fitted)")
+    trials = trials.assign(tau2_s2=trials["tau_s"] ** 2)
+    fit = fit_frame(trials, config)
+    figures = draw({"trials.csv": trials, "fit.csv": fit})
+    pct = f"{config.confidence:.0%}"
+    lines = [f"{source}; OLS of a_r on tau^2, {pct} confidence intervals"]
+    for row in fit.itertuples():
+        lines.append(
+            f"({row.condition}) slope {row.slope:.4f} m/s^2 [{row.slope_ci_low:.4f}, "
+            f"{row.slope_ci_high:.4f}] vs eq. 15 {row.predicted_slope:.4f}; intercept "
+            f"{row.intercept * 100:.2f} cm [{row.intercept_ci_low * 100:.2f}, "
+            f"{row.intercept_ci_high * 100:.2f}] vs 0; R^2 {row.r2:.3f} (paper 0.98 / 0.90)")
+    return ExperimentResult(frames={"trials.csv": trials, "fit.csv": fit}, figures=figures,
+                            summary=lines, seed=None if config.data else config.seed)
+
+
+def draw(frames: dict[str, pd.DataFrame]) -> dict:
+    trials, fit = frames["trials.csv"], frames["fit.csv"]
+    fig, axes = new_figure(1, 1, width=7, height=5.2)
+    ax = axes[0, 0]
+    x_max = float(np.nanmax(trials["tau_s"] ** 2)) * 1.08
+    xs = np.linspace(0.0, x_max, 50)
+    has_condition = "condition" in trials.columns
+    colors = ["k", "tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange"]
+    for i, row in enumerate(fit.itertuples()):
+        color = colors[i % len(colors)]
+        group = trials[trials["condition"].astype(str) == str(row.condition)] if has_condition \
+            else trials
+        tag = f"{row.condition}: " if has_condition else ""
+        if "lost" in group.columns:
+            group = group[~group["lost"].astype(bool)]
+        ax.plot(group["tau_s"] ** 2, group["a_r_m"] * 100, "o", mfc="none", mec=color, ms=5,
+                label=f"{tag}trial means (n={row.n})")
+        ax.plot(xs, (row.intercept + row.slope * xs) * 100, "-", color=color, lw=1.5,
+                label=f"{tag}OLS fit: slope {row.slope:.3f} m/s^2, intercept "
+                      f"{row.intercept * 100:.2f} cm, R^2 {row.r2:.3f}")
+        if np.isfinite(row.predicted_slope):
+            ax.plot(xs, row.predicted_slope * xs * 100, "--", color=color, lw=1.2,
+                    label=f"{tag}eq. 15 at mean phase {row.mean_theta_deg:.1f} deg: slope "
+                          f"{row.predicted_slope:.3f} m/s^2")
+    ax.set_xlim(0, x_max)
+    ax.set_ylim(bottom=min(0.0, float(ax.get_ylim()[0])))
+    ax.axhline(0, color="0.8", lw=0.8)
+    ax.set_xlabel("squared racket period tau^2 (s^2)")
+    ax.set_ylabel("racket amplitude a_r (cm)")
+    ax.set_title("Fig. 7: trial means of racket amplitude vs squared period (eq. 15)")
+    ax.legend(fontsize=7, loc="upper left")
+    return {"regression.png": fig}
+
+
+EXPERIMENT = Experiment(
+    name="regression", schema=RegressionConfig, run=run,
+    help="Racket amplitude vs squared period, OLS against eq. 15 (Fig. 7).",
+)

@@ -1,0 +1,69 @@
+"""`bounce acf` (Fig. 8): CLI, files, determinism, redraw from CSV, errors."""
+
+import json
+
+import pandas as pd
+import pytest
+from test_cli import assert_user_error, run  # shared CliRunner helpers
+
+from bounce_cli.experiments import acf
+
+SMALL = ["--set", "long_runs.runs=6", "--set", "long_runs.bounces=300", "--set", "burn_in=20"]
+
+
+@pytest.fixture(scope="module")
+def small_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("acf")
+    result = run("acf", "--out", out, "--quiet", *SMALL)
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def test_files_and_columns(small_run):
+    frame = pd.read_csv(small_run / "acf.csv")
+    assert list(frame.columns) == ["lag", "pair", "theory", "theory_map", "sample_mean",
+                                   "sample_sd", "sample_se", "trial_mean", "trial_sd"]
+    assert set(frame["pair"]) == {"v_v", "theta_theta", "v_to_theta", "theta_to_v"}
+    assert sorted(frame["lag"].unique()) == list(range(11))
+    th = frame.set_index(["pair", "lag"])["theory"]
+    assert th["v_to_theta", 0] < 0 < th["v_to_theta", 1]  # section 6's description
+    summary = pd.read_csv(small_run / "summary.csv").set_index(["quantity", "source"])
+    assert summary.loc[("sd_v", "theory_eq19"), "paper"] == 0.068
+    assert summary.loc[("sd_theta", "theory_eq19"), "paper"] == 8.4
+    assert summary.loc[("sd_v", "sample"), "paper"] == 0.07
+    # ours, rounded as the paper rounds: 0.0695 m/s vs 0.068 and 7.89 deg vs 8.4 (see README)
+    assert summary.loc[("sd_v", "theory_eq19"), "ours"] == pytest.approx(0.0695, abs=5e-4)
+    assert summary.loc[("spectral_radius", "theory"), "ours"] == pytest.approx(0.42)
+    manifest = json.loads((small_run / "run.json").read_text())
+    assert manifest["seed"] == 2009 and manifest["config"]["noise"]["q_v"] == 0.04
+
+
+def test_same_seed_same_numbers_other_seed_differs(small_run, tmp_path):
+    again = tmp_path / "again"
+    assert run("acf", "--out", again, "--quiet", *SMALL).exit_code == 0
+    pd.testing.assert_frame_equal(pd.read_csv(small_run / "acf.csv"),
+                                  pd.read_csv(again / "acf.csv"))
+    other = tmp_path / "other"
+    assert run("acf", "--out", other, "--quiet", *SMALL, "--set", "seed=1").exit_code == 0
+    assert not pd.read_csv(other / "acf.csv")["sample_mean"].equals(
+        pd.read_csv(small_run / "acf.csv")["sample_mean"])
+
+
+def test_figure_redraws_from_csvs(small_run):
+    frames = {name: pd.read_csv(small_run / name) for name in ("acf.csv", "summary.csv")}
+    figures = acf.draw(frames)
+    fig = figures["acf.png"]
+    assert len(fig.axes) == 4
+    assert all(ax.get_xlabel() or ax.get_ylabel() for ax in fig.axes)
+    assert "Fig. 8" in fig._suptitle.get_text()
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--set", "model.racket_amplitude=0.076", "--set", "model.racket_period=0.53"],
+     "unstable (spectral radius 1.357"),
+    (["--set", "noise.q_v=-1"], "noise.q_v"),
+    (["--set", "noise.velocity_phase=psi"], "noise.velocity_phase"),
+    (["--set", "long_runs.runs=1"], "long_runs.runs"),
+])
+def test_user_errors(args, needle, tmp_path):
+    assert_user_error(run("acf", "--out", tmp_path / "o", *args), needle)
