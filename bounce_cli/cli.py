@@ -350,3 +350,20 @@ def orbit_note(orbit, params: ModelParams, sticking_interval: float) -> str:
 
 def main() -> None:
     app(prog_name="bounce")
+
+
+@app.command("basin")
+def basin_command(
+    config: ConfigOption = None,
+    overrides: SetOption = None,
+    out: OutOption = None,
+    quiet: QuietOption = False,
+    force: ForceOption = False,
+    print_config: PrintConfigOption = False,
+    jobs: JobsOption = None,
+) -> None:
+    """Basin of attraction of the period-1 attractor over (theta0, v0) (paper Fig. 4)."""
+    from .experiments import basin
+
+    run_experiment(basin.EXPERIMENT, config=config, overrides=overrides, out=out,
+                   quiet=quiet, force=force, print_config=print_config, jobs=jobs)
