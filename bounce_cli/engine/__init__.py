@@ -8,7 +8,7 @@ from .classify import (
     UNDECIDED,
     Classification,
     ClassifySettings,
-    classify,
+    classify_batch,
     classify_grid,
 )
 from .impact import can_fly, gap, gap_slope, launch_slope, next_impact_phase
@@ -36,7 +36,7 @@ from .params import (
 
 __all__ = [
     "BELOW_RACKET", "OUTCOMES", "PERIOD1", "STICKING", "UNDECIDED", "Classification",
-    "ClassifySettings", "classify", "classify_grid",
+    "ClassifySettings", "classify_batch", "classify_grid",
     "FixedPoint", "MapStep", "Orbit", "iterate_orbit", "ModelError", "ModelParams", "NoFixedPointError", "Stability",
     "can_fly", "complex_boundaries_g", "eigenvalues", "finite_difference_jacobian",
     "flip_boundary_g", "gap", "gap_slope", "is_complex_regime", "iterate_map", "jacobian",

@@ -67,7 +67,7 @@ class Classification:
         return np.asarray(OUTCOMES, dtype=object)[self.outcome]
 
 
-def classify(theta0, v0, params: ModelParams, settings: ClassifySettings = ClassifySettings()):
+def classify_batch(theta0, v0, params: ModelParams, settings: ClassifySettings = ClassifySettings()):
     """Classify initial conditions (arrays broadcast) in one vectorised batch.
 
     Returns a ``Classification`` with the broadcast shape. See the module docstring for the
@@ -116,7 +116,7 @@ def classify(theta0, v0, params: ModelParams, settings: ClassifySettings = Class
 
 def _classify_tile(args):
     theta0, v0, params, settings = args
-    result = classify(theta0, v0, params, settings)
+    result = classify_batch(theta0, v0, params, settings)
     return result.outcome, result.iterations
 
 
@@ -130,39 +130,46 @@ def classify_grid(
     tile_points: int = DEFAULT_TILE_POINTS,
     on_tile_done: Callable[[int], None] | None = None,
 ) -> Classification:
-    """``classify`` for large arrays: cut into tiles of ``tile_points`` points, spread over
-    ``jobs`` worker processes (``jobs=1``: in this process, no pool).
+    """``classify_batch`` for large arrays: cut into tiles of at most ``tile_points`` points, spread
+    over ``jobs`` worker processes (``jobs=1``: in this process, no pool).
 
+    Tiles interleave the points (tile i holds points i, i + n, i + 2n, ... of the flattened
+    arrays), so every tile gets the same mix of cheap and expensive initial conditions and
+    the workers stay balanced; with several jobs the number of tiles is a multiple of jobs.
     ``on_tile_done(n_points)`` is called once per finished tile with the number of points in
     it (for a progress bar). Results are identical for any ``jobs`` and ``tile_points``.
     """
     theta0, v0 = np.broadcast_arrays(np.asarray(theta0, dtype=float), np.asarray(v0, dtype=float))
     shape = theta0.shape
     theta0, v0 = theta0.ravel(), v0.ravel()
-    bounds = tile_bounds(theta0.size, tile_points)
+    tiles = tile_slices(theta0.size, tile_points, jobs)
     outcome = np.empty(theta0.shape, dtype=np.int8)
     iterations = np.empty(theta0.shape, dtype=np.int16)
-    tasks = ((theta0[a:b], v0[a:b], params, settings) for a, b in bounds)
+    # copies: contiguous arrays for the worker (and small pickles)
+    tasks = ((theta0[t].copy(), v0[t].copy(), params, settings) for t in tiles)
 
-    def store(i, res):
-        a, b = bounds[i]
-        outcome[a:b], iterations[a:b] = res
+    def store(tile, res):
+        outcome[tile], iterations[tile] = res
         if on_tile_done is not None:
-            on_tile_done(b - a)
+            on_tile_done(res[0].size)
 
-    if jobs <= 1 or len(bounds) <= 1:
-        for i, task in enumerate(tasks):
-            store(i, _classify_tile(task))
+    if jobs <= 1 or len(tiles) <= 1:
+        for tile, task in zip(tiles, tasks):
+            store(tile, _classify_tile(task))
     else:
-        with ProcessPoolExecutor(max_workers=min(jobs, len(bounds))) as pool:
-            # map keeps at most a bounded backlog in flight and yields in order
-            for i, res in enumerate(pool.map(_classify_tile, tasks, chunksize=1)):
-                store(i, res)
+        with ProcessPoolExecutor(max_workers=min(jobs, len(tiles))) as pool:
+            for tile, res in zip(tiles, pool.map(_classify_tile, tasks)):
+                store(tile, res)
     return Classification(outcome.reshape(shape), iterations.reshape(shape))
 
 
-def tile_bounds(size: int, tile_points: int) -> list[tuple[int, int]]:
-    """[(start, stop), ...] covering range(size) in tiles of at most ``tile_points``."""
+def tile_slices(size: int, tile_points: int, jobs: int = 1) -> list[slice]:
+    """Interleaved tiles [slice(i, None, n) for i < n] covering range(size), each of at most
+    ``tile_points`` points; n is rounded up to a multiple of ``jobs``."""
     if tile_points < 1:
         raise ValueError("tile_points must be >= 1")
-    return [(a, min(a + tile_points, size)) for a in range(0, size, tile_points)]
+    n = max(1, -(-size // tile_points))
+    if jobs > 1:
+        n = jobs * -(-n // jobs)
+    n = min(n, max(size, 1))
+    return [slice(i, None, n) for i in range(n)]

@@ -3,9 +3,9 @@ finder for each impact, Matlab's fzero) done right.
 
 For each impact the FIRST root of eq. 6 is bracketed by scanning the gap for its first sign
 change on a fine grid of elapsed phase, then refined with ``scipy.optimize.brentq``. Scalar
-Python throughout (``math``), sharing no code with ``next_impact_phase`` or ``classify``: it
+Python throughout (``math``), sharing no code with ``next_impact_phase`` or ``classify_batch``: it
 exists to check the fast classifier point by point and as the baseline of
-``benchmarks/basin.py``. It follows the same conventions as ``classify`` (see there).
+``benchmarks/basin.py``. It follows the same conventions as ``engine.classify`` (see there).
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ import pandas as pd
 from pydantic import Field, model_validator
 
 from ..config import ConfigError, ExperimentConfig, StrictModel
-from ..engine import OUTCOMES, ClassifySettings, classify, classify_grid
+from ..engine import OUTCOMES, ClassifySettings, classify_batch, classify_grid
 from .base import Experiment, ExperimentResult, RunOptions
 
 #: Fig. 3 initial conditions: the ball starts on the racket at x_b(0) = 0.205 m (section 3)
@@ -140,7 +140,7 @@ def marker_frame(params, settings: ClassifySettings) -> pd.DataFrame:
     names = ["fixed_point", *FIG3_V0_M_S]
     theta = np.array([fp.theta_rad] + [FIG3_THETA0_RAD] * len(FIG3_V0_M_S))
     v = np.array([fp.v_m_s, *FIG3_V0_M_S.values()])
-    res = classify(theta, v, params, settings)
+    res = classify_batch(theta, v, params, settings)
     return pd.DataFrame(
         {
             "marker": names,
