@@ -84,3 +84,23 @@ def test_basin_grid_limit_and_bad_grid_are_one_line_errors(tmp_path):
         lines = [line for line in result.stderr.splitlines() if line.strip()]
         assert len(lines) == 1 and needle in lines[0], result.stderr
         assert "Traceback" not in result.output
+
+
+def test_draw_accepts_rows_in_any_order_and_subsamples_large_grids(monkeypatch):
+    th, v = np.meshgrid(np.linspace(0, 360, 30), np.linspace(0, 10, 20))
+    outcome = np.where(v > 5, "period1", "sticking").astype(object)
+    outcome[v < 1] = "below_racket"
+    df = pd.DataFrame({"theta0_rad": np.deg2rad(th.ravel()), "theta0_deg": th.ravel(),
+                       "v0_m_s": v.ravel(), "outcome": outcome.ravel(),
+                       "iterations": (v * 3).astype(int).ravel()})
+    markers = pd.DataFrame({"marker": ["fixed_point"], "theta0_deg": [42.8], "v0_m_s": [4.5],
+                            "outcome": ["period1"], "iterations": [1]})
+    ordered = basin.draw({"basin.csv": df, "markers.csv": markers})
+    shuffled = basin.draw({"basin.csv": df.sample(frac=1, random_state=1),
+                           "markers.csv": markers})
+    for name in ordered:
+        np.testing.assert_array_equal(ordered[name].axes[0].images[0].get_array(),
+                                      shuffled[name].axes[0].images[0].get_array())
+    monkeypatch.setattr(basin, "MAX_IMAGE_CELLS", 8)
+    small = basin.draw({"basin.csv": df, "markers.csv": markers})["basin.png"]
+    assert small.axes[0].images[0].get_array().shape == (7, 8)  # every 3rd v0, 4th theta0

@@ -112,6 +112,7 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
             "iterations": result.iterations,
         }
     )
+    del theta_grid_deg, theta_grid_rad, v_grid  # the frame holds copies (large grids)
     counts = np.bincount(result.outcome, minlength=len(OUTCOMES))
     fractions = pd.DataFrame(
         {"outcome": list(OUTCOMES), "count": counts, "fraction": counts / n_points}
@@ -152,16 +153,41 @@ def marker_frame(params, settings: ClassifySettings) -> pd.DataFrame:
     )
 
 
-def _grid_image(basin: pd.DataFrame, values: str):
-    """(image [v0, theta0], extent) of a column of basin.csv on its grid."""
-    table = basin.pivot(index="v0_m_s", columns="theta0_deg", values=values).sort_index()
-    table = table.sort_index(axis=1)
-    th = table.columns.to_numpy(dtype=float)
-    v = table.index.to_numpy(dtype=float)
-    dth = (th[-1] - th[0]) / max(len(th) - 1, 1)
-    dv = (v[-1] - v[0]) / max(len(v) - 1, 1)
-    extent = (th[0] - dth / 2, th[-1] + dth / 2, v[0] - dv / 2, v[-1] + dv / 2)
-    return table.to_numpy(), extent
+#: figures show at most this many cells per axis (every k-th grid point beyond: a 150 dpi
+#: figure has ~1100 pixels across, so more cells are invisible and only cost memory)
+MAX_IMAGE_CELLS = 1200
+
+
+class _Grid:
+    """Where each row of basin.csv sits on its (v0, theta0) grid. ``image(values)`` -> array
+    [v0 index, theta0 index], subsampled to at most MAX_IMAGE_CELLS per axis; ``extent`` for
+    imshow. Rows in the order ``run`` writes them (v0 outer, theta0 inner) are reshaped
+    without index arrays, so that 10^7-row grids stay cheap; other orders are scattered."""
+
+    def __init__(self, basin: pd.DataFrame) -> None:
+        theta, v = basin["theta0_deg"].to_numpy(), basin["v0_m_s"].to_numpy()
+        th, vs = np.unique(theta), np.unique(v)
+        self.shape = (vs.size, th.size)
+        self.index = None
+        canonical = len(basin) == th.size * vs.size and (
+            (theta.reshape(self.shape) == th).all()
+            and (v.reshape(self.shape) == vs[:, None]).all()
+        )
+        if not canonical:
+            self.index = (np.searchsorted(vs, v), np.searchsorted(th, theta))
+        dth = (th[-1] - th[0]) / max(th.size - 1, 1)
+        dv = (vs[-1] - vs[0]) / max(vs.size - 1, 1)
+        self.extent = (th[0] - dth / 2, th[-1] + dth / 2, vs[0] - dv / 2, vs[-1] + dv / 2)
+        self.stride = tuple(-(-n // MAX_IMAGE_CELLS) for n in self.shape)
+
+    def image(self, values, fill=0):
+        values = np.asarray(values)
+        if self.index is None:
+            out = values.reshape(self.shape)
+        else:
+            out = np.full(self.shape, fill, dtype=values.dtype)
+            out[self.index] = values
+        return out[:: self.stride[0], :: self.stride[1]]
 
 
 def _draw_markers(ax, markers: pd.DataFrame, extent) -> None:
@@ -187,7 +213,8 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
 
     basin, markers = frames["basin.csv"], frames["markers.csv"]
     codes = pd.Categorical(basin["outcome"], categories=list(OUTCOMES)).codes
-    image, extent = _grid_image(basin.assign(code=codes), "code")
+    grid = _Grid(basin)
+    image, extent = grid.image(codes), grid.extent
 
     fig, axes = new_figure(width=7.5, height=6.2)
     ax = axes[0, 0]
@@ -204,8 +231,8 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     ax.set_ylabel(r"initial velocity $v_0$ (m/s)")
     ax.set_title("Domain of attraction of the period-1 attractor (paper Fig. 4)")
 
-    iters, _ = _grid_image(basin, "iterations")
-    below, _ = _grid_image(basin.assign(below=codes == OUTCOMES.index("below_racket")), "below")
+    iters = grid.image(basin["iterations"].to_numpy())
+    below = grid.image(codes == OUTCOMES.index("below_racket"))
     fig2, axes2 = new_figure(width=7.5, height=6.2)
     ax2 = axes2[0, 0]
     shaded = np.ma.masked_array(iters.astype(float), mask=below.astype(bool))
