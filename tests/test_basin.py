@@ -104,3 +104,27 @@ def test_draw_accepts_rows_in_any_order_and_subsamples_large_grids(monkeypatch):
     monkeypatch.setattr(basin, "MAX_IMAGE_CELLS", 8)
     small = basin.draw({"basin.csv": df, "markers.csv": markers})["basin.png"]
     assert small.axes[0].images[0].get_array().shape == (7, 8)  # every 3rd v0, 4th theta0
+
+
+def test_run_reports_progress_per_tile_and_summary():
+    from bounce_cli.experiments.base import RunOptions
+
+    class Recorder:
+        def __init__(self):
+            self.total, self.done = None, []
+
+        def start(self, total, description):
+            self.total = total
+
+        def advance(self, n=1):
+            self.done.append(n)
+
+    cfg = basin.BasinConfig.model_validate(
+        {"grid": {"theta0_deg": {"start": 0, "stop": 360, "num": 12},
+                  "v0_m_s": {"start": 0, "stop": 10, "num": 10}}}
+    )
+    progress = Recorder()
+    result = basin.run(cfg, RunOptions(jobs=1, progress=progress))
+    assert progress.total == 120 and sum(progress.done) == 120
+    assert len(result.frames["basin.csv"]) == 120
+    assert any("max impacts" in line for line in result.summary)
