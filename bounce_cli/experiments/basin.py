@@ -37,8 +37,7 @@ OUTCOME_LABELS = {
     "undecided": "undecided (max impacts)",
 }
 
-LEGEND_BELOW = dict(loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3, fontsize=8,
-                    frameon=False)
+LEGEND_BELOW = dict(loc="outside lower center", ncol=3, fontsize=8, frameon=False)
 
 
 class GridAxis(StrictModel):
@@ -226,7 +225,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     handles = [Patch(facecolor=OUTCOME_COLOURS[o], edgecolor="0.3", label=OUTCOME_LABELS[o])
                for o in OUTCOMES]
     handles += ax.get_legend_handles_labels()[0]
-    ax.legend(handles=handles, **LEGEND_BELOW)
+    fig.legend(handles=handles, **LEGEND_BELOW)
     ax.set_xlabel(r"initial phase $\theta_0$ (deg)")
     ax.set_ylabel(r"initial velocity $v_0$ (m/s)")
     ax.set_title("Domain of attraction of the period-1 attractor (paper Fig. 4)")
@@ -241,7 +240,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     ax2.set_facecolor("black")
     fig2.colorbar(im, ax=ax2, label="impacts until classified")
     _draw_markers(ax2, markers, extent)
-    ax2.legend(
+    fig2.legend(
         handles=[Patch(facecolor="black", label="below the racket")]
         + ax2.get_legend_handles_labels()[0],
         **LEGEND_BELOW,
