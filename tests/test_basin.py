@@ -66,7 +66,7 @@ def test_basin_figures_redraw_from_csv(tmp_path):
     np.testing.assert_array_equal(np.asarray(image), codes.reshape(40, 40))
     ax = figures["basin.png"].axes[0]
     assert "deg" in ax.get_xlabel() and "m/s" in ax.get_ylabel() and "Fig. 4" in ax.get_title()
-    labels = [t.get_text() for t in ax.get_legend().get_texts()]
+    labels = [t.get_text() for t in figures["basin.png"].legends[0].get_texts()]
     assert any("undecided" in t for t in labels) and any("Fig. 3" in t for t in labels)
     iters = figures["basin_iterations.png"].axes[0].images[0].get_array()
     assert iters.max() == df.iterations.max()
