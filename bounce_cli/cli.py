@@ -402,3 +402,20 @@ def regression_command(
         overrides.append(f"data={json.dumps(str(data))}")
     run_experiment(regression.EXPERIMENT, config=config, overrides=overrides, out=out,
                    quiet=quiet, force=force, print_config=print_config, jobs=jobs)
+
+
+@app.command("basin")
+def basin_command(
+    config: ConfigOption = None,
+    overrides: SetOption = None,
+    out: OutOption = None,
+    quiet: QuietOption = False,
+    force: ForceOption = False,
+    print_config: PrintConfigOption = False,
+    jobs: JobsOption = None,
+) -> None:
+    """Basin of attraction of the period-1 attractor over (theta0, v0) (paper Fig. 4)."""
+    from .experiments import basin
+
+    run_experiment(basin.EXPERIMENT, config=config, overrides=overrides, out=out,
+                   quiet=quiet, force=force, print_config=print_config, jobs=jobs)

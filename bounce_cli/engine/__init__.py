@@ -1,5 +1,16 @@
 """Pure numerics of the ball bouncing map: numpy/scipy only, no files, no printing."""
 
+from .classify import (
+    BELOW_RACKET,
+    OUTCOMES,
+    PERIOD1,
+    STICKING,
+    UNDECIDED,
+    Classification,
+    ClassifySettings,
+    classify_batch,
+    classify_grid,
+)
 from .impact import can_fly, gap, gap_slope, launch_slope, next_impact_phase
 from .impulse import (
     ImpulseResponse,
@@ -66,6 +77,8 @@ from .params import (
 )
 
 __all__ = [
+    "BELOW_RACKET", "OUTCOMES", "PERIOD1", "STICKING", "UNDECIDED", "Classification",
+    "ClassifySettings", "classify_batch", "classify_grid",
     "FixedPoint", "MapStep", "Orbit", "iterate_orbit", "ModelError", "ModelParams", "NoFixedPointError", "Stability",
     "can_fly", "complex_boundaries_g", "eigenvalues", "finite_difference_jacobian",
     "flip_boundary_g", "gap", "gap_slope", "is_complex_regime", "iterate_map", "jacobian",

@@ -1,0 +1,119 @@
+"""Benchmark of the Fig. 4 basin (a script, not a test).
+
+Times ``classify_grid`` on an N x N grid of the paper's Fig. 4 (theta0 0..360 deg, v0 0..10
+m/s, the paper's parameters and stopping conditions) with one job and with all cores, and the
+paper's method -- a per-point Python loop around ``scipy.optimize.brentq`` for every impact
+(``engine.reference.classify_point_brentq``, bracketed by a first-root scan) -- on a random
+subsample of the grid, extrapolated to the whole grid. Prints points per second and ratios.
+With ``--memory-size M`` it also runs ``bounce basin`` on an M x M grid (CSV and figures
+included) in a subprocess and reports its peak resident memory.
+
+    python benchmarks/basin.py                       # 1000 x 1000, 1000-point subsample
+    python benchmarks/basin.py --size 200 --subsample 200
+    python benchmarks/basin.py --skip-grid --memory-size 4000
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from bounce_cli.engine import OUTCOMES, ClassifySettings, ModelParams, classify_grid  # noqa: E402
+from bounce_cli.engine.reference import classify_point_brentq  # noqa: E402
+
+PARAMS = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.30, racket_period=0.92)
+SETTINGS = ClassifySettings(max_iterations=100, tolerance=1e-3, sticking_interval_s=1e-3)
+
+
+def grid(n: int):
+    theta, v = np.meshgrid(np.deg2rad(np.linspace(0, 360, n)), np.linspace(0, 10, n))
+    return theta.ravel(), v.ravel()
+
+
+def time_grid(theta, v, jobs: int):
+    t0 = time.perf_counter()
+    res = classify_grid(theta, v, PARAMS, SETTINGS, jobs=jobs)
+    return time.perf_counter() - t0, res
+
+
+def time_reference(theta, v, m: int, seed: int, fast):
+    rng = np.random.default_rng(seed)
+    pick = rng.choice(theta.size, size=min(m, theta.size), replace=False)
+    t0 = time.perf_counter()
+    ref = [classify_point_brentq(theta[i], v[i], PARAMS) for i in pick]
+    elapsed = time.perf_counter() - t0
+    agree = None
+    if fast is not None:
+        names = fast.names()
+        agree = sum(r == (names[i], int(fast.iterations[i])) for r, i in zip(ref, pick))
+    return elapsed, len(pick), agree
+
+
+def memory_run(m: int, jobs: int) -> None:
+    with tempfile.TemporaryDirectory() as out:
+        cmd = [sys.executable, "-m", "bounce_cli", "basin", "--quiet", "--jobs", str(jobs),
+               "--set", f"grid.theta0_deg.num={m}", "--set", f"grid.v0_m_s.num={m}",
+               "--out", out]
+        t0 = time.perf_counter()
+        subprocess.run(cmd, cwd=ROOT, check=True)
+        wall = time.perf_counter() - t0
+        peak_kib = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+        size = (Path(out) / "basin.csv").stat().st_size
+    print(f"bounce basin {m} x {m} (--jobs {jobs}, CSV + figures): {wall:.1f} s, "
+          f"peak RSS of the largest process {peak_kib / 1024:.0f} MiB, basin.csv {size / 1e6:.0f} MB")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--size", type=int, default=1000, help="grid side N (N x N points)")
+    ap.add_argument("--subsample", type=int, default=1000, help="points for the brentq loop")
+    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="'all cores' jobs")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the subsample")
+    ap.add_argument("--skip-grid", action="store_true", help="only the memory run")
+    ap.add_argument("--memory-size", type=int, default=0, help="also run bounce basin M x M")
+    args = ap.parse_args()
+
+    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+          f"{platform.system()} {platform.release()}, Python {platform.python_version()}, "
+          f"numpy {np.__version__}")
+    if not args.skip_grid:
+        theta, v = grid(args.size)
+        n = theta.size
+        t1, res = time_grid(theta, v, 1)
+        print(f"grid {args.size} x {args.size} = {n:,} points, --jobs 1: {t1:.2f} s, "
+              f"{n / t1:,.0f} points/s")
+        fractions = np.bincount(res.outcome, minlength=4) / n
+        print("  fractions: " + ", ".join(f"{o} {f:.4f}" for o, f in zip(OUTCOMES, fractions))
+              + f"; max impacts {res.iterations.max()}")
+        if args.jobs > 1:
+            tj, resj = time_grid(theta, v, args.jobs)
+            same = np.array_equal(res.outcome, resj.outcome) and np.array_equal(
+                res.iterations, resj.iterations)
+            print(f"grid --jobs {args.jobs}: {tj:.2f} s, {n / tj:,.0f} points/s, "
+                  f"speed-up {t1 / tj:.2f}x, identical results: {same}")
+        tr, m, agree = time_reference(theta, v, args.subsample, args.seed, res)
+        per_point = tr / m
+        print(f"paper's method (per-point brentq loop): {m} points in {tr:.2f} s, "
+              f"{1 / per_point:,.0f} points/s, extrapolated to the grid: {per_point * n:,.0f} s "
+              f"({per_point * n / 3600:.2f} h); agrees with the fast classifier on {agree}/{m}")
+        print(f"ratio, vectorised --jobs 1 vs brentq loop: {per_point * n / t1:,.0f}x")
+        if args.jobs > 1:
+            print(f"ratio, vectorised --jobs {args.jobs} vs brentq loop: {per_point * n / tj:,.0f}x")
+    if args.memory_size:
+        memory_run(args.memory_size, args.jobs)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,259 @@
+"""Basin of attraction of the period-1 attractor (section 3, Fig. 4).
+
+Every initial condition (theta0, v0) of a grid -- the ball leaves the racket at phase theta0
+with velocity v0 -- is classified by iterating the map (eqs. 5, 6) until it reaches the
+period-1 fixed point, sticks, or (never, on the paper's grid) runs out of impacts; initial
+velocities not above the racket's are "below the racket". The numerics live in
+``engine.classify``; this module builds the grid, tiles it over worker processes and draws.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+from pydantic import Field, model_validator
+
+from ..config import ConfigError, ExperimentConfig, StrictModel
+from ..engine import OUTCOMES, ClassifySettings, classify_batch, classify_grid
+from .base import Experiment, ExperimentResult, RunOptions
+
+#: Fig. 3 initial conditions: the ball starts on the racket at x_b(0) = 0.205 m (section 3)
+FIG3_THETA0_RAD = math.asin(0.205 / 0.30)
+FIG3_V0_M_S = {"fig3_period1": 4.8, "fig3_sticking": 5.7}
+
+#: colours of the outcomes in basin.png (the paper: white, grey, black; undecided: red)
+OUTCOME_COLOURS = {
+    "period1": "#ffffff",
+    "sticking": "#9a9a9a",
+    "below_racket": "#000000",
+    "undecided": "#d62728",
+}
+OUTCOME_LABELS = {
+    "period1": "period-1 attractor",
+    "sticking": "sticking",
+    "below_racket": "below the racket",
+    "undecided": "undecided (max impacts)",
+}
+
+LEGEND_BELOW = dict(loc="outside lower center", ncol=3, fontsize=8, frameon=False)
+
+
+class GridAxis(StrictModel):
+    """numpy.linspace(start, stop, num): endpoints included."""
+
+    start: float
+    stop: float
+    num: int = Field(ge=2)
+
+    @model_validator(mode="after")
+    def _increasing(self):
+        if not self.stop > self.start:
+            raise ValueError(f"stop ({self.stop:g}) must be greater than start ({self.start:g})")
+        return self
+
+    def values(self) -> np.ndarray:
+        return np.linspace(self.start, self.stop, self.num)
+
+
+class GridBlock(StrictModel):
+    theta0_deg: GridAxis = GridAxis(start=0.0, stop=360.0, num=400)
+    v0_m_s: GridAxis = GridAxis(start=0.0, stop=10.0, num=400)
+
+
+class ClassifyBlock(StrictModel):
+    max_iterations: int = Field(100, ge=1, le=32767, description="impacts at most")
+    tolerance: float = Field(1e-3, gt=0.0, description="m/s and rad, distance to the fixed point")
+    sticking_interval_s: float = Field(1e-3, ge=0.0, description="s, shortest hop not sticking")
+
+    def settings(self) -> ClassifySettings:
+        return ClassifySettings(self.max_iterations, self.tolerance, self.sticking_interval_s)
+
+
+class LimitsBlock(StrictModel):
+    max_points: int = Field(100_000_000, ge=1, description="largest grid accepted")
+
+
+class BasinConfig(ExperimentConfig):
+    grid: GridBlock = GridBlock()
+    classify: ClassifyBlock = ClassifyBlock()
+    limits: LimitsBlock = LimitsBlock()
+
+
+def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
+    params = config.params
+    theta_deg = config.grid.theta0_deg.values()
+    v0 = config.grid.v0_m_s.values()
+    n_points = theta_deg.size * v0.size
+    if n_points > config.limits.max_points:
+        raise ConfigError(
+            f"limits.max_points: the grid has {n_points:,} points "
+            f"({theta_deg.size} x {v0.size}), more than limits.max_points = "
+            f"{config.limits.max_points:,}; reduce grid.*.num or raise limits.max_points"
+        )
+    settings = config.classify.settings()
+    # rows: v0 outer, theta0 inner
+    theta_grid_deg, v_grid = np.meshgrid(theta_deg, v0)
+    theta_grid_rad = np.deg2rad(theta_grid_deg)
+
+    options.progress.start(n_points, "basin: classifying")
+    result = classify_grid(
+        theta_grid_rad.ravel(), v_grid.ravel(), params, settings,
+        jobs=options.jobs, on_tile_done=options.progress.advance,
+    )
+    basin = pd.DataFrame(
+        {
+            "theta0_rad": theta_grid_rad.ravel(),
+            "theta0_deg": theta_grid_deg.ravel(),
+            "v0_m_s": v_grid.ravel(),
+            "outcome": pd.Categorical.from_codes(result.outcome, categories=list(OUTCOMES)),
+            "iterations": result.iterations,
+        }
+    )
+    del theta_grid_deg, theta_grid_rad, v_grid  # the frame holds copies (large grids)
+    counts = np.bincount(result.outcome, minlength=len(OUTCOMES))
+    fractions = pd.DataFrame(
+        {"outcome": list(OUTCOMES), "count": counts, "fraction": counts / n_points}
+    )
+    markers = marker_frame(params, settings)
+
+    frames = {"basin.csv": basin, "fractions.csv": fractions, "markers.csv": markers}
+    summary = [
+        f"basin: {theta_deg.size} x {v0.size} grid, "
+        + ", ".join(f"{o} {f:.4f}" for o, f in zip(OUTCOMES, counts / n_points)),
+        f"max impacts until classified: {int(result.iterations.max())} "
+        f"(limit {settings.max_iterations}; paper: no point reached 100)",
+        "Fig. 3 initial conditions: "
+        + ", ".join(
+            f"v0 = {row.v0_m_s:g} m/s -> {row.outcome} after {row.iterations}"
+            for row in markers.itertuples()
+            if row.marker != "fixed_point"
+        ),
+    ]
+    return ExperimentResult(frames=frames, figures=draw(frames), summary=summary)
+
+
+def marker_frame(params, settings: ClassifySettings) -> pd.DataFrame:
+    """The fixed point (eqs. 7, 8) and the Fig. 3 initial conditions, each classified."""
+    fp = params.fixed_point()
+    names = ["fixed_point", *FIG3_V0_M_S]
+    theta = np.array([fp.theta_rad] + [FIG3_THETA0_RAD] * len(FIG3_V0_M_S))
+    v = np.array([fp.v_m_s, *FIG3_V0_M_S.values()])
+    res = classify_batch(theta, v, params, settings)
+    return pd.DataFrame(
+        {
+            "marker": names,
+            "theta0_deg": np.degrees(theta),
+            "v0_m_s": v,
+            "outcome": res.names(),
+            "iterations": res.iterations,
+        }
+    )
+
+
+#: figures show at most this many cells per axis (every k-th grid point beyond: a 150 dpi
+#: figure has ~1100 pixels across, so more cells are invisible and only cost memory)
+MAX_IMAGE_CELLS = 1200
+
+
+class _Grid:
+    """Where each row of basin.csv sits on its (v0, theta0) grid. ``image(values)`` -> array
+    [v0 index, theta0 index], subsampled to at most MAX_IMAGE_CELLS per axis; ``extent`` for
+    imshow. Rows in the order ``run`` writes them (v0 outer, theta0 inner) are reshaped
+    without index arrays, so that 10^7-row grids stay cheap; other orders are scattered."""
+
+    def __init__(self, basin: pd.DataFrame) -> None:
+        theta, v = basin["theta0_deg"].to_numpy(), basin["v0_m_s"].to_numpy()
+        th, vs = np.unique(theta), np.unique(v)
+        self.shape = (vs.size, th.size)
+        self.index = None
+        canonical = len(basin) == th.size * vs.size and (
+            (theta.reshape(self.shape) == th).all()
+            and (v.reshape(self.shape) == vs[:, None]).all()
+        )
+        if not canonical:
+            self.index = (np.searchsorted(vs, v), np.searchsorted(th, theta))
+        dth = (th[-1] - th[0]) / max(th.size - 1, 1)
+        dv = (vs[-1] - vs[0]) / max(vs.size - 1, 1)
+        self.extent = (th[0] - dth / 2, th[-1] + dth / 2, vs[0] - dv / 2, vs[-1] + dv / 2)
+        self.stride = tuple(-(-n // MAX_IMAGE_CELLS) for n in self.shape)
+
+    def image(self, values, fill=0):
+        values = np.asarray(values)
+        if self.index is None:
+            out = values.reshape(self.shape)
+        else:
+            out = np.full(self.shape, fill, dtype=values.dtype)
+            out[self.index] = values
+        return out[:: self.stride[0], :: self.stride[1]]
+
+
+def _draw_markers(ax, markers: pd.DataFrame, extent) -> None:
+    x0, x1, y0, y1 = extent
+    inside = markers[
+        markers.theta0_deg.between(x0, x1) & markers.v0_m_s.between(y0, y1)
+    ]
+    for row in inside.itertuples():
+        if row.marker == "fixed_point":
+            ax.plot(row.theta0_deg, row.v0_m_s, "o", ms=7, mfc="black", mec="white",
+                    label="period-1 fixed point (eqs. 7, 8)")
+        else:
+            ax.plot(row.theta0_deg, row.v0_m_s, "X", ms=9, mfc="black", mec="white",
+                    label=f"Fig. 3: v0 = {row.v0_m_s:g} m/s ({row.outcome})")
+
+
+def draw(frames: dict[str, pd.DataFrame]) -> dict:
+    """basin.png and basin_iterations.png, from basin.csv and markers.csv only."""
+    from matplotlib.colors import BoundaryNorm, ListedColormap
+    from matplotlib.patches import Patch
+
+    from ..plotting import new_figure
+
+    basin, markers = frames["basin.csv"], frames["markers.csv"]
+    codes = pd.Categorical(basin["outcome"], categories=list(OUTCOMES)).codes
+    grid = _Grid(basin)
+    image, extent = grid.image(codes), grid.extent
+
+    fig, axes = new_figure(width=7.5, height=6.2)
+    ax = axes[0, 0]
+    cmap = ListedColormap([OUTCOME_COLOURS[o] for o in OUTCOMES])
+    norm = BoundaryNorm(np.arange(len(OUTCOMES) + 1) - 0.5, cmap.N)
+    ax.imshow(image, origin="lower", extent=extent, aspect="auto", cmap=cmap, norm=norm,
+              interpolation="nearest")
+    _draw_markers(ax, markers, extent)
+    handles = [Patch(facecolor=OUTCOME_COLOURS[o], edgecolor="0.3", label=OUTCOME_LABELS[o])
+               for o in OUTCOMES]
+    handles += ax.get_legend_handles_labels()[0]
+    fig.legend(handles=handles, **LEGEND_BELOW)
+    ax.set_xlabel(r"initial phase $\theta_0$ (deg)")
+    ax.set_ylabel(r"initial velocity $v_0$ (m/s)")
+    ax.set_title("Domain of attraction of the period-1 attractor (paper Fig. 4)")
+
+    iters = grid.image(basin["iterations"].to_numpy())
+    below = grid.image(codes == OUTCOMES.index("below_racket"))
+    fig2, axes2 = new_figure(width=7.5, height=6.2)
+    ax2 = axes2[0, 0]
+    shaded = np.ma.masked_array(iters.astype(float), mask=below.astype(bool))
+    im = ax2.imshow(shaded, origin="lower", extent=extent, aspect="auto", cmap="viridis",
+                    interpolation="nearest")
+    ax2.set_facecolor("black")
+    fig2.colorbar(im, ax=ax2, label="impacts until classified")
+    _draw_markers(ax2, markers, extent)
+    fig2.legend(
+        handles=[Patch(facecolor="black", label="below the racket")]
+        + ax2.get_legend_handles_labels()[0],
+        **LEGEND_BELOW,
+    )
+    ax2.set_xlabel(r"initial phase $\theta_0$ (deg)")
+    ax2.set_ylabel(r"initial velocity $v_0$ (m/s)")
+    ax2.set_title("Impacts until classified (paper Fig. 4, section 3)")
+    return {"basin.png": fig, "basin_iterations.png": fig2}
+
+
+EXPERIMENT = Experiment(
+    name="basin",
+    schema=BasinConfig,
+    run=run,
+    help="Basin of attraction of the period-1 attractor (paper Fig. 4).",
+)
