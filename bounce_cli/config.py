@@ -14,7 +14,7 @@ from typing import Any, TypeVar
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from .engine import ModelParams
+from .engine import ClassifySettings, ModelParams
 
 
 class ConfigError(ValueError):
@@ -35,6 +35,17 @@ class ModelBlock(StrictModel):
 
     def to_params(self) -> ModelParams:
         return ModelParams(self.alpha, self.g, self.racket_amplitude, self.racket_period)
+
+
+class ClassifyBlock(StrictModel):
+    """Section 3's stopping conditions for an orbit (Fig. 4; shared by basin and impulse)."""
+
+    max_iterations: int = Field(100, ge=1, le=32767, description="impacts at most")
+    tolerance: float = Field(1e-3, gt=0.0, description="m/s and rad, distance to the fixed point")
+    sticking_interval_s: float = Field(1e-3, ge=0.0, description="s, shortest hop not sticking")
+
+    def settings(self) -> ClassifySettings:
+        return ClassifySettings(self.max_iterations, self.tolerance, self.sticking_interval_s)
 
 
 class ExperimentConfig(StrictModel):

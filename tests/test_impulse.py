@@ -5,6 +5,8 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
+
+from bounce_cli.config import ClassifyBlock
 from typer.testing import CliRunner
 
 from bounce_cli.cli import app
@@ -84,7 +86,7 @@ def test_tables(result):
                                  "dtheta_deg", "outcome"]
     assert len(imp) == 4 * 2 * 11
     full = imp[imp.model == "full"].groupby("alpha_p").outcome.first()
-    assert full[0.4] == full[0.6] == full[0.35] == "period-1" and full[0.65] != "period-1"
+    assert full[0.4] == full[0.6] == full[0.35] == "period1" and full[0.65] != "period1"
     rel = result.frames["relaxation.csv"].set_index(["alpha_p", "model"])
     # linear: equal relaxation for opposite signs; full: the increase relaxes more slowly
     assert rel.asymmetry_impacts[(0.6, "linear")] == 0
@@ -99,12 +101,12 @@ def test_tables(result):
 
 
 def test_classify_criteria(paper_params):
-    block = exp.ClassificationBlock()
+    block = ClassifyBlock()
     fp = paper_params.fixed_point()
-    assert exp.classify(paper_params, fp.v_m_s, block) == ("period-1", 1)
+    assert exp.classify(paper_params, fp.v_m_s, block) == ("period1", 1)
     assert exp.classify(paper_params, perturbed_velocity(paper_params, 0.7), block)[0] == "sticking"
     racket = paper_params.racket_velocity(fp.theta_rad)
-    assert exp.classify(paper_params, racket - 0.1, block) == ("below-racket", 0)
+    assert exp.classify(paper_params, racket - 0.1, block) == ("below_racket", 0)
 
 
 def test_figures_redraw_from_csv(result, tmp_path):

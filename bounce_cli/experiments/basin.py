@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 from pydantic import Field, model_validator
 
-from ..config import ConfigError, ExperimentConfig, StrictModel
+from ..config import ClassifyBlock, ConfigError, ExperimentConfig, StrictModel
 from ..engine import OUTCOMES, ClassifySettings, classify_batch, classify_grid
 from .base import Experiment, ExperimentResult, RunOptions
 
@@ -60,15 +60,6 @@ class GridAxis(StrictModel):
 class GridBlock(StrictModel):
     theta0_deg: GridAxis = GridAxis(start=0.0, stop=360.0, num=400)
     v0_m_s: GridAxis = GridAxis(start=0.0, stop=10.0, num=400)
-
-
-class ClassifyBlock(StrictModel):
-    max_iterations: int = Field(100, ge=1, le=32767, description="impacts at most")
-    tolerance: float = Field(1e-3, gt=0.0, description="m/s and rad, distance to the fixed point")
-    sticking_interval_s: float = Field(1e-3, ge=0.0, description="s, shortest hop not sticking")
-
-    def settings(self) -> ClassifySettings:
-        return ClassifySettings(self.max_iterations, self.tolerance, self.sticking_interval_s)
 
 
 class LimitsBlock(StrictModel):

@@ -12,15 +12,14 @@ import numpy as np
 import pandas as pd
 from pydantic import Field
 
-from ..config import ExperimentConfig, StrictModel
+from ..config import ClassifyBlock, ExperimentConfig, StrictModel
 from ..engine import (
+    OUTCOMES,
     ModelParams,
-    can_fly,
+    classify_batch,
     impulse_response_full,
     impulse_response_linear,
-    map_step,
     perturbed_velocity,
-    phase_difference,
     relaxation_impacts,
     stability,
 )
@@ -28,15 +27,6 @@ from .base import Experiment, ExperimentResult, RunOptions
 
 MODELS = ("full", "linear")
 PAPER_THRESHOLD = 0.65
-
-
-class ClassificationBlock(StrictModel):
-    """Where the full response ends (section 3's criteria, as for the basin of Fig. 4)."""
-
-    max_impacts: int = Field(100, ge=1)
-    tolerance_v_m_s: float = Field(1e-3, gt=0.0)
-    tolerance_theta_rad: float = Field(1e-3, gt=0.0)
-    sticking_interval_s: float = Field(1e-3, gt=0.0)
 
 
 class RelaxationBlock(StrictModel):
@@ -56,35 +46,24 @@ class ThresholdBlock(StrictModel):
 class ImpulseConfig(ExperimentConfig):
     alpha_p: list[Annotated[float, Field(ge=0.0, lt=1.0)]] = Field([0.4, 0.6, 0.35, 0.65], min_length=1)
     iterations: int = Field(10, ge=1, description="impacts after the perturbed one, shown")
-    classification: ClassificationBlock = ClassificationBlock()
+    classify: ClassifyBlock = ClassifyBlock()
     relaxation: RelaxationBlock = RelaxationBlock()
     threshold: ThresholdBlock = ThresholdBlock()
 
 
 # -- classification of the full response (section 3's criteria) -----------------------------
-def classify(params: ModelParams, v0: float, block: ClassificationBlock) -> tuple[str, int]:
-    """Outcome of the full map from (theta~, v0): ``period-1`` | ``sticking`` |
-    ``below-racket`` | ``unresolved``, and the impact at which it was decided."""
-    fp = params.fixed_point()
-    theta, v = fp.theta_rad, v0
-    if not can_fly(theta, v, params):
-        return "below-racket", 0
-    for k in range(1, block.max_impacts + 1):
-        step = map_step(theta, v, params)
-        hop = float(step.hop_phase)
-        if not math.isfinite(hop) or hop / params.omega < block.sticking_interval_s:
-            return "sticking", k
-        theta, v = float(step.theta), float(step.v)
-        if (abs(v - fp.v_m_s) < block.tolerance_v_m_s
-                and abs(float(phase_difference(theta, fp.theta_rad))) < block.tolerance_theta_rad):
-            return "period-1", k
-    return "unresolved", block.max_impacts
+def classify(params: ModelParams, v0: float, block: ClassifyBlock) -> tuple[str, int]:
+    """Outcome of the full map from (theta~, v0) with section 3's criteria (the basin's
+    classifier, ``engine.classify_batch``): ``period1`` | ``sticking`` | ``below_racket`` |
+    ``undecided``, and the number of impacts until it was decided."""
+    result = classify_batch(params.fixed_point().theta_rad, v0, params, block.settings())
+    return OUTCOMES[int(result.outcome)], int(result.iterations)
 
 
 def find_threshold(params: ModelParams, direction: int, config: ImpulseConfig) -> dict:
     """Scan alpha_p away from alpha_0 (direction +1 or -1) in steps until the full response
     leaves the period-1 basin, then bisect between the last inside and first outside value."""
-    block, cls = config.threshold, config.classification
+    block, cls = config.threshold, config.classify
     alpha_0 = params.alpha
     end = block.alpha_p_max if direction > 0 else 0.0
 
@@ -96,7 +75,7 @@ def find_threshold(params: ModelParams, direction: int, config: ImpulseConfig) -
     outcomes = [outcome(a)[0] for a in values]
     row = {"direction": "increase" if direction > 0 else "decrease",
            "paper_alpha_p": PAPER_THRESHOLD if direction > 0 else math.nan}
-    leaving = [i for i, o in enumerate(outcomes) if o != "period-1"]
+    leaving = [i for i, o in enumerate(outcomes) if o != "period1"]
     if not leaving:
         return row | {"alpha_p_inside": values[-1] if len(values) else alpha_0,
                       "alpha_p_outside": math.nan, "alpha_p_threshold": math.nan,
@@ -109,7 +88,7 @@ def find_threshold(params: ModelParams, direction: int, config: ImpulseConfig) -
     while abs(outside - inside) > block.bisection_tolerance:
         mid = 0.5 * (inside + outside)
         o = outcome(mid)[0]
-        if o == "period-1":
+        if o == "period1":
             inside = mid
         else:
             outside, outside_outcome = mid, o
@@ -122,7 +101,7 @@ def find_threshold(params: ModelParams, direction: int, config: ImpulseConfig) -
         "v0_threshold_m_s": perturbed_velocity(params, threshold),
         "outcome_outside": outside_outcome,
         "bisection_steps": steps,
-        "period1_beyond_in_scan": sum(o == "period-1" for o in outcomes[first:]),
+        "period1_beyond_in_scan": sum(o == "period1" for o in outcomes[first:]),
     }
 
 
@@ -133,7 +112,7 @@ def responses(params: ModelParams, alpha_p: float, n: int):
 
 
 def impulse_frame(params: ModelParams, config: ImpulseConfig, outcomes: dict) -> pd.DataFrame:
-    linear_outcome = "period-1" if stability(params).stable else "diverges"
+    linear_outcome = "period1" if stability(params).stable else "diverges"
     rows = []
     for ap in config.alpha_p:
         for model, r in responses(params, ap, config.iterations).items():
@@ -159,7 +138,7 @@ def relaxation_frame(params: ModelParams, config: ImpulseConfig, outcomes: dict)
                 "alpha_p": ap, "model": model,
                 "v0_m_s": perturbed_velocity(params, ap),
                 "dv0_m_s": perturbed_velocity(params, ap) - fp.v_m_s,
-                "outcome": outcomes[ap][0] if model == "full" else "period-1",
+                "outcome": outcomes[ap][0] if model == "full" else "period1",
                 "relaxation_impacts": relaxation_impacts(r.dv, r.dtheta, rel.tolerance_v_m_s,
                                                          tol_theta),
                 "sum_abs_dv_m_s": float(np.nansum(np.abs(r.dv[shown]))),
@@ -187,7 +166,7 @@ def run(config: ImpulseConfig, options: RunOptions) -> ExperimentResult:
     options.progress.start(len(config.alpha_p) + 2, "impulse responses")
     outcomes = {}
     for ap in config.alpha_p:
-        outcomes[ap] = classify(params, perturbed_velocity(params, ap), config.classification)
+        outcomes[ap] = classify(params, perturbed_velocity(params, ap), config.classify)
         options.progress.advance(1)
     thresholds = []
     for direction in (+1, -1):
@@ -256,7 +235,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         for i, ap in enumerate(sorted(group, key=lambda a: abs(a - 0.5))):
             d = df[(df.alpha_p == ap) & (df.model == "full")].sort_values("k")
             outcome = d.outcome.iloc[0]
-            label = f"alpha_p = {ap:g}" + ("" if outcome == "period-1" else f" ({outcome})")
+            label = f"alpha_p = {ap:g}" + ("" if outcome == "period1" else f" ({outcome})")
             colour = f"{0.15 + 0.45 * i / max(len(group) - 1, 1):.2f}"
             axes[0, col].plot(d.k, d.v_m_s, styles[i % 6], color=colour, ms=4, label=label)
             axes[1, col].plot(d.k, th_st + d.dtheta_deg, styles[i % 6], color=colour, ms=4,
@@ -271,7 +250,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
             for model, colour, ls in (("full", "0.55", "-"), ("linear", "k", "--")):
                 d = df[(df.alpha_p == ap) & (df.model == model)].sort_values("k")
                 label = f"{model}, alpha_p = {ap:g}"
-                if model == "full" and d.outcome.iloc[0] != "period-1":
+                if model == "full" and d.outcome.iloc[0] != "period1":
                     label += f" ({d.outcome.iloc[0]})"
                 marker = styles[i % 6][1:]
                 axes[0, col].plot(d.k, d.v_m_s, ls, marker=marker, color=colour, ms=4, label=label)
