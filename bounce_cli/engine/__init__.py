@@ -1,5 +1,15 @@
 """Pure numerics of the ball bouncing map: numpy/scipy only, no files, no printing."""
 
+from .flight import (
+    INTEGRATORS,
+    FlightSettings,
+    Impact,
+    Segment,
+    Trajectory,
+    impact_velocity,
+    leave_phase,
+    simulate,
+)
 from .impact import can_fly, gap, gap_slope, launch_slope, next_impact_phase
 from .linear import (
     Stability,
@@ -24,6 +34,8 @@ from .params import (
 )
 
 __all__ = [
+    "INTEGRATORS", "FlightSettings", "Impact", "Segment", "Trajectory", "impact_velocity",
+    "leave_phase", "simulate",
     "FixedPoint", "MapStep", "Orbit", "iterate_orbit", "ModelError", "ModelParams", "NoFixedPointError", "Stability",
     "can_fly", "complex_boundaries_g", "eigenvalues", "finite_difference_jacobian",
     "flip_boundary_g", "gap", "gap_slope", "is_complex_regime", "iterate_map", "jacobian",
