@@ -350,3 +350,15 @@ def orbit_note(orbit, params: ModelParams, sticking_interval: float) -> str:
 
 def main() -> None:
     app(prog_name="bounce")
+
+
+@app.command("trajectory")
+def trajectory_command(config: ConfigOption = None, overrides: SetOption = None,
+                       out: OutOption = None, quiet: QuietOption = False,
+                       force: ForceOption = False, print_config: PrintConfigOption = False,
+                       jobs: JobsOption = None) -> None:
+    """Continuous-time ball and racket trajectories with sticking (paper Figs. 2, 3)."""
+    from .experiments import trajectory
+
+    run_experiment(trajectory.EXPERIMENT, config=config, overrides=overrides, out=out,
+                   quiet=quiet, force=force, print_config=print_config, jobs=jobs)
