@@ -173,13 +173,13 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         ax_v.plot(imp["k"], imp["v_m_s"], "o-", ms=2.5, lw=0.8, color="C0")
         ax_v.axhline(v_fp, ls="--", color="0.4", lw=0.8, label=f"$\\tilde v$ = {v_fp:.3f} m/s")
         ax_v.set_ylabel("$v_k$ (m/s)")
-        ax_v.legend(loc="upper right", fontsize=7)
+        ax_v.legend(loc="best", fontsize=7)
         ax_th.plot(imp["k"], imp["theta_deg"], "o-", ms=2.5, lw=0.8, color="C2")
         ax_th.axhline(th_fp, ls="--", color="0.4", lw=0.8,
                       label=f"$\\tilde\\theta$ = {th_fp:.2f} deg")
         ax_th.set_ylabel("$\\theta_k$ (deg)")
         ax_th.set_xlabel("bounce k")
-        ax_th.legend(loc="upper right", fontsize=7)
+        ax_th.legend(loc="best", fontsize=7)
         ax_x.set_xlabel("time t (s)")
     integrator = str(fixed["integrator"].iloc[0])
     fig.suptitle("Fig. 3: period-1 attractor and sticking solution (eqs. 1-4)\n"
