@@ -419,3 +419,15 @@ def basin_command(
 
     run_experiment(basin.EXPERIMENT, config=config, overrides=overrides, out=out,
                    quiet=quiet, force=force, print_config=print_config, jobs=jobs)
+
+
+@app.command("trajectory")
+def trajectory_command(config: ConfigOption = None, overrides: SetOption = None,
+                       out: OutOption = None, quiet: QuietOption = False,
+                       force: ForceOption = False, print_config: PrintConfigOption = False,
+                       jobs: JobsOption = None) -> None:
+    """Continuous-time ball and racket trajectories with sticking (paper Figs. 2, 3)."""
+    from .experiments import trajectory
+
+    run_experiment(trajectory.EXPERIMENT, config=config, overrides=overrides, out=out,
+                   quiet=quiet, force=force, print_config=print_config, jobs=jobs)

@@ -11,6 +11,16 @@ from .classify import (
     classify_batch,
     classify_grid,
 )
+from .flight import (
+    INTEGRATORS,
+    FlightSettings,
+    Impact,
+    Segment,
+    Trajectory,
+    impact_velocity,
+    leave_phase,
+    simulate,
+)
 from .impact import can_fly, gap, gap_slope, launch_slope, next_impact_phase
 from .impulse import (
     ImpulseResponse,
@@ -79,6 +89,8 @@ from .params import (
 __all__ = [
     "BELOW_RACKET", "OUTCOMES", "PERIOD1", "STICKING", "UNDECIDED", "Classification",
     "ClassifySettings", "classify_batch", "classify_grid",
+    "INTEGRATORS", "FlightSettings", "Impact", "Segment", "Trajectory", "impact_velocity",
+    "leave_phase", "simulate",
     "FixedPoint", "MapStep", "Orbit", "iterate_orbit", "ModelError", "ModelParams", "NoFixedPointError", "Stability",
     "can_fly", "complex_boundaries_g", "eigenvalues", "finite_difference_jacobian",
     "flip_boundary_g", "gap", "gap_slope", "is_complex_regime", "iterate_map", "jacobian",

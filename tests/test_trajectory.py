@@ -1,0 +1,131 @@
+"""`bounce trajectory`: files, columns, agreement with `bounce orbit`, figure from CSVs."""
+
+import io
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from bounce_cli.cli import app
+from bounce_cli.config import bundled_config_path, load_config
+from bounce_cli.experiments import trajectory
+from bounce_cli.experiments.base import RunOptions
+
+runner = CliRunner()
+
+
+def run(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+@pytest.fixture(scope="module")
+def out(tmp_path_factory):
+    out = tmp_path_factory.mktemp("trajectory")
+    result = run("trajectory", "--set", "duration_s=4", "--out", out, "--quiet")
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def test_bundled_config_has_the_fig3_cases():
+    cfg = load_config(trajectory.TrajectoryConfig, bundled_config_path("trajectory"))
+    assert cfg.integrator == "exact" and cfg.rk4_step_s == 1e-3 and cfg.duration_s >= 10
+    assert [c.v0_m_s for c in cfg.cases] == [4.8, 5.7]
+    for case in cfg.cases:  # x_b(0) = 0.205 m on the racket
+        assert 0.30 * math.sin(case.theta0) == pytest.approx(0.205, abs=1e-12)
+
+
+def test_files_and_columns(out):
+    track = pd.read_csv(out / "trajectory.csv")
+    impacts = pd.read_csv(out / "impacts.csv")
+    assert list(track.columns) == ["case", "t_s", "ball_x_m", "ball_v_m_s", "racket_x_m",
+                                   "racket_v_m_s", "state"]
+    assert list(impacts.columns) == ["case", "k", "t_s", "theta_deg", "v_m_s", "racket_acc_g"]
+    assert set(track["state"]) == {"flight", "stuck"}
+    assert set(track["case"]) == set(impacts["case"]) == {"period-1", "sticking"}
+    assert (track["ball_x_m"] - track["racket_x_m"]).min() > -1e-9
+    for _, tr in track.groupby("case"):
+        assert tr["t_s"].is_monotonic_increasing
+        assert tr["t_s"].iloc[-1] - tr["t_s"].iloc[0] == pytest.approx(4.0)
+        assert tr["t_s"].diff().max() <= 0.005 + 1e-12
+    stuck = track[track["state"] == "stuck"]
+    assert set(stuck["case"]) == {"sticking"}
+    assert np.allclose(stuck["ball_x_m"], stuck["racket_x_m"])
+    assert impacts["theta_deg"].between(0, 360).all()
+    assert (out / "trajectory.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("case", ["period-1", "sticking"])
+def test_impacts_agree_with_bounce_orbit(out, case):
+    impacts = pd.read_csv(out / "impacts.csv")
+    imp = impacts[impacts["case"] == case].reset_index(drop=True)
+    theta0_deg = math.degrees(math.asin(0.205 / 0.30))
+    result = run("orbit", "--theta0-deg", repr(theta0_deg), "--v0", imp["v_m_s"][0],
+                 "-n", len(imp) - 1, "--csv")
+    assert result.exit_code == 0, result.output
+    orbit = pd.read_csv(io.StringIO(result.stdout))
+    n = min(len(orbit), len(imp))
+    assert n >= 4
+    for col in ("t_s", "theta_deg", "v_m_s"):
+        np.testing.assert_allclose(imp[col][:n], orbit[col][:n], atol=1e-8)
+    if case == "sticking":
+        assert "sticking" in result.stderr and len(orbit) < len(imp)
+
+
+def test_figure_redrawn_from_csvs_alone(out, paper_params):
+    cfg = load_config(trajectory.TrajectoryConfig, bundled_config_path("trajectory"),
+                      ["duration_s=4"])
+    result = trajectory.run(cfg, RunOptions())
+    frames = {name: pd.read_csv(out / name) for name in result.frames}
+    redrawn = trajectory.draw(frames)["trajectory.png"]
+    original = result.figures["trajectory.png"]
+    assert len(redrawn.axes) == len(original.axes) == 6
+    for ax_a, ax_b in zip(original.axes, redrawn.axes):
+        assert ax_a.get_ylabel() == ax_b.get_ylabel() and ax_a.get_ylabel()
+        assert len(ax_a.lines) == len(ax_b.lines) > 0
+        for la, lb in zip(ax_a.lines, ax_b.lines):
+            np.testing.assert_allclose(la.get_ydata(), lb.get_ydata(), atol=1e-12)
+        assert len(ax_a.patches) == len(ax_b.patches)
+    assert len(original.axes[3].patches) >= 2  # stuck phases shaded in the sticking case
+    fp = paper_params.fixed_point()
+    assert original.axes[1].lines[1].get_ydata()[0] == pytest.approx(fp.v_m_s)
+    assert original.axes[2].lines[1].get_ydata()[0] == pytest.approx(fp.theta_deg)
+
+
+def test_rk4_integrator_from_the_command_line(tmp_path, out):
+    result = run("trajectory", "--set", "duration_s=4", "--set", "integrator=rk4",
+                 "--out", tmp_path, "--quiet")
+    assert result.exit_code == 0, result.output
+    a = pd.read_csv(out / "impacts.csv")
+    b = pd.read_csv(tmp_path / "impacts.csv")
+    assert len(a) == len(b)
+    assert np.abs(a["t_s"] - b["t_s"]).max() < 1e-3
+
+
+@pytest.mark.parametrize(
+    "args, needles",
+    [
+        (["--set", "integrator=euler"], ["integrator"]),
+        (["--set", "duration_s=0"], ["duration_s", "greater than 0"]),
+        (["--set", "sticking.min_hop_s=-1"], ["sticking.min_hop_s"]),
+        (["--set", "cases=[]"], ["cases"]),
+    ],
+)
+def test_user_errors(args, needles):
+    result = run("trajectory", *args, "--print-config")
+    assert result.exit_code == 2, result.output
+    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("bounce: error: ")
+    for needle in needles:
+        assert needle in lines[0]
+
+
+def test_case_needs_exactly_one_phase(tmp_path):
+    text = bundled_config_path("trajectory").read_text().replace(
+        "theta0_rad: 0.752318481155386", "theta0_rad: 0.75\n    theta0_deg: 43", 1)
+    path = tmp_path / "both.yaml"
+    path.write_text(text)
+    result = run("trajectory", "--config", path, "--print-config")
+    assert result.exit_code == 2
+    assert "cases.0" in result.stderr and "exactly one of" in result.stderr
