@@ -348,6 +348,75 @@ def orbit_note(orbit, params: ModelParams, sticking_interval: float) -> str:
     return ""
 
 
+@app.command("reproduce")
+def reproduce_command(
+    out: Annotated[Path, typer.Option("--out", "-o", help="Results root directory.")] = Path(
+        "results"
+    ),
+    jobs: JobsOption = None,
+    quiet: QuietOption = False,
+    force: ForceOption = False,
+) -> None:
+    """Regenerate every figure from the bundled configs into OUT/<name>/ and write
+    OUT/README.md: a gallery with captions and the table of the paper's claims."""
+    from .claims import markdown_table, verify
+    from .reproduce import EXPERIMENT_NAMES, gallery_markdown, load_experiment
+    from .artifacts import write_text_atomic
+
+    for name in EXPERIMENT_NAMES:
+        if not quiet:
+            stderr.print(f"[bold]bounce {name}[/bold]")
+        run_experiment(load_experiment(name), config=None, overrides=[], out=out / name,
+                       quiet=quiet, force=force, print_config=False, jobs=jobs)
+    verdicts = verify(out)
+    write_text_atomic(out / "README.md", gallery_markdown(out, markdown_table(verdicts)))
+    if not quiet:
+        stderr.print(f"wrote {out / 'README.md'}", highlight=False)
+        print_verdicts(verdicts)
+
+
+def print_verdicts(verdicts) -> None:
+    """The claims as a table on stdout, the known discrepancies as numbered notes below."""
+    console = Console(width=None if sys.stdout.isatty() else 160)
+    table = Table(title="The paper's claims against our reproduction")
+    for col in ("claim", "paper", "ours", "tolerance", "status"):
+        table.add_column(col, overflow="fold")
+    notes = []
+    for v in verdicts:
+        if v.status == "reproduced":
+            status = "[green]reproduced[/green]"
+        elif v.documented:
+            notes.append(v.claim.known_discrepancy)
+            status = f"[yellow]differs[/yellow] (known [{len(notes)}])"
+        else:
+            status = f"[red]{v.status}[/red]"
+        table.add_row(v.claim.statement, v.claim.paper, v.ours, v.claim.tolerance, status)
+    console.print(table)
+    for i, note in enumerate(notes, 1):
+        console.print(f"[{i}] {note}", highlight=False, markup=False)
+
+
+@app.command("verify")
+def verify_command(
+    results: Annotated[
+        Path, typer.Option("--results", "-r", help="Results root written by reproduce.")
+    ] = Path("results"),
+) -> None:
+    """Hold the paper's quantitative claims against the reproduced results. Exit 0 when each
+    is reproduced or differs for a documented reason, 1 otherwise."""
+    from .claims import verify
+
+    if not results.is_dir():
+        fail(f"--results {results}: no such directory (run `bounce reproduce` first)")
+    verdicts = verify(results)
+    print_verdicts(verdicts)
+    failed = [v for v in verdicts if not v.passed]
+    if failed:
+        print(f"bounce: {len(failed)} claim(s) not reproduced: "
+              + ", ".join(v.claim.key for v in failed), file=sys.stderr)
+        raise typer.Exit(code=1)
+
+
 def main() -> None:
     app(prog_name="bounce")
 

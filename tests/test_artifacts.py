@@ -92,3 +92,18 @@ def test_out_path_that_is_a_file_is_refused(tmp_path):
     (tmp_path / "f").write_text("x")
     with pytest.raises(OutputDirError, match="not a directory"):
         make_run(tmp_path / "f", {"a": 1})
+
+
+def test_written_files_are_readable_by_others(tmp_path):
+    import os
+    import stat
+
+    old = os.umask(0o022)
+    try:
+        run = make_run(tmp_path / "r", {"a": 1})
+        run.add_csv("data.csv", pd.DataFrame({"x": [1]}))
+        run.commit()
+    finally:
+        os.umask(old)
+    mode = stat.S_IMODE((tmp_path / "r" / "data.csv").stat().st_mode)
+    assert mode == 0o644
