@@ -170,7 +170,7 @@ def run_experiment(
             command=experiment.name,
             resolved_config=cfg.model_dump(mode="json"),
             overrides=overrides,
-            config_path=str(path),
+            config_path=str(path) if config is not None else f"bundled: configs/{path.name}",
             seed=getattr(cfg, "seed", None),
             force=force,
         )
