@@ -296,7 +296,7 @@ def markdown_table(verdicts: list[Verdict]) -> str:
         status = v.status
         if v.status == "differs" and v.documented:
             status = f"differs (known: {v.claim.known_discrepancy})"
-        lines.append(f"| {v.claim.statement} | {v.claim.paper} | {v.ours} | "
-                     f"{v.claim.tolerance} | {status} |")
+        cells = (v.claim.statement, v.claim.paper, v.ours, v.claim.tolerance, status)
+        lines.append("| " + " | ".join(c.replace("|", "\\|") for c in cells) + " |")
     return "\n".join(lines)
 
