@@ -97,7 +97,10 @@ PrintConfigOption = Annotated[
 ]
 JobsOption = Annotated[
     Optional[int],
-    typer.Option("--jobs", "-j", help="Worker processes (default: all cores).", min=1),
+    typer.Option(
+        "--jobs", "-j", min=1,
+        help="Worker processes for grid work (bounce basin; default: all cores).",
+    ),
 ]
 
 
@@ -357,8 +360,11 @@ def reproduce_command(
     quiet: QuietOption = False,
     force: ForceOption = False,
 ) -> None:
-    """Regenerate every figure from the bundled configs into OUT/<name>/ and write
-    OUT/README.md: a gallery with captions and the table of the paper's claims."""
+    """Regenerate every figure from the bundled configs, with a gallery and the claims.
+
+    Runs every bundled config into OUT/<name>/ and writes OUT/README.md: each figure with a
+    caption naming the paper's figure, and the table of the paper's claims (bounce verify).
+    """
     from .claims import markdown_table, verify
     from .reproduce import EXPERIMENT_NAMES, gallery_markdown, load_experiment
     from .artifacts import write_text_atomic
@@ -402,8 +408,10 @@ def verify_command(
         Path, typer.Option("--results", "-r", help="Results root written by reproduce.")
     ] = Path("results"),
 ) -> None:
-    """Hold the paper's quantitative claims against the reproduced results. Exit 0 when each
-    is reproduced or differs for a documented reason, 1 otherwise."""
+    """Hold the paper's quantitative claims against the reproduced results.
+
+    Exit 0 when each claim is reproduced or differs for a documented reason, 1 otherwise.
+    """
     from .claims import verify
 
     if not results.is_dir():
@@ -421,39 +429,39 @@ def main() -> None:
     app(prog_name="bounce")
 
 
-@app.command("stability")
-def stability_command(config: ConfigOption = None, overrides: SetOption = None,
-                      out: OutOption = None, quiet: QuietOption = False,
-                      force: ForceOption = False, print_config: PrintConfigOption = False,
-                      jobs: JobsOption = None) -> None:
-    """Linear stability diagram and coarse-grained predictions (paper Fig. 5, sections 4-5)."""
-    from .experiments import stability as stability_experiment
+def add_experiment_command(name: str, summary: str) -> None:
+    """Register ``bounce <name>``: the common options, then ``run_experiment``."""
 
-    run_experiment(stability_experiment.EXPERIMENT, config=config, overrides=overrides, out=out,
-                   quiet=quiet, force=force, print_config=print_config, jobs=jobs)
+    def command(
+        config: ConfigOption = None,
+        overrides: SetOption = None,
+        out: OutOption = None,
+        quiet: QuietOption = False,
+        force: ForceOption = False,
+        print_config: PrintConfigOption = False,
+        jobs: JobsOption = None,
+    ) -> None:
+        from .reproduce import load_experiment
 
+        run_experiment(load_experiment(name), config=config, overrides=overrides, out=out,
+                       quiet=quiet, force=force, print_config=print_config, jobs=jobs)
 
-@app.command("impulse")
-def impulse_command(config: ConfigOption = None, overrides: SetOption = None,
-                    out: OutOption = None, quiet: QuietOption = False,
-                    force: ForceOption = False, print_config: PrintConfigOption = False,
-                    jobs: JobsOption = None) -> None:
-    """Impulse responses after a perturbation of alpha, full vs linear (paper Figs. 9, 10)."""
-    from .experiments import impulse
-
-    run_experiment(impulse.EXPERIMENT, config=config, overrides=overrides, out=out,
-                   quiet=quiet, force=force, print_config=print_config, jobs=jobs)
+    command.__doc__ = summary
+    app.command(name)(command)
 
 
-@app.command("acf")
-def acf_command(config: ConfigOption = None, overrides: SetOption = None,
-                out: OutOption = None, quiet: QuietOption = False,
-                force: ForceOption = False, print_config: PrintConfigOption = False,
-                jobs: JobsOption = None) -> None:
-    """Correlation functions of the stochastic map vs the VAR(1) theory (paper Fig. 8)."""
-    from .experiments import acf
-    run_experiment(acf.EXPERIMENT, config=config, overrides=overrides, out=out,
-                   quiet=quiet, force=force, print_config=print_config, jobs=jobs)
+add_experiment_command(
+    "trajectory", "Continuous-time ball and racket trajectories with sticking (paper Figs. 2, 3).")
+add_experiment_command(
+    "basin", "Basin of attraction of the period-1 attractor over (theta0, v0) (paper Fig. 4).")
+add_experiment_command(
+    "stability",
+    "Linear stability diagram and coarse-grained predictions (paper Fig. 5, sections 4-5).")
+add_experiment_command(
+    "acf", "Correlation functions of the stochastic map vs the VAR(1) theory (paper Fig. 8).")
+add_experiment_command(
+    "impulse",
+    "Impulse responses after a perturbation of alpha, full vs linear (paper Figs. 9, 10).")
 
 
 @app.command("regression")
@@ -470,33 +478,4 @@ def regression_command(
     if data is not None:
         overrides.append(f"data={json.dumps(str(data))}")
     run_experiment(regression.EXPERIMENT, config=config, overrides=overrides, out=out,
-                   quiet=quiet, force=force, print_config=print_config, jobs=jobs)
-
-
-@app.command("basin")
-def basin_command(
-    config: ConfigOption = None,
-    overrides: SetOption = None,
-    out: OutOption = None,
-    quiet: QuietOption = False,
-    force: ForceOption = False,
-    print_config: PrintConfigOption = False,
-    jobs: JobsOption = None,
-) -> None:
-    """Basin of attraction of the period-1 attractor over (theta0, v0) (paper Fig. 4)."""
-    from .experiments import basin
-
-    run_experiment(basin.EXPERIMENT, config=config, overrides=overrides, out=out,
-                   quiet=quiet, force=force, print_config=print_config, jobs=jobs)
-
-
-@app.command("trajectory")
-def trajectory_command(config: ConfigOption = None, overrides: SetOption = None,
-                       out: OutOption = None, quiet: QuietOption = False,
-                       force: ForceOption = False, print_config: PrintConfigOption = False,
-                       jobs: JobsOption = None) -> None:
-    """Continuous-time ball and racket trajectories with sticking (paper Figs. 2, 3)."""
-    from .experiments import trajectory
-
-    run_experiment(trajectory.EXPERIMENT, config=config, overrides=overrides, out=out,
                    quiet=quiet, force=force, print_config=print_config, jobs=jobs)
