@@ -28,6 +28,7 @@ on the still-active subset; settled points are dropped. Phases are kept wrapped 
 from __future__ import annotations
 
 import math
+import multiprocessing
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from typing import Callable
@@ -157,10 +158,18 @@ def classify_grid(
         for tile, task in zip(tiles, tasks):
             store(tile, _classify_tile(task))
     else:
-        with ProcessPoolExecutor(max_workers=min(jobs, len(tiles))) as pool:
+        workers = min(jobs, len(tiles))
+        with ProcessPoolExecutor(max_workers=workers, mp_context=pool_context()) as pool:
             for tile, res in zip(tiles, pool.map(_classify_tile, tasks)):
                 store(tile, res)
     return Classification(outcome.reshape(shape), iterations.reshape(shape))
+
+
+def pool_context():
+    """Start workers with ``forkserver`` where available (``spawn`` elsewhere): forking a
+    process that runs threads (a progress bar's refresh thread) can deadlock."""
+    methods = multiprocessing.get_all_start_methods()
+    return multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
 
 
 def tile_slices(size: int, tile_points: int, jobs: int = 1) -> list[slice]:
