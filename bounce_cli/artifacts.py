@@ -97,6 +97,15 @@ def versions() -> dict[str, str]:
     }
 
 
+def read_manifest(out_dir: Path) -> dict[str, Any]:
+    """The ``run.json`` of a previous run in ``out_dir`` ({} when there is none or unreadable)."""
+    try:
+        data = json.loads((Path(out_dir) / MANIFEST).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return {}
+    return data if isinstance(data, dict) else {}
+
+
 class RunDirectory:
     """Collects a run's outputs and commits them atomically into ``out_dir``."""
 
@@ -121,19 +130,25 @@ class RunDirectory:
         self._t0 = time.perf_counter()
         self._frames: dict[str, pd.DataFrame] = {}
         self._figures: dict[str, Any] = {}
+        self.previous: dict[str, Any] = {}
         self.check_writable(force)
 
     def check_writable(self, force: bool) -> None:
-        """Refuse a directory holding results of a different resolved config (unless force)."""
+        """Before any computing: the directory can be created and written, and it does not
+        hold results of a different resolved config (unless force)."""
         if self.out_dir.exists() and not self.out_dir.is_dir():
             raise OutputDirError(f"--out {self.out_dir}: exists and is not a directory")
-        manifest = self.out_dir / MANIFEST
-        if force or not manifest.is_file():
-            return
         try:
-            previous = json.loads(manifest.read_text(encoding="utf-8"))
-        except (OSError, ValueError):
-            previous = {}
+            self.out_dir.mkdir(parents=True, exist_ok=True)
+            probe = stage(self.out_dir / ".write-test", lambda tmp: None)
+            probe.unlink()
+        except OSError as exc:
+            reason = exc.strerror or type(exc).__name__
+            raise OutputDirError(f"--out {self.out_dir}: cannot write there: {reason}") from None
+        self.previous = read_manifest(self.out_dir)
+        if force or not self.previous:
+            return
+        previous = self.previous
         same = (
             previous.get("command") == self.command
             and previous.get("config") == self.resolved_config
@@ -189,6 +204,12 @@ class RunDirectory:
             )
             for tmp, final in staged:
                 os.replace(tmp, final)
+            # files of the run this one replaces (listed in its manifest) that this run did
+            # not write: remove them, so the folder holds one run, as run.json says
+            for name in set(self.previous.get("files", [])) - set(writers):
+                stale = self.out_dir / Path(name).name
+                if stale.is_file():
+                    stale.unlink()
         finally:
             for tmp, _ in staged:
                 tmp.unlink(missing_ok=True)

@@ -194,6 +194,9 @@ def run_experiment(
     except USER_ERRORS as exc:
         fail(str(exc))
         return
+    except OSError as exc:  # e.g. the disk filled up while writing
+        fail(f"writing {exc.filename or 'results'}: {exc.strerror or exc}")
+        return
     if not quiet:
         for line in result.summary:
             stderr.print(line, highlight=False)

@@ -141,7 +141,8 @@ def format_validation_error(
     ``--set`` when the key was set by an override)."""
     err = exc.errors()[0]
     loc = ".".join(str(part) for part in err["loc"]) or "(top level)"
-    if any(loc == key or loc.startswith(key + ".") for key in overridden):
+    if any(loc == key or loc.startswith(key + ".") or key.startswith(loc + ".")
+           for key in overridden):
         source = "--set"
     if err["type"] == "extra_forbidden":
         reason = "unknown key"

@@ -107,3 +107,24 @@ def test_written_files_are_readable_by_others(tmp_path):
         os.umask(old)
     mode = stat.S_IMODE((tmp_path / "r" / "data.csv").stat().st_mode)
     assert mode == 0o644
+
+
+def test_unwritable_out_is_a_one_line_error_before_any_work(tmp_path):
+    (tmp_path / "afile").write_text("x")
+    with pytest.raises(OutputDirError, match="cannot write there"):
+        make_run(tmp_path / "afile" / "sub", {"a": 1})
+
+
+def test_replacing_a_run_removes_the_files_only_the_old_run_wrote(tmp_path):
+    out = tmp_path / "r"
+    (out).mkdir()
+    (out / "notes.txt").write_text("the user's own file")
+    first = make_run(out, {"a": 1})
+    first.add_csv("old_only.csv", pd.DataFrame({"x": [1]}))
+    first.add_csv("both.csv", pd.DataFrame({"x": [1]}))
+    first.commit()
+    second = make_run(out, {"a": 2}, force=True)
+    second.add_csv("both.csv", pd.DataFrame({"x": [2]}))
+    second.commit()
+    assert sorted(p.name for p in out.iterdir()) == ["both.csv", "notes.txt", "run.json"]
+    assert json.loads((out / "run.json").read_text())["files"] == ["both.csv"]

@@ -71,7 +71,7 @@ def test_invalid_parameters_rejected(kwargs, key):
 
 def test_no_fixed_point_is_an_error_naming_the_minimum_amplitude():
     p = ModelParams(0.5, 9.81, 0.01, 0.92)
-    with pytest.raises(NoFixedPointError, match="racket_amplitude must be >= 0.22"):
+    with pytest.raises(NoFixedPointError, match=r"model.racket_amplitude\) must be >= 0.22"):
         p.fixed_point()
     # just above the minimum amplitude there is one, at theta~ ~ 0
     q = ModelParams(0.5, 9.81, p.min_racket_amplitude() * (1 + 1e-9), 0.92)

@@ -105,7 +105,8 @@ class ModelParams:
         if cos_theta > 1.0:
             raise NoFixedPointError(
                 f"no period-1 fixed point: eq. 8 gives cos(theta~) = {cos_theta:.4g} > 1; "
-                f"racket_amplitude must be >= {self.min_racket_amplitude():.4g} m "
+                f"the racket amplitude (model.racket_amplitude) must be >= "
+                f"{self.min_racket_amplitude():.4g} m "
                 f"at alpha={self.alpha:g}, g={self.g:g}, racket_period={self.racket_period:g}"
             )
         return FixedPoint(v_m_s=math.pi * self.g / self.omega, theta_rad=math.acos(cos_theta))

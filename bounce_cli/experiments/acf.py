@@ -140,6 +140,13 @@ def _sds_or_nan(params: ModelParams, q_v: float, q_theta: float) -> tuple[float,
         return math.nan, math.nan
 
 
+def _radius_or_nan(params: ModelParams) -> float:
+    try:
+        return stability(params).spectral_radius
+    except ModelError:
+        return math.nan
+
+
 def nearest_root(f, low: float, high: float, near: float, points: int = 200) -> float:
     """The root of f in [low, high] nearest to ``near`` (sign changes on a grid, then brentq);
     NaN when there is none."""
@@ -170,12 +177,13 @@ def candidate_rows(config: AcfConfig) -> list[dict]:
     add("sd_v", "m/s", "candidate: one xi_k in both eqs. 16 and 18", sv, 0.068)
     add("sd_theta", "deg", "candidate: one xi_k in both eqs. 16 and 18", st, 8.4)
     observed_tau = ModelParams(p.alpha, p.g, OBSERVED_AMPLITUDE_M, p.racket_period)
-    sv, st = _sds(observed_tau, q.q_v, q.q_theta)
-    add("sd_v", "m/s", f"candidate: observed a_r {OBSERVED_AMPLITUDE_M} m", sv, 0.068)
-    add("sd_theta", "deg", f"candidate: observed a_r {OBSERVED_AMPLITUDE_M} m", st, 8.4)
+    sv, st = _sds_or_nan(observed_tau, q.q_v, q.q_theta)  # NaN where unstable at these alpha, g
+    note = "" if np.isfinite(sv) else "fixed point unstable or absent at a_r = 0.076 m here"
+    add("sd_v", "m/s", f"candidate: observed a_r {OBSERVED_AMPLITUDE_M} m", sv, 0.068, note)
+    add("sd_theta", "deg", f"candidate: observed a_r {OBSERVED_AMPLITUDE_M} m", st, 8.4, note)
     observed = ModelParams(p.alpha, p.g, OBSERVED_AMPLITUDE_M, OBSERVED_PERIOD_S)
     add("spectral_radius", "1", f"candidate: observed a_r {OBSERVED_AMPLITUDE_M} m and period "
-        f"{OBSERVED_PERIOD_S} s", stability(observed).spectral_radius, np.nan,
+        f"{OBSERVED_PERIOD_S} s", _radius_or_nan(observed), np.nan,
         "fixed point unstable (>= 1): no stationary SDs at the observed racket parameters")
     # a_r that alone reproduces each paper SD, and the noise strengths that reproduce both
     for idx, (name, unit) in enumerate((("sd_v", "m/s"), ("sd_theta", "deg"))):
