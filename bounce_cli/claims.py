@@ -43,13 +43,15 @@ class Claim:
     #: the value we reproduce instead, and its tolerance: a difference counts as the known one
     #: only while our value stays there (so drift of our own numbers still fails)
     known_value: tuple[float, float] | None = None
+    #: the result folders it reads: they must come from the bundled configs
+    sources: tuple[str, ...] = ()
 
 
 @dataclass(frozen=True)
 class Verdict:
     claim: Claim
     ours: str
-    status: str  # "reproduced" | "differs" | "missing"
+    status: str  # "reproduced" | "differs" | "missing" | "other config"
     documented: bool  # a difference explained as a known discrepancy
 
     @property
@@ -222,26 +224,34 @@ def claim_slope(results: Path) -> Measured:
 
 CLAIMS: tuple[Claim, ...] = (
     Claim("v_fixed", "stationary velocity v~ at the Fig. 9 parameters (Fig. 9 caption, eq. 7)",
-          "4.5 m/s", "+-0.05 (printed to 0.1)", claim_v_fixed),
+          "4.5 m/s", "+-0.05 (printed to 0.1)", claim_v_fixed,
+          sources=("impulse",)),
     Claim("theta_fixed", "stationary phase theta~ at the Fig. 9 parameters (Fig. 9 caption)",
           "42 deg", "+-0.5 (printed to 1 deg)", claim_theta_fixed,
           known_discrepancy=(
               "the paper's own eq. 8 gives arccos(0.7342) = 42.76 deg at these parameters "
               "(v~ = 4.5126 m/s agrees); the caption's 42 is the value truncated, not rounded"),
-          known_value=(42.763, 0.005)),
+          known_value=(42.763, 0.005),
+          sources=("impulse",)),
     Claim("eigen_paper", "both eigenvalues 0.5 in absolute value at the Fig. 3 parameters "
-          "(section 6)", "0.5", "+-0.005", claim_paper_eigenvalues),
+          "(section 6)", "0.5", "+-0.005", claim_paper_eigenvalues,
+          sources=("stability",)),
     Claim("complex_modulus", "|lambda+| = |lambda-| = |alpha| in the complex regime (eq. 12)",
-          "|alpha|", "1e-9 (exact algebra)", claim_complex_modulus),
+          "|alpha|", "1e-9 (exact algebra)", claim_complex_modulus,
+          sources=("stability",)),
     Claim("stable_range", "stable AC range at alpha = 0.5 (section 5, eq. 14)",
-          "0 to -1.11 g", "+-0.005 g", claim_stable_range),
+          "0 to -1.11 g", "+-0.005 g", claim_stable_range,
+          sources=("stability",)),
     Claim("min_radius", "min over stable AC of the largest |lambda| equals alpha (section 4)",
-          "alpha", "1e-6", claim_min_radius),
+          "alpha", "1e-6", claim_min_radius,
+          sources=("stability",)),
     Claim("fig3_initial_conditions", "leaving at asin(0.205/0.30) with 4.8 m/s reaches "
           "period-1, with 5.7 m/s the sticking solution (Fig. 3)",
-          "period-1 / sticking", "qualitative", claim_fig3_initial_conditions),
+          "period-1 / sticking", "qualitative", claim_fig3_initial_conditions,
+          sources=("basin", "trajectory")),
     Claim("basin_no_100", "no basin point needed the maximum of 100 impacts (section 3)",
-          "none", "0 undecided", claim_basin_iterations),
+          "none", "0 undecided", claim_basin_iterations,
+          sources=("basin",)),
     Claim("sd_v", "theoretical SD of v at the Fig. 8 parameters (section 6)",
           "0.068 m/s", "+-0.0005 (printed to 0.001)", claim_sd_v,
           known_discrepancy=(
@@ -249,32 +259,61 @@ CLAIMS: tuple[Claim, ...] = (
               "parameters gives 0.0695 m/s (+2 %); no single reading of the parameters "
               "reproduces both printed SDs (acf/summary.csv lists the candidates: a_r 0.0646 m "
               "would match v, 0.0676 m theta)"),
-          known_value=(0.0695, 0.0002)),
+          known_value=(0.0695, 0.0002),
+          sources=("acf",)),
     Claim("sd_theta", "theoretical SD of theta at the Fig. 8 parameters (section 6)",
           "8.4 deg", "+-0.05 (printed to 0.1)", claim_sd_theta,
           known_discrepancy=(
               "eq. 19 gives 7.89 deg (-6 %) at the printed parameters; see sd_v and "
               "acf/summary.csv for the candidate explanations, none of which fits both SDs"),
-          known_value=(7.885, 0.01)),
+          known_value=(7.885, 0.01),
+          sources=("acf",)),
     Claim("v0_perturbed", "alpha_p = 0.7 gives v_0 = 5.7 m/s (section 7)",
-          "5.7 m/s", "+-0.05", claim_v0_perturbed),
+          "5.7 m/s", "+-0.05", claim_v0_perturbed,
+          sources=("impulse",)),
     Claim("impulse_threshold", "perturbations with alpha_p above about 0.65 leave the "
-          "period-1 basin (section 7)", "about 0.65", "+-0.025 ('about')", claim_threshold),
+          "period-1 basin (section 7)", "about 0.65", "+-0.025 ('about')", claim_threshold,
+          sources=("impulse",)),
     Claim("impulse_symmetry", "the linear response is symmetric in the sign of the "
           "perturbation, the full one is not (section 7, Fig. 10)",
           "symmetric / asymmetric", "ratio 1 +-1e-6 / differs by > 10 %",
-          claim_linear_symmetric),
+          claim_linear_symmetric,
+          sources=("impulse",)),
     Claim("regression_intercept", "the amplitude-period regression has zero intercept "
-          "(section 5, eq. 15)", "0", "95 % CI covers 0", claim_intercept),
+          "(section 5, eq. 15)", "0", "95 % CI covers 0", claim_intercept,
+          sources=("regression",)),
     Claim("regression_slope", "its slope is (1-alpha)/(1+alpha) g / (4 pi cos theta~) "
-          "(eq. 15)", "eq. 15", "95 % CI covers it", claim_slope),
+          "(eq. 15)", "eq. 15", "95 % CI covers it", claim_slope,
+          sources=("regression",)),
 )
 
 
+def from_bundled_config(results: Path, name: str) -> bool:
+    """True when ``results/<name>/run.json`` records the resolved bundled config."""
+    from .config import bundled_config_path, load_config
+    from .reproduce import load_experiment
+
+    path = results / name / "run.json"
+    if not path.is_file():
+        return True  # reported as missing by the claim itself
+    recorded = json.loads(path.read_text()).get("config")
+    schema = load_experiment(name).schema
+    return recorded == load_config(schema, bundled_config_path(name)).model_dump(mode="json")
+
+
 def verify(results: Path) -> list[Verdict]:
-    """Evaluate every claim against the results directory."""
+    """Evaluate every claim against the results directory. Results made from another config
+    than the bundled one (the paper's parameters) cannot confirm a claim of the paper."""
     verdicts = []
+    bundled: dict[str, bool] = {}
     for claim in CLAIMS:
+        foreign = [name for name in claim.sources
+                   if not bundled.setdefault(name, from_bundled_config(results, name))]
+        if foreign:
+            verdicts.append(Verdict(claim, "results of " + ", ".join(
+                f"{name}/ come from another config than configs/{name}.yaml" for name in foreign),
+                "other config", False))
+            continue
         try:
             measured = claim.measure(results)
         except MissingResults as exc:

@@ -147,6 +147,22 @@ def resolve_config_path(config: Path | None, name: str) -> Path:
     return config if config is not None else bundled_config_path(name)
 
 
+def warn_if_unstable(params: ModelParams) -> None:
+    """A one-line warning on stderr when the period-1 fixed point exists but is linearly
+    unstable (eq. 10): the figures then describe an orbit nothing converges to.
+    Raises NoFixedPointError when there is no fixed point at all."""
+    from .engine import flip_boundary_g
+
+    st = stability(params)
+    if not st.stable:
+        print(
+            f"bounce: warning: the period-1 fixed point is linearly unstable at these "
+            f"parameters (spectral radius {st.spectral_radius:.3g}, AC = {st.ac_g:.3g} g; "
+            f"stable for {float(flip_boundary_g(params.alpha)):.3g} g < AC < 0, eq. 14)",
+            file=sys.stderr,
+        )
+
+
 def run_experiment(
     experiment: Experiment,
     *,
@@ -166,7 +182,7 @@ def run_experiment(
         if print_config:
             typer.echo(to_yaml(cfg), nl=False)
             return
-        cfg.params.fixed_point()  # every experiment needs the period-1 fixed point
+        warn_if_unstable(cfg.params)  # every experiment needs the period-1 fixed point
         name = path.stem if config is not None else experiment.name
         run_dir = RunDirectory(
             out if out is not None else Path("results") / name,

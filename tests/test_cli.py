@@ -21,7 +21,9 @@ def run(*args):
 
 def assert_user_error(result, *needles):
     assert result.exit_code == 2, result.output
-    lines = [line for line in result.stderr.splitlines() if line.strip()]
+    # one error line (an instability warning may precede it)
+    lines = [line for line in result.stderr.splitlines()
+             if line.strip() and not line.startswith("bounce: warning: ")]
     assert len(lines) == 1, result.stderr
     assert lines[0].startswith("bounce: error: ")
     for needle in needles:
@@ -151,3 +153,20 @@ def test_python_dash_m_entry_point():
     out = subprocess.run([sys.executable, "-m", "bounce_cli", "--version"], capture_output=True,
                          text=True, cwd=os.path.dirname(os.path.dirname(__file__)))
     assert out.returncode == 0 and __version__ in out.stdout
+
+
+def test_unstable_fixed_point_warns_in_one_line(tmp_path):
+    # period 0.8 s: AC = -1.57 g, beyond the flip boundary -1.11 g (eq. 14)
+    result = run("basin", "--set", "model.racket_period=0.8", "--set", "grid.theta0_deg.num=6",
+                 "--set", "grid.v0_m_s.num=6", "--out", tmp_path / "b", "--quiet")
+    assert result.exit_code == 0
+    warnings = [line for line in result.stderr.splitlines() if "warning" in line]
+    assert len(warnings) == 1 and "unstable" in warnings[0] and "2.16" in warnings[0]
+    stable = run("basin", "--set", "grid.theta0_deg.num=6", "--set", "grid.v0_m_s.num=6",
+                 "--out", tmp_path / "s", "--quiet")
+    assert "warning" not in stable.stderr
+
+
+def test_rk4_step_is_bounded():
+    assert_user_error(run("trajectory", "--set", "rk4_step_s=0.02", "--print-config"),
+                      "rk4_step_s")

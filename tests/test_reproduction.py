@@ -114,3 +114,16 @@ def test_reproduce_gallery_lists_every_figure():
         for png, _ in CAPTIONS[name]:
             assert f"({name}/{png})" in text
     assert "| claim | paper | ours | tolerance | status |" in text
+
+
+def test_verify_refuses_results_made_from_another_config(tmp_path):
+    copy = tmp_path / "results"
+    shutil.copytree(RESULTS, copy, ignore=shutil.ignore_patterns("*.png"))
+    small = runner.invoke(app, ["basin", "--set", "grid.theta0_deg.num=12", "--set",
+                                "grid.v0_m_s.num=12", "--out", str(copy / "basin"), "--force",
+                                "--quiet", "--jobs", "1"])
+    assert small.exit_code == 0, small.output
+    result = runner.invoke(app, ["verify", "--results", str(copy)])
+    assert result.exit_code == 1
+    assert "basin_no_100" in result.stderr and "fig3_initial_conditions" in result.stderr
+    assert "other config" in result.stdout

@@ -105,6 +105,11 @@ def find_threshold(params: ModelParams, direction: int, config: ImpulseConfig) -
     }
 
 
+def linear_outcome(params: ModelParams) -> str:
+    """The linear map y_{k+1} = J y_k returns to the fixed point iff J is stable."""
+    return "period1" if stability(params).stable else "diverges"
+
+
 # -- tables ---------------------------------------------------------------------------------
 def responses(params: ModelParams, alpha_p: float, n: int):
     return {"full": impulse_response_full(params, alpha_p, n),
@@ -112,7 +117,7 @@ def responses(params: ModelParams, alpha_p: float, n: int):
 
 
 def impulse_frame(params: ModelParams, config: ImpulseConfig, outcomes: dict) -> pd.DataFrame:
-    linear_outcome = "period1" if stability(params).stable else "diverges"
+    linear = linear_outcome(params)
     rows = []
     for ap in config.alpha_p:
         for model, r in responses(params, ap, config.iterations).items():
@@ -121,7 +126,7 @@ def impulse_frame(params: ModelParams, config: ImpulseConfig, outcomes: dict) ->
                     "alpha_p": ap, "model": model, "k": k, "v_m_s": r.v[k],
                     "theta_deg": math.degrees(r.theta[k]), "dv_m_s": r.dv[k],
                     "dtheta_deg": math.degrees(r.dtheta[k]),
-                    "outcome": outcomes[ap][0] if model == "full" else linear_outcome,
+                    "outcome": outcomes[ap][0] if model == "full" else linear,
                 })
     return pd.DataFrame(rows)
 
@@ -138,7 +143,7 @@ def relaxation_frame(params: ModelParams, config: ImpulseConfig, outcomes: dict)
                 "alpha_p": ap, "model": model,
                 "v0_m_s": perturbed_velocity(params, ap),
                 "dv0_m_s": perturbed_velocity(params, ap) - fp.v_m_s,
-                "outcome": outcomes[ap][0] if model == "full" else "period1",
+                "outcome": outcomes[ap][0] if model == "full" else linear_outcome(params),
                 "relaxation_impacts": relaxation_impacts(r.dv, r.dtheta, rel.tolerance_v_m_s,
                                                          tol_theta),
                 "sum_abs_dv_m_s": float(np.nansum(np.abs(r.dv[shown]))),

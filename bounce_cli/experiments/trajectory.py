@@ -47,7 +47,8 @@ class StickingBlock(StrictModel):
 
 class TrajectoryConfig(ExperimentConfig):
     integrator: Literal["exact", "rk4"] = "exact"
-    rk4_step_s: float = Field(1e-3, gt=0.0)
+    # a coarser fixed step misses short hops (at 0.02 s, 9 of 87 impacts of the sticking case)
+    rk4_step_s: float = Field(1e-3, gt=0.0, le=5e-3)
     duration_s: float = Field(10.0, gt=0.0, le=1e4)
     sample_interval_s: float = Field(0.005, gt=0.0)
     sticking: StickingBlock = StickingBlock()
