@@ -303,5 +303,4 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
 
 EXPERIMENT = Experiment(
     name="acf", schema=AcfConfig, run=run,
-    help="Correlation functions of the stochastic map vs the VAR(1) theory (Fig. 8).",
 )

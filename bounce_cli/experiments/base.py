@@ -54,9 +54,9 @@ class ExperimentResult:
 @dataclass(frozen=True)
 class Experiment:
     """An experiment: its name (bundled config ``configs/<name>.yaml``), config schema, and
-    ``run(config, options) -> ExperimentResult``."""
+    ``run(config, options) -> ExperimentResult``. Its one-line summary lives with its command
+    in ``cli.py``, so that ``bounce --help`` need not import the experiments."""
 
     name: str
     schema: type[ExperimentConfig]
     run: Callable[[Any, RunOptions], ExperimentResult]
-    help: str

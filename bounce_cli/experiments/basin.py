@@ -246,5 +246,4 @@ EXPERIMENT = Experiment(
     name="basin",
     schema=BasinConfig,
     run=run,
-    help="Basin of attraction of the period-1 attractor (paper Fig. 4).",
 )

@@ -270,5 +270,4 @@ EXPERIMENT = Experiment(
     name="impulse",
     schema=ImpulseConfig,
     run=run,
-    help="Impulse responses after a perturbation of alpha (Figs. 9, 10, section 7).",
 )

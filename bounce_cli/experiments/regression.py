@@ -264,5 +264,4 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
 
 EXPERIMENT = Experiment(
     name="regression", schema=RegressionConfig, run=run,
-    help="Racket amplitude vs squared period, OLS against eq. 15 (Fig. 7).",
 )

@@ -302,5 +302,4 @@ EXPERIMENT = Experiment(
     name="stability",
     schema=StabilityConfig,
     run=run,
-    help="Linear stability diagram (Fig. 5) and the coarse-grained predictions (section 5).",
 )

@@ -193,5 +193,4 @@ EXPERIMENT = Experiment(
     name="trajectory",
     schema=TrajectoryConfig,
     run=run,
-    help="Continuous-time ball and racket trajectories with sticking (Figs. 2, 3).",
 )
