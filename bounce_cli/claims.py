@@ -291,13 +291,13 @@ CLAIMS: tuple[Claim, ...] = (
 def from_bundled_config(results: Path, name: str) -> bool:
     """True when ``results/<name>/run.json`` records the resolved bundled config."""
     from .config import bundled_config_path, load_config
-    from .reproduce import load_experiment
+    from .registry import entry
 
     path = results / name / "run.json"
     if not path.is_file():
         return True  # reported as missing by the claim itself
     recorded = json.loads(path.read_text()).get("config")
-    schema = load_experiment(name).schema
+    schema = entry(name).load().schema
     return recorded == load_config(schema, bundled_config_path(name)).model_dump(mode="json")
 
 

@@ -7,10 +7,12 @@ an output directory holding another config's results) print ONE line to stderr a
 
 from __future__ import annotations
 
+import inspect
 import json
 import math
 import os
 import sys
+import typing
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -32,7 +34,8 @@ from .config import (
     validate,
 )
 from .engine import ModelError, ModelParams, iterate_orbit, stability, wrap_phase
-from .experiments.base import Experiment, RunOptions
+from .experiments.base import RunOptions
+from .registry import EXPERIMENTS, Entry
 
 USER_ERRORS = (ConfigError, ModelError, OutputDirError)
 
@@ -164,7 +167,7 @@ def warn_if_unstable(params: ModelParams) -> None:
 
 
 def run_experiment(
-    experiment: Experiment,
+    entry: Entry,
     *,
     config: Path | None,
     overrides: list[str] | None,
@@ -177,12 +180,14 @@ def run_experiment(
     """Load and validate the config, run the experiment, write its files atomically."""
     overrides = list(overrides or [])
     try:
+        experiment = entry.load()
         path = resolve_config_path(config, experiment.name)
         cfg = load_config(experiment.schema, path, overrides)
         if print_config:
             typer.echo(to_yaml(cfg), nl=False)
             return
-        warn_if_unstable(cfg.params)  # every experiment needs the period-1 fixed point
+        if entry.needs_fixed_point:
+            warn_if_unstable(cfg.params)
         name = path.stem if config is not None else experiment.name
         run_dir = RunDirectory(
             out if out is not None else Path("results") / name,
@@ -385,13 +390,14 @@ def reproduce_command(
     caption naming the paper's figure, and the table of the paper's claims (bounce verify).
     """
     from .claims import markdown_table, verify
-    from .reproduce import EXPERIMENT_NAMES, gallery_markdown, load_experiment
     from .artifacts import write_text_atomic
+    from .registry import reproduced
+    from .reproduce import gallery_markdown
 
-    for name in EXPERIMENT_NAMES:
+    for entry in reproduced():
         if not quiet:
-            stderr.print(f"[bold]bounce {name}[/bold]")
-        run_experiment(load_experiment(name), config=None, overrides=[], out=out / name,
+            stderr.print(f"[bold]bounce {entry.name}[/bold]")
+        run_experiment(entry, config=None, overrides=[], out=out / entry.name,
                        quiet=quiet, force=force, print_config=False, jobs=jobs)
     verdicts = verify(out)
     write_text_atomic(out / "README.md", gallery_markdown(out, markdown_table(verdicts)))
@@ -448,8 +454,9 @@ def main() -> None:
     app(prog_name="bounce")
 
 
-def add_experiment_command(name: str, summary: str) -> None:
-    """Register ``bounce <name>``: the common options, then ``run_experiment``."""
+def add_experiment_command(entry: Entry) -> None:
+    """Register ``bounce <name>`` for a registry entry: the common options (and ``--data``
+    where the experiment declares it), then ``run_experiment``."""
 
     def command(
         config: ConfigOption = None,
@@ -459,42 +466,24 @@ def add_experiment_command(name: str, summary: str) -> None:
         force: ForceOption = False,
         print_config: PrintConfigOption = False,
         jobs: JobsOption = None,
+        data: Optional[Path] = None,
     ) -> None:
-        from .reproduce import load_experiment
+        overrides = list(overrides or [])
+        if data is not None:
+            overrides.append(f"data={json.dumps(str(data))}")
+        run_experiment(entry, config=config, overrides=overrides, out=out, quiet=quiet,
+                       force=force, print_config=print_config, jobs=jobs)
 
-        run_experiment(load_experiment(name), config=config, overrides=overrides, out=out,
-                       quiet=quiet, force=force, print_config=print_config, jobs=jobs)
-
-    command.__doc__ = summary
-    app.command(name)(command)
-
-
-add_experiment_command(
-    "trajectory", "Continuous-time ball and racket trajectories with sticking (paper Figs. 2, 3).")
-add_experiment_command(
-    "basin", "Basin of attraction of the period-1 attractor over (theta0, v0) (paper Fig. 4).")
-add_experiment_command(
-    "stability",
-    "Linear stability diagram and coarse-grained predictions (paper Fig. 5, sections 4-5).")
-add_experiment_command(
-    "acf", "Correlation functions of the stochastic map vs the VAR(1) theory (paper Fig. 8).")
-add_experiment_command(
-    "impulse",
-    "Impulse responses after a perturbation of alpha, full vs linear (paper Figs. 9, 10).")
+    # the signature typer reads: annotations resolved, --data only where declared
+    hints = typing.get_type_hints(command, include_extras=True)
+    hints["data"] = Annotated[Optional[Path], typer.Option("--data", help=entry.data_help)]
+    params = [p.replace(annotation=hints[p.name])
+              for p in inspect.signature(command).parameters.values()
+              if p.name != "data" or entry.data_help is not None]
+    command.__signature__ = inspect.Signature(params)  # type: ignore[attr-defined]
+    command.__doc__ = entry.summary
+    app.command(entry.name)(command)
 
 
-@app.command("regression")
-def regression_command(
-    config: ConfigOption = None, overrides: SetOption = None,
-    data: Annotated[Optional[Path], typer.Option(
-        "--data", help="Trials CSV (a_r_m, tau_s; optional theta_deg, alpha, g, condition) "
-        "to fit instead of simulating (sets the config key `data`).")] = None,
-    out: OutOption = None, quiet: QuietOption = False, force: ForceOption = False,
-    print_config: PrintConfigOption = False, jobs: JobsOption = None) -> None:
-    """Racket amplitude vs squared period, OLS against eq. 15 (paper Fig. 7)."""
-    from .experiments import regression
-    overrides = list(overrides or [])
-    if data is not None:
-        overrides.append(f"data={json.dumps(str(data))}")
-    run_experiment(regression.EXPERIMENT, config=config, overrides=overrides, out=out,
-                   quiet=quiet, force=force, print_config=print_config, jobs=jobs)
+for _entry in EXPERIMENTS:
+    add_experiment_command(_entry)

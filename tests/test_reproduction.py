@@ -8,7 +8,6 @@ between machines); categorical columns must match exactly, except the basin's ou
 at most 1 point in 10^4 may flip (a grid point lying on a basin boundary to within rounding).
 """
 
-import importlib
 import io
 import json
 import shutil
@@ -22,7 +21,9 @@ from typer.testing import CliRunner
 from bounce_cli.cli import app
 from bounce_cli.config import bundled_config_path, load_config
 from bounce_cli.experiments.base import RunOptions
-from bounce_cli.reproduce import CAPTIONS, EXPERIMENT_NAMES, load_experiment
+from bounce_cli.registry import entry, reproduced
+
+EXPERIMENT_NAMES = [e.name for e in reproduced()]
 
 RESULTS = Path(__file__).resolve().parent.parent / "results"
 RTOL, ATOL = 1e-6, 1e-9
@@ -56,7 +57,7 @@ def assert_frames_match(fresh: pd.DataFrame, committed: pd.DataFrame, where: tup
 
 @pytest.mark.parametrize("name", EXPERIMENT_NAMES)
 def test_bundled_config_reproduces_committed_results(name):
-    experiment = load_experiment(name)
+    experiment = entry(name).load()
     config = load_config(experiment.schema, bundled_config_path(name))
     manifest = json.loads((RESULTS / name / "run.json").read_text())
     assert manifest["config"] == config.model_dump(mode="json"), (
@@ -67,13 +68,12 @@ def test_bundled_config_reproduces_committed_results(name):
     for csv_name, frame in result.frames.items():
         fresh = pd.read_csv(io.StringIO(frame.to_csv(index=False)))  # the CSV round trip
         assert_frames_match(fresh, committed[csv_name], (name, csv_name))
-    assert sorted(result.figures) == sorted(png for png, _ in CAPTIONS[name])
+    assert sorted(result.figures) == sorted(png for png, _ in entry(name).figures)
 
 
 @pytest.mark.parametrize("name", EXPERIMENT_NAMES)
 def test_every_figure_redraws_from_its_csvs_alone(name, tmp_path):
-    module = importlib.import_module(f"bounce_cli.experiments.{name}")
-    figures = module.draw(committed_frames(name))
+    figures = entry(name).load().draw(committed_frames(name))
     assert sorted(figures) == sorted(p.name for p in (RESULTS / name).glob("*.png"))
     for png, figure in figures.items():
         out = tmp_path / png
@@ -108,12 +108,24 @@ def test_verify_fails_on_drifted_or_missing_results(tmp_path):
     assert result.exit_code == 1 and "sd_v" in result.stderr
 
 
-def test_reproduce_gallery_lists_every_figure():
-    text = (RESULTS / "README.md").read_text()
-    for name in EXPERIMENT_NAMES:
-        for png, _ in CAPTIONS[name]:
-            assert f"({name}/{png})" in text
+def test_reproduce_gallery_lists_every_figure_and_flags_missing_ones(tmp_path):
+    from bounce_cli.claims import markdown_table, verify
+    from bounce_cli.reproduce import gallery_markdown
+
+    copy = tmp_path / "results"
+    shutil.copytree(RESULTS, copy, ignore=shutil.ignore_patterns("*.csv", "basin.png"))
+    text = gallery_markdown(copy, markdown_table(verify(copy)))
+    for e in reproduced():
+        for png, caption in e.figures:
+            if png == "basin.png":
+                assert f"*(missing: {e.name}/{png})*" in text
+            else:
+                assert f"![{png}]({e.name}/{png})" in text and caption in text
     assert "| claim | paper | ours | tolerance | status |" in text
+    assert text == gallery_markdown(copy, markdown_table(verify(copy)))
+    # the committed gallery is what reproduce writes for the committed results
+    assert (RESULTS / "README.md").read_text() == gallery_markdown(
+        RESULTS, markdown_table(verify(RESULTS)))
 
 
 def test_verify_refuses_results_made_from_another_config(tmp_path):
@@ -127,3 +139,21 @@ def test_verify_refuses_results_made_from_another_config(tmp_path):
     assert result.exit_code == 1
     assert "basin_no_100" in result.stderr and "fig3_initial_conditions" in result.stderr
     assert "other config" in result.stdout
+
+
+def test_registry_is_the_one_list_the_cli_and_experiments_follow():
+    from bounce_cli.config import ExperimentConfig
+    from bounce_cli.registry import EXPERIMENTS
+
+    commands = {c.name for c in app.registered_commands}
+    for e in EXPERIMENTS:
+        assert e.name in commands
+        experiment = e.load()
+        assert experiment.name == e.name
+        assert issubclass(experiment.schema, ExperimentConfig)
+        assert callable(experiment.run) and callable(experiment.draw)
+        assert bundled_config_path(e.name).is_file()
+        if e.data_help is not None:
+            assert "data" in experiment.schema.model_fields
+        help_text = runner.invoke(app, [e.name, "--help"]).stdout
+        assert ("--data" in help_text) == (e.data_help is not None)

@@ -124,7 +124,7 @@ def run(config: AcfConfig, options: RunOptions) -> ExperimentResult:
         f"bounces ({config.trials.duration_s:g} s); runs lost to sticking: {lost}",
     ]
     return ExperimentResult(frames={"acf.csv": acf, "summary.csv": summary_df},
-                            figures=figures, summary=lines, seed=config.seed)
+                            figures=figures, summary=lines)
 
 
 def _sds(params: ModelParams, q_v: float, q_theta: float, noise_cov=None) -> tuple[float, float]:
@@ -303,4 +303,5 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
 
 EXPERIMENT = Experiment(
     name="acf", schema=AcfConfig, run=run,
+    draw=draw,
 )

@@ -1,7 +1,28 @@
-"""What every experiment module provides, and what the CLI hands it.
+"""The contract of an experiment, and what the CLI hands it.
 
-An experiment turns a validated config into tidy DataFrames (written as CSV) and figures drawn
-from those same DataFrames, so that every figure can be redrawn from its CSVs.
+An experiment module ``bounce_cli/experiments/<name>.py`` provides ``EXPERIMENT``, an
+:class:`Experiment`, and is listed once in :mod:`bounce_cli.registry`. Adding an experiment
+means: one module, one bundled config ``configs/<name>.yaml``, one registry line, its tests,
+and (if it is part of ``bounce reproduce``) its baseline in ``results/<name>/``.
+
+What an experiment must provide (as scipy's ``OdeSolver`` documents what a solver provides):
+
+``schema``
+    A subclass of :class:`bounce_cli.config.ExperimentConfig` (pydantic, unknown keys
+    forbidden) describing its config; the bundled YAML must validate against it.
+``run(config, options) -> ExperimentResult``
+    Pure with respect to files: it reads nothing but the config (and, for an experiment with a
+    ``data`` key, the file the config names), writes nothing, prints nothing. It returns tidy
+    DataFrames (file name -> frame, written as CSV) and figures. Numerics belong in
+    ``bounce_cli.engine``; an experiment turns a config into tables and figures. User errors
+    are raised as ``ConfigError`` or ``ModelError`` with one line naming the key or file.
+``draw(frames) -> dict[str, Figure]``
+    Every figure of the run, drawn from the DataFrames ``run`` returned (or read back from the
+    CSVs): a figure can always be redrawn from its data. ``run`` builds its figures by calling
+    ``draw`` on its own frames.
+
+What it gets: the validated config, and :class:`RunOptions` (worker count, a progress sink),
+which never change the numbers it produces.
 """
 
 from __future__ import annotations
@@ -48,15 +69,17 @@ class ExperimentResult:
     frames: dict[str, pd.DataFrame]
     figures: dict[str, Any]
     summary: list[str] = field(default_factory=list)
-    seed: int | None = None
 
 
 @dataclass(frozen=True)
 class Experiment:
-    """An experiment: its name (bundled config ``configs/<name>.yaml``), config schema, and
-    ``run(config, options) -> ExperimentResult``. Its one-line summary lives with its command
-    in ``cli.py``, so that ``bounce --help`` need not import the experiments."""
+    """An experiment module's entry point: see the module docstring for the contract.
+
+    ``name`` is its command and bundled config (``configs/<name>.yaml``); its one-line summary,
+    figure captions and capabilities (``--data``) are in :mod:`bounce_cli.registry`, so that
+    ``bounce --help`` need not import the experiments."""
 
     name: str
     schema: type[ExperimentConfig]
     run: Callable[[Any, RunOptions], ExperimentResult]
+    draw: Callable[[dict[str, pd.DataFrame]], dict[str, Any]]

@@ -246,4 +246,5 @@ EXPERIMENT = Experiment(
     name="basin",
     schema=BasinConfig,
     run=run,
+    draw=draw,
 )

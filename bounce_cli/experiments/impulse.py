@@ -270,4 +270,5 @@ EXPERIMENT = Experiment(
     name="impulse",
     schema=ImpulseConfig,
     run=run,
+    draw=draw,
 )

@@ -225,7 +225,7 @@ def run(config: RegressionConfig, options: RunOptions) -> ExperimentResult:
             f"{row.intercept * 100:.2f} cm [{row.intercept_ci_low * 100:.2f}, "
             f"{row.intercept_ci_high * 100:.2f}] vs 0; R^2 {row.r2:.3f} (paper 0.98 / 0.90)")
     return ExperimentResult(frames={"trials.csv": trials, "fit.csv": fit}, figures=figures,
-                            summary=lines, seed=None if config.data else config.seed)
+                            summary=lines)
 
 
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
@@ -264,4 +264,5 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
 
 EXPERIMENT = Experiment(
     name="regression", schema=RegressionConfig, run=run,
+    draw=draw,
 )

@@ -302,4 +302,5 @@ EXPERIMENT = Experiment(
     name="stability",
     schema=StabilityConfig,
     run=run,
+    draw=draw,
 )

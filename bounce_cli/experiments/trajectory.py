@@ -193,4 +193,5 @@ EXPERIMENT = Experiment(
     name="trajectory",
     schema=TrajectoryConfig,
     run=run,
+    draw=draw,
 )

@@ -1,0 +1,98 @@
+"""The one list of experiments: the CLI makes a command of each, ``bounce reproduce`` runs
+those marked ``reproduce``, and the tests read it. Light on purpose (no numpy, no experiment
+import) so that ``bounce --help`` stays fast; :meth:`Entry.load` imports the module.
+
+Adding an experiment: see :mod:`bounce_cli.experiments.base` for the contract, then add one
+:class:`Entry` here.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from .experiments.base import Experiment
+
+
+@dataclass(frozen=True)
+class Entry:
+    """One experiment: command name (= module and bundled config name), one-line summary,
+    its figures as (file, caption), and what it can do.
+
+    ``data_help``: the command takes ``--data FILE``, which sets the config key ``data``
+    (the text is the option's help). ``needs_fixed_point``: the run is about the period-1
+    fixed point, so the CLI warns when it is unstable. ``reproduce``: part of
+    ``bounce reproduce`` and of the committed ``results/``."""
+
+    name: str
+    summary: str
+    figures: tuple[tuple[str, str], ...]
+    data_help: str | None = None
+    needs_fixed_point: bool = True
+    reproduce: bool = True
+
+    def load(self) -> Experiment:
+        module = importlib.import_module(f"bounce_cli.experiments.{self.name}")
+        experiment: Experiment = module.EXPERIMENT
+        return experiment
+
+
+#: every experiment, in the paper's order of figures
+EXPERIMENTS: tuple[Entry, ...] = (
+    Entry(
+        "trajectory",
+        "Continuous-time ball and racket trajectories with sticking (paper Figs. 2, 3).",
+        (("trajectory.png", "Figs. 2-3 (section 3): ball and racket trajectories of the two "
+          "coexisting attractors, period-1 (v0 = 4.8 m/s) and sticking (v0 = 5.7 m/s), with "
+          "the discrete v_k and theta_k per bounce."),),
+    ),
+    Entry(
+        "basin",
+        "Basin of attraction of the period-1 attractor over (theta0, v0) (paper Fig. 4).",
+        (("basin.png", "Fig. 4 (section 3): domain of attraction of the period-1 attractor; "
+          "white period-1, grey sticking, black below the racket."),
+         ("basin_iterations.png", "Section 3: number of impacts until each initial condition "
+          "was classified.")),
+    ),
+    Entry(
+        "stability",
+        "Linear stability diagram and coarse-grained predictions (paper Fig. 5, sections 4-5).",
+        (("stability.png", "Fig. 5 (section 4): stability diagram in (alpha, AC) and the "
+          "largest |lambda| where stable."),),
+    ),
+    Entry(
+        "regression",
+        "Racket amplitude vs squared period, OLS against eq. 15 (paper Fig. 7).",
+        (("regression.png", "Fig. 7 (section 5, eq. 15): trial means of racket amplitude "
+          "regressed on the squared racket period (simulated trials)."),),
+        data_help="Trials CSV (a_r_m, tau_s; optional theta_deg, alpha, g, condition) to fit "
+        "instead of simulating (sets the config key `data`).",
+    ),
+    Entry(
+        "acf",
+        "Correlation functions of the stochastic map vs the VAR(1) theory (paper Fig. 8).",
+        (("acf.png", "Fig. 8 (section 6): auto- and cross-correlation functions of the "
+          "stochastic map: theory (circles) and samples (crosses)."),),
+    ),
+    Entry(
+        "impulse",
+        "Impulse responses after a perturbation of alpha, full vs linear (paper Figs. 9, 10).",
+        (("impulse.png", "Fig. 9 (section 7): relaxation of velocity and phase after a "
+          "perturbation of the coefficient of restitution (model curves)."),
+         ("impulse_linear.png", "Fig. 10 (section 7): full map vs its linearisation with the "
+          "same Jacobian.")),
+    ),
+)
+
+BY_NAME: dict[str, Entry] = {entry.name: entry for entry in EXPERIMENTS}
+
+
+def entry(name: str) -> Entry:
+    return BY_NAME[name]
+
+
+def reproduced() -> tuple[Entry, ...]:
+    """The experiments ``bounce reproduce`` runs, in order."""
+    return tuple(e for e in EXPERIMENTS if e.reproduce)
