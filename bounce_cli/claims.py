@@ -298,7 +298,7 @@ def from_bundled_config(results: Path, name: str) -> bool:
         return True  # reported as missing by the claim itself
     recorded = json.loads(path.read_text()).get("config")
     schema = entry(name).load().schema
-    return recorded == load_config(schema, bundled_config_path(name)).model_dump(mode="json")
+    return recorded == load_config(schema, bundled_config_path(entry(name).config)).model_dump(mode="json")
 
 
 def verify(results: Path) -> list[Verdict]:

@@ -181,17 +181,17 @@ def run_experiment(
     overrides = list(overrides or [])
     try:
         experiment = entry.load()
-        path = resolve_config_path(config, experiment.name)
+        path = resolve_config_path(config, entry.config)
         cfg = load_config(experiment.schema, path, overrides)
         if print_config:
             typer.echo(to_yaml(cfg), nl=False)
             return
         if entry.needs_fixed_point:
             warn_if_unstable(cfg.params)
-        name = path.stem if config is not None else experiment.name
+        name = path.stem if config is not None else entry.name
         run_dir = RunDirectory(
             out if out is not None else Path("results") / name,
-            command=experiment.name,
+            command=entry.name,
             resolved_config=cfg.model_dump(mode="json"),
             overrides=overrides,
             config_path=str(path) if config is not None else f"bundled: configs/{path.name}",

@@ -18,8 +18,9 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class Entry:
-    """One experiment: command name (= module and bundled config name), one-line summary,
-    its figures as (file, caption), and what it can do.
+    """One experiment: command name, one-line summary, its figures as (file, caption), and
+    what it can do. Its module is ``bounce_cli.experiments.<module>`` and its bundled config
+    ``configs/<config>.yaml`` (both default to the name, with ``-`` as ``_`` for the module).
 
     ``data_help``: the command takes ``--data FILE``, which sets the config key ``data``
     (the text is the option's help). ``needs_fixed_point``: the run is about the period-1
@@ -32,9 +33,17 @@ class Entry:
     data_help: str | None = None
     needs_fixed_point: bool = True
     reproduce: bool = True
+    module: str = ""
+    config: str = ""
+
+    def __post_init__(self) -> None:
+        if not self.module:
+            object.__setattr__(self, "module", self.name.replace("-", "_"))
+        if not self.config:
+            object.__setattr__(self, "config", self.name)
 
     def load(self) -> Experiment:
-        module = importlib.import_module(f"bounce_cli.experiments.{self.name}")
+        module = importlib.import_module(f"bounce_cli.experiments.{self.module}")
         experiment: Experiment = module.EXPERIMENT
         return experiment
 

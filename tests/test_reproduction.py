@@ -58,7 +58,7 @@ def assert_frames_match(fresh: pd.DataFrame, committed: pd.DataFrame, where: tup
 @pytest.mark.parametrize("name", EXPERIMENT_NAMES)
 def test_bundled_config_reproduces_committed_results(name):
     experiment = entry(name).load()
-    config = load_config(experiment.schema, bundled_config_path(name))
+    config = load_config(experiment.schema, bundled_config_path(entry(name).config))
     manifest = json.loads((RESULTS / name / "run.json").read_text())
     assert manifest["config"] == config.model_dump(mode="json"), (
         f"results/{name} was made from another config: rerun `bounce reproduce`")
@@ -152,7 +152,7 @@ def test_registry_is_the_one_list_the_cli_and_experiments_follow():
         assert experiment.name == e.name
         assert issubclass(experiment.schema, ExperimentConfig)
         assert callable(experiment.run) and callable(experiment.draw)
-        assert bundled_config_path(e.name).is_file()
+        assert bundled_config_path(e.config).is_file()
         if e.data_help is not None:
             assert "data" in experiment.schema.model_fields
         help_text = runner.invoke(app, [e.name, "--help"]).stdout
