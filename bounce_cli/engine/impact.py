@@ -73,16 +73,34 @@ def next_impact_phase(theta, v, params: ModelParams, *, max_steps: int = MAX_SAF
     (m/s). Arrays broadcast. Returns s > 0 with G(s) = 0 and G > 0 on (0, s); NaN where the
     ball cannot fly (see ``can_fly``) or, never observed, where the iteration did not converge.
     """
-    theta, v = np.broadcast_arrays(np.asarray(theta, dtype=float), np.asarray(v, dtype=float))
+    return first_impact_phase(theta, v, params.racket_amplitude, params.omega, params.g,
+                              max_steps=max_steps)
+
+
+def first_impact_phase(theta, v, amplitude, omega, g, *, max_steps: int = MAX_SAFE_STEPS):
+    """``next_impact_phase`` with the racket's amplitude a (m), angular frequency w (rad/s)
+    and gravity g (m/s^2) given directly, each a scalar or an array broadcasting with theta
+    and v: one call serves states at different parameters (a sweep of the map, or a racket
+    whose period changes from one flight to the next under period control). Scalars take the
+    same arithmetic as arrays of one value, so results do not depend on the form."""
+    theta, v, a, w, g = np.broadcast_arrays(*(np.asarray(x, dtype=float)
+                                              for x in (theta, v, amplitude, omega, g)))
     shape = theta.shape
     theta = np.mod(theta.ravel(), 2.0 * np.pi)  # sin/cos periodic: keep arguments small
     v = v.ravel()
-    w, a, g = params.omega, params.racket_amplitude, params.g
+    # racket parameters: plain floats when they are one value (the fast path), else arrays
+    # that are compacted with the states below
+    params = [float(x.flat[0]) if x.size and np.all(x == x.flat[0]) else x.ravel()
+              for x in (a, w, g)]
+    a, w, g = params
     bound = g / (w * w) + a  # M >= |G''|
 
     result = np.full(theta.shape, np.nan)
-    idx = np.flatnonzero(can_fly(theta, v, params))
+    slope = (v - a * w * np.cos(theta)) / w
+    curvature = -g / w**2 + a * np.sin(theta)
+    idx = np.flatnonzero((slope > 0.0) | ((slope == 0.0) & (curvature > 0.0)))  # can_fly
     th, vv = theta[idx], v[idx]
+    a, w, g, bound = (x if isinstance(x, float) else x[idx] for x in (a, w, g, bound))
 
     # first step from s = 0 (G = 0): smallest positive root of d + c h/2 - a h^2/6
     d0 = vv / w - a * np.cos(th)
@@ -113,5 +131,6 @@ def next_impact_phase(theta, v, params: ModelParams, *, max_steps: int = MAX_SAF
             idx, th, vv, d0, s, step = (
                 idx[keep], th[keep], vv[keep], d0[keep], s[keep], step[keep]
             )
+            a, w, g, bound = (x if isinstance(x, float) else x[keep] for x in (a, w, g, bound))
         s = s + step
     return result.reshape(shape)
