@@ -159,11 +159,15 @@ def apex_height(params: ModelParams, theta, v):
     return params.racket_amplitude * np.sin(theta) + np.square(v) / (2.0 * params.g)
 
 
-def apex_sd_eq19(params: ModelParams, q_v: float, q_theta: float) -> float:
+def apex_sd_eq19(params: ModelParams, q_v: float, q_theta: float,
+                 noise_cov: np.ndarray | None = None) -> float:
     """SD of the ball apex height (m) that eq. 19 predicts: the gradient of apex_height at the
-    fixed point, (v~/g, a_r cos theta~), applied to R(0) of eq. 19 with diagonal noise."""
+    fixed point, (v~/g, a_r cos theta~), applied to R(0) of eq. 19 with diagonal noise
+    diag(q_v^2, q_theta^2) (or ``noise_cov``, e.g. ``map_noise_covariance``)."""
     fp = params.fixed_point()
-    cov = stationary_covariance(jacobian(params), paper_noise_covariance(q_v, q_theta))
+    if noise_cov is None:
+        noise_cov = paper_noise_covariance(q_v, q_theta)
+    cov = stationary_covariance(jacobian(params), noise_cov)
     grad = np.array([fp.v_m_s / params.g, params.racket_amplitude * math.cos(fp.theta_rad)])
     return float(math.sqrt(grad @ cov @ grad))
 

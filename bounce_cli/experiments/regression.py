@@ -32,6 +32,7 @@ from ..engine import (
 )
 from ..plotting import new_figure
 from .base import Experiment, ExperimentResult, RunOptions
+from .data_side import is_impacts_table, trial_means_from_impacts
 
 REQUIRED = ("a_r_m", "tau_s")
 OPTIONAL = ("theta_deg", "alpha", "g", "condition")
@@ -206,7 +207,10 @@ def _constant(group: pd.DataFrame, column: str, default: float, condition) -> fl
 
 
 def run(config: RegressionConfig, options: RunOptions) -> ExperimentResult:
-    if config.data is not None:
+    if config.data is not None and is_impacts_table(config.data):
+        trials = trial_means_from_impacts(config.data, config.model.alpha)
+        source = f"data {config.data} (impacts averaged per trial)"
+    elif config.data is not None:
         trials = read_trials(config.data)
         source = f"data {config.data}"
     else:
