@@ -146,6 +146,10 @@ def test_acf_data_files_and_manifest(acf_data):
                      "stability_data.png", "trust.csv"]
     manifest = json.loads((out / "run.json").read_text())
     assert manifest["config"]["data"] == str(path)
+    import hashlib
+
+    assert manifest["data_file"] == {"path": str(path.resolve()),
+                                     "sha256": hashlib.sha256(path.read_bytes()).hexdigest()}
 
 
 def test_acf_data_recovers_the_simulated_truth(acf_data):
