@@ -96,6 +96,20 @@ class Impacts:
                     yield trial, rows.iloc[part]
 
 
+def read_data_csv(path: Path) -> pd.DataFrame:
+    """A ``--data`` CSV as a DataFrame with stripped column names; an unreadable file is one
+    line naming ``data`` and the file."""
+    try:
+        frame = pd.read_csv(path)
+    except FileNotFoundError:
+        raise ConfigError(f"data: {path}: file not found") from None
+    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise _fail(path, f"cannot read as CSV: {first}") from None
+    frame.columns = [str(c).strip() for c in frame.columns]
+    return frame
+
+
 def _fail(path: Path, message: str) -> ConfigError:
     return ConfigError(f"data: {path}: {message}")
 
@@ -106,14 +120,7 @@ def read_impacts(path_text: str | Path, needs: tuple[str, ...] = (), command: st
     the file and the column, row or trial (ConfigError). ``needs``: the optional columns the
     analysis ``command`` requires; ``min_bounces``: fewest impacts a trial may have."""
     path = Path(path_text)
-    try:
-        frame = pd.read_csv(path)
-    except FileNotFoundError:
-        raise ConfigError(f"data: {path}: file not found") from None
-    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise _fail(path, f"cannot read as CSV: {first}") from None
-    frame.columns = [str(c).strip() for c in frame.columns]
+    frame = read_data_csv(path)
     who = f"bounce {command} needs" if command else "needed"
     missing = [c for c in CORE_COLUMNS if c not in frame.columns]
     if "theta_rad" not in frame.columns and "theta_deg" not in frame.columns:

@@ -18,7 +18,6 @@ from bounce_cli.engine import (
     map_noise_covariance,
     paper_noise_covariance,
     phase_difference,
-    stability,
     var1_theory,
 )
 from bounce_cli.engine.data_stats import (

@@ -6,7 +6,6 @@ import math
 
 import numpy as np
 import pytest
-from scipy import stats
 
 from bounce_cli.engine import ModelParams, jacobian, stability
 from bounce_cli.engine.data_stats import simulate_impacts

@@ -1,7 +1,6 @@
 """`bounce learning` (Fig. 6): eq. 19's SD of ball amplitude against AC, and a learning curve
 from simulated trials whose AC drifts with known slope."""
 
-import math
 
 import numpy as np
 import pandas as pd

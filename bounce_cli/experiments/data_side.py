@@ -286,16 +286,9 @@ def trust_frame(params, q_v, q_theta, config, segments, options) -> pd.DataFrame
     return frame
 
 
-PANELS = {(0, 0): "v_v", (0, 1): "theta_to_v", (1, 0): "v_to_theta", (1, 1): "theta_theta"}
-TITLES = {
-    "v_v": "ACF of velocity: corr(v[k+l], v[k])",
-    "theta_to_v": "phase -> velocity: corr(v[k+l], theta[k])",
-    "v_to_theta": "velocity -> phase: corr(theta[k+l], v[k])",
-    "theta_theta": "ACF of phase: corr(theta[k+l], theta[k])",
-}
-
-
 def acf_data_draw(frames: dict[str, pd.DataFrame]) -> dict:
+    from .acf import PANELS, TITLES  # Fig. 8's layout, shared with the model's side
+
     acf = frames["acf_data.csv"]
     fig, axes = new_figure(2, 2, width=10, height=7.5, sharex=True)
     for (r, c), pair in PANELS.items():
