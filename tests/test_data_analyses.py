@@ -326,3 +326,43 @@ def test_regression_aggregates_impacts_to_trial_means(tmp_path):
     assert fit.slope == pytest.approx(float(eq15_amplitude(1.0, math.radians(35.0), 0.5, 9.81)))
     assert fit.predicted_slope == pytest.approx(fit.slope, rel=5e-3)
     assert abs(fit.intercept) < 1e-9
+
+
+def test_implied_alpha_inverts_eq8():
+    from bounce_cli.experiments.data_side import implied_alpha
+
+    for params in (ACF, PAPER):
+        assert implied_alpha(params, params.fixed_point().theta_rad) == pytest.approx(
+            params.alpha, abs=1e-12)
+    assert math.isnan(implied_alpha(PAPER, math.radians(120.0)))
+
+
+def test_acf_data_reports_the_data_means_beside_eqs_7_8(acf_data):
+    _, out = acf_data
+    stab = pd.read_csv(out / "stability_data.csv").set_index(["quantity", "source"])
+    fp = ACF.fixed_point()
+    assert stab.loc[("v_mean", "data"), "estimate"] == pytest.approx(fp.v_m_s, abs=0.02)
+    # the map's mean phase sits ~0.8 deg below theta~ at this noise (README, bounce acf)
+    assert stab.loc[("theta_mean", "data"), "estimate"] == pytest.approx(fp.theta_deg, abs=1.5)
+    assert stab.loc[("alpha", "data_eq8"), "estimate"] == pytest.approx(0.42, abs=0.01)
+
+
+def test_racket_period_modulation_is_recovered(impulse_data, tmp_path):
+    """Fig. 11: a subject who lengthens the racket period by 20 ms at the impact after an
+    increase of alpha and shortens it by 20 ms after a decrease (amplitude untouched)."""
+    path, _ = impulse_data
+    frame = pd.read_csv(path)
+    frame["racket_period_s"] = frame["racket_period_s"].astype(float)
+    for i in np.flatnonzero(frame["perturbed"].to_numpy()):
+        frame.loc[i + 1, "racket_period_s"] += 0.02 if frame.loc[i, "alpha"] > 0.5 else -0.02
+    modulated = tmp_path / "modulated.csv"
+    frame.to_csv(modulated, index=False)
+    out = tmp_path / "out"
+    result = run("impulse", "--data", modulated, "--out", out, "--quiet",
+                 "--set", "data_analysis.settle_after_perturbation=8")
+    assert result.exit_code == 0, result.output
+    a = pd.read_csv(out / "aligned.csv").set_index(["quantity", "direction", "k"])["mean"]
+    assert a["racket_period_s", "increase", 1] == pytest.approx(0.02, abs=1e-9)
+    assert a["racket_period_s", "decrease", 1] == pytest.approx(-0.02, abs=1e-9)
+    assert a["racket_period_s", "increase", 2] == pytest.approx(0.0, abs=1e-9)
+    assert np.allclose(a["racket_amplitude_m"].to_numpy(), 0.0, atol=1e-12)

@@ -97,7 +97,7 @@ def model_at_data(impacts: Impacts, alpha: float, g: float, need_stable: bool = 
 
 
 def stationary_segments(impacts: Impacts, settle: int, min_length: int):
-    """(trial, v, dtheta) of each run of consecutive, unperturbed impacts: perturbed impacts
+    """(trial, v, dtheta, theta) of each run of consecutive, unperturbed impacts: perturbed impacts
     and the ``settle`` impacts after each are cut out (they are not the stationary state),
     dtheta is the phase minus the trial's circular mean, wrapped to [-pi, pi)."""
     out = []
@@ -116,8 +116,22 @@ def stationary_segments(impacts: Impacts, settle: int, min_length: int):
         idx = np.flatnonzero(keep)
         for part in np.split(idx, np.flatnonzero(cut[idx][1:]) + 1):
             if len(part) >= min_length:
-                out.append((trial, v[part], dtheta[part]))
+                out.append((trial, v[part], dtheta[part], theta[part]))
     return out
+
+
+def stationary_means(runs) -> tuple[float, float]:
+    """Mean v (m/s) and circular mean phase (rad) over the impacts of (v, theta) runs."""
+    v = np.concatenate([r[0] for r in runs])
+    theta = np.concatenate([r[1] for r in runs])
+    return float(v.mean()), circular_mean(theta)
+
+
+def implied_alpha(params: ModelParams, theta_rad: float) -> float:
+    """Eq. 8 solved for alpha: (1 - alpha)/(1 + alpha) = r with r = cos(theta) w^2 a_r / (pi g),
+    so alpha = (1 - r)/(1 + r); NaN where the phase is outside (-90, 90) deg."""
+    r = math.cos(theta_rad) * params.omega**2 * params.racket_amplitude / (math.pi * params.g)
+    return (1.0 - r) / (1.0 + r) if r > 0 else math.nan
 
 
 # -- acf --data (Fig. 8 and the stability measured from data) --------------------------------
@@ -127,6 +141,8 @@ def acf_data_run(config, options) -> tuple[dict[str, pd.DataFrame], list[str]]:
                            min_bounces=config.max_lag + 2)
     params = model_at_data(impacts, config.model.alpha, config.model.g)
     segments = stationary_segments(impacts, d.settle_after_perturbation, config.max_lag + 2)
+    segments_means = [(s[1], s[3]) for s in segments]
+    segments = [s[:3] for s in segments]
     if not segments:
         raise ConfigError(f"data: {impacts.path}: no run of {config.max_lag + 2} consecutive "
                           "unperturbed impacts (max_lag + 2) in any trial")
@@ -205,6 +221,13 @@ def acf_data_run(config, options) -> tuple[dict[str, pd.DataFrame], list[str]]:
             note="residual variance of v given theta's (removes eq. 16's phase-noise term)")
     add("v_fixed", "m/s", "model_eq7", fp.v_m_s)
     add("theta_fixed", "deg", "model_eq8", fp.theta_deg)
+    v_mean, theta_mean = stationary_means(segments_means)
+    add("v_mean", "m/s", "data", v_mean, note="mean over the runs' impacts (compare eq. 7)")
+    add("theta_mean", "deg", "data", math.degrees(theta_mean),
+        note="circular mean phase of impact (compare eq. 8)")
+    add("alpha", "1", "data_eq8", implied_alpha(params, theta_mean),
+        note="the alpha for which eq. 8 puts theta~ at the data's mean phase (a check of "
+             "model.alpha)")
     add("ac", "g", "model", st.ac_g)
     add("racket_period", "s", "data", params.racket_period, note="mean over impacts")
     add("racket_amplitude", "m", "data", params.racket_amplitude, note="mean over impacts")
@@ -224,6 +247,16 @@ def acf_data_run(config, options) -> tuple[dict[str, pd.DataFrame], list[str]]:
         lines.append(f"{fit.method}: spectral radius {r[0]:.3f} [{r[2]:.3f}, {r[3]:.3f}] "
                      f"({conf:.0%} CI, delta method)")
     lines.append(f"noise from the data's SDs: q_v = {q_v:.4f} m/s, q_theta = {q_theta:.4f} rad")
+    lines.append(f"data's mean phase {math.degrees(theta_mean):.1f} deg vs eq. 8's "
+                 f"{fp.theta_deg:.1f} deg (eq. 8 would need alpha = "
+                 f"{implied_alpha(params, theta_mean):.3f}; model.alpha = {params.alpha:g})")
+    n_data = int(sum(len(s[1]) for s in segments))
+    for method in ("ols", "lag2"):
+        ok = trust[(trust.method == method) & trust.trusted.astype(bool)]
+        need = f"from {int(ok.bounces.min())} bounces" if len(ok) else "at none of the sizes tried"
+        lines.append(f"trust study ({d.measurement_sd_v_m_s:g} m/s, "
+                     f"{d.measurement_sd_theta_deg:g} deg measurement noise): {method} trusted "
+                     f"{need}; these data have {n_data}")
     return frames, lines
 
 
@@ -322,25 +355,31 @@ def _stability_figure(stab: pd.DataFrame, trust: pd.DataFrame | None):
     sources = [src for src in dict.fromkeys(stab["source"]) if src.split("+")[0] in styles]
     t = np.linspace(0, 2 * np.pi, 200)
     ax.plot(np.cos(t), np.sin(t), color="0.8", lw=0.8)
-    for src in sources:
+    for src in sorted(sources, key=lambda x: x == "model_eq10"):  # the model on top
         marker, colour = styles[src.split("+")[0]]
+        radius = s.loc[("spectral_radius", src)]
+        label = f"{src}: radius {radius['estimate']:.3f}"
+        if np.isfinite(radius["ci_low"]):
+            label += f" [{radius['ci_low']:.3f}, {radius['ci_high']:.3f}]"
         for lam in ("lambda_plus", "lambda_minus"):
             try:
                 re = s.loc[(f"{lam}_re", src)]
                 im = s.loc[(f"{lam}_im", src)]
             except KeyError:
                 continue
-            ax.errorbar(re["estimate"], im["estimate"], xerr=re["se"] if np.isfinite(re["se"]) else 0,
-                        yerr=im["se"] if np.isfinite(im["se"]) else 0, fmt=marker, color=colour,
-                        mfc="none" if src == "model_eq10" else colour, ms=8, capsize=2,
-                        label=src if lam == "lambda_plus" else None)
+            model = src == "model_eq10"
+            ax.errorbar(re["estimate"], im["estimate"], xerr=0 if model else re["se"],
+                        yerr=0 if model else im["se"], fmt=marker, color=colour,
+                        mfc="none" if model else colour, ms=12 if model else 7, mew=2 if model else 1,
+                        capsize=2, zorder=3 if model else 2,
+                        label=label if lam == "lambda_plus" else None)
     ax.set_aspect("equal")
     ax.set_xlim(-1.1, 1.1)
     ax.set_ylim(-1.1, 1.1)
     ax.set_xlabel("Re lambda")
     ax.set_ylabel("Im lambda")
     ax.set_title("eigenvalues of J (+- SE): model eq. 10 vs VAR(1) fits", fontsize=10)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=8, title="spectral radius [95 % CI]", title_fontsize=8)
     ax = axes[0, 1]
     if trust is not None and len(trust):
         for method, colour in (("ols", "tab:blue"), ("lag2", "tab:red")):
@@ -355,6 +394,9 @@ def _stability_figure(stab: pd.DataFrame, trust: pd.DataFrame | None):
                         mec="k", label=f"{method}: trusted (coverage, bias)")
         ax.axhline(trust["true_spectral_radius"].iloc[0], color="k", ls="--",
                    label="true (model at the data's parameters)")
+        n_data = stab.loc[(stab.quantity == "bounces") & (stab.source == "data"), "estimate"]
+        if len(n_data):
+            ax.axvline(float(n_data.iloc[0]), color="0.5", ls=":", label="these data's bounces")
         ax.set_xscale("log")
         ax.set_ylim(0.0, 1.5)
         ax.set_xlabel("bounces in the data set (simulated, with measurement noise)")
