@@ -145,7 +145,8 @@ def acf_data_run(config, options) -> tuple[dict[str, pd.DataFrame], list[str]]:
     segments = [s[:3] for s in segments]
     if not segments:
         raise ConfigError(f"data: {impacts.path}: no run of {config.max_lag + 2} consecutive "
-                          "unperturbed impacts (max_lag + 2) in any trial")
+                          "unperturbed impacts (max_lag + 2) in any trial; lower max_lag or "
+                          "data_analysis.settle_after_perturbation")
     options.progress.start(3 + len(d.trust_bounces), "data: correlations, VAR(1) fits")
     corr = trial_correlations([s[1] for s in segments], [s[2] for s in segments], config.max_lag)
     options.progress.advance(1)

@@ -175,7 +175,8 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         right.set_ylabel("SD of ball amplitude (cm)", color="0.4")
         h1, l1 = ax.get_legend_handles_labels()
         h2, l2 = right.get_legend_handles_labels()
-        ax.legend(h1 + h2, l1 + l2, fontsize=8, loc="lower left")
+        ax.legend(h1 + h2, l1 + l2, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.13),
+                  ncol=2)
         ax.set_title("Fig. 6: learning over trials (data)", fontsize=10)
         ax2 = axes[0, 1]
     else:
