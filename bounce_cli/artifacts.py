@@ -10,6 +10,7 @@ refused unless ``force``.
 from __future__ import annotations
 
 import datetime as _dt
+import hashlib
 import json
 import os
 import platform
@@ -106,6 +107,22 @@ def read_manifest(out_dir: Path) -> dict[str, Any]:
     return data if isinstance(data, dict) else {}
 
 
+def data_file_record(data: Any) -> dict[str, Any] | None:
+    """The data file a run reads (config key ``data``): its path and SHA-256, so that a
+    result can be traced to the exact file (None without data or when it cannot be read; the
+    experiment then reports the error)."""
+    if not isinstance(data, str) or not data:
+        return None
+    digest = hashlib.sha256()
+    try:
+        with open(data, "rb") as handle:
+            for block in iter(lambda: handle.read(1 << 20), b""):
+                digest.update(block)
+    except OSError:
+        return None
+    return {"path": str(Path(data).resolve()), "sha256": digest.hexdigest()}
+
+
 class RunDirectory:
     """Collects a run's outputs and commits them atomically into ``out_dir``."""
 
@@ -131,6 +148,7 @@ class RunDirectory:
         self._frames: dict[str, pd.DataFrame] = {}
         self._figures: dict[str, Any] = {}
         self.previous: dict[str, Any] = {}
+        self.data_file = data_file_record(resolved_config.get("data"))
         self.check_writable(force)
 
     def check_writable(self, force: bool) -> None:
@@ -174,6 +192,7 @@ class RunDirectory:
             "overrides": self.overrides,
             "seed": self.seed,
             "config": self.resolved_config,
+            **({"data_file": self.data_file} if self.data_file else {}),
             "versions": versions(),
             "git_commit": git_commit(),
             "started": self.started.isoformat(timespec="seconds"),

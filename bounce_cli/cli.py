@@ -186,8 +186,8 @@ def run_experiment(
         if print_config:
             typer.echo(to_yaml(cfg), nl=False)
             return
-        if entry.needs_fixed_point:
-            warn_if_unstable(cfg.params)
+        if entry.needs_fixed_point and getattr(cfg, "data", None) is None:
+            warn_if_unstable(cfg.params)  # with --data the model is taken at the data's racket
         name = path.stem if config is not None else entry.name
         run_dir = RunDirectory(
             out if out is not None else Path("results") / name,

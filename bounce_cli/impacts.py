@@ -25,6 +25,15 @@ Columns (units in the names; phases are the racket's phase of impact, section 2,
 
 from __future__ import annotations
 
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .config import ConfigError
+
 #: the columns every impacts table has, in this order
 REQUIRED_COLUMNS: tuple[str, ...] = (
     "trial",
@@ -41,3 +50,170 @@ REQUIRED_COLUMNS: tuple[str, ...] = (
 )
 #: columns present when the recording came with events (a virtual set-up's log)
 EVENT_COLUMNS: tuple[str, ...] = ("alpha", "perturbed")
+
+#: what every analysis needs: the trial, the impact index, and the map's state (v, theta);
+#: theta may come as theta_rad or theta_deg
+CORE_COLUMNS: tuple[str, ...] = ("trial", "k", "v_m_s")
+#: what each optional column is for (named in the error when an analysis needs it)
+COLUMN_PURPOSE: dict[str, str] = {
+    "racket_acc_g": "the racket acceleration at impact AC",
+    "racket_period_s": "the racket period (the model at the data's parameters)",
+    "racket_amplitude_m": "the racket amplitude (the model at the data's parameters)",
+    "ball_apex_m": "the SD of ball amplitude (Fig. 6)",
+    "alpha": "the coefficient of restitution of each impact (perturbations, Figs. 9 and 11)",
+    "perturbed": "which impacts were perturbed (Figs. 9 and 11)",
+    "hop_s": "the time to the next impact",
+    "t_s": "the time of each impact",
+}
+
+
+@dataclass(frozen=True)
+class Impacts:
+    """A checked impacts table: ``frame`` sorted by (trial, k) with ``theta_rad`` present, and
+    the file it came from (for messages)."""
+
+    frame: pd.DataFrame
+    path: Path
+
+    @property
+    def trials(self) -> list:
+        return list(dict.fromkeys(self.frame["trial"]))
+
+    def by_trial(self):
+        """(trial, rows) in the file's order of trials."""
+        for trial in self.trials:
+            yield trial, self.frame[self.frame["trial"] == trial]
+
+    def segments(self, min_length: int = 2):
+        """(trial, rows) of each run of consecutive k (an impact missing from the table, e.g.
+        dropped by the extraction in a gap, ends a run: no pair spans it), in order; runs
+        shorter than ``min_length`` are left out."""
+        for trial, rows in self.by_trial():
+            k = rows["k"].to_numpy()
+            breaks = np.flatnonzero(np.diff(k) != 1) + 1
+            for part in np.split(np.arange(len(rows)), breaks):
+                if len(part) >= min_length:
+                    yield trial, rows.iloc[part]
+
+
+def read_data_csv(path: Path) -> pd.DataFrame:
+    """A ``--data`` CSV as a DataFrame with stripped column names; an unreadable file is one
+    line naming ``data`` and the file."""
+    try:
+        frame = pd.read_csv(path)
+    except FileNotFoundError:
+        raise ConfigError(f"data: {path}: file not found") from None
+    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise _fail(path, f"cannot read as CSV: {first}") from None
+    frame.columns = [str(c).strip() for c in frame.columns]
+    return frame
+
+
+def _fail(path: Path, message: str) -> ConfigError:
+    return ConfigError(f"data: {path}: {message}")
+
+
+def read_impacts(path_text: str | Path, needs: tuple[str, ...] = (), command: str = "",
+                 min_bounces: int = 2) -> Impacts:
+    """Read and check an impacts table (ours or a lab's own). Every problem is one line naming
+    the file and the column, row or trial (ConfigError). ``needs``: the optional columns the
+    analysis ``command`` requires; ``min_bounces``: fewest impacts a trial may have."""
+    path = Path(path_text)
+    frame = read_data_csv(path)
+    who = f"bounce {command} needs" if command else "needed"
+    missing = [c for c in CORE_COLUMNS if c not in frame.columns]
+    if "theta_rad" not in frame.columns and "theta_deg" not in frame.columns:
+        missing.append("theta_rad (or theta_deg)")
+    if missing:
+        raise _fail(path, f"missing column(s) {', '.join(missing)}: not an impacts table "
+                          f"(required: trial, k, v_m_s, theta_rad or theta_deg)")
+    for column in needs:
+        if column not in frame.columns:
+            raise _fail(path, f"missing column {column}: {who} {COLUMN_PURPOSE.get(column, column)}")
+    if frame.empty:
+        raise _fail(path, "no rows")
+    if frame["trial"].isna().any():
+        row = int(np.flatnonzero(frame["trial"].isna().to_numpy())[0])
+        raise _fail(path, f"column trial: empty in data row {row + 1}")
+    numeric = ["k", "v_m_s", "theta_rad" if "theta_rad" in frame.columns else "theta_deg",
+               *[c for c in needs if c not in ("perturbed",)]]
+    allow_nan = {"hop_s", "ball_apex_m"}  # a trial's last impact has no following flight
+    for column in dict.fromkeys(numeric):
+        values = pd.to_numeric(frame[column], errors="coerce")
+        bad = ~np.isfinite(values.astype(float))
+        if column in allow_nan:
+            bad &= frame[column].notna()
+        if bad.any():
+            row = int(np.flatnonzero(bad.to_numpy())[0])
+            raise _fail(path, f"column {column}: not a number in data row {row + 1} (trial "
+                              f"{frame['trial'].iloc[row]}, got {frame[column].iloc[row]!r})")
+        frame[column] = values.astype(float)
+    if "theta_rad" not in frame.columns:
+        frame["theta_rad"] = np.radians(frame["theta_deg"])
+    if (frame["k"] != np.round(frame["k"])).any():
+        raise _fail(path, "column k: impact indices must be whole numbers")
+    frame["k"] = frame["k"].astype(int)
+    checks = {"racket_period_s": ("> 0", lambda x: x > 0),
+              "racket_amplitude_m": ("> 0", lambda x: x > 0),
+              "alpha": ("in [0, 1)", lambda x: (x >= 0) & (x < 1))}
+    for column, (rule, ok) in checks.items():
+        if column in needs and not ok(frame[column]).all():
+            row = int(np.flatnonzero(~ok(frame[column]).to_numpy())[0])
+            raise _fail(path, f"column {column}: must be {rule} (data row {row + 1}, trial "
+                              f"{frame['trial'].iloc[row]}: {frame[column].iloc[row]!r})")
+    if "perturbed" in frame.columns:
+        text = frame["perturbed"].astype(str).str.strip().str.lower()
+        mapping = {"true": True, "false": False, "1": True, "0": False, "1.0": True, "0.0": False}
+        unknown = ~text.isin(list(mapping))
+        if "perturbed" in needs and unknown.any():
+            row = int(np.flatnonzero(unknown.to_numpy())[0])
+            raise _fail(path, f"column perturbed: expected True/False in data row {row + 1} "
+                              f"(got {frame['perturbed'].iloc[row]!r})")
+        frame["perturbed"] = text.map(mapping).fillna(False).astype(bool)
+    frame["trial"] = frame["trial"].astype(str)
+    order = list(dict.fromkeys(frame["trial"]))
+    frame["_order"] = frame["trial"].map({t: i for i, t in enumerate(order)})
+    frame = frame.sort_values(["_order", "k"], kind="stable").drop(columns="_order")
+    frame = frame.reset_index(drop=True)
+    duplicate = frame.duplicated(["trial", "k"])
+    if duplicate.any():
+        row = frame[duplicate].iloc[0]
+        raise _fail(path, f"trial {row['trial']}: impact k = {row['k']} appears twice")
+    counts = frame.groupby("trial", sort=False).size()
+    short = counts[counts < min_bounces]
+    if len(short):
+        raise _fail(path, f"trial {short.index[0]}: {int(short.iloc[0])} impacts, fewer than the "
+                          f"{min_bounces} {('bounce ' + command) if command else 'the analysis'} "
+                          "needs per trial (drop the trial or lower the requirement)")
+    return Impacts(frame, path)
+
+
+def impacts_frame(sim, params, trial_names=None) -> pd.DataFrame:
+    """An impacts table (the columns above) from the engine's synthetic lab
+    (``engine.data_stats.simulate_impacts``): racket period and amplitude are the model's,
+    AC = -a_r w^2 sin(theta) / g, ball apex x_r(theta) + v^2 / 2g. Lost trials are left out."""
+    from .engine.data_stats import apex_height
+
+    rows = []
+    n_trials, n = sim.v.shape
+    for i in range(n_trials):
+        if sim.lost[i]:
+            continue
+        name = trial_names[i] if trial_names is not None else i + 1
+        theta = sim.theta[i]
+        rows.append(pd.DataFrame({
+            "trial": name, "k": np.arange(n), "t_s": sim.t[i],
+            "theta_rad": theta, "theta_deg": np.degrees(theta), "v_m_s": sim.v[i],
+            "racket_acc_g": -params.racket_amplitude * params.omega**2 * np.sin(theta) / params.g,
+            "racket_period_s": params.racket_period,
+            "racket_amplitude_m": params.racket_amplitude,
+            "hop_s": sim.hop[i], "ball_apex_m": apex_height(params, theta, sim.v[i]),
+            "alpha": sim.alpha[i], "perturbed": sim.perturbed[i],
+        }))
+    return pd.concat(rows, ignore_index=True)
+
+
+def circular_mean(theta_rad) -> float:
+    """Mean phase (rad) in [0, 2 pi): the angle of the mean unit vector."""
+    return float(np.mod(np.angle(np.mean(np.exp(1j * np.asarray(theta_rad, float)))), 2 * math.pi))

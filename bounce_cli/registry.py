@@ -72,18 +72,32 @@ EXPERIMENTS: tuple[Entry, ...] = (
           "largest |lambda| where stable."),),
     ),
     Entry(
+        "learning",
+        "Learning study: AC and ball-amplitude variability over trials vs eq. 19 (paper Fig. 6).",
+        (("learning.png", "Fig. 6 (section 5): SD of ball amplitude predicted by eq. 19 as a "
+          "function of the racket acceleration at impact AC at fixed noise, stable range of "
+          "eq. 14 shaded (with --data: the data's trials beside it)."),),
+        data_help="Impacts table (impacts.csv, with racket_acc_g and ball_apex_m): per-trial "
+        "AC and variability and their trends (sets the config key `data`).",
+        needs_fixed_point=False,
+    ),
+    Entry(
         "regression",
         "Racket amplitude vs squared period, OLS against eq. 15 (paper Fig. 7).",
         (("regression.png", "Fig. 7 (section 5, eq. 15): trial means of racket amplitude "
           "regressed on the squared racket period (simulated trials)."),),
-        data_help="Trials CSV (a_r_m, tau_s; optional theta_deg, alpha, g, condition) to fit "
-        "instead of simulating (sets the config key `data`).",
+        data_help="Trials CSV (a_r_m, tau_s; optional theta_deg, alpha, g, condition), or an "
+        "impacts table (impacts.csv) averaged per trial, to fit instead of simulating (sets "
+        "the config key `data`).",
     ),
     Entry(
         "acf",
         "Correlation functions of the stochastic map vs the VAR(1) theory (paper Fig. 8).",
         (("acf.png", "Fig. 8 (section 6): auto- and cross-correlation functions of the "
           "stochastic map: theory (circles) and samples (crosses)."),),
+        data_help="Impacts table (impacts.csv): the data's correlation functions and the "
+        "VAR(1) stability measured from it, beside eq. 19 and eqs. 9-10 at the data's "
+        "parameters (sets the config key `data`).",
     ),
     Entry(
         "impulse",
@@ -92,6 +106,9 @@ EXPERIMENTS: tuple[Entry, ...] = (
           "perturbation of the coefficient of restitution (model curves)."),
          ("impulse_linear.png", "Fig. 10 (section 7): full map vs its linearisation with the "
           "same Jacobian.")),
+        data_help="Impacts table with `alpha` and `perturbed` columns: the data's responses "
+        "aligned on the perturbed impacts beside the model's (Figs. 9, 11; sets the config "
+        "key `data`).",
     ),
 )
 

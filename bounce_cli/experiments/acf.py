@@ -8,7 +8,7 @@ with the covariance the map of eqs. 16-18 actually induces. Samples: long runs o
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Literal, Optional
 
 import numpy as np
 import pandas as pd
@@ -31,6 +31,7 @@ from ..engine import (
 )
 from ..plotting import new_figure
 from .base import Experiment, ExperimentResult, RunOptions
+from .data_side import AcfDataBlock
 
 #: the paper's values (section 6)
 PAPER_SD_THEORY = {"sd_v": 0.068, "sd_theta": 8.4}
@@ -64,9 +65,13 @@ class AcfConfig(ExperimentConfig):
     burn_in: int = Field(100, ge=0, description="bounces dropped at the start of every run")
     max_lag: int = Field(10, ge=1, description="largest lag, bounces")
     seed: int = Field(0, ge=0)
+    data: Optional[str] = Field(None, description="impacts table: the data's side (--data)")
+    data_analysis: AcfDataBlock = AcfDataBlock()
 
 
 def run(config: AcfConfig, options: RunOptions) -> ExperimentResult:
+    if config.data is not None:
+        return run_data(config, options)
     params = config.params
     noise = config.noise
     if not stability(params).stable:
@@ -263,6 +268,8 @@ TITLES = {
 
 
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
+    if "acf_data.csv" in frames:
+        return draw_data(frames)
     acf = frames["acf.csv"]
     fig, axes = new_figure(2, 2, width=10, height=7.5, sharex=True)
     for (r, c), pair in PANELS.items():
@@ -299,6 +306,20 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
                   f"{s['sd_v', 'sample']:.3f} m/s, {s['sd_theta', 'sample']:.1f} deg")
     fig.suptitle(title, fontsize=11)
     return {"acf.png": fig}
+
+
+# -- the data's side (--data impacts.csv): bounce_cli/experiments/data_side.py ----------------
+def run_data(config: AcfConfig, options: RunOptions) -> ExperimentResult:
+    from .data_side import acf_data_run
+
+    frames, lines = acf_data_run(config, options)
+    return ExperimentResult(frames=frames, figures=draw_data(frames), summary=lines)
+
+
+def draw_data(frames: dict[str, pd.DataFrame]) -> dict:
+    from .data_side import acf_data_draw
+
+    return acf_data_draw(frames)
 
 
 EXPERIMENT = Experiment(

@@ -6,7 +6,7 @@ relaxation times of opposite perturbations.
 from __future__ import annotations
 
 import math
-from typing import Annotated
+from typing import Annotated, Optional
 
 import numpy as np
 import pandas as pd
@@ -24,6 +24,7 @@ from ..engine import (
     stability,
 )
 from .base import Experiment, ExperimentResult, RunOptions
+from .data_side import ImpulseDataBlock
 
 MODELS = ("full", "linear")
 PAPER_THRESHOLD = 0.65
@@ -49,6 +50,8 @@ class ImpulseConfig(ExperimentConfig):
     classify: ClassifyBlock = ClassifyBlock()
     relaxation: RelaxationBlock = RelaxationBlock()
     threshold: ThresholdBlock = ThresholdBlock()
+    data: Optional[str] = Field(None, description="impacts table with perturbations (--data)")
+    data_analysis: ImpulseDataBlock = ImpulseDataBlock()
 
 
 # -- classification of the full response (section 3's criteria) -----------------------------
@@ -167,6 +170,8 @@ def relaxation_frame(params: ModelParams, config: ImpulseConfig, outcomes: dict)
 
 
 def run(config: ImpulseConfig, options: RunOptions) -> ExperimentResult:
+    if config.data is not None:
+        return run_data(config, options)
     params = config.params
     options.progress.start(len(config.alpha_p) + 2, "impulse responses")
     outcomes = {}
@@ -229,6 +234,8 @@ def _side(df: pd.DataFrame) -> tuple[pd.Series, pd.Series]:
 
 
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
+    if "aligned.csv" in frames:
+        return draw_data(frames)
     df = frames["impulse.csv"]
     lower, higher = _side(df)
     figs = {}
@@ -264,6 +271,20 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         axes[0, col].legend(fontsize=7)
     figs["impulse_linear.png"] = fig
     return figs
+
+
+# -- the data's side (--data impacts.csv): bounce_cli/experiments/data_side.py ----------------
+def run_data(config: ImpulseConfig, options: RunOptions) -> ExperimentResult:
+    from .data_side import impulse_data_run
+
+    frames, lines = impulse_data_run(config, options)
+    return ExperimentResult(frames=frames, figures=draw_data(frames), summary=lines)
+
+
+def draw_data(frames: dict[str, pd.DataFrame]) -> dict:
+    from .data_side import impulse_data_draw
+
+    return impulse_data_draw(frames)
 
 
 EXPERIMENT = Experiment(

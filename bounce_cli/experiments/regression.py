@@ -32,6 +32,8 @@ from ..engine import (
 )
 from ..plotting import new_figure
 from .base import Experiment, ExperimentResult, RunOptions
+from ..impacts import read_data_csv
+from .data_side import is_impacts_table, trial_means_from_impacts
 
 REQUIRED = ("a_r_m", "tau_s")
 OPTIONAL = ("theta_deg", "alpha", "g", "condition")
@@ -117,14 +119,7 @@ def read_trials(path_text: str) -> pd.DataFrame:
     """Read and check a trials CSV: a_r_m, tau_s required; theta_deg, alpha, g, condition
     optional. Any problem is a one-line ConfigError naming ``data`` and the column."""
     path = Path(path_text)
-    try:
-        frame = pd.read_csv(path)
-    except FileNotFoundError:
-        raise ConfigError(f"data: {path}: file not found") from None
-    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise ConfigError(f"data: {path}: cannot read as CSV: {first}") from None
-    frame.columns = [str(c).strip() for c in frame.columns]
+    frame = read_data_csv(path)
     missing = [c for c in REQUIRED if c not in frame.columns]
     if missing:
         raise ConfigError(f"data: {path}: missing column(s) {', '.join(missing)} "
@@ -206,7 +201,10 @@ def _constant(group: pd.DataFrame, column: str, default: float, condition) -> fl
 
 
 def run(config: RegressionConfig, options: RunOptions) -> ExperimentResult:
-    if config.data is not None:
+    if config.data is not None and is_impacts_table(config.data):
+        trials = trial_means_from_impacts(config.data, config.model.alpha)
+        source = f"data {config.data} (impacts averaged per trial)"
+    elif config.data is not None:
         trials = read_trials(config.data)
         source = f"data {config.data}"
     else:

@@ -1,0 +1,588 @@
+"""The data's side of Figs. 7, 8, 9 and 11 (sections 5-7): ``bounce regression|acf|impulse
+--data impacts.csv``. Not an experiment module: ``regression``, ``acf`` and ``impulse``
+dispatch here when their config has ``data`` set to an impacts table, and draw the figures
+below from the frames these functions return.
+
+The model at the data's parameters (DESIGN.md): alpha and g from the config's ``model`` block
+(alpha is not observable from a trial), racket period and amplitude from the data's cycles
+(means over all impacts of the file).
+"""
+
+from __future__ import annotations
+
+import math
+
+from typing import Annotated
+
+import numpy as np
+import pandas as pd
+from pydantic import Field
+
+from ..config import ConfigError, StrictModel
+from ..engine import (
+    PAIR_NAMES,
+    ModelError,
+    ModelParams,
+    impulse_response_full,
+    jacobian,
+    paper_noise_covariance,
+    phase_difference,
+    stability,
+    var1_theory,
+)
+from ..engine.data_stats import (
+    align,
+    noise_from_sds,
+    relaxation_impact,
+    trial_correlations,
+)
+from ..engine.var_fit import EIGEN_QUANTITIES, J_ENTRIES, fit_var1
+from ..impacts import Impacts, circular_mean, read_impacts
+from ..plotting import new_figure
+
+MODEL_COLUMNS = ("racket_period_s", "racket_amplitude_m")
+
+
+class AcfDataBlock(StrictModel):
+    """``bounce acf --data``: how the data's stability is measured (used only with ``data``)."""
+
+    settle_after_perturbation: int = Field(
+        4, ge=0, description="impacts after a perturbed one left out of the stationary analyses")
+    confidence: float = Field(0.95, gt=0.0, lt=1.0, description="level of the intervals")
+    jackknife: bool = Field(True, description="split-panel jackknife against the O(1/N) bias "
+                                              "of removing each trial's mean")
+    measurement_sd_v_m_s: float = Field(0.03, ge=0.0, description="assumed measurement noise "
+                                        "on v for the trust study, m/s")
+    measurement_sd_theta_deg: float = Field(1.0, ge=0.0, description="assumed measurement "
+                                            "noise on theta for the trust study, deg")
+    trust_bounces: list[Annotated[int, Field(ge=16)]] = Field(
+        [100, 200, 400, 800, 1600, 3200], description="data-set sizes of the trust study")
+    trust_repetitions: int = Field(200, ge=10, description="simulated data sets per size")
+    trust_coverage_slack: float = Field(0.05, ge=0.0, lt=1.0, description="a size is trusted "
+                                        "when coverage >= confidence - slack and |median bias| <= "
+                                        "a quarter of the 16-84 % spread")
+    trust_seed: int = Field(0, ge=0)
+
+
+class ImpulseDataBlock(StrictModel):
+    """``bounce impulse --data``: alignment on the perturbed impacts (used only with ``data``)."""
+
+    settle_after_perturbation: int = Field(
+        3, ge=0, description="a trial's baseline: unperturbed impacts at least this many after "
+                             "the last perturbation")
+    relaxation_z: float = Field(2.0, gt=0.0, description="a mean within z SE of 0 counts as "
+                                "relaxed (data and model alike; the model's SE is 0)")
+
+
+# -- the model at the data's parameters ------------------------------------------------------
+def model_at_data(impacts: Impacts, alpha: float, g: float, need_stable: bool = True) -> ModelParams:
+    """alpha, g from the config; a_r and tau the means of the data's racket cycles. A
+    one-line error when these give no (stable) period-1 fixed point."""
+    f = impacts.frame
+    tau = float(f["racket_period_s"].mean())
+    a_r = float(f["racket_amplitude_m"].mean())
+    where = (f"data: {impacts.path}: the model at the data's racket amplitude {a_r:.4g} m and "
+             f"period {tau:.4g} s with model.alpha = {alpha:g}, model.g = {g:g}")
+    params = ModelParams(alpha, g, a_r, tau)
+    try:
+        st = stability(params)
+    except ModelError:
+        raise ConfigError(f"{where} has no period-1 fixed point (eq. 8: cos theta~ = "
+                          f"{params.cos_theta_fixed():.3g} > 1); check model.alpha and model.g")
+    if need_stable and not st.stable:
+        raise ConfigError(f"{where} has an unstable fixed point (spectral radius "
+                          f"{st.spectral_radius:.3g}, AC = {st.ac_g:.3g} g): no stationary "
+                          "statistics to compare with")
+    return params
+
+
+def stationary_segments(impacts: Impacts, settle: int, min_length: int):
+    """(trial, v, dtheta, theta) of each run of consecutive, unperturbed impacts: perturbed impacts
+    and the ``settle`` impacts after each are cut out (they are not the stationary state),
+    dtheta is the phase minus the trial's circular mean, wrapped to [-pi, pi)."""
+    out = []
+    for trial, rows in impacts.by_trial():
+        keep = np.ones(len(rows), bool)
+        if "perturbed" in rows.columns:
+            for i in np.flatnonzero(rows["perturbed"].to_numpy()):
+                keep[i:i + settle + 1] = False
+        theta = rows["theta_rad"].to_numpy()
+        ref = circular_mean(theta[keep]) if keep.any() else 0.0
+        dtheta = phase_difference(theta, ref)
+        v = rows["v_m_s"].to_numpy()
+        k = rows["k"].to_numpy()
+        cut = np.ones(len(rows), bool)  # start of a new run
+        cut[1:] = (np.diff(k) != 1) | ~keep[:-1]
+        idx = np.flatnonzero(keep)
+        for part in np.split(idx, np.flatnonzero(cut[idx][1:]) + 1):
+            if len(part) >= min_length:
+                out.append((trial, v[part], dtheta[part], theta[part]))
+    return out
+
+
+def stationary_means(runs) -> tuple[float, float]:
+    """Mean v (m/s) and circular mean phase (rad) over the impacts of (v, theta) runs."""
+    v = np.concatenate([r[0] for r in runs])
+    theta = np.concatenate([r[1] for r in runs])
+    return float(v.mean()), circular_mean(theta)
+
+
+def implied_alpha(params: ModelParams, theta_rad: float) -> float:
+    """Eq. 8 solved for alpha: (1 - alpha)/(1 + alpha) = r with r = cos(theta) w^2 a_r / (pi g),
+    so alpha = (1 - r)/(1 + r); NaN where the phase is outside (-90, 90) deg."""
+    r = math.cos(theta_rad) * params.omega**2 * params.racket_amplitude / (math.pi * params.g)
+    return (1.0 - r) / (1.0 + r) if r > 0 else math.nan
+
+
+# -- acf --data (Fig. 8 and the stability measured from data) --------------------------------
+def acf_data_run(config, options) -> tuple[dict[str, pd.DataFrame], list[str]]:
+    d = config.data_analysis
+    impacts = read_impacts(config.data, needs=MODEL_COLUMNS, command="acf --data",
+                           min_bounces=config.max_lag + 2)
+    params = model_at_data(impacts, config.model.alpha, config.model.g)
+    segments = stationary_segments(impacts, d.settle_after_perturbation, config.max_lag + 2)
+    segments_means = [(s[1], s[3]) for s in segments]
+    segments = [s[:3] for s in segments]
+    if not segments:
+        raise ConfigError(f"data: {impacts.path}: no run of {config.max_lag + 2} consecutive "
+                          "unperturbed impacts (max_lag + 2) in any trial; lower max_lag or "
+                          "data_analysis.settle_after_perturbation")
+    options.progress.start(3 + len(d.trust_bounces), "data: correlations, VAR(1) fits")
+    corr = trial_correlations([s[1] for s in segments], [s[2] for s in segments], config.max_lag)
+    options.progress.advance(1)
+    jac = jacobian(params)
+    dv_all = np.concatenate([s[1] - s[1].mean() for s in segments])
+    dth_all = np.concatenate([s[2] - s[2].mean() for s in segments])
+    sd_v, sd_theta = float(np.sqrt(np.mean(dv_all**2))), float(np.sqrt(np.mean(dth_all**2)))
+    q_v, q_theta = noise_from_sds(jac, sd_v, sd_theta)
+    noise_note = "q from the data's SDs through eq. 19 at the model's J (section 6's route)"
+    if not (math.isfinite(q_v) and math.isfinite(q_theta)):
+        noise_note = ("the data's SDs need a negative noise variance at the model's J: theory "
+                      "drawn with q_v = SD(v) (1 - |lambda|^2)^0.5 and likewise for theta")
+        rad2 = 1 - stability(params).spectral_radius ** 2
+        q_v, q_theta = sd_v * math.sqrt(rad2), sd_theta * math.sqrt(rad2)
+    theory = var1_theory(jac, paper_noise_covariance(q_v, q_theta), config.max_lag)
+    rows = []
+    n_seg = len(segments)
+    for name in PAIR_NAMES:
+        for lag in range(config.max_lag + 1):
+            x = corr[name][:, lag]
+            rows.append({"lag": lag, "pair": name, "data_mean": float(x.mean()),
+                         "data_sd": float(x.std(ddof=1)) if n_seg > 1 else math.nan,
+                         "data_trials": n_seg, "theory": float(theory.correlations[name][lag])})
+    acf = pd.DataFrame(rows)
+    trials = [np.column_stack([s[1], s[2]]) for s in segments]
+    fits = {}
+    for method in ("ols", "lag2"):
+        try:
+            fits[method] = fit_var1(trials, method, jackknife=d.jackknife)
+        except ModelError as exc:
+            fits[method] = exc
+        options.progress.advance(1)
+    st = stability(params)
+    fp = params.fixed_point()
+    conf = d.confidence
+    srows = []
+
+    def add(quantity, unit, source, estimate, se=math.nan, low=math.nan, high=math.nan, note=""):
+        srows.append({"quantity": quantity, "unit": unit, "source": source, "estimate": estimate,
+                      "se": se, "ci_low": low, "ci_high": high, "note": note})
+
+    for name, value in zip(J_ENTRIES, jac.ravel()):
+        add(name, "mixed", "model_eq9", float(value), note="eq. 9 at the data's parameters")
+    add("spectral_radius", "1", "model_eq10", st.spectral_radius, note=f"regime {st.regime}")
+    for label, lam in zip(("lambda_plus", "lambda_minus"), st.eigenvalues):
+        add(f"{label}_re", "1", "model_eq10", lam.real)
+        add(f"{label}_im", "1", "model_eq10", lam.imag)
+    for method, fit in fits.items():
+        if isinstance(fit, ModelError):
+            add("spectral_radius", "1", method, math.nan, note=str(fit))
+            continue
+        source = fit.method
+        se = fit.jacobian_se.ravel()
+        z = _z(conf)
+        for name, value, s in zip(J_ENTRIES, fit.jacobian.ravel(), se):
+            add(name, "mixed", source, float(value), float(s), value - z * s, value + z * s,
+                f"{fit.n_pairs} pairs in {fit.n_trials} runs")
+        eig = fit.eigen_summary(conf)
+        for name in EIGEN_QUANTITIES:
+            add(name, "1", source, *eig[name], note="delta method")
+        for (i, j), name in zip(((0, 0), (1, 1), (0, 1)), ("noise_cov_vv", "noise_cov_thetatheta",
+                                                           "noise_cov_vtheta")):
+            add(name, "mixed", source, float(fit.noise_cov[i, j]), note="residual covariance")
+    add("sd_v", "m/s", "data", sd_v, note="pooled within-run SD")
+    add("sd_theta", "deg", "data", math.degrees(sd_theta), note="pooled within-run SD")
+    add("q_v", "m/s", "data_sd_match", q_v, note=noise_note)
+    add("q_theta", "rad", "data_sd_match", q_theta, note=noise_note)
+    if not isinstance(fits["ols"], ModelError):
+        sig = fits["ols"].noise_cov
+        add("q_theta", "rad", "ols_residual", math.sqrt(sig[1, 1]),
+            note="sqrt of the VAR residual variance of theta (eq. 18's noise)")
+        add("q_v", "m/s", "ols_residual", math.sqrt(max(sig[0, 0] - sig[0, 1] ** 2 / sig[1, 1], 0)),
+            note="residual variance of v given theta's (removes eq. 16's phase-noise term)")
+    add("v_fixed", "m/s", "model_eq7", fp.v_m_s)
+    add("theta_fixed", "deg", "model_eq8", fp.theta_deg)
+    v_mean, theta_mean = stationary_means(segments_means)
+    add("v_mean", "m/s", "data", v_mean, note="mean over the runs' impacts (compare eq. 7)")
+    add("theta_mean", "deg", "data", math.degrees(theta_mean),
+        note="circular mean phase of impact (compare eq. 8)")
+    add("alpha", "1", "data_eq8", implied_alpha(params, theta_mean),
+        note="the alpha for which eq. 8 puts theta~ at the data's mean phase (a check of "
+             "model.alpha)")
+    add("ac", "g", "model", st.ac_g)
+    add("racket_period", "s", "data", params.racket_period, note="mean over impacts")
+    add("racket_amplitude", "m", "data", params.racket_amplitude, note="mean over impacts")
+    add("bounces", "1", "data", float(sum(len(s[1]) for s in segments)),
+        note=f"in {n_seg} runs of consecutive unperturbed impacts")
+    stab = pd.DataFrame(srows)
+    trust = trust_frame(params, q_v, q_theta, config, segments, options)
+    frames = {"acf_data.csv": acf, "stability_data.csv": stab, "trust.csv": trust}
+    lines = [f"data {impacts.path}: {n_seg} runs, {len(dv_all)} bounces; model at a_r = "
+             f"{params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s, alpha = "
+             f"{params.alpha:g}, g = {params.g:g}: spectral radius {st.spectral_radius:.3f}"]
+    for method, fit in fits.items():
+        if isinstance(fit, ModelError):
+            lines.append(f"{method}: {fit}")
+            continue
+        r = fit.eigen_summary(conf)["spectral_radius"]
+        lines.append(f"{fit.method}: spectral radius {r[0]:.3f} [{r[2]:.3f}, {r[3]:.3f}] "
+                     f"({conf:.0%} CI, delta method)")
+    lines.append(f"noise from the data's SDs: q_v = {q_v:.4f} m/s, q_theta = {q_theta:.4f} rad")
+    lines.append(f"data's mean phase {math.degrees(theta_mean):.1f} deg vs eq. 8's "
+                 f"{fp.theta_deg:.1f} deg (eq. 8 would need alpha = "
+                 f"{implied_alpha(params, theta_mean):.3f}; model.alpha = {params.alpha:g})")
+    n_data = int(sum(len(s[1]) for s in segments))
+    for method in ("ols", "lag2"):
+        ok = trust[(trust.method == method) & trust.trusted.astype(bool)]
+        need = f"from {int(ok.bounces.min())} bounces" if len(ok) else "at none of the sizes tried"
+        lines.append(f"trust study ({d.measurement_sd_v_m_s:g} m/s, "
+                     f"{d.measurement_sd_theta_deg:g} deg measurement noise): {method} trusted "
+                     f"{need}; these data have {n_data}")
+    return frames, lines
+
+
+def _z(confidence: float) -> float:
+    from scipy import stats
+
+    return float(stats.norm.ppf(0.5 + confidence / 2.0))
+
+
+def trust_frame(params, q_v, q_theta, config, segments, options) -> pd.DataFrame:
+    """How many bounces each estimator needs: linear VAR data at the model's J (data
+    parameters) and the data's noise, plus white measurement noise of the configured SDs,
+    split into trials of the data's mean run length; per total size and estimator the bias,
+    SD and interval coverage of the spectral radius over repetitions."""
+    from ..engine.var_fit import fit_var1
+
+    d = config.data_analysis
+    jac = jacobian(params)
+    truth = stability(params).spectral_radius
+    chol = np.linalg.cholesky(paper_noise_covariance(max(q_v, 1e-12), max(q_theta, 1e-12)))
+    meas = np.array([d.measurement_sd_v_m_s, math.radians(d.measurement_sd_theta_deg)])
+    run_length = int(round(np.mean([len(s[1]) for s in segments])))
+    rng = np.random.default_rng(np.random.SeedSequence(d.trust_seed))
+    rows = []
+    for total in d.trust_bounces:
+        per = max(run_length, 8)
+        n_trials = max(1, int(round(total / per)))
+        reps = d.trust_repetitions
+        y = np.zeros((reps * n_trials, 2))
+        series = np.empty((reps * n_trials, per, 2))
+        for k in range(100 + per):
+            y = y @ jac.T + rng.standard_normal(y.shape) @ chol.T
+            if k >= 100:
+                series[:, k - 100] = y
+        series += rng.standard_normal(series.shape) * meas
+        for method in ("ols", "lag2"):
+            est, inside = [], 0
+            for r in range(reps):
+                try:
+                    fit = fit_var1(list(series[r * n_trials:(r + 1) * n_trials]), method,
+                                   jackknife=d.jackknife)
+                except ModelError:
+                    continue
+                value, _, low, high = fit.eigen_summary(d.confidence)["spectral_radius"]
+                est.append(value)
+                inside += low <= truth <= high
+            est = np.array(est)
+            q16, med, q84 = np.percentile(est, [16, 50, 84]) if len(est) else (math.nan,) * 3
+            rows.append({"bounces": n_trials * per, "trials": n_trials, "method": method,
+                         "repetitions": len(est), "true_spectral_radius": truth,
+                         "median_estimate": med, "median_bias": med - truth,
+                         "spread_16_84": q84 - q16, "q16": q16, "q84": q84,
+                         "coverage": inside / len(est) if len(est) else math.nan,
+                         "measurement_sd_v_m_s": meas[0],
+                         "measurement_sd_theta_deg": d.measurement_sd_theta_deg})
+        options.progress.advance(1)
+    frame = pd.DataFrame(rows)
+    frame["trusted"] = (frame["coverage"] >= d.confidence - d.trust_coverage_slack) & (
+        frame["median_bias"].abs() <= 0.25 * frame["spread_16_84"])
+    return frame
+
+
+def acf_data_draw(frames: dict[str, pd.DataFrame]) -> dict:
+    from .acf import PANELS, TITLES  # Fig. 8's layout, shared with the model's side
+
+    acf = frames["acf_data.csv"]
+    fig, axes = new_figure(2, 2, width=10, height=7.5, sharex=True)
+    for (r, c), pair in PANELS.items():
+        ax = axes[r, c]
+        d = acf[acf["pair"] == pair].sort_values("lag")
+        ax.axhline(0, color="0.8", lw=0.8)
+        ax.errorbar(d["lag"], d["data_mean"], yerr=d["data_sd"].fillna(0), color="0.5", lw=1.5,
+                    capsize=3, label=f"data: mean +- SD over {int(d['data_trials'].iloc[0])} runs")
+        ax.plot(d["lag"], d["theory"], "o", mfc="none", mec="k", ms=9,
+                label="model, eq. 19 at the data's parameters")
+        ax.set_ylim(-1.05, 1.05)
+        ax.set_title(TITLES[pair], fontsize=10)
+        ax.set_ylabel("correlation")
+        if r == 1:
+            ax.set_xlabel("lag l (bounces)")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=2, fontsize=9)
+    fig.suptitle("Fig. 8 with data: correlation functions of the data (grey) and eq. 19 (circles)")
+    stab = frames.get("stability_data.csv")
+    figs = {"acf_data.png": fig}
+    if stab is not None:
+        figs["stability_data.png"] = _stability_figure(stab, frames.get("trust.csv"))
+    return figs
+
+
+def _stability_figure(stab: pd.DataFrame, trust: pd.DataFrame | None):
+    fig, axes = new_figure(1, 2, width=11, height=4.8)
+    ax = axes[0, 0]
+    s = stab.set_index(["quantity", "source"])
+    styles = {"model_eq10": ("o", "k"), "ols": ("s", "tab:blue"), "lag2": ("D", "tab:red")}
+    sources = [src for src in dict.fromkeys(stab["source"]) if src.split("+")[0] in styles]
+    t = np.linspace(0, 2 * np.pi, 200)
+    ax.plot(np.cos(t), np.sin(t), color="0.8", lw=0.8)
+    for src in sorted(sources, key=lambda x: x == "model_eq10"):  # the model on top
+        marker, colour = styles[src.split("+")[0]]
+        radius = s.loc[("spectral_radius", src)]
+        label = f"{src}: radius {radius['estimate']:.3f}"
+        if np.isfinite(radius["ci_low"]):
+            label += f" [{radius['ci_low']:.3f}, {radius['ci_high']:.3f}]"
+        for lam in ("lambda_plus", "lambda_minus"):
+            try:
+                re = s.loc[(f"{lam}_re", src)]
+                im = s.loc[(f"{lam}_im", src)]
+            except KeyError:
+                continue
+            model = src == "model_eq10"
+            ax.errorbar(re["estimate"], im["estimate"], xerr=0 if model else re["se"],
+                        yerr=0 if model else im["se"], fmt=marker, color=colour,
+                        mfc="none" if model else colour, ms=12 if model else 7, mew=2 if model else 1,
+                        capsize=2, zorder=3 if model else 2,
+                        label=label if lam == "lambda_plus" else None)
+    ax.set_aspect("equal")
+    ax.set_xlim(-1.1, 1.1)
+    ax.set_ylim(-1.1, 1.1)
+    ax.set_xlabel("Re lambda")
+    ax.set_ylabel("Im lambda")
+    ax.set_title("eigenvalues of J (+- SE): model eq. 10 vs VAR(1) fits", fontsize=10)
+    ax.legend(fontsize=8, title="spectral radius [95 % CI]", title_fontsize=8)
+    ax = axes[0, 1]
+    if trust is not None and len(trust):
+        for method, colour in (("ols", "tab:blue"), ("lag2", "tab:red")):
+            d = trust[trust["method"] == method]
+            ax.errorbar(d["bounces"], d["median_estimate"],
+                        yerr=[d["median_estimate"] - d["q16"], d["q84"] - d["median_estimate"]],
+                        fmt="-o", color=colour, capsize=2,
+                        label=f"{method}: median and 16-84 % of the estimates")
+            ok = d[d["trusted"].astype(bool)]
+            if len(ok):
+                ax.plot(ok["bounces"], ok["median_estimate"], "*", color=colour, ms=13,
+                        mec="k", label=f"{method}: trusted (coverage, bias)")
+        ax.axhline(trust["true_spectral_radius"].iloc[0], color="k", ls="--",
+                   label="true (model at the data's parameters)")
+        n_data = stab.loc[(stab.quantity == "bounces") & (stab.source == "data"), "estimate"]
+        if len(n_data):
+            ax.axvline(float(n_data.iloc[0]), color="0.5", ls=":", label="these data's bounces")
+        ax.set_xscale("log")
+        ax.set_ylim(0.0, 1.5)
+        ax.set_xlabel("bounces in the data set (simulated, with measurement noise)")
+        ax.set_ylabel("estimated spectral radius")
+        meas = trust.iloc[0]
+        ax.set_title(f"bias from measurement noise ({meas['measurement_sd_v_m_s']:g} m/s, "
+                     f"{meas['measurement_sd_theta_deg']:g} deg)", fontsize=10)
+        ax.legend(fontsize=8)
+    fig.suptitle("Stability measured from data (VAR(1) of eq. 19) beside eqs. 9-10")
+    return fig
+
+
+# -- impulse --data (Figs. 9 and 11) ----------------------------------------------------------
+def impulse_data_run(config, options) -> tuple[dict[str, pd.DataFrame], list[str]]:
+    d = config.data_analysis
+    needs = ("alpha", "perturbed", *MODEL_COLUMNS)
+    impacts = read_impacts(config.data, needs=needs, command="impulse --data", min_bounces=2)
+    frame = impacts.frame
+    if not frame["perturbed"].any():
+        raise ConfigError(f"data: {impacts.path}: column perturbed: no perturbed impact, nothing "
+                          "to align (bounce impulse --data needs perturbations)")
+    params = model_at_data(impacts, config.model.alpha, config.model.g)
+    n = config.iterations
+    groups = list(impacts.by_trial())
+    alpha_0 = config.model.alpha
+    quantities = {"v_m_s": ("v_m_s", False, 1.0), "theta_deg": ("theta_rad", True, 180 / math.pi),
+                  "racket_period_s": ("racket_period_s", False, 1.0),
+                  "racket_amplitude_m": ("racket_amplitude_m", False, 1.0)}
+    rows, windows = [], {}
+    options.progress.start(len(quantities), "aligning perturbations")
+    for name, (column, is_phase, scale) in quantities.items():
+        w = align([g[column].to_numpy() for _, g in groups],
+                  [g["perturbed"].to_numpy() for _, g in groups],
+                  [g["alpha"].to_numpy() for _, g in groups], n, d.settle_after_perturbation,
+                  phase=is_phase)
+        windows[name] = (w, scale)
+        options.progress.advance(1)
+    w_v = windows["v_m_s"][0]
+    direction = np.where(w_v.alpha_p > alpha_0, "increase", "decrease")
+    for name, (w, scale) in windows.items():
+        for side in ("decrease", "increase"):
+            sel = direction == side
+            if not sel.any():
+                continue
+            vals = w.values[sel] * scale
+            count = np.sum(np.isfinite(vals), axis=0)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                mean = np.nanmean(np.where(count > 0, vals, 0.0), axis=0) if vals.size else vals
+                sd = np.array([np.nanstd(vals[:, k], ddof=1) if count[k] > 1 else math.nan
+                               for k in range(n + 1)])
+            for k in range(n + 1):
+                rows.append({"quantity": name, "direction": side, "k": k,
+                             "mean": float(mean[k]) if count[k] else math.nan,
+                             "sd": float(sd[k]), "n": int(count[k]),
+                             "mean_alpha_p": float(w.alpha_p[sel].mean())})
+    aligned = pd.DataFrame(rows)
+    model_rows, relax_rows = [], []
+    fp = params.fixed_point()
+    rel = config.relaxation
+    for side in ("decrease", "increase"):
+        sel = direction == side
+        if not sel.any():
+            continue
+        ap = float(w_v.alpha_p[sel].mean())
+        r = impulse_response_full(params, ap, n)
+        for k in range(n + 1):
+            model_rows.append({"direction": side, "alpha_p": ap, "k": k, "dv_m_s": r.dv[k],
+                               "dtheta_deg": math.degrees(r.dtheta[k]),
+                               "v_m_s": r.v[k], "theta_deg": math.degrees(r.theta[k])})
+        a = aligned[aligned.direction == side]
+        mv = a[a.quantity == "v_m_s"].sort_values("k")
+        mt = a[a.quantity == "theta_deg"].sort_values("k")
+        se_v = (mv["sd"] / np.sqrt(mv["n"])).to_numpy()
+        se_t = (mt["sd"] / np.sqrt(mt["n"])).to_numpy()
+        tol = (rel.tolerance_v_m_s, rel.tolerance_theta_deg)
+        # both over the impacts the data's windows reach (at least 2 windows there)
+        reach = int(np.flatnonzero(mv["n"].to_numpy() >= 2).max(initial=-1)) + 1
+        shown = slice(0, max(reach, 1))
+        relax_rows.append({
+            "direction": side, "source": "data", "mean_alpha_p": ap,
+            "perturbations": int(sel.sum()), "impacts_compared": reach,
+            "relaxation_impacts": relaxation_impact(
+                [mv["mean"].to_numpy()[shown], mt["mean"].to_numpy()[shown]],
+                [se_v[shown], se_t[shown]], tol, d.relaxation_z),
+        })
+        relax_rows.append({
+            "direction": side, "source": "model", "mean_alpha_p": ap, "perturbations": 0,
+            "impacts_compared": reach,
+            "relaxation_impacts": relaxation_impact(
+                [r.dv[shown], np.degrees(r.dtheta[shown])], [np.zeros(n + 1)[shown]] * 2, tol,
+                d.relaxation_z),
+        })
+    model = pd.DataFrame(model_rows)
+    relax = pd.DataFrame(relax_rows)
+    relax["criterion"] = (f"|mean| <= max(tol, {d.relaxation_z:g} SE) for v (tol "
+                          f"{rel.tolerance_v_m_s:g} m/s) and theta (tol "
+                          f"{rel.tolerance_theta_deg:g} deg) from k on")
+    cut = int(np.sum(np.isnan(w_v.values[:, -1])))
+    lines = [f"data {impacts.path}: {len(w_v.values)} perturbations ({int((direction == 'decrease').sum())}"
+             f" decrease, {int((direction == 'increase').sum())} increase); {cut} windows cut short "
+             "by the next perturbation or the trial's end (their later impacts are not averaged)",
+             f"model at a_r = {params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s,"
+             f" alpha_0 = {params.alpha:g}: v~ = {fp.v_m_s:.3f} m/s, theta~ = {fp.theta_deg:.1f} deg"]
+    for row in relax.itertuples():
+        lines.append(f"{row.direction} (alpha_p {row.mean_alpha_p:.3f}), {row.source}: impacts "
+                     f"to relax {row.relaxation_impacts}")
+    return {"aligned.csv": aligned, "model_response.csv": model, "relaxation_data.csv": relax}, lines
+
+
+def impulse_data_draw(frames: dict[str, pd.DataFrame]) -> dict:
+    aligned, model = frames["aligned.csv"], frames["model_response.csv"]
+    fig, axes = new_figure(2, 2, width=11, height=7, sharex=True)
+    for col, side in enumerate(("decrease", "increase")):
+        for row, (q, mq, label) in enumerate((("v_m_s", "dv_m_s", "deviation of v_k (m/s)"),
+                                              ("theta_deg", "dtheta_deg",
+                                               "deviation of theta_k (deg)"))):
+            ax = axes[row, col]
+            ax.axhline(0, color="k", ls="--", lw=1)
+            a = aligned[(aligned.quantity == q) & (aligned.direction == side)].sort_values("k")
+            m = model[model.direction == side].sort_values("k")
+            if len(a):
+                ax.errorbar(a["k"], a["mean"], yerr=a["sd"], fmt="-o", color="k", capsize=3,
+                            ms=4, label="data: mean +- SD")
+            if len(m):
+                ax.plot(m["k"], m[mq], "-s", color="0.6", ms=4,
+                        label=f"model at alpha_p = {m['alpha_p'].iloc[0]:.3f}")
+            ax.set_ylabel(label)
+            if row == 1:
+                ax.set_xlabel("impact k after the perturbation (0 = perturbed)")
+            if row == 0:
+                ax.set_title(f"alpha_p {'<' if side == 'decrease' else '>'} alpha_0")
+                ax.legend(fontsize=8)
+    fig.suptitle("Fig. 9 with data: relaxation after a perturbation (data black, model grey)")
+    fig2, axes2 = new_figure(2, 1, width=7, height=7, sharex=True)
+    for row, (q, label, unit_scale) in enumerate((("racket_period_s", "racket period change (ms)", 1e3),
+                                                  ("racket_amplitude_m", "racket amplitude change (mm)",
+                                                   1e3))):
+        ax = axes2[row, 0]
+        ax.axhline(0, color="0.7", lw=0.8)
+        for side, colour in (("increase", "k"), ("decrease", "0.6")):
+            a = aligned[(aligned.quantity == q) & (aligned.direction == side)].sort_values("k")
+            if len(a):
+                ax.errorbar(a["k"], a["mean"] * unit_scale, yerr=a["sd"] * unit_scale, fmt="-o",
+                            color=colour, capsize=3, ms=4, label=f"alpha {side}")
+        ax.set_ylabel(label)
+        low, high = ax.get_ylim()
+        ax.set_ylim(min(low, -1.0), max(high, 1.0))  # a constant racket shows as flat, not noise
+        ax.legend(fontsize=8)
+    axes2[1, 0].set_xlabel("impact k after the perturbation (0 = perturbed)")
+    fig2.suptitle("Fig. 11 with data: racket period and amplitude modulation\n(difference from "
+                  "the trial's baseline, mean +- SD)")
+    return {"impulse_data.png": fig, "modulation_data.png": fig2}
+
+
+# -- regression --data impacts.csv (Fig. 7) ---------------------------------------------------
+def is_impacts_table(path_text: str) -> bool:
+    """An impacts table (trial, k, v_m_s, ...) rather than a trials CSV (a_r_m, tau_s)."""
+    try:
+        header = pd.read_csv(path_text, nrows=0).columns
+    except Exception:  # the trials reader gives the one-line error
+        return False
+    cols = {str(c).strip() for c in header}
+    return {"trial", "k", "racket_period_s", "racket_amplitude_m"} <= cols and "a_r_m" not in cols
+
+
+def trial_means_from_impacts(path_text: str, alpha: float) -> pd.DataFrame:
+    """One row per trial: mean racket amplitude (a_r_m), mean racket period (tau_s), the
+    circular mean phase of impact (theta_deg, in (-180, 180]), and the trial's alpha (the
+    median of its impacts' alpha when given: perturbed impacts do not move it)."""
+    impacts = read_impacts(path_text, needs=MODEL_COLUMNS, command="regression --data",
+                           min_bounces=2)
+    rows = []
+    for trial, g in impacts.by_trial():
+        theta = circular_mean(g["theta_rad"])
+        rows.append({"trial": trial, "a_r_m": float(g["racket_amplitude_m"].mean()),
+                     "tau_s": float(g["racket_period_s"].mean()),
+                     "theta_deg": (math.degrees(theta) + 180.0) % 360.0 - 180.0,
+                     "alpha": float(g["alpha"].median()) if "alpha" in g.columns else alpha,
+                     "bounces": len(g)})
+    frame = pd.DataFrame(rows)
+    if (frame["theta_deg"].abs() >= 90).any():
+        bad = frame[frame["theta_deg"].abs() >= 90].iloc[0]
+        raise ConfigError(f"data: {path_text}: trial {bad['trial']}: mean phase of impact "
+                          f"{bad['theta_deg']:.1f} deg is outside (-90, 90): eq. 15 has no "
+                          "positive slope there")
+    if frame["alpha"].nunique() > 1:
+        frame["alpha"] = frame["alpha"].median()
+    return frame

@@ -1,0 +1,103 @@
+"""The impacts table reader (bounce_cli/impacts.py): a lab's own file or ours, checked with
+one-line errors naming the file and the column, row or trial."""
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bounce_cli.config import ConfigError
+from bounce_cli.engine import ModelParams
+from bounce_cli.engine.data_stats import perturbation_schedule, simulate_impacts
+from bounce_cli.impacts import (
+    EVENT_COLUMNS,
+    REQUIRED_COLUMNS,
+    circular_mean,
+    impacts_frame,
+    read_impacts,
+)
+
+PAPER = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.30, racket_period=0.92)
+
+
+@pytest.fixture(scope="module")
+def table():
+    alpha = perturbation_schedule(3, 30, 10, 0.5, [(0.4, 0.45), (0.55, 0.6)], seed=1)
+    sim = simulate_impacts(PAPER, 0.01, 0.01, 3, 30, seed=2, alpha=alpha)
+    return impacts_frame(sim, PAPER)
+
+
+def write(tmp_path, frame, name="impacts.csv"):
+    path = tmp_path / name
+    frame.to_csv(path, index=False)
+    return path
+
+
+def test_simulated_table_has_the_fixed_columns_and_reads_back(table, tmp_path):
+    assert list(table.columns) == [*REQUIRED_COLUMNS, *EVENT_COLUMNS]
+    impacts = read_impacts(write(tmp_path, table), needs=("alpha", "perturbed", "ball_apex_m"))
+    f = impacts.frame
+    assert impacts.trials == ["1", "2", "3"]
+    assert f["perturbed"].dtype == bool and f["perturbed"].sum() == 3 * 2
+    np.testing.assert_allclose(f["theta_rad"], table["theta_rad"])
+    # the synthetic lab's columns follow their definitions
+    assert (f["theta_deg"] >= 0).all() and (f["theta_deg"] < 360).all()
+    np.testing.assert_allclose(f["racket_acc_g"], -0.30 * PAPER.omega**2 * np.sin(f["theta_rad"])
+                               / 9.81)
+    t = table[table.trial == 1]
+    np.testing.assert_allclose(t["hop_s"].to_numpy()[:-1], np.diff(t["t_s"].to_numpy()))
+
+
+def test_a_labs_file_in_another_order_with_degrees_only(table, tmp_path):
+    lab = table.drop(columns=["theta_rad"]).sample(frac=1.0, random_state=3)
+    lab["trial"] = lab["trial"].map({1: "S01-b", 2: "S01-a", 3: "S01-c"})
+    impacts = read_impacts(write(tmp_path, lab))
+    f = impacts.frame
+    for trial, rows in impacts.by_trial():
+        assert list(rows["k"]) == sorted(rows["k"])
+    np.testing.assert_allclose(np.sort(f["theta_rad"]), np.sort(table["theta_rad"]), rtol=1e-12)
+
+
+def test_segments_break_at_a_missing_impact(table, tmp_path):
+    gap = table.drop(index=table.index[(table.trial == 1) & (table.k == 12)])
+    impacts = read_impacts(write(tmp_path, gap))
+    lengths = [len(rows) for _, rows in impacts.segments()]
+    assert lengths == [12, 17, 30, 30]
+
+
+@pytest.mark.parametrize("change, needles", [
+    (lambda f: f.drop(columns=["v_m_s"]), ["missing column(s) v_m_s", "not an impacts table"]),
+    (lambda f: f.drop(columns=["theta_rad", "theta_deg"]), ["theta_rad (or theta_deg)"]),
+    (lambda f: f.drop(columns=["ball_apex_m"]), ["missing column ball_apex_m",
+                                                  "SD of ball amplitude"]),
+    (lambda f: f.drop(columns=["alpha"]), ["missing column alpha", "perturbations"]),
+    (lambda f: f.assign(v_m_s=f["v_m_s"].where(f.index != 4, np.nan)),
+     ["column v_m_s", "data row 5", "trial 1"]),
+    (lambda f: pd.concat([f, f.iloc[[3]]]), ["trial 1", "k = 3 appears twice"]),
+    (lambda f: f[(f.trial != 2) | (f.k < 3)], ["trial 2", "3 impacts", "fewer than the 5"]),
+    (lambda f: f.assign(perturbed="maybe"), ["column perturbed", "True/False"]),
+    (lambda f: f.assign(racket_period_s=-1.0), ["racket_period_s", "must be > 0"]),
+])
+def test_bad_tables_are_one_line_errors(table, tmp_path, change, needles):
+    path = write(tmp_path, change(table))
+    with pytest.raises(ConfigError) as err:
+        read_impacts(path, needs=("ball_apex_m", "alpha", "perturbed", "racket_period_s"),
+                     command="x", min_bounces=5)
+    message = str(err.value)
+    assert "\n" not in message and str(path) in message
+    for needle in needles:
+        assert needle in message
+
+
+def test_unreadable_files(tmp_path):
+    with pytest.raises(ConfigError, match="file not found"):
+        read_impacts(tmp_path / "nope.csv")
+    empty = tmp_path / "empty.csv"
+    empty.write_text("")
+    with pytest.raises(ConfigError, match="cannot read as CSV"):
+        read_impacts(empty)
+
+
+def test_circular_mean_across_zero():
+    assert circular_mean(np.radians([350.0, 10.0])) == pytest.approx(0.0, abs=1e-12) or \
+        circular_mean(np.radians([350.0, 10.0])) == pytest.approx(2 * np.pi, abs=1e-12)
+    assert np.degrees(circular_mean(np.radians([40.0, 44.0]))) == pytest.approx(42.0)

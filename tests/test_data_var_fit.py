@@ -1,0 +1,185 @@
+"""VAR(1) fit of eq. 19 to data (engine/var_fit.py): recovery of eq. 9's J, interval coverage,
+the errors-in-variables bias of OLS against the lag-2 estimate, the per-trial mean-removal bias
+and its jackknife, no pairs across trial boundaries."""
+
+import math
+
+import numpy as np
+import pytest
+
+from bounce_cli.engine import ModelParams, jacobian, stability
+from bounce_cli.engine.data_stats import simulate_impacts
+from bounce_cli.engine.params import ModelError, phase_difference
+from bounce_cli.engine.var_fit import (
+    eigenvalues_2x2,
+    fit_var1,
+    fit_var1_lag2,
+    fit_var1_ols,
+    jacobian_coverage,
+)
+
+PAPER = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.30, racket_period=0.92)
+ACF = ModelParams(alpha=0.42, g=5.8, racket_amplitude=0.065, racket_period=0.55)
+Q = np.diag([0.04**2, 0.05**2])
+
+
+def var1_series(jac, noise_cov, n_trials, n, rng, burn=200):
+    """y_{k+1} = J y_k + eps_k for n_trials independent trials of n bounces: (T, n, 2)."""
+    chol = np.linalg.cholesky(noise_cov)
+    y = np.zeros((n_trials, 2))
+    out = np.empty((n_trials, n, 2))
+    for k in range(burn + n):
+        y = y @ jac.T + rng.standard_normal((n_trials, 2)) @ chol.T
+        if k >= burn:
+            out[:, k - burn] = y
+    return out
+
+
+def test_ols_is_the_textbook_least_squares_and_lag2_is_c2_c1_inverse():
+    rng = np.random.default_rng(1)
+    y = var1_series(jacobian(ACF), Q, 3, 400, rng)
+    trials = [t + [4.0, 1.0] for t in y]  # an offset per trial: the trial mean is removed
+    ols = fit_var1_ols(trials)
+    d = [t - t.mean(0) for t in trials]
+    x = np.concatenate([t[:-1] for t in d])
+    x1 = np.concatenate([t[1:] for t in d])
+    b, *_ = np.linalg.lstsq(x, x1, rcond=None)
+    np.testing.assert_allclose(ols.jacobian, b.T, rtol=1e-12)
+    # standard errors: per equation, s^2 (X'X)^-1 with the residual variance of that equation
+    resid = x1 - x @ b
+    s2 = (resid**2).sum(0) / (len(x) - 2 - 3)
+    se = np.sqrt(np.outer(s2, np.diag(np.linalg.inv(x.T @ x))))
+    np.testing.assert_allclose(ols.jacobian_se, se, rtol=1e-10)
+    lag2 = fit_var1_lag2(trials)
+    c1 = sum(t[1:-1].T @ t[:-2] for t in d)
+    c2 = sum(t[2:].T @ t[:-2] for t in d)
+    np.testing.assert_allclose(lag2.jacobian, c2 @ np.linalg.inv(c1), rtol=1e-10)
+
+
+def test_no_pair_crosses_a_trial_boundary():
+    """Two trials glued end to end with a jump between them: fitting them as two trials equals
+    the fit on the pairs of each trial alone; gluing them into one would differ."""
+    rng = np.random.default_rng(2)
+    a, b = var1_series(jacobian(ACF), Q, 2, 200, rng)
+    two = fit_var1_ols([a, b + 10.0])
+    assert two.n_pairs == 2 * 199 and two.n_trials == 2
+    one = fit_var1_ols([np.concatenate([a, b + 10.0])])
+    assert not np.allclose(one.jacobian, two.jacobian, atol=1e-3)
+    np.testing.assert_allclose(fit_var1_ols([a, b]).jacobian, two.jacobian, rtol=1e-12)
+
+
+def test_eigenvalues_follow_eq10_labels():
+    for params in (PAPER, ACF):
+        lp, lm = eigenvalues_2x2(jacobian(params))
+        st = stability(params)
+        assert lp == pytest.approx(st.eigenvalues[0], abs=1e-12)
+        assert lm == pytest.approx(st.eigenvalues[1], abs=1e-12)
+
+
+@pytest.mark.parametrize("method", ["ols", "lag2"])
+def test_long_series_recover_eq9_jacobian(method):
+    rng = np.random.default_rng(3)
+    truth = jacobian(ACF)
+    fit = fit_var1([*var1_series(truth, Q, 4, 5000, rng)], method)
+    assert np.all(np.abs(fit.jacobian - truth) < 4 * fit.jacobian_se)
+    eig = fit.eigen_summary()
+    assert eig["spectral_radius"][0] == pytest.approx(stability(ACF).spectral_radius, abs=0.03)
+
+
+def coverage(method, params, n_trials, n, reps, seed, measurement_sd=(0.0, 0.0)):
+    rng = np.random.default_rng(seed)
+    truth = jacobian(params)
+    ys = var1_series(truth, Q, reps * n_trials, n, rng)
+    ys = ys + rng.standard_normal(ys.shape) * np.array(measurement_sd)
+    inside = np.zeros((2, 2))
+    radius_inside = 0
+    estimates = []
+    true_radius = stability(params).spectral_radius
+    for r in range(reps):
+        fit = fit_var1(list(ys[r * n_trials:(r + 1) * n_trials]), method)
+        inside += jacobian_coverage(fit, truth)
+        lo, hi = fit.eigen_summary()["spectral_radius"][2:]
+        radius_inside += lo <= true_radius <= hi
+        estimates.append(fit.jacobian)
+    return inside / reps, radius_inside / reps, np.mean(estimates, axis=0) - truth
+
+
+def binomial_band(p, reps, z=3.5):
+    return z * math.sqrt(p * (1 - p) / reps)
+
+
+@pytest.mark.parametrize("method", ["ols", "lag2"])
+def test_intervals_cover_eq9_jacobian_at_nominal_rate(method):
+    """Coverage over 400 data sets of 3 trials x 200 bounces (linear VAR at the acf config's
+    parameters): each entry of J and the spectral radius inside the 95 % interval at 95 % +-
+    3.5 binomial SE."""
+    reps = 400
+    rate, radius_rate, bias = coverage(method, ACF, 3, 200, reps, seed=4)
+    band = binomial_band(0.95, reps)
+    assert np.all(np.abs(rate - 0.95) < band), rate
+    assert abs(radius_rate - 0.95) < band, radius_rate
+
+
+def test_measurement_noise_biases_ols_toward_stability_but_not_lag2():
+    """Errors in variables: white measurement noise of SD 0.03 m/s and 3 deg on v and theta.
+    OLS's J shrinks (spectral radius too small: the subject looks MORE stable); C(2) C(1)^-1
+    is unbiased. Long series, so that the bias is not hidden by sampling error."""
+    rng = np.random.default_rng(5)
+    truth = jacobian(ACF)
+    clean = var1_series(truth, Q, 8, 4000, rng)
+    noisy = clean + rng.standard_normal(clean.shape) * [0.03, math.radians(3.0)]
+    true_radius = stability(ACF).spectral_radius
+    ols = fit_var1(list(noisy), "ols").eigen_summary()["spectral_radius"]
+    lag2 = fit_var1(list(noisy), "lag2").eigen_summary()["spectral_radius"]
+    assert ols[3] < true_radius  # the whole OLS interval lies below the truth
+    assert lag2[2] <= true_radius <= lag2[3]
+    assert abs(lag2[0] - true_radius) < 0.03
+
+
+def test_lag2_interval_keeps_its_coverage_under_measurement_noise():
+    reps = 300
+    rate, radius_rate, _ = coverage("lag2", ACF, 3, 400, reps, seed=6,
+                                    measurement_sd=(0.02, math.radians(2.0)))
+    band = binomial_band(0.95, reps)
+    assert np.all(rate > 0.95 - band), rate
+    assert radius_rate > 0.95 - band
+
+
+def test_jackknife_removes_the_mean_removal_bias_of_short_trials():
+    """40 trials of 43 bounces (40 s at 0.92 s): removing each trial's mean biases J's
+    diagonal by about -(1 + lambda)/N; the split-panel jackknife removes most of it."""
+    rng = np.random.default_rng(7)
+    truth = jacobian(PAPER)
+    raw, jack = [], []
+    for _ in range(100):
+        ys = list(var1_series(truth, Q, 40, 43, rng))
+        raw.append(fit_var1(ys, "ols", jackknife=False).jacobian)
+        jack.append(fit_var1(ys, "ols", jackknife=True).jacobian)
+    bias_raw = np.mean(raw, axis=0) - truth
+    bias_jack = np.mean(jack, axis=0) - truth
+    sd = np.std(raw, axis=0) / math.sqrt(len(raw))
+    assert abs(bias_raw[1, 1]) > 5 * sd[1, 1]  # the bias is real
+    assert np.all(np.abs(bias_jack) < np.abs(bias_raw) / 2 + 3 * sd)
+
+
+def test_full_stochastic_map_trials_recover_eq9_within_intervals():
+    """Impacts from the full stochastic map (eqs. 16-18), not the linear VAR: J of eq. 9 is
+    inside the lag-2 and OLS intervals (10 trials x 300 bounces at the acf config)."""
+    sim = simulate_impacts(ACF, 0.04, 0.05, 10, 300, seed=8)
+    assert not sim.lost.any()
+    fp = ACF.fixed_point()
+    trials = [np.column_stack([v, phase_difference(th, fp.theta_rad)])
+              for v, th in zip(sim.v, sim.theta)]
+    truth = jacobian(ACF)
+    for method in ("ols", "lag2"):
+        fit = fit_var1(trials, method)
+        assert np.all(np.abs(fit.jacobian - truth) < 3.5 * fit.jacobian_se), method
+
+
+def test_errors_are_model_errors():
+    with pytest.raises(ModelError, match="too few"):
+        fit_var1_ols([np.zeros((2, 2))])
+    with pytest.raises(ModelError, match="at least 8"):
+        fit_var1([np.ones((5, 2))], "ols")
+    with pytest.raises(ModelError, match="NaN"):
+        fit_var1_ols([np.full((10, 2), np.nan)])

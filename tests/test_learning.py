@@ -1,0 +1,108 @@
+"""`bounce learning` (Fig. 6): eq. 19's SD of ball amplitude against AC, and a learning curve
+from simulated trials whose AC drifts with known slope."""
+
+
+import numpy as np
+import pandas as pd
+import pytest
+from test_cli import assert_user_error, run  # shared CliRunner helpers
+
+from bounce_cli.engine import ModelParams, flip_boundary_g, racket_amplitude_for_ac, stability
+from bounce_cli.engine.data_stats import apex_height, apex_sd_eq19, simulate_impacts
+from bounce_cli.experiments import learning
+from bounce_cli.impacts import impacts_frame
+
+AC_START, AC_END, TRIALS = -0.25, -0.8, 12
+
+
+def test_model_curve_spans_the_stable_range_and_sets_ac():
+    curve = learning.model_curve(0.5, 9.81, 0.92, 0.04, 0.05, 41)
+    low = float(flip_boundary_g(0.5))
+    assert curve["ac_g"].min() > low and curve["ac_g"].max() < 0
+    for row in curve.iloc[[0, 20, 40]].itertuples():
+        st = stability(ModelParams(0.5, 9.81, row.racket_amplitude_m, 0.92))
+        assert st.ac_g == pytest.approx(row.ac_g, abs=1e-9) and st.stable
+    # the variability grows towards both stability boundaries; its minimum is inside
+    i = int(curve["apex_sd_m"].idxmin())
+    assert 0 < i < 40
+    assert curve["apex_sd_m"].iloc[0] > 2 * curve["apex_sd_m"].iloc[i]
+
+
+def test_apex_sd_of_long_simulations_matches_eq19_with_the_maps_noise():
+    """Eq. 19's apex SD (with the printed map's noise covariance) against 20 x 1000 bounces
+    of eqs. 16-18: within 3 %."""
+    from bounce_cli.engine import map_noise_covariance
+
+    for ac in (-0.3, -0.7):
+        a_r = float(racket_amplitude_for_ac(0.5, ac, 9.81, 0.92))
+        p = ModelParams(0.5, 9.81, a_r, 0.92)
+        sim = simulate_impacts(p, 0.04, 0.05, 20, 1000, seed=3)
+        sd = apex_height(p, sim.theta, sim.v).std(axis=1).mean()
+        predicted = apex_sd_eq19(p, 0.04, 0.05, map_noise_covariance(p, 0.04, 0.05))
+        assert sd == pytest.approx(predicted, rel=0.03)
+
+
+@pytest.fixture(scope="module")
+def learning_run(tmp_path_factory):
+    """12 trials of 120 bounces; trial i bounces at AC from -0.25 g to -0.8 g (linear in i)."""
+    tmp = tmp_path_factory.mktemp("learning")
+    frames = []
+    for i, ac in enumerate(np.linspace(AC_START, AC_END, TRIALS)):
+        a_r = float(racket_amplitude_for_ac(0.5, ac, 9.81, 0.92))
+        p = ModelParams(0.5, 9.81, a_r, 0.92)
+        sim = simulate_impacts(p, 0.04, 0.05, 1, 120, seed=10 + i)
+        frames.append(impacts_frame(sim, p, trial_names=[f"day{i + 1}"]))
+    path = tmp / "impacts.csv"
+    pd.concat(frames).to_csv(path, index=False)
+    out = tmp / "out"
+    result = run("learning", "--data", path, "--out", out, "--quiet")
+    assert result.exit_code == 0, result.output
+    return path, out
+
+
+def test_learning_trend_recovers_the_known_drift(learning_run):
+    _, out = learning_run
+    trials = pd.read_csv(out / "trials.csv")
+    assert list(trials["trial"]) == [f"day{i + 1}" for i in range(TRIALS)]
+    assert (trials["bounces"] == 120).all()
+    trend = pd.read_csv(out / "trend.csv").set_index("quantity")
+    slope = (AC_END - AC_START) / (TRIALS - 1)
+    ac = trend.loc["ac_mean_g"]
+    # the per-trial mean AC sits near the fixed point's AC (noise moves it by ~0.01 g)
+    assert ac.slope_ci_low - 0.003 <= slope <= ac.slope_ci_high + 0.003
+    assert ac.trend == "decreasing"
+    # SD of ball amplitude rises with more negative AC in this range (eq. 19 at fixed noise)
+    assert trend.loc["apex_sd_m", "trend"] == "increasing"
+
+
+def test_learning_figure_and_redraw(learning_run):
+    _, out = learning_run
+    frames = {n: pd.read_csv(out / n) for n in ("trials.csv", "trend.csv", "model_curve.csv")}
+    fig = learning.draw(frames)["learning.png"]
+    labels = {ax.get_xlabel() for ax in fig.axes}
+    assert "trial number" in labels and "racket acceleration at impact AC (g)" in labels
+
+
+def test_model_only_without_data(tmp_path):
+    result = run("learning", "--out", tmp_path, "--quiet")
+    assert result.exit_code == 0, result.output
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["learning.png", "model_curve.csv",
+                                                          "run.json"]
+
+
+def test_learning_errors(learning_run, tmp_path):
+    path, _ = learning_run
+    frame = pd.read_csv(path)
+    no_apex = tmp_path / "no_apex.csv"
+    frame.drop(columns=["ball_apex_m"]).to_csv(no_apex, index=False)
+    assert_user_error(run("learning", "--data", no_apex, "--out", tmp_path / "a"),
+                      "missing column ball_apex_m", "SD of ball amplitude")
+    two = tmp_path / "two.csv"
+    frame[frame.trial.isin(["day1", "day2"])].to_csv(two, index=False)
+    assert_user_error(run("learning", "--data", two, "--out", tmp_path / "b"),
+                      "2 trial(s)", "at least 3")
+    short = tmp_path / "short.csv"
+    frame[(frame.trial != "day3") | (frame.k < 4)].to_csv(short, index=False)
+    assert_user_error(run("learning", "--data", short, "--out", tmp_path / "c"),
+                      "trial day3", "4 impacts")
+    assert not any((tmp_path / d).exists() and any((tmp_path / d).iterdir()) for d in "abc")
