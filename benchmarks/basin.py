@@ -34,7 +34,7 @@ from bounce_cli.engine import OUTCOMES, ClassifySettings, ModelParams, classify_
 from bounce_cli.engine.reference import classify_point_brentq  # noqa: E402
 
 PARAMS = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.30, racket_period=0.92)
-SETTINGS = ClassifySettings(max_iterations=100, tolerance=1e-3, sticking_interval_s=1e-3)
+SETTINGS = ClassifySettings(max_iterations=100, tolerance=1e-3, min_hop_s=1e-3)
 
 
 def grid(n: int):

@@ -12,9 +12,10 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import AliasChoices, BaseModel, ConfigDict, Field, ValidationError
 
-from .engine import ClassifySettings, ModelParams
+from .engine.classify import ClassifySettings
+from .engine.params import ModelParams
 
 
 class ConfigError(ValueError):
@@ -37,15 +38,26 @@ class ModelBlock(StrictModel):
         return ModelParams(self.alpha, self.g, self.racket_amplitude, self.racket_period)
 
 
-class ClassifyBlock(StrictModel):
-    """Section 3's stopping conditions for an orbit (Fig. 4; shared by basin and impulse)."""
+#: section 3's stopping conditions as the engine defines them (the one place of the defaults)
+_SECTION3 = ClassifySettings()
 
-    max_iterations: int = Field(100, ge=1, le=32767, description="impacts at most")
-    tolerance: float = Field(1e-3, gt=0.0, description="m/s and rad, distance to the fixed point")
-    sticking_interval_s: float = Field(1e-3, ge=0.0, description="s, shortest hop not sticking")
+
+class ClassifyBlock(StrictModel):
+    """Section 3's stopping conditions for an orbit (Fig. 4; shared by basin and impulse).
+    Defaults: :class:`bounce_cli.engine.classify.ClassifySettings` (the paper's values)."""
+
+    max_iterations: int = Field(_SECTION3.max_iterations, ge=1, le=32767,
+                                description="impacts at most")
+    tolerance: float = Field(_SECTION3.tolerance, gt=0.0,
+                             description="m/s and rad, distance to the fixed point")
+    # ``sticking_interval_s``: the former name of this key, still read
+    min_hop_s: float = Field(
+        _SECTION3.min_hop_s, ge=0.0, description="s, sticking when a hop is shorter",
+        validation_alias=AliasChoices("min_hop_s", "sticking_interval_s"),
+    )
 
     def settings(self) -> ClassifySettings:
-        return ClassifySettings(self.max_iterations, self.tolerance, self.sticking_interval_s)
+        return ClassifySettings(self.max_iterations, self.tolerance, self.min_hop_s)
 
 
 class ExperimentConfig(StrictModel):

@@ -127,9 +127,9 @@ def test_orbit_sticking_stops_early_with_a_note():
     assert len(df) < 41
     assert df.flight_s.iloc[-1] < 1e-3
     assert "sticking" in result.stderr
-    # a coarser sticking interval stops earlier
+    # a longer shortest hop stops earlier
     coarse = read_orbit_csv(run("orbit", "--theta0-deg", 43.1, "--v0", 5.7, "-n", 40, "--csv",
-                                "--sticking-interval", 0.05))
+                                "--min-hop-s", 0.05))
     assert len(coarse) < len(df)
 
 
@@ -170,3 +170,35 @@ def test_unstable_fixed_point_warns_in_one_line(tmp_path):
 def test_rk4_step_is_bounded():
     assert_user_error(run("trajectory", "--set", "rk4_step_s=0.02", "--print-config"),
                       "rk4_step_s")
+
+
+def test_orbit_iterates_where_there_is_no_fixed_point():
+    # a_r = 0.01 m: eq. 8 gives cos(theta~) = 22 (no period-1 orbit); the ball dies onto the
+    # racket, each hop shorter than the last, until one is shorter than 1 ms
+    result = run("orbit", "--theta0-deg", 43.1, "--v0", 4.8, "-n", 40, "--csv",
+                 "--set", "model.racket_amplitude=0.01")
+    assert result.exit_code == 0, result.output
+    df = read_orbit_csv(result)
+    assert 3 < len(df) < 41
+    assert (df.flight_s.diff().dropna() < 0).all()
+    notes = result.stderr.splitlines()
+    assert len(notes) == 2
+    assert notes[0].startswith("note: no period-1 fixed point") and "22.02" in notes[0]
+    assert "sticking" in notes[1]
+    # the same rows as the engine's map from the same start
+    from bounce_cli.engine.maps import iterate_orbit
+    from bounce_cli.engine.params import ModelParams
+
+    orbit = iterate_orbit(math.radians(43.1), 4.8, ModelParams(0.5, 9.81, 0.01, 0.92), 40, 1e-3)
+    assert df.v_m_s.to_numpy() == pytest.approx(orbit.v, rel=1e-12)
+    # fixed-point still refuses these parameters
+    assert_user_error(run("fixed-point", "--set", "model.racket_amplitude=0.01"),
+                      "no period-1 fixed point")
+
+
+def test_orbit_at_an_unstable_fixed_point_has_no_note_about_it():
+    # alpha 0.5, period 0.8 s: the fixed point exists (unstable): the orbit runs all impacts
+    result = run("orbit", "--theta0-deg", 60, "--v0", 4.0, "-n", 30, "--csv",
+                 "--set", "model.racket_period=0.8")
+    assert result.exit_code == 0, result.output
+    assert "no period-1 fixed point" not in result.stderr

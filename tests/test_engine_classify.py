@@ -131,7 +131,7 @@ def test_tolerance_and_sticking_interval_are_used(paper_params):
     assert np.all(loose.iterations[fly] <= base.iterations[fly])
     assert np.any(loose.iterations[fly] < base.iterations[fly])
     never_stick = classify_batch(theta, v, paper_params,
-                           ClassifySettings(max_iterations=30, sticking_interval_s=0.0))
+                           ClassifySettings(max_iterations=30, min_hop_s=0.0))
     assert not np.any(never_stick.outcome[base.outcome == STICKING] == STICKING)
 
 

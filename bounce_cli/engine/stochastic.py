@@ -27,6 +27,7 @@ from typing import Callable, Sequence
 import numpy as np
 from scipy.linalg import solve_discrete_lyapunov
 
+from .classify import ClassifySettings
 from .impact import next_impact_phase
 from .maps import map_step, velocity_after_impact
 from .params import ModelError, ModelParams, phase_difference, wrap_phase
@@ -193,7 +194,7 @@ def simulate_stochastic_map(
     *,
     burn_in: int = 0,
     velocity_phase: str = "theta",
-    sticking_interval_s: float = 1e-3,
+    min_hop_s: float = ClassifySettings().min_hop_s,
     block: int = 1024,
     on_block: Callable[[int], None] | None = None,
 ) -> StochasticRuns:
@@ -214,7 +215,7 @@ def simulate_stochastic_map(
     lost = np.zeros(runs, dtype=bool)
     dv = np.full((runs, n_bounces), np.nan)
     dtheta = np.full((runs, n_bounces), np.nan)
-    min_hop = sticking_interval_s * params.omega
+    min_hop = min_hop_s * params.omega
     k = 0
     while k < total:
         size = min(block, total - k)

@@ -38,17 +38,21 @@ class CaseBlock(StrictModel):
         return self.theta0_rad if self.theta0_rad is not None else math.radians(self.theta0_deg)
 
 
+#: the engine's defaults (the one place they live)
+_FLIGHT = FlightSettings()
+
+
 class StickingBlock(StrictModel):
     """When the ball counts as stuck on the racket."""
 
-    min_hop_s: float = Field(1e-3, ge=0.0)
-    min_relative_velocity_m_s: float = Field(1e-3, ge=0.0)
+    min_hop_s: float = Field(_FLIGHT.min_hop_s, ge=0.0, description="s, a shorter hop sticks")
+    min_relative_velocity_m_s: float = Field(_FLIGHT.min_relative_velocity_m_s, ge=0.0)
 
 
 class TrajectoryConfig(ExperimentConfig):
     integrator: Literal["exact", "rk4"] = "exact"
     # a coarser fixed step misses short hops (at 0.02 s, 9 of 87 impacts of the sticking case)
-    rk4_step_s: float = Field(1e-3, gt=0.0, le=5e-3)
+    rk4_step_s: float = Field(_FLIGHT.rk4_step_s, gt=0.0, le=5e-3)
     duration_s: float = Field(10.0, gt=0.0, le=1e4)
     sample_interval_s: float = Field(0.005, gt=0.0)
     sticking: StickingBlock = StickingBlock()
