@@ -14,7 +14,7 @@ import os
 import sys
 import typing
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Any, NoReturn, Optional
 
 import typer
 from rich.console import Console
@@ -51,7 +51,7 @@ app = typer.Typer(
 stderr = Console(stderr=True)
 
 
-def fail(message: str) -> None:
+def fail(message: str) -> NoReturn:
     """Print one line ``bounce: error: ...`` on stderr and exit 2."""
     print(f"bounce: error: {message}", file=sys.stderr)
     raise typer.Exit(code=2)
@@ -130,7 +130,7 @@ class RichProgress:
             console=stderr,
             transient=True,
         )
-        self._task = None
+        self._task: Any = None  # rich's TaskID once started
 
     def start(self, total: int, description: str) -> None:
         if self._task is None:

@@ -52,7 +52,7 @@ class ClassifyBlock(StrictModel):
                              description="m/s and rad, distance to the fixed point")
     # ``sticking_interval_s``: the former name of this key, still read
     min_hop_s: float = Field(
-        _SECTION3.min_hop_s, ge=0.0, description="s, sticking when a hop is shorter",
+        default=_SECTION3.min_hop_s, ge=0.0, description="s, sticking when a hop is shorter",
         validation_alias=AliasChoices("min_hop_s", "sticking_interval_s"),
     )
 

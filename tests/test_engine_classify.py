@@ -6,18 +6,17 @@ import math
 import numpy as np
 import pytest
 
-from bounce_cli.engine import (
+from bounce_cli.engine.classify import (
     BELOW_RACKET,
     OUTCOMES,
     PERIOD1,
     STICKING,
     UNDECIDED,
-    ClassifySettings,
     classify_batch,
     classify_grid,
-    iterate_orbit,
-    map_step,
+    ClassifySettings,
 )
+from bounce_cli.engine.maps import iterate_orbit, map_step
 from bounce_cli.engine.reference import classify_point_brentq, first_impact_brentq
 
 FIG3_THETA0 = math.asin(0.205 / 0.30)  # section 3: x_b(0) = 0.205 m, ball on the racket

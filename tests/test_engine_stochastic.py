@@ -5,13 +5,12 @@ import math
 import numpy as np
 import pytest
 
-from bounce_cli.engine import (
+from bounce_cli.engine.linear import jacobian
+from bounce_cli.engine.maps import map_step
+from bounce_cli.engine.params import ModelError, ModelParams
+from bounce_cli.engine.stochastic import (
     PAIR_NAMES,
-    ModelError,
-    ModelParams,
-    jacobian,
     map_noise_covariance,
-    map_step,
     paper_noise_covariance,
     sample_correlations,
     simulate_stochastic_map,
@@ -133,12 +132,14 @@ def test_stochastic_step_implements_eqs_16_to_18():
     phi, hop = det.theta, det.hop_phase
     w, a, al, g = ACF_PARAMS.omega, 0.065, 0.42, 5.8
     # eq. 17 holds for phi
-    assert a * w**2 * (np.sin(theta) - np.sin(phi)) + v * w * hop - g / 2 * hop**2 == pytest.approx(0, abs=1e-9)
+    eq17 = a * w**2 * (np.sin(theta) - np.sin(phi)) + v * w * hop - g / 2 * hop**2
+    assert eq17 == pytest.approx(0, abs=1e-9)
     for vp, phase_in_cos in (("theta", phi + dth), ("phi", phi)):
         th1, v1, hop1 = stochastic_step(theta, v, ACF_PARAMS, dv, dth, vp)
         np.testing.assert_allclose(th1, phi + dth)  # eq. 18
         np.testing.assert_allclose(hop1, hop)
-        expected = (1 + al) * a * w * np.cos(phase_in_cos) - al * v + g * al / w * hop + dv  # eq. 16
+        # eq. 16
+        expected = (1 + al) * a * w * np.cos(phase_in_cos) - al * v + g * al / w * hop + dv
         np.testing.assert_allclose(v1, expected, rtol=1e-13)
 
 

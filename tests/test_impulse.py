@@ -6,20 +6,18 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bounce_cli.config import ClassifyBlock
 from typer.testing import CliRunner
 
 from bounce_cli.cli import app
 from bounce_cli.config import bundled_config_path, load_config
-from bounce_cli.engine import (
+from bounce_cli.engine.impulse import (
     impulse_response_full,
     impulse_response_linear,
-    jacobian,
-    map_step,
     perturbed_velocity,
     relaxation_impacts,
-    velocity_after_impact,
 )
+from bounce_cli.engine.linear import jacobian
+from bounce_cli.engine.maps import map_step, velocity_after_impact
 from bounce_cli.experiments import impulse as exp
 from bounce_cli.experiments.base import RunOptions
 
@@ -98,15 +96,6 @@ def test_tables(result):
     assert up.alpha_p_outside - up.alpha_p_inside <= 1e-3
     assert up.v0_threshold_m_s == pytest.approx(
         (1 + 2 * up.alpha_p_threshold - 0.5) / 1.5 * math.pi * 9.81 * 0.92 / (2 * math.pi))
-
-
-def test_classify_criteria(paper_params):
-    block = ClassifyBlock()
-    fp = paper_params.fixed_point()
-    assert exp.classify(paper_params, fp.v_m_s, block) == ("period1", 1)
-    assert exp.classify(paper_params, perturbed_velocity(paper_params, 0.7), block)[0] == "sticking"
-    racket = paper_params.racket_velocity(fp.theta_rad)
-    assert exp.classify(paper_params, racket - 0.1, block) == ("below_racket", 0)
 
 
 def test_figures_redraw_from_csv(result, tmp_path):

@@ -1,6 +1,5 @@
 """`bounce stability`: Fig. 5 boundaries, eigenvalues, crosscheck and section 5 predictions."""
 
-import math
 
 import numpy as np
 import pandas as pd
@@ -9,12 +8,11 @@ from typer.testing import CliRunner
 
 from bounce_cli.cli import app
 from bounce_cli.config import bundled_config_path, load_config
-from bounce_cli.engine import (
-    ModelParams,
+from bounce_cli.engine.linear import (
     ac_explicit_g,
     characteristic_c,
-    is_complex_regime,
     empirical_contraction_rate,
+    is_complex_regime,
     iterate_linear,
     jacobian,
     min_stable_spectral_radius,
@@ -23,6 +21,7 @@ from bounce_cli.engine import (
     spectral_radius,
     stability,
 )
+from bounce_cli.engine.params import ModelParams
 from bounce_cli.experiments import stability as exp
 from bounce_cli.experiments.base import RunOptions
 
@@ -88,11 +87,13 @@ def test_surface_follows_the_stable_region(result):
 
 def test_eigen_grid_matches_eq9_at_real_models():
     for alpha, ac, period in [(0.3, -0.7, 0.8), (0.5, -1.05, 0.6), (0.9, -0.2, 1.1)]:
-        p = ModelParams(alpha, 9.81, float(racket_amplitude_for_ac(alpha, ac, 9.81, period)), period)
+        a_r = float(racket_amplitude_for_ac(alpha, ac, 9.81, period))
+        p = ModelParams(alpha, 9.81, a_r, period)
         assert racket_acceleration_at_impact_g(p) == pytest.approx(ac, abs=1e-12)
         assert ac_explicit_g(alpha, 9.81, p.racket_amplitude, period) == pytest.approx(ac)
         frame = exp.eigen_frame(np.array([alpha]), np.array([ac]))
-        assert frame.spectral_radius[0] == pytest.approx(np.abs(np.linalg.eigvals(jacobian(p))).max())
+        radius = np.abs(np.linalg.eigvals(jacobian(p))).max()
+        assert frame.spectral_radius[0] == pytest.approx(radius)
 
 
 def test_crosscheck_agrees_where_stable_and_grows_where_not(result):

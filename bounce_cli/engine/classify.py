@@ -76,7 +76,8 @@ class Classification:
         return np.asarray(OUTCOMES, dtype=object)[self.outcome]
 
 
-def classify_batch(theta0, v0, params: ModelParams, settings: ClassifySettings = ClassifySettings()):
+def classify_batch(theta0, v0, params: ModelParams,
+                   settings: ClassifySettings = ClassifySettings()) -> Classification:
     """Classify initial conditions (arrays broadcast) in one vectorised batch.
 
     Returns a ``Classification`` with the broadcast shape. See the module docstring for the
