@@ -66,3 +66,24 @@ def test_figure_redraws_from_csvs(small_run):
 ])
 def test_user_errors(args, needle, tmp_path, cli, user_error):
     user_error(cli("acf", "--out", tmp_path / "o", *args), needle)
+
+
+def test_every_run_lost_is_a_one_line_error(tmp_path, cli, user_error):
+    # q_v = 0.5 m/s (12 x the paper's): every run knocks the ball onto the racket
+    result = cli("acf", "--out", tmp_path / "o", *SMALL, "--set", "noise.q_v=0.5")
+    user_error(result, "every run lost the ball")
+    assert not (tmp_path / "o" / "acf.csv").exists()
+
+
+def test_paper_values_only_at_the_papers_parameters(small_run, tmp_path, cli):
+    summary = pd.read_csv(small_run / "summary.csv")
+    theory = summary[summary.source == "theory_eq19"].set_index("quantity")
+    assert theory.loc["sd_v", "paper"] == 0.068 and theory.loc["sd_theta", "paper"] == 8.4
+    assert summary.source.str.startswith("candidate").any()
+    other = tmp_path / "other"
+    result = cli("acf", "--out", other, *SMALL, "--set", "model.alpha=0.5")
+    assert result.exit_code == 0, result.output
+    assert "paper: theory" not in result.stderr and "not the paper's" in result.stderr
+    summary = pd.read_csv(other / "summary.csv")
+    assert summary.paper.isna().all()
+    assert not summary.source.str.startswith("candidate").any()

@@ -138,11 +138,13 @@ def test_python_dash_m_entry_point():
 def test_unstable_fixed_point_warns_in_one_line(tmp_path, cli):
     # period 0.8 s: AC = -1.57 g, beyond the flip boundary -1.11 g (eq. 14)
     result = cli("basin", "--set", "model.racket_period=0.8", "--set", "grid.theta0_deg.num=6",
+                 "--jobs", 1,
                  "--set", "grid.v0_m_s.num=6", "--out", tmp_path / "b", "--quiet")
     assert result.exit_code == 0
     warnings = [line for line in result.stderr.splitlines() if "warning" in line]
     assert len(warnings) == 1 and "unstable" in warnings[0] and "2.16" in warnings[0]
     stable = cli("basin", "--set", "grid.theta0_deg.num=6", "--set", "grid.v0_m_s.num=6",
+                 "--jobs", 1,
                  "--out", tmp_path / "s", "--quiet")
     assert "warning" not in stable.stderr
 
@@ -182,3 +184,28 @@ def test_orbit_at_an_unstable_fixed_point_has_no_note_about_it(cli):
                  "--set", "model.racket_period=0.8")
     assert result.exit_code == 0, result.output
     assert "no period-1 fixed point" not in result.stderr
+
+
+@pytest.mark.parametrize("name", ["trajectory", "basin", "stability", "regression", "acf",
+                                  "impulse"])
+def test_print_config_prints_the_resolved_config_and_runs_nothing(name, tmp_path, monkeypatch,
+                                                                  cli):
+    """--print-config: the resolved config as YAML (the bundled file with defaults filled in
+    and --set applied), a file that loads back to the same config; nothing is written."""
+    import yaml
+
+    from bounce_cli.config import bundled_config_path, load_config
+    from bounce_cli.registry import entry
+
+    monkeypatch.chdir(tmp_path)
+    schema = entry(name).load().schema
+    result = cli(name, "--print-config", "--set", "model.g=9.8")
+    assert result.exit_code == 0, result.output
+    printed = yaml.safe_load(result.stdout)
+    expected = load_config(schema, bundled_config_path(name), ["model.g=9.8"])
+    assert printed == expected.model_dump(mode="json")
+    assert printed["model"]["g"] == 9.8
+    (tmp_path / "printed.yaml").write_text(result.stdout)
+    again = cli(name, "--print-config", "--config", tmp_path / "printed.yaml")
+    assert again.exit_code == 0 and again.stdout == result.stdout
+    assert list(tmp_path.iterdir()) == [tmp_path / "printed.yaml"]  # no results folder

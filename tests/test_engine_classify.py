@@ -146,6 +146,16 @@ def test_grid_results_independent_of_tiles_and_jobs(paper_params, jobs, tile_poi
     assert sum(done) == theta.size and max(done) <= tile_points
 
 
-def test_outcome_codes_and_names():
-    assert OUTCOMES == ("period1", "sticking", "below_racket", "undecided")
-    assert (PERIOD1, STICKING, BELOW_RACKET, UNDECIDED) == (0, 1, 2, 3)
+def test_outcome_codes_name_what_happened(paper_params):
+    """Each code and its name on a point whose fate is known independently: the fixed point,
+    Fig. 3's sticking start, a ball slower than the racket, and one impact from far away."""
+    fp = paper_params.fixed_point()
+    theta = np.array([fp.theta_rad, FIG3_THETA0, 0.0, FIG3_THETA0])
+    v = np.array([fp.v_m_s, 5.7, 0.5 * float(paper_params.racket_velocity(0.0)), 9.0])
+    first = classify_batch(theta[:3], v[:3], paper_params)
+    last = classify_batch(theta[3:], v[3:], paper_params, ClassifySettings(max_iterations=1))
+    codes = np.concatenate([first.outcome, last.outcome])
+    assert codes.tolist() == [PERIOD1, STICKING, BELOW_RACKET, UNDECIDED]
+    assert [*first.names(), *last.names()] == [OUTCOMES[c] for c in codes]
+    assert [*first.names(), *last.names()] == ["period1", "sticking", "below_racket",
+                                               "undecided"]

@@ -168,3 +168,23 @@ def test_unstable_fixed_point_has_no_stationary_covariance():
     observed = ModelParams(alpha=0.42, g=5.8, racket_amplitude=0.076, racket_period=0.53)
     with pytest.raises(ModelError, match="spectral radius 1.3"):
         stationary_covariance(jacobian(observed), paper_noise_covariance(0.04, 0.05))
+
+
+def test_lost_runs_are_flagged_and_blank_from_the_loss_on():
+    """q_v = 0.08 m/s: one of 8 runs of 300 bounces (seed 1) loses the ball at bounce 290
+    (a hop shorter than 1 ms); its row is NaN from there on, the other runs are untouched,
+    and the lost run alone gives the same numbers (each run has its own stream)."""
+    seeds = np.random.SeedSequence(1).spawn(8)
+    runs = simulate_stochastic_map(ACF_PARAMS, 0.08, 0.05, 300, seeds)
+    assert runs.lost.tolist() == [False] * 4 + [True] + [False] * 3
+    blank = np.isnan(runs.dv[4])
+    first = int(np.argmax(blank))
+    assert 0 < first and blank[first:].all() and not blank[:first].any()
+    assert (np.isnan(runs.dtheta[4]) == blank).all()
+    assert np.isfinite(runs.dv[~runs.lost]).all()
+    alone = simulate_stochastic_map(ACF_PARAMS, 0.08, 0.05, 300, seeds[4:5])
+    assert alone.lost.tolist() == [True]
+    np.testing.assert_array_equal(alone.dv[0], runs.dv[4])
+    # a longer shortest hop loses it no later
+    strict = simulate_stochastic_map(ACF_PARAMS, 0.08, 0.05, 300, seeds[4:5], min_hop_s=0.05)
+    assert int(np.argmax(np.isnan(strict.dv[0]))) <= first

@@ -4,6 +4,7 @@ import json
 
 import pandas as pd
 import pytest
+from scipy import stats
 
 from bounce_cli.experiments import regression
 
@@ -32,7 +33,19 @@ def test_simulated_trials_and_fit(small_run):
     assert list(fit.columns[:9]) == ["condition", "n", "slope", "slope_ci_low", "slope_ci_high",
                                      "intercept", "intercept_ci_low", "intercept_ci_high", "r2"]
     row = fit.iloc[0]
-    assert row.slope_ci_low < row.slope < row.slope_ci_high
+    # fit.csv is the OLS of the fitted trials in trials.csv (scipy, an independent route)
+    used = trials[~trials.lost.astype(bool)]
+    ref = stats.linregress(used.tau2_s2, used.a_r_m)
+    t = stats.t.ppf(0.975, len(used) - 2)
+    assert row.n == len(used)
+    assert row.slope == pytest.approx(ref.slope, rel=1e-10)
+    assert row.intercept == pytest.approx(ref.intercept, abs=1e-12)
+    assert row.r2 == pytest.approx(ref.rvalue**2, rel=1e-10)
+    assert (row.slope_ci_low, row.slope_ci_high) == pytest.approx(
+        (ref.slope - t * ref.stderr, ref.slope + t * ref.stderr), rel=1e-9)
+    assert (row.intercept_ci_low, row.intercept_ci_high) == pytest.approx(
+        (ref.intercept - t * ref.intercept_stderr, ref.intercept + t * ref.intercept_stderr),
+        rel=1e-9)
     assert row.predicted_slope > 0 and 0.5 < row.r2 <= 1
     manifest = json.loads((small_run / "run.json").read_text())
     assert manifest["config"]["data"] is None and manifest["seed"] == 1996
