@@ -22,7 +22,7 @@ import pandas as pd
 
 from . import paper
 from .engine.params import ModelParams
-from .paper import Printed
+from .paper import Printed, number_text
 
 #: |lambda| = |alpha| in the complex regime is exact algebra: rounding only
 EXACT_ALGEBRA_TOLERANCE = 1e-9
@@ -288,14 +288,14 @@ CLAIMS: tuple[Claim, ...] = (
           sources=("stability",)),
     Claim("complex_modulus", "|lambda+| = |lambda-| = |alpha| in the complex regime (eq. 12)",
           claim_complex_modulus, words="|alpha|",
-          criterion=f"{EXACT_ALGEBRA_TOLERANCE:g} (exact algebra)",
+          criterion=f"{number_text(EXACT_ALGEBRA_TOLERANCE)} (exact algebra)",
           sources=("stability",)),
     Claim("stable_range", f"stable AC range at alpha = {paper.STABLE_AC_ALPHA:g}, lower end "
           "(section 5, eq. 14; the upper end must be 0)",
           claim_stable_range, paper.STABLE_AC_LOW,
           sources=("stability",)),
     Claim("min_radius", "min over stable AC of the largest |lambda| equals alpha (section 4)",
-          claim_min_radius, words="alpha", criterion=f"{MIN_RADIUS_TOLERANCE:g}",
+          claim_min_radius, words="alpha", criterion=number_text(MIN_RADIUS_TOLERANCE),
           sources=("stability",)),
     Claim("fig3_initial_conditions",
           f"leaving at asin({paper.FIG3_BALL_HEIGHT_M:g}/{paper.FIG3_MODEL.racket_amplitude:.2f}) "
@@ -335,7 +335,8 @@ CLAIMS: tuple[Claim, ...] = (
     Claim("impulse_symmetry", "the linear response is symmetric in the sign of the "
           "perturbation, the full one is not (section 7, Fig. 10)",
           claim_linear_symmetric, words="symmetric / asymmetric",
-          criterion=f"ratio 1 +-{SYMMETRY_TOLERANCE:g} / differs by > {ASYMMETRY_MIN:.0%}",
+          criterion=(f"ratio 1 +-{number_text(SYMMETRY_TOLERANCE)} / differs by > "
+                     f"{ASYMMETRY_MIN:.0%}"),
           sources=("impulse",)),
     Claim("regression_intercept", "the amplitude-period regression has zero intercept "
           "(section 5, eq. 15)", claim_intercept, words="0", criterion="95 % CI covers 0",

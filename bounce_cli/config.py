@@ -16,6 +16,7 @@ from pydantic import AliasChoices, BaseModel, ConfigDict, Field, ValidationError
 
 from .engine.classify import ClassifySettings
 from .engine.params import ModelParams
+from .paper import FIG3_MODEL
 
 
 class ConfigError(ValueError):
@@ -27,12 +28,14 @@ class StrictModel(BaseModel):
 
 
 class ModelBlock(StrictModel):
-    """The common ``model`` block: parameters of eqs. 3-6."""
+    """The common ``model`` block: parameters of eqs. 3-6 (default: the paper's Figs. 3, 4)."""
 
-    alpha: float = Field(0.5, ge=0.0, lt=1.0, description="coefficient of restitution")
-    g: float = Field(9.81, gt=0.0, description="gravitational acceleration, m/s^2")
-    racket_amplitude: float = Field(0.30, gt=0.0, description="a_r, m")
-    racket_period: float = Field(0.92, gt=0.0, description="tau = 2 pi / omega_r, s")
+    alpha: float = Field(FIG3_MODEL.alpha, ge=0.0, lt=1.0,
+                         description="coefficient of restitution")
+    g: float = Field(FIG3_MODEL.g, gt=0.0, description="gravitational acceleration, m/s^2")
+    racket_amplitude: float = Field(FIG3_MODEL.racket_amplitude, gt=0.0, description="a_r, m")
+    racket_period: float = Field(FIG3_MODEL.racket_period, gt=0.0,
+                                 description="tau = 2 pi / omega_r, s")
 
     def to_params(self) -> ModelParams:
         return ModelParams(self.alpha, self.g, self.racket_amplitude, self.racket_period)

@@ -50,9 +50,15 @@ class Printed:
 
     def tolerance_text(self) -> str:
         """The tolerance and why: the printed resolution, or the paper's wording."""
+        unit = f" {self.unit}" if self.unit else ""
         why = ("the paper says 'about'" if self.tolerance_override is not None
-               else f"printed to {self.resolution:g}")
-        return f"+-{self.tolerance:g} ({why})"
+               else f"printed to {number_text(self.resolution)}{unit}")
+        return f"+-{number_text(self.tolerance)}{unit} ({why})"
+
+
+def number_text(x: float) -> str:
+    """A number as short as it reads: 0.05, 1e-9 (not 1e-09)."""
+    return f"{x:g}".replace("e-0", "e-").replace("e+0", "e+")
 
 
 # -- parameter sets --------------------------------------------------------------------------
