@@ -121,3 +121,14 @@ def test_cli(tmp_path):
     bad = runner.invoke(app, ["impulse", "--out", str(tmp_path / "b"),
                               "--set", "relaxation.tolerance_v_m_s=0"])
     assert bad.exit_code == 2 and "relaxation.tolerance_v_m_s" in bad.stderr
+
+
+def test_paper_values_only_at_the_papers_parameters(tmp_path, cli):
+    fast = [a for s in FAST for a in ("--set", s)]
+    at_paper = cli("impulse", "--out", tmp_path / "p", *fast)
+    assert "paper: about 0.65" in at_paper.stderr and "(paper: 5.7 m/s)" in at_paper.stderr
+    assert pd.read_csv(tmp_path / "p" / "threshold.csv").paper_alpha_p.iloc[0] == 0.65
+    other = cli("impulse", "--out", tmp_path / "o", *fast, "--set", "model.alpha=0.4")
+    assert other.exit_code == 0, other.output
+    assert "paper:" not in other.stderr and "not the paper's" in other.stderr
+    assert pd.read_csv(tmp_path / "o" / "threshold.csv").paper_alpha_p.isna().all()

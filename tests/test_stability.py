@@ -1,5 +1,6 @@
 """`bounce stability`: Fig. 5 boundaries, eigenvalues, crosscheck and section 5 predictions."""
 
+import math
 
 import numpy as np
 import pandas as pd
@@ -174,3 +175,36 @@ def test_cli_writes_files_and_rejects_bad_grid(tmp_path):
     bad = runner.invoke(app, ["stability", "--out", str(tmp_path / "b"),
                               "--set", "grid.alpha_min=-1"])
     assert bad.exit_code == 2 and "grid.alpha_min" in bad.stderr
+
+
+def test_paper_range_only_at_the_alpha_it_is_given_for(tmp_path, cli):
+    small = [a for s in SMALL for a in ("--set", s)]
+    for alpha, quoted in ((0.5, -1.11), (0.8, None)):
+        out = tmp_path / str(alpha)
+        result = cli("stability", "--out", out, *small, "--set", f"model.alpha={alpha}",
+                     "--set", "crosscheck.max_impacts=300")
+        assert result.exit_code == 0, result.output
+        pred = pd.read_csv(out / "predictions.csv").set_index("quantity")
+        if quoted is None:
+            assert math.isnan(pred.loc["stable_ac_low_g", "paper_value"])
+            assert "(paper:" not in result.stderr
+        else:
+            assert pred.loc["stable_ac_low_g", "paper_value"] == quoted
+            assert "(paper: -1.11 to 0)" in result.stderr
+
+
+def test_one_value_grid_axes_draw(tmp_path, cli):
+    """n_alpha: 1 is one column of the diagram: its regions as a band, its boundaries as
+    points on that line (the 3D surface as a curve)."""
+    small = [a for s in SMALL for a in ("--set", s)]
+    out = tmp_path / "one"
+    result = cli("stability", "--out", out, *small, "--set", "grid.n_alpha=1",
+                 "--set", "grid.alpha_min=0.5", "--set", "crosscheck.max_impacts=300", "--quiet")
+    assert result.exit_code == 0, result.output
+    frames = {n: pd.read_csv(out / n) for n in ("eigen.csv", "boundaries.csv", "surface.csv")}
+    assert frames["eigen.csv"].alpha.unique().tolist() == [0.5]
+    fig = exp.draw(frames)["stability.png"]
+    image = fig.axes[0].images[0]
+    assert np.asarray(image.get_array()).shape[1] == 1
+    x0, x1, _, _ = image.get_extent()
+    assert x0 < 0.5 < x1
