@@ -14,8 +14,8 @@ PERIOD1_V0, STICKING_V0 = 4.8, 5.7  # Fig. 3 top and bottom
 
 
 @pytest.fixture(scope="module")
-def params():
-    return ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.30, racket_period=0.92)
+def params(paper_params):
+    return paper_params
 
 
 @pytest.fixture(scope="module")

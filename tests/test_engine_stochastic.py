@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 
+from bounce_cli import paper
 from bounce_cli.engine.linear import jacobian
 from bounce_cli.engine.maps import map_step
 from bounce_cli.engine.params import ModelError, ModelParams
@@ -19,7 +20,7 @@ from bounce_cli.engine.stochastic import (
     var1_theory,
 )
 
-ACF_PARAMS = ModelParams(alpha=0.42, g=5.8, racket_amplitude=0.065, racket_period=0.55)
+ACF_PARAMS = paper.FIG8_MODEL  # the paper's Fig. 8 parameters (section 6)
 
 
 def covariance_by_summation(jac, noise_cov, terms=400):
