@@ -30,11 +30,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bounce_cli.engine import OUTCOMES, ClassifySettings, ModelParams, classify_grid  # noqa: E402
+from bounce_cli.engine.classify import OUTCOMES, ClassifySettings, classify_grid  # noqa: E402
+from bounce_cli.engine.params import ModelParams  # noqa: E402
 from bounce_cli.engine.reference import classify_point_brentq  # noqa: E402
 
 PARAMS = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.30, racket_period=0.92)
-SETTINGS = ClassifySettings(max_iterations=100, tolerance=1e-3, sticking_interval_s=1e-3)
+SETTINGS = ClassifySettings(max_iterations=100, tolerance=1e-3, min_hop_s=1e-3)
 
 
 def grid(n: int):
@@ -72,7 +73,8 @@ def memory_run(m: int, jobs: int) -> None:
         peak_kib = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
         size = (Path(out) / "basin.csv").stat().st_size
     print(f"bounce basin {m} x {m} (--jobs {jobs}, CSV + figures): {wall:.1f} s, "
-          f"peak RSS of the largest process {peak_kib / 1024:.0f} MiB, basin.csv {size / 1e6:.0f} MB")
+          f"peak RSS of the largest process {peak_kib / 1024:.0f} MiB, "
+          f"basin.csv {size / 1e6:.0f} MB")
 
 
 def main() -> None:
@@ -110,7 +112,8 @@ def main() -> None:
               f"({per_point * n / 3600:.2f} h); agrees with the fast classifier on {agree}/{m}")
         print(f"ratio, vectorised --jobs 1 vs brentq loop: {per_point * n / t1:,.0f}x")
         if args.jobs > 1:
-            print(f"ratio, vectorised --jobs {args.jobs} vs brentq loop: {per_point * n / tj:,.0f}x")
+            print(f"ratio, vectorised --jobs {args.jobs} vs brentq loop: "
+                  f"{per_point * n / tj:,.0f}x")
     if args.memory_size:
         memory_run(args.memory_size, args.jobs)
 

@@ -10,6 +10,7 @@ refused unless ``force``.
 from __future__ import annotations
 
 import datetime as _dt
+import functools
 import hashlib
 import json
 import os
@@ -33,7 +34,7 @@ class OutputDirError(ValueError):
     """The output directory cannot be used (holds another config's results, not writable)."""
 
 
-def stage(path: Path, write: Callable[[Path], None]) -> Path:
+def stage(path: Path, write: Callable[[Path], object]) -> Path:
     """Call ``write(tmp)`` on a new temporary file beside ``path``; return ``tmp``.
 
     On failure the temporary file is removed and the error propagates."""
@@ -57,7 +58,7 @@ def current_umask() -> int:
     return mask
 
 
-def atomic_write(path: Path, write: Callable[[Path], None]) -> None:
+def atomic_write(path: Path, write: Callable[[Path], object]) -> None:
     """Write ``path`` through a temporary file and ``os.replace``: never half-written."""
     tmp = stage(path, write)
     try:
@@ -205,11 +206,11 @@ class RunDirectory:
         then move them all into place with ``os.replace``, ``run.json`` last. Returns the
         paths. Until the staging is complete, the previous run's files are untouched."""
         self.out_dir.mkdir(parents=True, exist_ok=True)
-        writers: dict[str, Callable[[Path], None]] = {}
+        writers: dict[str, Callable[[Path], object]] = {}
         for name, frame in self._frames.items():
-            writers[name] = lambda tmp, frame=frame: frame.to_csv(tmp, index=False)
+            writers[name] = functools.partial(frame.to_csv, index=False)
         for name, figure in self._figures.items():
-            writers[name] = lambda tmp, figure=figure: figure.savefig(tmp, format="png", dpi=150)
+            writers[name] = functools.partial(figure.savefig, format="png", dpi=150)
         staged: list[tuple[Path, Path]] = []
         try:
             for name, write in writers.items():
@@ -232,12 +233,4 @@ class RunDirectory:
         finally:
             for tmp, _ in staged:
                 tmp.unlink(missing_ok=True)
-            close_figures(self._figures.values())
         return [final for _, final in staged]
-
-
-def close_figures(figures) -> None:
-    import matplotlib.pyplot as plt
-
-    for figure in figures:
-        plt.close(figure)

@@ -14,7 +14,7 @@ import os
 import sys
 import typing
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated, Any, NoReturn, Optional
 
 import typer
 from rich.console import Console
@@ -34,6 +34,7 @@ from .config import (
     validate,
 )
 from .engine import ModelError, ModelParams, iterate_orbit, stability, wrap_phase
+from .engine.classify import ClassifySettings
 from .experiments.base import RunOptions
 from .registry import EXPERIMENTS, Entry
 
@@ -50,7 +51,7 @@ app = typer.Typer(
 stderr = Console(stderr=True)
 
 
-def fail(message: str) -> None:
+def fail(message: str) -> NoReturn:
     """Print one line ``bounce: error: ...`` on stderr and exit 2."""
     print(f"bounce: error: {message}", file=sys.stderr)
     raise typer.Exit(code=2)
@@ -129,7 +130,7 @@ class RichProgress:
             console=stderr,
             transient=True,
         )
-        self._task = None
+        self._task: Any = None  # rich's TaskID once started
 
     def start(self, total: int, description: str) -> None:
         if self._task is None:
@@ -229,8 +230,11 @@ def run_experiment(
 
 
 # -- engine commands ------------------------------------------------------------------------
-def load_model(config: Path | None, overrides: list[str] | None) -> ModelParams:
-    """The ``model`` block of a config (any experiment's; other blocks are ignored here)."""
+def load_model(config: Path | None, overrides: list[str] | None, *,
+               need_fixed_point: bool = True) -> ModelParams:
+    """The ``model`` block of a config (any experiment's; other blocks are ignored here).
+    With ``need_fixed_point``, parameters without a period-1 fixed point (eq. 8) are a user
+    error; the map itself (``orbit``) is defined at any valid parameters."""
     path = resolve_config_path(config, "model")
     overrides = list(overrides or [])
     for text in overrides:
@@ -240,13 +244,15 @@ def load_model(config: Path | None, overrides: list[str] | None) -> ModelParams:
     data = apply_overrides(read_yaml(path), overrides)
     cfg = validate(ModelOnlyConfig, {"model": data.get("model") or {}}, str(path), overrides)
     params = cfg.params
-    params.fixed_point()
+    if need_fixed_point:
+        params.fixed_point()
     return params
 
 
-def _model_or_fail(config: Path | None, overrides: list[str] | None) -> ModelParams:
+def _model_or_fail(config: Path | None, overrides: list[str] | None, *,
+                   need_fixed_point: bool = True) -> ModelParams:
     try:
-        return load_model(config, overrides)
+        return load_model(config, overrides, need_fixed_point=need_fixed_point)
     except USER_ERRORS as exc:
         fail(str(exc))
         raise  # unreachable
@@ -307,19 +313,20 @@ def orbit_command(
     ],
     v0: Annotated[float, typer.Option("--v0", help="Ball velocity leaving the racket, m/s.")],
     n_impacts: Annotated[int, typer.Option("-n", "--impacts", min=1, help="Impacts.")] = 20,
-    sticking_interval: Annotated[
+    min_hop_s: Annotated[
         float,
-        typer.Option("--sticking-interval", min=0.0, help="Stop when a hop is shorter, s."),
-    ] = 1e-3,
+        typer.Option("--min-hop-s", min=0.0,
+                     help="Stop when a hop is shorter than this, s (sticking, section 3)."),
+    ] = ClassifySettings().min_hop_s,
     config: ConfigOption = None,
     overrides: SetOption = None,
     as_csv: Annotated[bool, typer.Option("--csv", help="Write CSV to stdout.")] = False,
 ) -> None:
-    """Iterate the map (eqs. 5, 6) from one initial condition."""
-    params = _model_or_fail(config, overrides)
+    """Iterate the map (eqs. 5, 6) from one initial condition, at any parameters."""
+    params = _model_or_fail(config, overrides, need_fixed_point=False)
     if not (math.isfinite(theta0_deg) and math.isfinite(v0)):
         fail("--theta0-deg and --v0 must be finite numbers")
-    orbit = iterate_orbit(math.radians(theta0_deg), v0, params, n_impacts, sticking_interval)
+    orbit = iterate_orbit(math.radians(theta0_deg), v0, params, n_impacts, min_hop_s)
     rows = orbit_rows(orbit, params)
     if as_csv:
         import pandas as pd
@@ -339,8 +346,7 @@ def orbit_command(
                 "" if math.isnan(row["flight_s"]) else f"{row['flight_s']:.5f}",
             )
         Console().print(table)
-    note = orbit_note(orbit, params, sticking_interval)
-    if note:
+    for note in orbit_notes(orbit, params, min_hop_s):
         print(note, file=sys.stderr)
 
 
@@ -359,20 +365,29 @@ def orbit_rows(orbit, params: ModelParams) -> list[dict]:
     ]
 
 
-def orbit_note(orbit, params: ModelParams, sticking_interval: float) -> str:
+def orbit_notes(orbit, params: ModelParams, min_hop_s: float) -> list[str]:
+    """What the user should know about an orbit: no period-1 fixed point at these parameters,
+    and why it stopped early."""
+    notes = []
+    cos_theta = params.cos_theta_fixed()
+    if cos_theta > 1.0:
+        notes.append(
+            f"note: no period-1 fixed point at these parameters (eq. 8 gives cos(theta~) = "
+            f"{cos_theta:.4g} > 1): the orbit cannot settle on one"
+        )
     if orbit.stop_reason == "below_racket":
         v_r = float(params.racket_velocity(orbit.theta[0]))
-        return (
+        notes.append(
             f"note: stopped: the initial velocity {orbit.v[0]:g} m/s is not above the racket's "
             f"{v_r:.4f} m/s at that phase (below the racket)"
         )
-    if orbit.stop_reason == "sticking":
+    elif orbit.stop_reason == "sticking":
         k = len(orbit.theta) - 1
-        return (
+        notes.append(
             f"note: stopped at impact {k}: the hop lasted {orbit.hop_phase[k] / params.omega:.3g} s"
-            f" < {sticking_interval:g} s (sticking)"
+            f" < {min_hop_s:g} s (sticking)"
         )
-    return ""
+    return notes
 
 
 @app.command("reproduce")

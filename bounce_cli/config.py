@@ -12,9 +12,11 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from pydantic import AliasChoices, BaseModel, ConfigDict, Field, ValidationError
 
-from .engine import ClassifySettings, ModelParams
+from .engine.classify import ClassifySettings
+from .engine.params import ModelParams
+from .paper import FIG3_MODEL
 
 
 class ConfigError(ValueError):
@@ -26,26 +28,39 @@ class StrictModel(BaseModel):
 
 
 class ModelBlock(StrictModel):
-    """The common ``model`` block: parameters of eqs. 3-6."""
+    """The common ``model`` block: parameters of eqs. 3-6 (default: the paper's Figs. 3, 4)."""
 
-    alpha: float = Field(0.5, ge=0.0, lt=1.0, description="coefficient of restitution")
-    g: float = Field(9.81, gt=0.0, description="gravitational acceleration, m/s^2")
-    racket_amplitude: float = Field(0.30, gt=0.0, description="a_r, m")
-    racket_period: float = Field(0.92, gt=0.0, description="tau = 2 pi / omega_r, s")
+    alpha: float = Field(FIG3_MODEL.alpha, ge=0.0, lt=1.0,
+                         description="coefficient of restitution")
+    g: float = Field(FIG3_MODEL.g, gt=0.0, description="gravitational acceleration, m/s^2")
+    racket_amplitude: float = Field(FIG3_MODEL.racket_amplitude, gt=0.0, description="a_r, m")
+    racket_period: float = Field(FIG3_MODEL.racket_period, gt=0.0,
+                                 description="tau = 2 pi / omega_r, s")
 
     def to_params(self) -> ModelParams:
         return ModelParams(self.alpha, self.g, self.racket_amplitude, self.racket_period)
 
 
-class ClassifyBlock(StrictModel):
-    """Section 3's stopping conditions for an orbit (Fig. 4; shared by basin and impulse)."""
+#: section 3's stopping conditions as the engine defines them (the one place of the defaults)
+_SECTION3 = ClassifySettings()
 
-    max_iterations: int = Field(100, ge=1, le=32767, description="impacts at most")
-    tolerance: float = Field(1e-3, gt=0.0, description="m/s and rad, distance to the fixed point")
-    sticking_interval_s: float = Field(1e-3, ge=0.0, description="s, shortest hop not sticking")
+
+class ClassifyBlock(StrictModel):
+    """Section 3's stopping conditions for an orbit (Fig. 4; shared by basin and impulse).
+    Defaults: :class:`bounce_cli.engine.classify.ClassifySettings` (the paper's values)."""
+
+    max_iterations: int = Field(_SECTION3.max_iterations, ge=1, le=32767,
+                                description="impacts at most")
+    tolerance: float = Field(_SECTION3.tolerance, gt=0.0,
+                             description="m/s and rad, distance to the fixed point")
+    # ``sticking_interval_s``: the former name of this key, still read
+    min_hop_s: float = Field(
+        default=_SECTION3.min_hop_s, ge=0.0, description="s, sticking when a hop is shorter",
+        validation_alias=AliasChoices("min_hop_s", "sticking_interval_s"),
+    )
 
     def settings(self) -> ClassifySettings:
-        return ClassifySettings(self.max_iterations, self.tolerance, self.sticking_interval_s)
+        return ClassifySettings(self.max_iterations, self.tolerance, self.min_hop_s)
 
 
 class ExperimentConfig(StrictModel):

@@ -130,7 +130,8 @@ def read_impacts(path_text: str | Path, needs: tuple[str, ...] = (), command: st
                           f"(required: trial, k, v_m_s, theta_rad or theta_deg)")
     for column in needs:
         if column not in frame.columns:
-            raise _fail(path, f"missing column {column}: {who} {COLUMN_PURPOSE.get(column, column)}")
+            purpose = COLUMN_PURPOSE.get(column, column)
+            raise _fail(path, f"missing column {column}: {who} {purpose}")
     if frame.empty:
         raise _fail(path, "no rows")
     if frame["trial"].isna().any():

@@ -3,17 +3,31 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 from matplotlib.figure import Figure
+
+from .engine.params import ModelParams
+from .paper import parameters_text
 
 
 def new_figure(nrows: int = 1, ncols: int = 1, *, width: float = 6.4, height: float = 4.8,
-               **subplot_kw):
+               **subplot_kw: Any) -> tuple[Figure, Any]:
     """A Figure with a grid of axes (``squeeze=False`` so ``axes[i, j]`` always works)."""
     fig = Figure(figsize=(width, height), layout="constrained")
     axes = fig.subplots(nrows, ncols, squeeze=False, **subplot_kw)
     return fig, axes
 
 
-def paper_caption(fig: Figure, text: str) -> None:
-    """A small caption under the figure naming the paper figure and parameters."""
-    fig.text(0.5, 0.0, text, ha="center", va="bottom", fontsize=7, color="0.35")
+def caption_figures(figures: dict[str, Figure], params: ModelParams | None,
+                    extra: str = "") -> None:
+    """Add the parameters a run was made at (and ``extra``, e.g. the run's size and seed) as
+    the last line of each figure's title, so that figures of two runs can be told apart."""
+    parts = ([parameters_text(params)] if params is not None else []) + ([extra] if extra else [])
+    if not parts:
+        return
+    line = "; ".join(parts)
+    for fig in figures.values():
+        title = fig.get_suptitle()
+        fig.suptitle(f"{title}\n{line}" if title else line,
+                     fontsize=10 if title else 9)

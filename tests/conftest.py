@@ -1,3 +1,6 @@
+"""Shared test helpers: the CLI runner, the one-line-error assertion and the paper's parameter
+sets, as fixtures (test modules never import from one another)."""
+
 import os
 
 import matplotlib
@@ -5,13 +8,55 @@ import pytest
 
 matplotlib.use("Agg")
 
-from bounce_cli.engine import ModelParams  # noqa: E402
+from typer.testing import CliRunner  # noqa: E402
+
+from bounce_cli import paper  # noqa: E402
+from bounce_cli.cli import app  # noqa: E402
+from bounce_cli.engine.params import ModelParams  # noqa: E402
+
+_runner = CliRunner()
 
 
-@pytest.fixture
+def run_cli(*args):
+    """``bounce ARGS`` in-process (typer's CliRunner); arguments are stringified."""
+    return _runner.invoke(app, [str(a) for a in args])
+
+
+def assert_one_line_error(result, *needles):
+    """Exit 2, exactly one ``bounce: error: ...`` line on stderr (an instability warning may
+    precede it) holding every needle, and no traceback."""
+    assert result.exit_code == 2, result.output
+    lines = [line for line in result.stderr.splitlines()
+             if line.strip() and not line.startswith("bounce: warning: ")]
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("bounce: error: "), lines[0]
+    for needle in needles:
+        assert needle in lines[0], (needle, lines[0])
+    assert "Traceback" not in result.output
+
+
+@pytest.fixture(scope="session")
+def cli():
+    """The CLI runner: ``cli("basin", "--quiet", ...)`` -> click Result."""
+    return run_cli
+
+
+@pytest.fixture(scope="session")
+def user_error():
+    """The one-line user error assertion: ``user_error(result, "needle", ...)``."""
+    return assert_one_line_error
+
+
+@pytest.fixture(scope="session")
 def paper_params() -> ModelParams:
-    """The paper's Figs. 3-4 and 9 parameters (section 3)."""
-    return ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.30, racket_period=0.92)
+    """The paper's Figs. 3-4 and 9 parameters (sections 3, 7)."""
+    return paper.FIG3_MODEL
+
+
+@pytest.fixture(scope="session")
+def acf_params() -> ModelParams:
+    """The paper's Fig. 8 parameters (section 6)."""
+    return paper.FIG8_MODEL
 
 
 @pytest.fixture(autouse=True)

@@ -7,41 +7,21 @@ import os
 
 import pandas as pd
 import pytest
-from typer.testing import CliRunner
 
 from bounce_cli import __version__
-from bounce_cli.cli import app
-
-runner = CliRunner()
 
 
-def run(*args):
-    return runner.invoke(app, [str(a) for a in args])
-
-
-def assert_user_error(result, *needles):
-    assert result.exit_code == 2, result.output
-    # one error line (an instability warning may precede it)
-    lines = [line for line in result.stderr.splitlines()
-             if line.strip() and not line.startswith("bounce: warning: ")]
-    assert len(lines) == 1, result.stderr
-    assert lines[0].startswith("bounce: error: ")
-    for needle in needles:
-        assert needle in lines[0]
-    assert "Traceback" not in result.output
-
-
-def test_version_and_help():
-    result = run("--version")
+def test_version_and_help(cli):
+    result = cli("--version")
     assert result.exit_code == 0 and __version__ in result.stdout
-    result = run("--help")
+    result = cli("--help")
     assert result.exit_code == 0
     for command in ("fixed-point", "orbit"):
         assert command in result.stdout
 
 
-def test_fixed_point_json_paper_values():
-    result = run("fixed-point", "--json")
+def test_fixed_point_json_paper_values(cli):
+    result = cli("fixed-point", "--json")
     assert result.exit_code == 0, result.output
     data = json.loads(result.stdout)
     assert set(data) == {"v_m_s", "theta_rad", "theta_deg", "ac_g", "eigenvalues",
@@ -56,11 +36,11 @@ def test_fixed_point_json_paper_values():
     assert data["theta_rad"] == pytest.approx(math.radians(data["theta_deg"]))
 
 
-def test_fixed_point_table_and_overrides():
-    result = run("fixed-point", "--set", "model.alpha=0.6")
+def test_fixed_point_table_and_overrides(cli):
+    result = cli("fixed-point", "--set", "model.alpha=0.6")
     assert result.exit_code == 0
     assert "v~" in result.stdout and "4.5126" in result.stdout  # v~ does not depend on alpha
-    result = run("fixed-point", "--json", "--set", "model.racket_period=0.5")
+    result = cli("fixed-point", "--json", "--set", "model.racket_period=0.5")
     assert json.loads(result.stdout)["v_m_s"] == pytest.approx(math.pi * 9.81 / (2 * math.pi / 0.5))
 
 
@@ -75,25 +55,25 @@ def test_fixed_point_table_and_overrides():
         (["--set", "model.alpha"], ["expected dotted.key=value"]),
     ],
 )
-def test_fixed_point_user_errors(args, needles):
-    assert_user_error(run("fixed-point", *args), *needles)
+def test_fixed_point_user_errors(args, needles, cli, user_error):
+    user_error(cli("fixed-point", *args), *needles)
 
 
-def test_config_file_errors(tmp_path):
+def test_config_file_errors(tmp_path, cli, user_error):
     wrong_type = tmp_path / "wrong.yaml"
     wrong_type.write_text("model:\n  racket_period: fast\n")
-    assert_user_error(run("fixed-point", "--config", wrong_type), "model.racket_period", "number")
+    user_error(cli("fixed-point", "--config", wrong_type), "model.racket_period", "number")
     malformed = tmp_path / "bad.yaml"
     malformed.write_text("model: {alpha: 0.5\n")
-    assert_user_error(run("fixed-point", "--config", malformed), "malformed YAML")
-    assert_user_error(run("fixed-point", "--config", tmp_path / "none.yaml"), "not found")
+    user_error(cli("fixed-point", "--config", malformed), "malformed YAML")
+    user_error(cli("fixed-point", "--config", tmp_path / "none.yaml"), "not found")
 
 
-def test_fixed_point_reads_the_model_block_of_any_config(tmp_path):
+def test_fixed_point_reads_the_model_block_of_any_config(tmp_path, cli):
     cfg = tmp_path / "other.yaml"
     cfg.write_text("model:\n  alpha: 0.42\n  g: 5.8\n  racket_amplitude: 0.065\n"
                    "  racket_period: 0.55\nnoise: {q_v: 0.04}\n")
-    result = run("fixed-point", "--json", "--config", cfg)
+    result = cli("fixed-point", "--json", "--config", cfg)
     assert result.exit_code == 0, result.output
     assert json.loads(result.stdout)["v_m_s"] == pytest.approx(math.pi * 5.8 * 0.55 / (2 * math.pi))
 
@@ -102,8 +82,8 @@ def read_orbit_csv(result):
     return pd.read_csv(io.StringIO(result.stdout))
 
 
-def test_orbit_period1_settles_on_fixed_point():
-    result = run("orbit", "--theta0-deg", 43.1, "--v0", 4.8, "-n", 40, "--csv")
+def test_orbit_period1_settles_on_fixed_point(cli):
+    result = cli("orbit", "--theta0-deg", 43.1, "--v0", 4.8, "-n", 40, "--csv")
     assert result.exit_code == 0, result.output
     df = read_orbit_csv(result)
     assert list(df.columns) == ["k", "t_s", "theta_rad", "theta_deg", "v_m_s", "flight_s"]
@@ -120,28 +100,28 @@ def test_orbit_period1_settles_on_fixed_point():
     assert result.stderr.strip() == ""
 
 
-def test_orbit_sticking_stops_early_with_a_note():
-    result = run("orbit", "--theta0-deg", 43.1, "--v0", 5.7, "-n", 40, "--csv")
+def test_orbit_sticking_stops_early_with_a_note(cli):
+    result = cli("orbit", "--theta0-deg", 43.1, "--v0", 5.7, "-n", 40, "--csv")
     assert result.exit_code == 0
     df = read_orbit_csv(result)
     assert len(df) < 41
     assert df.flight_s.iloc[-1] < 1e-3
     assert "sticking" in result.stderr
-    # a coarser sticking interval stops earlier
-    coarse = read_orbit_csv(run("orbit", "--theta0-deg", 43.1, "--v0", 5.7, "-n", 40, "--csv",
-                                "--sticking-interval", 0.05))
+    # a longer shortest hop stops earlier
+    coarse = read_orbit_csv(cli("orbit", "--theta0-deg", 43.1, "--v0", 5.7, "-n", 40, "--csv",
+                                "--min-hop-s", 0.05))
     assert len(coarse) < len(df)
 
 
-def test_orbit_below_racket():
-    result = run("orbit", "--theta0-deg", 0, "--v0", 0.5, "--csv")
+def test_orbit_below_racket(cli):
+    result = cli("orbit", "--theta0-deg", 0, "--v0", 0.5, "--csv")
     assert result.exit_code == 0
     assert len(read_orbit_csv(result)) == 1
     assert "below the racket" in result.stderr
 
 
-def test_orbit_table_output():
-    result = run("orbit", "--theta0-deg", 43.1, "--v0", 4.8, "-n", 3)
+def test_orbit_table_output(cli):
+    result = cli("orbit", "--theta0-deg", 43.1, "--v0", 4.8, "-n", 3)
     assert result.exit_code == 0
     assert "theta_deg" in result.stdout and "4.80000" in result.stdout
 
@@ -155,18 +135,77 @@ def test_python_dash_m_entry_point():
     assert out.returncode == 0 and __version__ in out.stdout
 
 
-def test_unstable_fixed_point_warns_in_one_line(tmp_path):
+def test_unstable_fixed_point_warns_in_one_line(tmp_path, cli):
     # period 0.8 s: AC = -1.57 g, beyond the flip boundary -1.11 g (eq. 14)
-    result = run("basin", "--set", "model.racket_period=0.8", "--set", "grid.theta0_deg.num=6",
+    result = cli("basin", "--set", "model.racket_period=0.8", "--set", "grid.theta0_deg.num=6",
+                 "--jobs", 1,
                  "--set", "grid.v0_m_s.num=6", "--out", tmp_path / "b", "--quiet")
     assert result.exit_code == 0
     warnings = [line for line in result.stderr.splitlines() if "warning" in line]
     assert len(warnings) == 1 and "unstable" in warnings[0] and "2.16" in warnings[0]
-    stable = run("basin", "--set", "grid.theta0_deg.num=6", "--set", "grid.v0_m_s.num=6",
+    stable = cli("basin", "--set", "grid.theta0_deg.num=6", "--set", "grid.v0_m_s.num=6",
+                 "--jobs", 1,
                  "--out", tmp_path / "s", "--quiet")
     assert "warning" not in stable.stderr
 
 
-def test_rk4_step_is_bounded():
-    assert_user_error(run("trajectory", "--set", "rk4_step_s=0.02", "--print-config"),
+def test_rk4_step_is_bounded(cli, user_error):
+    user_error(cli("trajectory", "--set", "rk4_step_s=0.02", "--print-config"),
                       "rk4_step_s")
+
+
+def test_orbit_iterates_where_there_is_no_fixed_point(cli, user_error):
+    # a_r = 0.01 m: eq. 8 gives cos(theta~) = 22 (no period-1 orbit); the ball dies onto the
+    # racket, each hop shorter than the last, until one is shorter than 1 ms
+    result = cli("orbit", "--theta0-deg", 43.1, "--v0", 4.8, "-n", 40, "--csv",
+                 "--set", "model.racket_amplitude=0.01")
+    assert result.exit_code == 0, result.output
+    df = read_orbit_csv(result)
+    assert 3 < len(df) < 41
+    assert (df.flight_s.diff().dropna() < 0).all()
+    notes = result.stderr.splitlines()
+    assert len(notes) == 2
+    assert notes[0].startswith("note: no period-1 fixed point") and "22.02" in notes[0]
+    assert "sticking" in notes[1]
+    # the same rows as the engine's map from the same start
+    from bounce_cli.engine.maps import iterate_orbit
+    from bounce_cli.engine.params import ModelParams
+
+    orbit = iterate_orbit(math.radians(43.1), 4.8, ModelParams(0.5, 9.81, 0.01, 0.92), 40, 1e-3)
+    assert df.v_m_s.to_numpy() == pytest.approx(orbit.v, rel=1e-12)
+    # fixed-point still refuses these parameters
+    user_error(cli("fixed-point", "--set", "model.racket_amplitude=0.01"),
+                      "no period-1 fixed point")
+
+
+def test_orbit_at_an_unstable_fixed_point_has_no_note_about_it(cli):
+    # alpha 0.5, period 0.8 s: the fixed point exists (unstable): the orbit runs all impacts
+    result = cli("orbit", "--theta0-deg", 60, "--v0", 4.0, "-n", 30, "--csv",
+                 "--set", "model.racket_period=0.8")
+    assert result.exit_code == 0, result.output
+    assert "no period-1 fixed point" not in result.stderr
+
+
+@pytest.mark.parametrize("name", ["trajectory", "basin", "stability", "regression", "acf",
+                                  "impulse"])
+def test_print_config_prints_the_resolved_config_and_runs_nothing(name, tmp_path, monkeypatch,
+                                                                  cli):
+    """--print-config: the resolved config as YAML (the bundled file with defaults filled in
+    and --set applied), a file that loads back to the same config; nothing is written."""
+    import yaml
+
+    from bounce_cli.config import bundled_config_path, load_config
+    from bounce_cli.registry import entry
+
+    monkeypatch.chdir(tmp_path)
+    schema = entry(name).load().schema
+    result = cli(name, "--print-config", "--set", "model.g=9.8")
+    assert result.exit_code == 0, result.output
+    printed = yaml.safe_load(result.stdout)
+    expected = load_config(schema, bundled_config_path(name), ["model.g=9.8"])
+    assert printed == expected.model_dump(mode="json")
+    assert printed["model"]["g"] == 9.8
+    (tmp_path / "printed.yaml").write_text(result.stdout)
+    again = cli(name, "--print-config", "--config", tmp_path / "printed.yaml")
+    assert again.exit_code == 0 and again.stdout == result.stdout
+    assert list(tmp_path.iterdir()) == [tmp_path / "printed.yaml"]  # no results folder

@@ -22,10 +22,32 @@ def write(tmp_path, text, name="c.yaml") -> Path:
     return path
 
 
-def test_bundled_model_config_is_the_paper_fig3_fig4_model():
-    cfg = load_config(ModelOnlyConfig, bundled_config_path("model"))
-    assert (cfg.model.alpha, cfg.model.g, cfg.model.racket_amplitude, cfg.model.racket_period) == (
-        0.5, 9.81, 0.30, 0.92)
+@pytest.mark.parametrize("name, paper_set", [
+    ("model", "FIG3_MODEL"), ("trajectory", "FIG3_MODEL"), ("basin", "FIG3_MODEL"),
+    ("stability", "FIG3_MODEL"), ("impulse", "FIG3_MODEL"), ("acf", "FIG8_MODEL"),
+])
+def test_bundled_configs_are_at_the_papers_parameters(name, paper_set):
+    """Each bundled config's model block is the paper's parameter set of its figure, as the
+    paper module records it (a config edited away from the paper fails here, not in a
+    claim)."""
+    from bounce_cli import paper
+
+    cfg = load_config(ModelOnlyConfig, bundled_config_path(name)) if name == "model" else None
+    if cfg is None:
+        from bounce_cli.registry import entry
+
+        cfg = load_config(entry(name).load().schema, bundled_config_path(name))
+    assert paper.at_parameters(cfg.params, getattr(paper, paper_set))
+
+
+def test_old_name_of_the_sticking_threshold_is_still_read(tmp_path):
+    from bounce_cli.config import ClassifyBlock
+    from bounce_cli.engine.classify import ClassifySettings
+
+    old = ClassifyBlock.model_validate({"sticking_interval_s": 0.02})
+    assert old.min_hop_s == 0.02 and old.settings().min_hop_s == 0.02
+    # defaults are the engine's (section 3's values)
+    assert ClassifyBlock().settings() == ClassifySettings()
 
 
 def test_overrides_parse_as_yaml_scalars():

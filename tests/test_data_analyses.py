@@ -8,18 +8,12 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
-from test_cli import assert_user_error, run  # shared CliRunner helpers
 
-from bounce_cli.engine import (
-    ModelParams,
-    eq15_amplitude,
-    impulse_response_full,
-    jacobian,
-    map_noise_covariance,
-    paper_noise_covariance,
-    phase_difference,
-    var1_theory,
-)
+from bounce_cli.engine.impulse import impulse_response_full
+from bounce_cli.engine.linear import jacobian
+from bounce_cli.engine.params import ModelParams, phase_difference
+from bounce_cli.engine.regression import eq15_amplitude
+from bounce_cli.engine.stochastic import map_noise_covariance, paper_noise_covariance, var1_theory
 from bounce_cli.engine.data_stats import (
     align,
     noise_from_sds,
@@ -118,7 +112,7 @@ def test_relaxation_criterion_is_shared_and_uses_the_se():
 
 # -- bounce acf --data ------------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def acf_data(tmp_path_factory):
+def acf_data(tmp_path_factory, cli):
     """12 trials x 250 bounces of eqs. 16-18 at the acf config's parameters, with measurement
     noise on v (0.01 m/s) and theta (0.5 deg) and an offset per trial in the phase reference
     (a lab's racket mid-position)."""
@@ -133,7 +127,7 @@ def acf_data(tmp_path_factory):
     path = tmp / "impacts.csv"
     frame.to_csv(path, index=False)
     out = tmp / "out"
-    result = run("acf", "--data", path, "--out", out, "--quiet", *ACF_MODEL, *FAST)
+    result = cli("acf", "--data", path, "--out", out, "--quiet", *ACF_MODEL, *FAST)
     assert result.exit_code == 0, result.output
     return path, out
 
@@ -198,15 +192,15 @@ def test_acf_data_figures_redraw_from_csvs(acf_data):
         assert any(ax.get_xlabel() for ax in fig.axes)
 
 
-def test_acf_data_without_a_fixed_point_is_one_line(acf_data, tmp_path):
+def test_acf_data_without_a_fixed_point_is_one_line(acf_data, tmp_path, cli, user_error):
     path, _ = acf_data
     small = tmp_path / "small.csv"
     pd.read_csv(path).assign(racket_amplitude_m=0.01).to_csv(small, index=False)
-    result = run("acf", "--data", small, "--out", tmp_path / "o", *ACF_MODEL)
-    assert_user_error(result, "no period-1 fixed point", "data's racket amplitude 0.01 m")
+    result = cli("acf", "--data", small, "--out", tmp_path / "o", *ACF_MODEL)
+    user_error(result, "no period-1 fixed point", "data's racket amplitude 0.01 m")
     assert not (tmp_path / "o" / "acf_data.csv").exists()
     # the config's own racket (unused with --data) does not stop the run
-    result = run("acf", "--data", path, "--out", tmp_path / "p", "--quiet", *ACF_MODEL, *FAST,
+    result = cli("acf", "--data", path, "--out", tmp_path / "p", "--quiet", *ACF_MODEL, *FAST,
                  "--set", "model.racket_amplitude=0.001")
     assert result.exit_code == 0, result.output
 
@@ -235,7 +229,7 @@ def test_full_map_var_intervals_cover_eq9_over_seeds():
 
 # -- bounce impulse --data --------------------------------------------------------------------
 @pytest.fixture(scope="module")
-def impulse_data(tmp_path_factory):
+def impulse_data(tmp_path_factory, cli):
     """Perturbations every 12th impact, alpha_p in 0.38-0.40 or 0.60-0.62, weak noise
     (q = 0.003), 10 trials of 70 impacts at the paper's section 7 parameters."""
     tmp = tmp_path_factory.mktemp("impulsedata")
@@ -247,7 +241,7 @@ def impulse_data(tmp_path_factory):
     out = tmp / "out"
     # baseline from impacts 8 or more after a perturbation: the passive model is still
     # relaxing before (|dtheta| ~ 6 deg at k = 4), which would bias a closer baseline
-    result = run("impulse", "--data", path, "--out", out, "--quiet",
+    result = cli("impulse", "--data", path, "--out", out, "--quiet",
                  "--set", "data_analysis.settle_after_perturbation=8")
     assert result.exit_code == 0, result.output
     return path, out
@@ -276,33 +270,33 @@ def test_aligned_data_match_the_model_response(impulse_data):
     assert relax["criterion"].str.contains("SE").all()
 
 
-def test_close_perturbations_do_not_contaminate_each_other(tmp_path):
+def test_close_perturbations_do_not_contaminate_each_other(tmp_path, cli):
     alpha = perturbation_schedule(4, 60, 5, 0.5, [(0.38, 0.40), (0.60, 0.62)], seed=41)
     sim = simulate_impacts(PAPER, 0.003, 0.003, 4, 60, seed=42, alpha=alpha)
     path = tmp_path / "impacts.csv"
     impacts_frame(sim, PAPER).to_csv(path, index=False)
-    result = run("impulse", "--data", path, "--out", tmp_path / "o", "--quiet")
+    result = cli("impulse", "--data", path, "--out", tmp_path / "o", "--quiet")
     assert result.exit_code == 0, result.output
     aligned = pd.read_csv(tmp_path / "o" / "aligned.csv")
     assert (aligned.loc[aligned.k >= 5, "n"] == 0).all()  # cut before the next perturbation
     assert (aligned.loc[aligned.k < 5, "n"] > 0).all()
 
 
-def test_impulse_data_errors(impulse_data, tmp_path):
+def test_impulse_data_errors(impulse_data, tmp_path, cli, user_error):
     path, _ = impulse_data
     frame = pd.read_csv(path)
     none = tmp_path / "none.csv"
     frame.assign(perturbed=False, alpha=0.5).to_csv(none, index=False)
-    assert_user_error(run("impulse", "--data", none, "--out", tmp_path / "a"),
+    user_error(cli("impulse", "--data", none, "--out", tmp_path / "a"),
                       "no perturbed impact")
     no_alpha = tmp_path / "no_alpha.csv"
     frame.drop(columns=["alpha"]).to_csv(no_alpha, index=False)
-    assert_user_error(run("impulse", "--data", no_alpha, "--out", tmp_path / "b"),
+    user_error(cli("impulse", "--data", no_alpha, "--out", tmp_path / "b"),
                       "missing column alpha", "impulse --data")
 
 
 # -- bounce regression --data impacts.csv -------------------------------------------------------
-def test_regression_aggregates_impacts_to_trial_means(tmp_path):
+def test_regression_aggregates_impacts_to_trial_means(tmp_path, cli):
     """Trials at three periods with eq. 15's amplitude at theta~ = 35 deg: trial means give
     back a_r and tau exactly and the eq. 15 slope within its interval."""
     frames = []
@@ -314,7 +308,7 @@ def test_regression_aggregates_impacts_to_trial_means(tmp_path):
     path = tmp_path / "impacts.csv"
     pd.concat(frames).to_csv(path, index=False)
     out = tmp_path / "out"
-    result = run("regression", "--data", path, "--out", out, "--quiet")
+    result = cli("regression", "--data", path, "--out", out, "--quiet")
     assert result.exit_code == 0, result.output
     trials = pd.read_csv(out / "trials.csv")
     assert list(trials["trial"]) == [f"t{i}" for i in range(6)]
@@ -347,7 +341,7 @@ def test_acf_data_reports_the_data_means_beside_eqs_7_8(acf_data):
     assert stab.loc[("alpha", "data_eq8"), "estimate"] == pytest.approx(0.42, abs=0.01)
 
 
-def test_racket_period_modulation_is_recovered(impulse_data, tmp_path):
+def test_racket_period_modulation_is_recovered(impulse_data, tmp_path, cli):
     """Fig. 11: a subject who lengthens the racket period by 20 ms at the impact after an
     increase of alpha and shortens it by 20 ms after a decrease (amplitude untouched)."""
     path, _ = impulse_data
@@ -358,7 +352,7 @@ def test_racket_period_modulation_is_recovered(impulse_data, tmp_path):
     modulated = tmp_path / "modulated.csv"
     frame.to_csv(modulated, index=False)
     out = tmp_path / "out"
-    result = run("impulse", "--data", modulated, "--out", out, "--quiet",
+    result = cli("impulse", "--data", modulated, "--out", out, "--quiet",
                  "--set", "data_analysis.settle_after_perturbation=8")
     assert result.exit_code == 0, result.output
     a = pd.read_csv(out / "aligned.csv").set_index(["quantity", "direction", "k"])["mean"]

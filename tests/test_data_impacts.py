@@ -6,7 +6,7 @@ import pandas as pd
 import pytest
 
 from bounce_cli.config import ConfigError
-from bounce_cli.engine import ModelParams
+from bounce_cli.engine.params import ModelParams
 from bounce_cli.engine.data_stats import perturbation_schedule, simulate_impacts
 from bounce_cli.impacts import (
     EVENT_COLUMNS,
@@ -52,7 +52,7 @@ def test_a_labs_file_in_another_order_with_degrees_only(table, tmp_path):
     lab["trial"] = lab["trial"].map({1: "S01-b", 2: "S01-a", 3: "S01-c"})
     impacts = read_impacts(write(tmp_path, lab))
     f = impacts.frame
-    for trial, rows in impacts.by_trial():
+    for _trial, rows in impacts.by_trial():
         assert list(rows["k"]) == sorted(rows["k"])
     np.testing.assert_allclose(np.sort(f["theta_rad"]), np.sort(table["theta_rad"]), rtol=1e-12)
 

@@ -47,7 +47,8 @@ def assert_frames_match(fresh: pd.DataFrame, committed: pd.DataFrame, where: tup
             x, y = a.to_numpy(float), b.to_numpy(float)
             close = np.isclose(x, y, rtol=RTOL, atol=ATOL, equal_nan=True)
         else:
-            text = [col.astype(object).where(col.notna(), "<missing>").astype(str) for col in (a, b)]
+            text = [col.astype(object).where(col.notna(), "<missing>").astype(str)
+                    for col in (a, b)]
             close = (text[0] == text[1]).to_numpy(bool)
         flipped = 1.0 - close.mean()
         assert flipped <= allowed, (

@@ -1,112 +1,39 @@
-"""Pure numerics of the ball bouncing map: numpy/scipy only, no files, no printing."""
+"""Pure numerics of the ball bouncing map: numpy/scipy only, no files, no printing.
 
-from .classify import (
-    BELOW_RACKET,
-    OUTCOMES,
-    PERIOD1,
-    STICKING,
-    UNDECIDED,
-    Classification,
-    ClassifySettings,
-    classify_batch,
-    classify_grid,
-)
-from .flight import (
-    INTEGRATORS,
-    FlightSettings,
-    Impact,
-    Segment,
-    Trajectory,
-    impact_velocity,
-    leave_phase,
-    simulate,
-)
-from .impact import can_fly, gap, gap_slope, launch_slope, next_impact_phase
-from .impulse import (
-    ImpulseResponse,
-    impulse_response_full,
-    impulse_response_linear,
-    perturbed_velocity,
-    relaxation_impacts,
-)
-from .linear import (
-    ContractionFit,
-    MinimumRadius,
-    Stability,
-    ac_explicit_g,
-    characteristic_c,
-    empirical_contraction_rate,
-    iterate_linear,
-    min_stable_spectral_radius,
-    racket_amplitude_for_ac,
-    stable_ac_range_g,
-    complex_boundaries_g,
-    eigenvalues,
-    finite_difference_jacobian,
-    flip_boundary_g,
-    is_complex_regime,
-    jacobian,
-    racket_acceleration_at_impact_g,
-    spectral_radius,
-    stability,
-)
-from .maps import MapStep, Orbit, iterate_map, iterate_orbit, map_step, velocity_after_impact
-from .regression import (
-    LineFit,
-    TrialMeans,
-    eq15_amplitude,
-    eq15_slope,
-    ols_line,
-    period_for_height,
-    phase_from_slope,
-    simulate_trial,
-)
-from .stochastic import (
-    PAIR_NAMES,
-    PAIRS,
-    VELOCITY_PHASES,
-    StochasticRuns,
-    Var1Theory,
-    correlations_from_covariances,
-    lagged_covariances,
-    map_noise_covariance,
-    paper_noise_covariance,
-    sample_correlations,
-    simulate_stochastic_map,
-    stationary_covariance,
-    stochastic_step,
-    var1_theory,
-)
-from .params import (
-    FixedPoint,
-    ModelError,
-    ModelParams,
-    NoFixedPointError,
-    phase_difference,
-    wrap_phase,
-)
+The entry points a library user needs; everything else lives in the submodules
+(``params``, ``impact``, ``maps``, ``linear``, ``classify``, ``flight``, ``stochastic``,
+``impulse``, ``regression``, ``reference``, ``roots``)::
+
+    from bounce_cli.engine import ModelParams, classify_grid, stability
+    p = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.30, racket_period=0.92)
+    p.fixed_point(), stability(p).spectral_radius
+"""
+
+from .classify import OUTCOMES, Classification, ClassifySettings, classify_batch, classify_grid
+from .flight import FlightSettings, Trajectory, simulate
+from .impact import next_impact_phase
+from .impulse import find_threshold, impulse_response_full, impulse_response_linear
+from .linear import Stability, flip_boundary_g, jacobian, stability
+from .maps import Orbit, iterate_map, iterate_orbit, map_step
+from .params import FixedPoint, ModelError, ModelParams, NoFixedPointError, wrap_phase
+from .regression import eq15_slope, ols_line
+from .stochastic import simulate_stochastic_map, var1_theory
 
 __all__ = [
-    "BELOW_RACKET", "OUTCOMES", "PERIOD1", "STICKING", "UNDECIDED", "Classification",
-    "ClassifySettings", "classify_batch", "classify_grid",
-    "INTEGRATORS", "FlightSettings", "Impact", "Segment", "Trajectory", "impact_velocity",
-    "leave_phase", "simulate",
-    "FixedPoint", "MapStep", "Orbit", "iterate_orbit", "ModelError", "ModelParams", "NoFixedPointError", "Stability",
-    "can_fly", "complex_boundaries_g", "eigenvalues", "finite_difference_jacobian",
-    "flip_boundary_g", "gap", "gap_slope", "is_complex_regime", "iterate_map", "jacobian",
-    "launch_slope", "map_step", "next_impact_phase", "phase_difference",
-    "racket_acceleration_at_impact_g", "spectral_radius", "stability", "velocity_after_impact",
-    "wrap_phase", "ContractionFit", "MinimumRadius", "ac_explicit_g", "characteristic_c",
-    "empirical_contraction_rate", "iterate_linear", "min_stable_spectral_radius",
-    "racket_amplitude_for_ac", "stable_ac_range_g", "ImpulseResponse", "impulse_response_full",
-    "impulse_response_linear", "perturbed_velocity", "relaxation_impacts",
-    "wrap_phase",
-    # stochastic map and VAR(1) theory (section 6)
-    "PAIR_NAMES", "PAIRS", "VELOCITY_PHASES", "StochasticRuns", "Var1Theory",
-    "correlations_from_covariances", "lagged_covariances", "map_noise_covariance",
-    "paper_noise_covariance", "sample_correlations", "simulate_stochastic_map",
-    "stationary_covariance", "stochastic_step", "var1_theory",
-    # amplitude-period relation (section 5, eq. 15)
-    "LineFit", "TrialMeans", "eq15_amplitude", "eq15_slope", "ols_line", "period_for_height",
-    "phase_from_slope", "simulate_trial",
+    # parameters, fixed point (eqs. 4, 7, 8)
+    "ModelParams", "FixedPoint", "ModelError", "NoFixedPointError", "wrap_phase",
+    # the map (eqs. 5, 6)
+    "next_impact_phase", "map_step", "iterate_map", "iterate_orbit", "Orbit",
+    # linear stability (eqs. 9-14)
+    "jacobian", "stability", "Stability", "flip_boundary_g",
+    # basin classification (section 3, Fig. 4)
+    "classify_batch", "classify_grid", "ClassifySettings", "Classification", "OUTCOMES",
+    # continuous motion (eqs. 1-4, Fig. 3)
+    "simulate", "FlightSettings", "Trajectory",
+    # stochastic map and eq. 19 (section 6)
+    "simulate_stochastic_map", "var1_theory",
+    # impulse responses (section 7)
+    "impulse_response_full", "impulse_response_linear", "find_threshold",
+    # eq. 15 (section 5)
+    "eq15_slope", "ols_line",
 ]

@@ -6,7 +6,7 @@ conditions occurs:
 
 * ``below_racket``: v0 is not above the racket's velocity at theta0 (``can_fly`` false at
   k = 0), so the ball cannot leave the racket; 0 iterations.
-* ``sticking``: a hop (time between two impacts) lasts less than ``sticking_interval_s``.
+* ``sticking``: a hop (time between two impacts) lasts less than ``min_hop_s``.
   A ball that cannot leave the racket after an impact (grazing, possible only for alpha = 0)
   is sticking too.
 * ``period1``: after an impact both ``|v - v~| < tolerance`` (m/s) and
@@ -50,11 +50,19 @@ DEFAULT_TILE_POINTS = 1 << 15
 
 @dataclass(frozen=True)
 class ClassifySettings:
-    """Stopping conditions of section 3 (the paper: 100, 1e-3, 1e-3 s)."""
+    """Stopping conditions of section 3, the paper's values by default (the one place these
+    defaults live: the config's ``classify`` block and the reference classifier take them from
+    here).
+
+    max_iterations: impacts at most (section 3: 100).
+    tolerance: period-1 when |v - v~| < tolerance (m/s) and the wrapped |theta - theta~| <
+    tolerance (rad) (section 3: 1e-3).
+    min_hop_s: sticking when a hop lasts less than this, s (section 3: 1e-3 s).
+    """
 
     max_iterations: int = 100
     tolerance: float = 1e-3
-    sticking_interval_s: float = 1e-3
+    min_hop_s: float = 1e-3
 
 
 @dataclass(frozen=True)
@@ -68,7 +76,8 @@ class Classification:
         return np.asarray(OUTCOMES, dtype=object)[self.outcome]
 
 
-def classify_batch(theta0, v0, params: ModelParams, settings: ClassifySettings = ClassifySettings()):
+def classify_batch(theta0, v0, params: ModelParams,
+                   settings: ClassifySettings = ClassifySettings()) -> Classification:
     """Classify initial conditions (arrays broadcast) in one vectorised batch.
 
     Returns a ``Classification`` with the broadcast shape. See the module docstring for the
@@ -79,7 +88,7 @@ def classify_batch(theta0, v0, params: ModelParams, settings: ClassifySettings =
     theta0, v0 = theta0.ravel(), v0.ravel()
     fp = params.fixed_point()
     tol = settings.tolerance
-    min_hop = settings.sticking_interval_s
+    min_hop = settings.min_hop_s
     w = params.omega
 
     outcome = np.full(theta0.shape, UNDECIDED, dtype=np.int8)

@@ -21,7 +21,12 @@ from .impact import next_impact_phase
 from .linear import jacobian
 from .maps import velocity_after_impact
 from .params import ModelError, ModelParams, phase_difference, wrap_phase
-from .stochastic import PAIR_NAMES, paper_noise_covariance, sample_correlations, stationary_covariance
+from .stochastic import (
+    PAIR_NAMES,
+    paper_noise_covariance,
+    sample_correlations,
+    stationary_covariance,
+)
 
 
 # -- a synthetic lab -------------------------------------------------------------------------
@@ -80,13 +85,14 @@ def simulate_impacts(
     out_v = np.full_like(out_theta, np.nan)
     out_t = np.full_like(out_theta, np.nan)
     lost = np.zeros(n_trials, dtype=bool)
-    start = None
+    start = np.full(n_trials, np.nan)
     for step in range(total):
         j = step - burn_in
         a = alphas[:, j] if j >= 0 else alpha_0
         hop = next_impact_phase(theta, v, params)
         theta_next = theta + hop + q_theta * noise[step, :, 1]
-        v_next = velocity_after_impact(theta_next, v, hop, params, alpha=a) + q_v * noise[step, :, 0]
+        v_next = (velocity_after_impact(theta_next, v, hop, params, alpha=a)
+                  + q_v * noise[step, :, 0])
         bad = ~(hop >= sticking_interval_s * w) | ~np.isfinite(v_next)
         lost |= bad
         theta = np.where(lost, fp.theta_rad + 2 * math.pi * (step + 1), theta_next)

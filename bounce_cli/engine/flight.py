@@ -26,12 +26,14 @@ All times in s, positions in m, velocities in m/s, phases in rad (theta = w t, u
 
 from __future__ import annotations
 
+import enum
 import math
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import brentq
 
+from .classify import ClassifySettings
 from .impact import can_fly, next_impact_phase
 from .params import ModelError, ModelParams
 
@@ -46,8 +48,16 @@ LEAVE_NUDGE_PHASE = 1e-4
 #: sub-intervals sampled per RK4 step to find the first sign change of the gap
 RK4_SUBSAMPLES = 16
 
-#: marker returned for a hop the rk4 integrator cannot resolve (treated as sticking)
-UNRESOLVED = object()
+
+
+class FlightEnd(enum.Enum):
+    """How a flight ends when it does not end in an impact."""
+
+    #: the flight lasts beyond the end of the run
+    BEYOND_END = "beyond_end"
+    #: rk4: the ball is below the racket after one step with no crossing resolved inside it
+    #: (a hop shorter than a sub-step); treated as sticking
+    UNRESOLVED = "unresolved"
 
 
 @dataclass(frozen=True)
@@ -55,8 +65,8 @@ class FlightSettings:
     """How the continuous motion is integrated and when the ball counts as stuck."""
 
     integrator: str = "exact"
-    rk4_step_s: float = 1e-3
-    min_hop_s: float = 1e-3
+    rk4_step_s: float = 1e-3  # the paper's RK4 step (section 3)
+    min_hop_s: float = ClassifySettings().min_hop_s  # section 3's sticking criterion
     min_relative_velocity_m_s: float = 1e-3
 
     def __post_init__(self) -> None:
@@ -203,9 +213,9 @@ class _Simulation:
                 stuck = False
                 continue
             impact = self.fly(t, v)
-            if impact is None:  # the flight lasts beyond the end
+            if impact is FlightEnd.BEYOND_END:
                 return
-            if impact is UNRESOLVED:  # rk4: a hop shorter than its sub-step
+            if impact is FlightEnd.UNRESOLVED:
                 stuck = True
                 continue
             self.impacts.append(impact)
@@ -217,27 +227,28 @@ class _Simulation:
             )
 
     # -- one flight: from the racket at time t with velocity v to the next impact ---------------
-    def fly(self, t: float, v: float):
-        """The impact ending the flight from the racket at time t with velocity v; None when
-        the flight outlasts the run; UNRESOLVED when rk4 cannot resolve the hop."""
+    def fly(self, t: float, v: float) -> Impact | FlightEnd:
+        """The impact ending the flight from the racket at time t with velocity v, or how
+        the flight ends otherwise (beyond the run's end; a hop rk4 cannot resolve)."""
         p, w = self.p, self.p.omega
         x = float(p.racket_position(w * t))
         if self.s.integrator == "exact":
             t_hit = self._exact_hit(t, v)
         else:
-            t_hit = self._rk4_hit(t, x, v)
-            if t_hit is None:
-                return UNRESOLVED
+            rk4_hit = self._rk4_hit(t, x, v)
+            if rk4_hit is None:
+                return FlightEnd.UNRESOLVED
+            t_hit = rk4_hit
         self.segments.append(Segment("flight", t, min(t_hit, self.t_end), x, v))
         if t_hit > self.t_end:
-            return None
+            return FlightEnd.BEYOND_END
         hop = t_hit - t
         v_before = v - p.g * hop
         racket_v = float(p.racket_velocity(w * t_hit))
         return Impact(t_hit, w * t_hit, v_before, impact_velocity(v_before, racket_v, p.alpha),
                       racket_v, hop)
 
-    def _exact_hit(self, t: float, v: float) -> float | None:
+    def _exact_hit(self, t: float, v: float) -> float:
         p, w = self.p, self.p.omega
         theta = w * t
         launch_v, launch_theta = v, theta

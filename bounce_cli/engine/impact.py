@@ -20,6 +20,8 @@ side (like Newton, quadratically near a simple root) and is finished with a Newt
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from .params import ModelParams
@@ -83,17 +85,17 @@ def first_impact_phase(theta, v, amplitude, omega, g, *, max_steps: int = MAX_SA
     and v: one call serves states at different parameters (a sweep of the map, or a racket
     whose period changes from one flight to the next under period control). Scalars take the
     same arithmetic as arrays of one value, so results do not depend on the form."""
-    theta, v, a, w, g = np.broadcast_arrays(*(np.asarray(x, dtype=float)
-                                              for x in (theta, v, amplitude, omega, g)))
+    theta, v, *given = np.broadcast_arrays(*(np.asarray(x, dtype=float)
+                                             for x in (theta, v, amplitude, omega, g)))
     shape = theta.shape
     theta = np.mod(theta.ravel(), 2.0 * np.pi)  # sin/cos periodic: keep arguments small
     v = v.ravel()
     # racket parameters: plain floats when they are one value (the fast path), else arrays
     # that are compacted with the states below
-    params = [float(x.flat[0]) if x.size and np.all(x == x.flat[0]) else x.ravel()
-              for x in (a, w, g)]
-    a, w, g = params
-    bound = g / (w * w) + a  # M >= |G''|
+    racket: list[Any] = [float(x.flat[0]) if x.size and np.all(x == x.flat[0]) else x.ravel()
+                         for x in given]
+    a, w, g = racket
+    bound: Any = g / (w * w) + a  # M >= |G''|
 
     result = np.full(theta.shape, np.nan)
     slope = (v - a * w * np.cos(theta)) / w

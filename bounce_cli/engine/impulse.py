@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .classify import OUTCOMES, ClassifySettings, classify_batch
 from .linear import iterate_linear, jacobian
 from .maps import iterate_map
 from .params import ModelParams, phase_difference
@@ -72,3 +73,77 @@ def relaxation_impacts(dv, dtheta, tol_v: float, tol_theta: float) -> int:
         return -1
     outside = np.flatnonzero(~inside)
     return int(outside[-1] + 1) if len(outside) else 0
+
+
+# -- where the perturbed response goes (section 3's criteria) ----------------------------------
+def perturbed_outcome(params: ModelParams, alpha_p: float,
+                      settings: ClassifySettings = ClassifySettings()) -> tuple[str, int]:
+    """Where the full map from (theta~, v_0(alpha_p)) ends with section 3's criteria (the
+    basin's classifier, ``classify_batch``): ``period1`` | ``sticking`` | ``below_racket`` |
+    ``undecided``, and the number of impacts until it was decided."""
+    result = classify_batch(params.fixed_point().theta_rad, perturbed_velocity(params, alpha_p),
+                            params, settings)
+    return OUTCOMES[int(result.outcome)], int(result.iterations)
+
+
+@dataclass(frozen=True)
+class Threshold:
+    """The alpha_p beyond which the perturbed response leaves the period-1 basin, found in
+    one direction from alpha_0 (NaN fields and ``outcome_outside`` "" when the scan never
+    leaves). ``alpha_p_inside`` / ``alpha_p_outside``: the final bracket (period-1 / not);
+    ``alpha_p_threshold`` its midpoint and ``v0_threshold_m_s`` the v_0 there;
+    ``period1_beyond_in_scan``: scan points beyond the first leaving one that are period-1
+    again (the basin is not an interval in v_0)."""
+
+    alpha_p_inside: float
+    alpha_p_outside: float
+    alpha_p_threshold: float
+    v0_threshold_m_s: float
+    outcome_outside: str
+    bisection_steps: int
+    period1_beyond_in_scan: int
+
+
+def find_threshold(
+    params: ModelParams, direction: int, settings: ClassifySettings = ClassifySettings(), *,
+    scan_step: float, bisection_tolerance: float, alpha_p_max: float,
+) -> Threshold:
+    """Scan alpha_p away from alpha_0 = params.alpha (``direction`` +1: up to ``alpha_p_max``,
+    -1: down to 0) in steps of ``scan_step`` until the full response leaves the period-1
+    basin (``perturbed_outcome``), then bisect between the last value inside and the first
+    outside until the bracket is at most ``bisection_tolerance`` wide.
+
+    The scan decides which boundary is found: a period-1 island narrower than a scan step
+    beyond it is not seen, and one the scan does see beyond the first exit is counted in
+    ``period1_beyond_in_scan``.
+    """
+    alpha_0 = params.alpha
+    end = alpha_p_max if direction > 0 else 0.0
+
+    def outcome(a: float) -> str:
+        return perturbed_outcome(params, a, settings)[0]
+
+    # steps that fit between alpha_0 and the end, the end included: 0.1 / 0.01 is
+    # 9.999999999999998 in floating point, so a plain int() would drop the last step
+    scan = np.arange(1, math.floor(abs(end - alpha_0) / scan_step * (1 + 1e-12)) + 1)
+    values = alpha_0 + direction * scan_step * scan
+    outcomes = [outcome(a) for a in values]
+    leaving = [i for i, o in enumerate(outcomes) if o != "period1"]
+    if not leaving:
+        return Threshold(values[-1] if len(values) else alpha_0, math.nan, math.nan, math.nan,
+                         "", 0, 0)
+    first = leaving[0]
+    inside = alpha_0 if first == 0 else float(values[first - 1])
+    outside, outside_outcome = float(values[first]), outcomes[first]
+    steps = 0
+    while abs(outside - inside) > bisection_tolerance:
+        mid = 0.5 * (inside + outside)
+        o = outcome(mid)
+        if o == "period1":
+            inside = mid
+        else:
+            outside, outside_outcome = mid, o
+        steps += 1
+    threshold = 0.5 * (inside + outside)
+    return Threshold(inside, outside, threshold, perturbed_velocity(params, threshold),
+                     outside_outcome, steps, sum(o == "period1" for o in outcomes[first:]))

@@ -38,9 +38,6 @@ class MapStep:
     v: np.ndarray  # v_{k+1}, m/s
     hop_phase: np.ndarray  # phi_{k+1} - theta_k: phase elapsed in flight (NaN: no flight)
 
-    def hop_seconds(self, params: ModelParams) -> np.ndarray:
-        return self.hop_phase / params.omega
-
 
 def map_step(theta, v, params: ModelParams, velocity_noise=0.0, phase_noise=0.0) -> MapStep:
     """Advance states (theta_k, v_k) by one impact.
@@ -82,8 +79,8 @@ class Orbit:
 
     Arrays run over impacts k = 0..K (row 0: the initial condition, hop NaN there).
     stop_reason: "" (all impacts done) | "below_racket" (v_0 not above the racket's
-    velocity: the ball cannot leave) | "sticking" (the last hop was shorter than the
-    sticking interval).
+    velocity: the ball cannot leave) | "sticking" (the last hop was shorter than
+    ``min_hop_s``).
     """
 
     theta: np.ndarray
@@ -93,11 +90,11 @@ class Orbit:
 
 
 def iterate_orbit(
-    theta0: float, v0: float, params: ModelParams, n_impacts: int, sticking_interval_s: float
+    theta0: float, v0: float, params: ModelParams, n_impacts: int, min_hop_s: float
 ) -> Orbit:
     """Iterate eqs. 5, 6 from one initial condition for up to ``n_impacts`` impacts.
 
-    Stops after the first hop lasting less than ``sticking_interval_s`` (section 3's sticking
+    Stops after the first hop lasting less than ``min_hop_s`` (section 3's sticking
     criterion), or at once when the ball cannot leave the racket (v_0 <= racket velocity).
     """
     theta, v, hop = [float(theta0)], [float(v0)], [np.nan]
@@ -110,7 +107,7 @@ def iterate_orbit(
             theta.append(float(step.theta))
             v.append(float(step.v))
             hop.append(float(step.hop_phase))
-            if hop[-1] / params.omega < sticking_interval_s:
+            if hop[-1] / params.omega < min_hop_s:
                 reason = "sticking"
                 break
             if not can_fly(theta[-1], v[-1], params):  # only when alpha == 0

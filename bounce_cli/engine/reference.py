@@ -15,6 +15,7 @@ import math
 import numpy as np
 from scipy.optimize import brentq
 
+from .classify import ClassifySettings
 from .params import ModelParams
 
 #: scan step of the bracket search (rad of racket phase; 1e-3 rad = 0.15 ms at tau = 0.92 s)
@@ -58,9 +59,11 @@ def first_impact_brentq(theta: float, v: float, params: ModelParams, scan_step=S
         start = float(s[-1])
 
 
-def classify_point_brentq(theta0: float, v0: float, params: ModelParams, max_iterations=100,
-                          tolerance=1e-3, sticking_interval_s=1e-3) -> tuple[str, int]:
-    """(outcome name, iterations) of one initial condition by the scalar reference method."""
+def classify_point_brentq(theta0: float, v0: float, params: ModelParams,
+                          settings: ClassifySettings = ClassifySettings()) -> tuple[str, int]:
+    """(outcome name, iterations) of one initial condition by the scalar reference method,
+    with the stopping conditions of ``settings`` (section 3)."""
+    max_iterations, tolerance = settings.max_iterations, settings.tolerance
     w, a, g, alpha = params.omega, params.racket_amplitude, params.g, params.alpha
     fp = params.fixed_point()
     theta, v = math.fmod(theta0, 2 * math.pi) % (2 * math.pi), float(v0)
@@ -70,7 +73,7 @@ def classify_point_brentq(theta0: float, v0: float, params: ModelParams, max_ite
         return "below_racket", 0
     for k in range(1, max_iterations + 1):
         s = first_impact_brentq(theta, v, params)
-        if s is None or s / w < sticking_interval_s:
+        if s is None or s / w < settings.min_hop_s:
             return "sticking", k
         theta = (theta + s) % (2 * math.pi)
         v = (1 + alpha) * a * w * math.cos(theta) - alpha * v + g * alpha / w * s  # eq. 5

@@ -27,9 +27,12 @@ from typing import Callable, Sequence
 import numpy as np
 from scipy.linalg import solve_discrete_lyapunov
 
+from .classify import ClassifySettings
+from .linear import jacobian
 from .impact import next_impact_phase
 from .maps import map_step, velocity_after_impact
 from .params import ModelError, ModelParams, phase_difference, wrap_phase
+from .roots import nearest_root
 
 #: (name, row, column) of R(l) = E[y_{k+l} y_k^T] with y = (v, theta)
 PAIRS: tuple[tuple[str, int, int], ...] = (
@@ -72,7 +75,8 @@ def map_noise_covariance(
 
 def check_velocity_phase(velocity_phase: str) -> None:
     if velocity_phase not in VELOCITY_PHASES:
-        raise ModelError(f"velocity_phase must be one of {VELOCITY_PHASES} (got {velocity_phase!r})")
+        raise ModelError(
+            f"velocity_phase must be one of {VELOCITY_PHASES} (got {velocity_phase!r})")
 
 
 def stationary_covariance(jac: np.ndarray, noise_cov: np.ndarray) -> np.ndarray:
@@ -101,7 +105,8 @@ def lagged_covariances(jac: np.ndarray, cov0: np.ndarray, max_lag: int) -> np.nd
 
 
 def correlations_from_covariances(covs: np.ndarray) -> dict[str, np.ndarray]:
-    """Normalise R(l) (shape (..., L+1, 2, 2)) by the lag-0 standard deviations: pair -> (..., L+1)."""
+    """Normalise R(l) (shape (..., L+1, 2, 2)) by the lag-0 standard deviations:
+    pair -> (..., L+1)."""
     sd = np.sqrt(np.stack([covs[..., 0, 0, 0], covs[..., 0, 1, 1]], axis=-1))
     return {
         name: covs[..., i, j] / (sd[..., i, None] * sd[..., j, None]) for name, i, j in PAIRS
@@ -193,7 +198,7 @@ def simulate_stochastic_map(
     *,
     burn_in: int = 0,
     velocity_phase: str = "theta",
-    sticking_interval_s: float = 1e-3,
+    min_hop_s: float = ClassifySettings().min_hop_s,
     block: int = 1024,
     on_block: Callable[[int], None] | None = None,
 ) -> StochasticRuns:
@@ -214,7 +219,7 @@ def simulate_stochastic_map(
     lost = np.zeros(runs, dtype=bool)
     dv = np.full((runs, n_bounces), np.nan)
     dtheta = np.full((runs, n_bounces), np.nan)
-    min_hop = sticking_interval_s * params.omega
+    min_hop = min_hop_s * params.omega
     k = 0
     while k < total:
         size = min(block, total - k)
@@ -238,3 +243,57 @@ def simulate_stochastic_map(
         if on_block is not None:
             on_block(size)
     return StochasticRuns(dv=dv, dtheta=dtheta, lost=lost)
+
+
+# -- inverse problems: what would give the paper's printed SDs (section 6) ---------------------
+def stationary_sds(params: ModelParams, noise_cov: np.ndarray) -> tuple[float, float]:
+    """Stationary standard deviations of eq. 19 at the fixed point of ``params`` with noise
+    covariance ``noise_cov``: (SD of v in m/s, SD of theta in rad). ModelError when the fixed
+    point is absent or unstable."""
+    cov = stationary_covariance(jacobian(params), noise_cov)
+    return math.sqrt(cov[0, 0]), math.sqrt(cov[1, 1])
+
+
+def noise_strengths_for_sds(jac: np.ndarray, sd_v_m_s: float,
+                            sd_theta_rad: float) -> tuple[float, float]:
+    """The diagonal noise strengths (q_v in m/s, q_theta in rad) under which eq. 19 gives the
+    stationary SDs ``sd_v_m_s`` and ``sd_theta_rad``.
+
+    R(0) is linear in the noise covariance diag(q_v^2, q_theta^2), so the two variances are
+    a 2 x 2 linear system in (q_v^2, q_theta^2); a strength whose square comes out <= 0 (no
+    real noise gives those SDs) is NaN.
+    """
+    unit_v = stationary_covariance(jac, np.diag([1.0, 0.0]))
+    unit_t = stationary_covariance(jac, np.diag([0.0, 1.0]))
+    a = np.array([[unit_v[0, 0], unit_t[0, 0]], [unit_v[1, 1], unit_t[1, 1]]])
+    b = np.array([sd_v_m_s**2, sd_theta_rad**2])
+    q2 = np.linalg.solve(a, b)
+    q_v, q_theta = (math.sqrt(value) if value > 0 else math.nan for value in q2)
+    return q_v, q_theta
+
+
+def racket_amplitude_for_sd(
+    params: ModelParams, q_v: float, q_theta: float, a_max: float, *,
+    sd_v_m_s: float | None = None, sd_theta_deg: float | None = None,
+) -> float:
+    """The racket amplitude a_r (m) at which eq. 19 with the diagonal noise (q_v, q_theta)
+    gives the target SD of v (m/s) or of theta (deg; give exactly one), all other parameters
+    as in ``params``: the root nearest to ``params.racket_amplitude`` between just above the
+    smallest a_r with a fixed point and ``a_max``; NaN when there is none."""
+    if (sd_v_m_s is None) == (sd_theta_deg is None):
+        raise ValueError("give exactly one of sd_v_m_s and sd_theta_deg")
+    noise_cov = paper_noise_covariance(q_v, q_theta)
+
+    def excess(a: float) -> float:
+        try:
+            sd_v, sd_theta = stationary_sds(
+                ModelParams(params.alpha, params.g, a, params.racket_period), noise_cov)
+        except ModelError:  # no fixed point, or an unstable one: no stationary SDs
+            return math.nan
+        if sd_v_m_s is not None:
+            return sd_v - sd_v_m_s
+        assert sd_theta_deg is not None
+        return math.degrees(sd_theta) - sd_theta_deg
+
+    return nearest_root(excess, params.min_racket_amplitude() * 1.001, a_max,
+                        params.racket_amplitude)

@@ -60,7 +60,9 @@ class Var1Fit:
     def jacobian_se(self) -> np.ndarray:
         return np.sqrt(np.clip(np.diag(self.cov_vec), 0.0, None)).reshape(2, 2)
 
-    def eigen_summary(self, confidence: float = 0.95) -> dict[str, tuple[float, float, float, float]]:
+    def eigen_summary(
+        self, confidence: float = 0.95
+    ) -> dict[str, tuple[float, float, float, float]]:
         """quantity -> (estimate, SE, CI low, CI high) for the spectral radius and the real and
         imaginary parts of lambda_+ and lambda_- (eq. 10's labels: lambda_+- = c +- sqrt(c^2 -
         det J), c = tr J / 2), by the delta method."""
@@ -124,14 +126,14 @@ def demeaned(trials: Sequence[np.ndarray]) -> list[np.ndarray]:
 def _lagged_rows(trials: Sequence[np.ndarray], lags: int):
     """Stack (y_k, y_{k+1}, ..., y_{k+lags}) rows within each trial: list of (n, 2) arrays,
     index 0 the earliest; ``trial_of`` gives each row's trial."""
-    parts = [[] for _ in range(lags + 1)]
+    parts: list[list[np.ndarray]] = [[] for _ in range(lags + 1)]
     trial_of = []
     for i, y in enumerate(trials):
         n = len(y) - lags
         if n <= 0:
             continue
-        for l in range(lags + 1):
-            parts[l].append(y[l:l + n])
+        for lag in range(lags + 1):
+            parts[lag].append(y[lag:lag + n])
         trial_of.append(np.full(n, i))
     if not trial_of:
         raise ModelError(f"no trial has more than {lags} bounces")

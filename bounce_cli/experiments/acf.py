@@ -2,54 +2,63 @@
 
 Theory: the linearised VAR(1) model (eq. 19) with the paper's diagonal noise covariance, and
 with the covariance the map of eqs. 16-18 actually induces. Samples: long runs of eqs. 16-18
-(the paper's crosses) and three simulated 40 s trials (what the experiment recorded).
+(the paper's crosses) and simulated trials as the experiment recorded them (three of 40 s).
+The inverse problems behind the candidate explanations are solved by the engine
+(``engine.stochastic``); the paper's values come from :mod:`bounce_cli.paper`.
 """
 
 from __future__ import annotations
 
 import math
-from typing import Literal, Optional
+from typing import Any, Literal, Optional
 
 import numpy as np
 import pandas as pd
 from pydantic import Field
-from scipy.optimize import brentq
 
+from .. import paper
 from ..config import ExperimentConfig, ModelBlock, StrictModel
-from ..engine import (
+from ..engine.linear import jacobian, stability
+from ..engine.params import ModelError, ModelParams
+from ..engine.stochastic import (
     PAIR_NAMES,
-    ModelError,
-    ModelParams,
-    jacobian,
     map_noise_covariance,
+    noise_strengths_for_sds,
     paper_noise_covariance,
+    racket_amplitude_for_sd,
     sample_correlations,
     simulate_stochastic_map,
-    stability,
-    stationary_covariance,
+    stationary_sds,
     var1_theory,
 )
-from ..plotting import new_figure
+from ..plotting import caption_figures, new_figure
 from .base import Experiment, ExperimentResult, RunOptions
 from .data_side import AcfDataBlock
 
-#: the paper's values (section 6)
-PAPER_SD_THEORY = {"sd_v": 0.068, "sd_theta": 8.4}
-PAPER_SD_OBSERVED = {"sd_v": 0.07, "sd_theta": 9.2}
-OBSERVED_AMPLITUDE_M, OBSERVED_PERIOD_S = 0.076, 0.53
+OBSERVED_AMPLITUDE_M, OBSERVED_PERIOD_S = paper.OBSERVED_AMPLITUDE_M, paper.OBSERVED_PERIOD_S
+
+
+def paper_sds(params: ModelParams) -> dict[str, tuple[float, float]]:
+    """The paper's (theoretical, observed) SDs of v (m/s) and theta (deg), section 6, when
+    ``params`` are its Fig. 8 parameters; NaN elsewhere (they describe another system)."""
+    if not paper.at_parameters(params, paper.FIG8_MODEL):
+        return {"sd_v": (math.nan, math.nan), "sd_theta": (math.nan, math.nan)}
+    return {"sd_v": (paper.SD_V_THEORY.value, paper.SD_V_OBSERVED.value),
+            "sd_theta": (paper.SD_THETA_THEORY.value, paper.SD_THETA_OBSERVED.value)}
 
 
 class NoiseBlock(StrictModel):
-    q_v: float = Field(0.04, ge=0.0, description="velocity noise strength, m/s")
-    q_theta: float = Field(0.05, ge=0.0, description="phase noise strength, rad")
+    q_v: float = Field(paper.Q_V_M_S, ge=0.0, description="velocity noise strength, m/s")
+    q_theta: float = Field(paper.Q_THETA_RAD, ge=0.0, description="phase noise strength, rad")
     velocity_phase: Literal["theta", "phi"] = Field(
         "theta", description="phase in eq. 16's cos(): theta_{k+1} (printed) or phi_{k+1}"
     )
 
 
 class TrialsBlock(StrictModel):
-    repetitions: int = Field(3, ge=2, description="simulated trials (the experiment had 3)")
-    duration_s: float = Field(40.0, gt=0.0, description="trial length, s")
+    repetitions: int = Field(paper.TRIALS, ge=2, description="simulated trials (the experiment "
+                             "had 3)")
+    duration_s: float = Field(paper.TRIAL_DURATION_S, gt=0.0, description="trial length, s")
 
 
 class LongRunsBlock(StrictModel):
@@ -58,7 +67,9 @@ class LongRunsBlock(StrictModel):
 
 
 class AcfConfig(ExperimentConfig):
-    model: ModelBlock = ModelBlock(alpha=0.42, g=5.8, racket_amplitude=0.065, racket_period=0.55)
+    model: ModelBlock = ModelBlock(alpha=paper.FIG8_MODEL.alpha, g=paper.FIG8_MODEL.g,
+                                   racket_amplitude=paper.FIG8_MODEL.racket_amplitude,
+                                   racket_period=paper.FIG8_MODEL.racket_period)
     noise: NoiseBlock = NoiseBlock()
     trials: TrialsBlock = TrialsBlock()
     long_runs: LongRunsBlock = LongRunsBlock()
@@ -90,18 +101,20 @@ def run(config: AcfConfig, options: RunOptions) -> ExperimentResult:
     reps, runs = config.trials.repetitions, config.long_runs.runs
     total = (n_trial + config.burn_in) + (config.long_runs.bounces + config.burn_in)
     options.progress.start(total, "stochastic map")
-    common = dict(burn_in=config.burn_in, velocity_phase=noise.velocity_phase,
-                  on_block=options.progress.advance)
-    trials = simulate_stochastic_map(params, noise.q_v, noise.q_theta, n_trial,
-                                     trial_seeds.spawn(reps), **common)
-    long = simulate_stochastic_map(params, noise.q_v, noise.q_theta, config.long_runs.bounces,
-                                   long_seeds.spawn(runs), **common)
+    trials, long = (
+        simulate_stochastic_map(params, noise.q_v, noise.q_theta, n_bounces, seeds,
+                                burn_in=config.burn_in, velocity_phase=noise.velocity_phase,
+                                on_block=options.progress.advance)
+        for n_bounces, seeds in ((n_trial, trial_seeds.spawn(reps)),
+                                 (config.long_runs.bounces, long_seeds.spawn(runs)))
+    )
     lost = int(long.lost.sum() + trials.lost.sum())
     if long.lost.all() or trials.lost.all():
         raise ModelError("every run lost the ball (it stuck to the racket): noise too strong")
     keep = ~long.lost
     sample = sample_correlations(long.dv[keep], long.dtheta[keep], config.max_lag)
-    trial = sample_correlations(trials.dv[~trials.lost], trials.dtheta[~trials.lost], config.max_lag)
+    trial = sample_correlations(trials.dv[~trials.lost], trials.dtheta[~trials.lost],
+                                config.max_lag)
     n_kept = int(keep.sum())
     rows = []
     for name in PAIR_NAMES:
@@ -120,27 +133,38 @@ def run(config: AcfConfig, options: RunOptions) -> ExperimentResult:
     summary_df = summary_frame(config, theory, theory_map, long.dv[keep], long.dtheta[keep])
     figures = draw({"acf.csv": acf, "summary.csv": summary_df})
     sd = summary_df.set_index(["quantity", "source"])["ours"]
+    quoted = paper_sds(params)
+    at_paper = paper.at_parameters(params, paper.FIG8_MODEL)
+
+    def paper_note(name: str) -> str:
+        theory_sd, observed_sd = quoted[name]
+        return (f" (paper: theory {theory_sd:g}, observed {observed_sd:g})" if at_paper
+                else " (not the paper's Fig. 8 parameters: no paper value to compare)")
+
     lines = [
         f"SD v: theory (eq. 19) {sd['sd_v', 'theory_eq19']:.4f} m/s, sample "
-        f"{sd['sd_v', 'sample']:.4f} m/s (paper: theory 0.068, observed 0.07)",
+        f"{sd['sd_v', 'sample']:.4f} m/s" + paper_note("sd_v"),
         f"SD theta: theory (eq. 19) {sd['sd_theta', 'theory_eq19']:.2f} deg, sample "
-        f"{sd['sd_theta', 'sample']:.2f} deg (paper: theory 8.4, observed 9.2)",
+        f"{sd['sd_theta', 'sample']:.2f} deg" + paper_note("sd_theta"),
         f"long runs: {n_kept} x {config.long_runs.bounces} bounces; trials: {reps} x {n_trial} "
         f"bounces ({config.trials.duration_s:g} s); runs lost to sticking: {lost}",
     ]
+    caption_figures(figures, params, f"{config.long_runs.runs} runs x "
+                    f"{config.long_runs.bounces} bounces; {reps} simulated trials of "
+                    f"{config.trials.duration_s:g} s ({n_trial} bounces); seed {config.seed}")
     return ExperimentResult(frames={"acf.csv": acf, "summary.csv": summary_df},
                             figures=figures, summary=lines)
 
 
-def _sds(params: ModelParams, q_v: float, q_theta: float, noise_cov=None) -> tuple[float, float]:
-    cov = stationary_covariance(jacobian(params),
-                                paper_noise_covariance(q_v, q_theta) if noise_cov is None else noise_cov)
-    return math.sqrt(cov[0, 0]), math.degrees(math.sqrt(cov[1, 1]))
+def _sds(params: ModelParams, noise_cov: np.ndarray) -> tuple[float, float]:
+    """Stationary SDs of eq. 19: v in m/s, theta in deg."""
+    sd_v, sd_theta = stationary_sds(params, noise_cov)
+    return sd_v, math.degrees(sd_theta)
 
 
 def _sds_or_nan(params: ModelParams, q_v: float, q_theta: float) -> tuple[float, float]:
     try:
-        return _sds(params, q_v, q_theta)
+        return _sds(params, paper_noise_covariance(q_v, q_theta))
     except ModelError:
         return math.nan, math.nan
 
@@ -152,63 +176,53 @@ def _radius_or_nan(params: ModelParams) -> float:
         return math.nan
 
 
-def nearest_root(f, low: float, high: float, near: float, points: int = 200) -> float:
-    """The root of f in [low, high] nearest to ``near`` (sign changes on a grid, then brentq);
-    NaN when there is none."""
-    grid = np.linspace(low, high, points)
-    values = np.array([f(x) for x in grid])
-    roots = [brentq(f, grid[i], grid[i + 1]) for i in range(points - 1)
-             if np.isfinite(values[i]) and np.isfinite(values[i + 1])
-             and values[i] * values[i + 1] < 0]
-    return min(roots, key=lambda r: abs(r - near)) if roots else math.nan
-
-
 def candidate_rows(config: AcfConfig) -> list[dict]:
-    """Possible reasons for a difference from the paper's 0.068 m/s and 8.4 deg, computed."""
+    """Possible reasons for a difference from the paper's theoretical SDs (section 6),
+    computed by the engine: other readings of eq. 16, the observed racket, the a_r or the
+    noise strengths that would give the printed SDs. Only at the paper's Fig. 8 parameters
+    (elsewhere there is no printed value to explain)."""
     p, q = config.params, config.noise
-    rows = []
+    rows: list[dict] = []
+    if not paper.at_parameters(p, paper.FIG8_MODEL):
+        return rows
+    sd_v_paper, sd_theta_paper = paper.SD_V_THEORY.value, paper.SD_THETA_THEORY.value
 
     def add(quantity, unit, source, ours, paper=np.nan, note=""):
         rows.append({"quantity": quantity, "unit": unit, "source": source, "ours": ours,
                      "ours_se": np.nan, "paper": paper, "note": note})
 
     for reading in ("theta", "phi"):
-        sv, st = _sds(p, 0, 0, map_noise_covariance(p, q.q_v, q.q_theta, reading))
+        sv, st = _sds(p, map_noise_covariance(p, q.q_v, q.q_theta, reading))
         label = "cos(theta_k+1) as printed" if reading == "theta" else "cos(phi_k+1)"
-        add("sd_v", "m/s", f"candidate: eq. 16 with {label}, linearised", sv, 0.068)
-        add("sd_theta", "deg", f"candidate: eq. 16 with {label}, linearised", st, 8.4)
+        add("sd_v", "m/s", f"candidate: eq. 16 with {label}, linearised", sv, sd_v_paper)
+        add("sd_theta", "deg", f"candidate: eq. 16 with {label}, linearised", st, sd_theta_paper)
     same = np.outer([q.q_v, q.q_theta], [q.q_v, q.q_theta])
-    sv, st = _sds(p, 0, 0, same)
-    add("sd_v", "m/s", "candidate: one xi_k in both eqs. 16 and 18", sv, 0.068)
-    add("sd_theta", "deg", "candidate: one xi_k in both eqs. 16 and 18", st, 8.4)
+    sv, st = _sds(p, same)
+    add("sd_v", "m/s", "candidate: one xi_k in both eqs. 16 and 18", sv, sd_v_paper)
+    add("sd_theta", "deg", "candidate: one xi_k in both eqs. 16 and 18", st, sd_theta_paper)
     observed_tau = ModelParams(p.alpha, p.g, OBSERVED_AMPLITUDE_M, p.racket_period)
     sv, st = _sds_or_nan(observed_tau, q.q_v, q.q_theta)  # NaN where unstable at these alpha, g
     note = "" if np.isfinite(sv) else "fixed point unstable or absent at a_r = 0.076 m here"
-    add("sd_v", "m/s", f"candidate: observed a_r {OBSERVED_AMPLITUDE_M} m", sv, 0.068, note)
-    add("sd_theta", "deg", f"candidate: observed a_r {OBSERVED_AMPLITUDE_M} m", st, 8.4, note)
+    add("sd_v", "m/s", f"candidate: observed a_r {OBSERVED_AMPLITUDE_M} m", sv, sd_v_paper,
+        note)
+    add("sd_theta", "deg", f"candidate: observed a_r {OBSERVED_AMPLITUDE_M} m", st,
+        sd_theta_paper, note)
     observed = ModelParams(p.alpha, p.g, OBSERVED_AMPLITUDE_M, OBSERVED_PERIOD_S)
     add("spectral_radius", "1", f"candidate: observed a_r {OBSERVED_AMPLITUDE_M} m and period "
         f"{OBSERVED_PERIOD_S} s", _radius_or_nan(observed), np.nan,
         "fixed point unstable (>= 1): no stationary SDs at the observed racket parameters")
     # a_r that alone reproduces each paper SD, and the noise strengths that reproduce both
-    for idx, (name, unit) in enumerate((("sd_v", "m/s"), ("sd_theta", "deg"))):
-        target = PAPER_SD_THEORY[name]
-
-        a_fit = nearest_root(
-            lambda a, idx=idx, target=target: _sds_or_nan(
-                ModelParams(p.alpha, p.g, a, p.racket_period), q.q_v, q.q_theta)[idx] - target,
-            p.min_racket_amplitude() * 1.001, OBSERVED_AMPLITUDE_M, p.racket_amplitude)
-        add("racket_amplitude", "m", f"candidate: a_r giving the paper's {name}", a_fit, 0.065,
-            f"a single a_r matching {name} = {target} {unit}")
-    jac = jacobian(p)
-    unit_v = stationary_covariance(jac, np.diag([1.0, 0.0]))
-    unit_t = stationary_covariance(jac, np.diag([0.0, 1.0]))
-    a = np.array([[unit_v[0, 0], unit_t[0, 0]], [unit_v[1, 1], unit_t[1, 1]]])
-    b = np.array([PAPER_SD_THEORY["sd_v"] ** 2, math.radians(PAPER_SD_THEORY["sd_theta"]) ** 2])
-    q2 = np.linalg.solve(a, b)
-    for value, name, paper, unit in ((q2[0], "q_v", 0.04, "m/s"), (q2[1], "q_theta", 0.05, "rad")):
-        add(name, unit, "candidate: noise strength giving both paper SDs (eq. 19)",
-            math.sqrt(value) if value > 0 else np.nan, paper)
+    targets = {"sd_v": {"sd_v_m_s": sd_v_paper}, "sd_theta": {"sd_theta_deg": sd_theta_paper}}
+    for (name, target), unit in zip(targets.items(), ("m/s", "deg")):
+        a_fit = racket_amplitude_for_sd(p, q.q_v, q.q_theta, OBSERVED_AMPLITUDE_M, **target)
+        add("racket_amplitude", "m", f"candidate: a_r giving the paper's {name}", a_fit,
+            paper.FIG8_MODEL.racket_amplitude,
+            f"a single a_r matching {name} = {next(iter(target.values()))} {unit}")
+    q_v, q_theta = noise_strengths_for_sds(jacobian(p), sd_v_paper, math.radians(sd_theta_paper))
+    add("q_v", "m/s", "candidate: noise strength giving both paper SDs (eq. 19)", q_v,
+        paper.Q_V_M_S)
+    add("q_theta", "rad", "candidate: noise strength giving both paper SDs (eq. 19)", q_theta,
+        paper.Q_THETA_RAD)
     return rows
 
 
@@ -226,22 +240,25 @@ def summary_frame(config: AcfConfig, theory, theory_map, dv, dtheta) -> pd.DataF
     runs = dv.shape[0]
     sd_v_runs = dv.std(axis=1)
     sd_t_runs = np.degrees(dtheta.std(axis=1))
-    add("sd_v", "m/s", "theory_eq19", theory.sd_v_m_s, paper=PAPER_SD_THEORY["sd_v"],
-        note="paper: theoretical SD")
+    quoted = paper_sds(p)  # NaN away from the paper's Fig. 8 parameters
+    at_paper = paper.at_parameters(p, paper.FIG8_MODEL)
+    theory_note = "paper: theoretical SD" if at_paper else ""
+    sample_note = "long runs of eqs. 16-18" + ("; paper: observed (human) SD" if at_paper else "")
+    add("sd_v", "m/s", "theory_eq19", theory.sd_v_m_s, paper=quoted["sd_v"][0],
+        note=theory_note)
     add("sd_theta", "deg", "theory_eq19", math.degrees(theory.sd_theta_rad),
-        paper=PAPER_SD_THEORY["sd_theta"], note="paper: theoretical SD")
-    add("sd_v", "m/s", "theory_map", theory_map.sd_v_m_s, paper=PAPER_SD_THEORY["sd_v"],
+        paper=quoted["sd_theta"][0], note=theory_note)
+    add("sd_v", "m/s", "theory_map", theory_map.sd_v_m_s, paper=quoted["sd_v"][0],
         note=f"eq. 19 with the noise covariance of eqs. 16-18 ({config.noise.velocity_phase})")
     add("sd_theta", "deg", "theory_map", math.degrees(theory_map.sd_theta_rad),
-        paper=PAPER_SD_THEORY["sd_theta"],
+        paper=quoted["sd_theta"][0],
         note=f"eq. 19 with the noise covariance of eqs. 16-18 ({config.noise.velocity_phase})")
     add("sd_v", "m/s", "sample", float(np.sqrt(np.mean(sd_v_runs**2))),
-        sd_v_runs.std(ddof=1) / math.sqrt(runs), PAPER_SD_OBSERVED["sd_v"],
-        "long runs of eqs. 16-18; paper: observed (human) SD")
+        sd_v_runs.std(ddof=1) / math.sqrt(runs), quoted["sd_v"][1], sample_note)
     add("sd_theta", "deg", "sample", float(np.sqrt(np.mean(sd_t_runs**2))),
-        sd_t_runs.std(ddof=1) / math.sqrt(runs), PAPER_SD_OBSERVED["sd_theta"],
-        "long runs of eqs. 16-18; paper: observed (human) SD")
-    add("mean_v_offset", "m/s", "sample", float(dv.mean()), dv.mean(axis=1).std(ddof=1) / math.sqrt(runs),
+        sd_t_runs.std(ddof=1) / math.sqrt(runs), quoted["sd_theta"][1], sample_note)
+    add("mean_v_offset", "m/s", "sample", float(dv.mean()),
+        dv.mean(axis=1).std(ddof=1) / math.sqrt(runs),
         note="sample mean of v - v~ (nonlinear drift)")
     add("mean_theta_offset", "deg", "sample", float(np.degrees(dtheta.mean())),
         np.degrees(dtheta.mean(axis=1)).std(ddof=1) / math.sqrt(runs),
@@ -278,7 +295,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         lag = d["lag"].to_numpy()
         ax.axhline(0, color="0.7", lw=0.8)
         ax.fill_between(lag, d["trial_mean"] - d["trial_sd"], d["trial_mean"] + d["trial_sd"],
-                        color="0.85", label="simulated 40 s trials, mean +- SD")
+                        color="0.85", label="simulated trials, mean +- SD")
         ax.plot(lag, d["trial_mean"], color="0.55", lw=1.2)
         ax.errorbar(lag, d["sample_mean"], yerr=d["sample_sd"], fmt="x", color="k", ms=7,
                     capsize=2, lw=0.8, label="sample, long runs (mean +- SD)")
@@ -292,18 +309,23 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         ax.set_ylabel("correlation")
         if r == 1:
             ax.set_xlabel("lag l (bounces)")
-    handles = {}
+    handles: dict[str, Any] = {}
     for ax in axes.flat:
         for handle, label in zip(*ax.get_legend_handles_labels()):
             handles.setdefault(label, handle)
-    fig.legend(handles.values(), handles.keys(), loc="outside lower center", ncol=4, fontsize=8)
+    fig.legend(list(handles.values()), list(handles.keys()), loc="outside lower center", ncol=4,
+               fontsize=8)
     title = "Fig. 8: correlation functions of the stochastic ball bouncing map"
     summary = frames.get("summary.csv")
     if summary is not None:
-        s = summary.set_index(["quantity", "source"])["ours"]
+        indexed = summary.set_index(["quantity", "source"])
+        s, quoted = indexed["ours"], indexed["paper"]
         title += (f"\nSD theory (eq. 19): v {s['sd_v', 'theory_eq19']:.3f} m/s, theta "
-                  f"{s['sd_theta', 'theory_eq19']:.1f} deg (paper 0.068, 8.4); sample: "
-                  f"{s['sd_v', 'sample']:.3f} m/s, {s['sd_theta', 'sample']:.1f} deg")
+                  f"{s['sd_theta', 'theory_eq19']:.1f} deg")
+        if np.isfinite(quoted["sd_v", "theory_eq19"]):  # only at the paper's parameters
+            title += (f" (paper {quoted['sd_v', 'theory_eq19']:g}, "
+                      f"{quoted['sd_theta', 'theory_eq19']:g})")
+        title += f"; sample: {s['sd_v', 'sample']:.3f} m/s, {s['sd_theta', 'sample']:.1f} deg"
     fig.suptitle(title, fontsize=11)
     return {"acf.png": fig}
 

@@ -19,7 +19,13 @@ What an experiment must provide (as scipy's ``OdeSolver`` documents what a solve
 ``draw(frames) -> dict[str, Figure]``
     Every figure of the run, drawn from the DataFrames ``run`` returned (or read back from the
     CSVs): a figure can always be redrawn from its data. ``run`` builds its figures by calling
-    ``draw`` on its own frames.
+    ``draw`` on its own frames, then adds the parameters it ran at to their titles
+    (:func:`bounce_cli.plotting.caption_figures`), so that two runs' figures can be told apart.
+
+The paper's values come from :mod:`bounce_cli.paper` (never literals in an experiment), and a
+summary line or CSV column states one only where the run is at the paper's parameters
+(:func:`bounce_cli.paper.at_parameters`); numerics (solvers, scans, inverse problems) live in
+:mod:`bounce_cli.engine` with their own tests.
 
 What it gets: the validated config, and :class:`RunOptions` (worker count, a progress sink),
 which never change the numbers it produces.

@@ -10,18 +10,18 @@ velocities not above the racket's are "below the racket". The numerics live in
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pandas as pd
 from pydantic import Field, model_validator
 
+from .. import paper
 from ..config import ClassifyBlock, ConfigError, ExperimentConfig, StrictModel
-from ..engine import OUTCOMES, ClassifySettings, classify_batch, classify_grid
+from ..engine.classify import OUTCOMES, ClassifySettings, classify_batch, classify_grid
+from ..engine.params import ModelParams
+from ..plotting import caption_figures
 from .base import Experiment, ExperimentResult, RunOptions
-
-#: Fig. 3 initial conditions: the ball starts on the racket at x_b(0) = 0.205 m (section 3)
-FIG3_THETA0_RAD = math.asin(0.205 / 0.30)
-FIG3_V0_M_S = {"fig3_period1": 4.8, "fig3_sticking": 5.7}
 
 #: colours of the outcomes in basin.png (the paper: white, grey, black; undecided: red)
 OUTCOME_COLOURS = {
@@ -31,25 +31,26 @@ OUTCOME_COLOURS = {
     "undecided": "#d62728",
 }
 OUTCOME_LABELS = {
-    "period1": "period-1 attractor",
+    "period1": "period-1 (reaches the fixed point)",
     "sticking": "sticking",
     "below_racket": "below the racket",
     "undecided": "undecided (max impacts)",
 }
 
-LEGEND_BELOW = dict(loc="outside lower center", ncol=3, fontsize=8, frameon=False)
+LEGEND_BELOW: dict[str, Any] = dict(loc="outside lower center", ncol=3, fontsize=8, frameon=False)
 
 
 class GridAxis(StrictModel):
-    """numpy.linspace(start, stop, num): endpoints included."""
+    """numpy.linspace(start, stop, num): endpoints included; ``num: 1`` is the one value
+    ``start`` (a basin along a line, or at one initial condition)."""
 
     start: float
     stop: float
-    num: int = Field(ge=2)
+    num: int = Field(ge=1)
 
     @model_validator(mode="after")
     def _increasing(self):
-        if not self.stop > self.start:
+        if self.num > 1 and not self.stop > self.start:
             raise ValueError(f"stop ({self.stop:g}) must be greater than start ({self.start:g})")
         return self
 
@@ -107,30 +108,42 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
     fractions = pd.DataFrame(
         {"outcome": list(OUTCOMES), "count": counts, "fraction": counts / n_points}
     )
-    markers = marker_frame(params, settings)
+    at_paper = at_paper_parameters(params, settings)
+    markers = marker_frame(params, settings, fig3=at_paper)
 
     frames = {"basin.csv": basin, "fractions.csv": fractions, "markers.csv": markers}
     summary = [
         f"basin: {theta_deg.size} x {v0.size} grid, "
         + ", ".join(f"{o} {f:.4f}" for o, f in zip(OUTCOMES, counts / n_points)),
         f"max impacts until classified: {int(result.iterations.max())} "
-        f"(limit {settings.max_iterations}; paper: no point reached 100)",
-        "Fig. 3 initial conditions: "
-        + ", ".join(
-            f"v0 = {row.v0_m_s:g} m/s -> {row.outcome} after {row.iterations}"
-            for row in markers.itertuples()
-            if row.marker != "fixed_point"
-        ),
+        f"(limit {settings.max_iterations}"
+        + ("; paper: no point reached 100)" if at_paper else ")"),
     ]
-    return ExperimentResult(frames=frames, figures=draw(frames), summary=summary)
+    if at_paper:
+        summary.append("Fig. 3 initial conditions: " + ", ".join(
+            f"v0 = {row.v0_m_s:g} m/s -> {row.outcome} after {row.iterations}"
+            for row in markers.itertuples() if row.marker != "fixed_point"))
+    figures = draw(frames)
+    caption_figures(figures, params, f"{theta_deg.size} x {v0.size} grid")
+    return ExperimentResult(frames=frames, figures=figures, summary=summary)
 
 
-def marker_frame(params, settings: ClassifySettings) -> pd.DataFrame:
-    """The fixed point (eqs. 7, 8) and the Fig. 3 initial conditions, each classified."""
+def at_paper_parameters(params: ModelParams, settings: ClassifySettings) -> bool:
+    """Fig. 4's model (section 3) with section 3's stopping conditions: only there do the
+    paper's statements about the basin (and its Fig. 3 initial conditions) apply."""
+    return paper.at_parameters(params, paper.FIG3_MODEL) and settings == paper.SECTION3_CLASSIFY
+
+
+def marker_frame(params: ModelParams, settings: ClassifySettings, *,
+                 fig3: bool = True) -> pd.DataFrame:
+    """The fixed point (eqs. 7, 8) and, with ``fig3``, Fig. 3's two initial conditions (the
+    ball on the racket at x_b(0) = 0.205 m, theta0 = asin(x_b(0) / a_r)), each classified."""
     fp = params.fixed_point()
-    names = ["fixed_point", *FIG3_V0_M_S]
-    theta = np.array([fp.theta_rad] + [FIG3_THETA0_RAD] * len(FIG3_V0_M_S))
-    v = np.array([fp.v_m_s, *FIG3_V0_M_S.values()])
+    starts = paper.FIG3_V0_M_S if fig3 else {}
+    names = ["fixed_point", *starts]
+    theta0 = math.asin(paper.FIG3_BALL_HEIGHT_M / params.racket_amplitude) if fig3 else 0.0
+    theta = np.array([fp.theta_rad] + [theta0] * len(starts))
+    v = np.array([fp.v_m_s, *starts.values()])
     res = classify_batch(theta, v, params, settings)
     return pd.DataFrame(
         {
@@ -165,8 +178,7 @@ class _Grid:
         )
         if not canonical:
             self.index = (np.searchsorted(vs, v), np.searchsorted(th, theta))
-        dth = (th[-1] - th[0]) / max(th.size - 1, 1)
-        dv = (vs[-1] - vs[0]) / max(vs.size - 1, 1)
+        dth, dv = _cell_width(th), _cell_width(vs)
         self.extent = (th[0] - dth / 2, th[-1] + dth / 2, vs[0] - dv / 2, vs[-1] + dv / 2)
         self.stride = tuple(-(-n // MAX_IMAGE_CELLS) for n in self.shape)
 
@@ -178,6 +190,12 @@ class _Grid:
             out = np.full(self.shape, fill, dtype=values.dtype)
             out[self.index] = values
         return out[:: self.stride[0], :: self.stride[1]]
+
+
+def _cell_width(values: np.ndarray) -> float:
+    """Width of one grid cell along an axis; an axis of one value (``num: 1``) is drawn one
+    unit (deg or m/s) wide, centred on the value."""
+    return float(values[-1] - values[0]) / (values.size - 1) if values.size > 1 else 1.0
 
 
 def _draw_markers(ax, markers: pd.DataFrame, extent) -> None:

@@ -19,24 +19,17 @@ import pandas as pd
 from pydantic import Field
 
 from ..config import ConfigError, StrictModel
-from ..engine import (
-    PAIR_NAMES,
-    ModelError,
-    ModelParams,
-    impulse_response_full,
-    jacobian,
-    paper_noise_covariance,
-    phase_difference,
-    stability,
-    var1_theory,
-)
+from ..engine.impulse import impulse_response_full
+from ..engine.linear import jacobian, stability
+from ..engine.params import ModelError, ModelParams, phase_difference
+from ..engine.stochastic import PAIR_NAMES, paper_noise_covariance, var1_theory
 from ..engine.data_stats import (
     align,
     noise_from_sds,
     relaxation_impact,
     trial_correlations,
 )
-from ..engine.var_fit import EIGEN_QUANTITIES, J_ENTRIES, fit_var1
+from ..engine.var_fit import EIGEN_QUANTITIES, J_ENTRIES, Var1Fit, fit_var1
 from ..impacts import Impacts, circular_mean, read_impacts
 from ..plotting import new_figure
 
@@ -75,7 +68,9 @@ class ImpulseDataBlock(StrictModel):
 
 
 # -- the model at the data's parameters ------------------------------------------------------
-def model_at_data(impacts: Impacts, alpha: float, g: float, need_stable: bool = True) -> ModelParams:
+def model_at_data(
+    impacts: Impacts, alpha: float, g: float, need_stable: bool = True
+) -> ModelParams:
     """alpha, g from the config; a_r and tau the means of the data's racket cycles. A
     one-line error when these give no (stable) period-1 fixed point."""
     f = impacts.frame
@@ -88,7 +83,8 @@ def model_at_data(impacts: Impacts, alpha: float, g: float, need_stable: bool = 
         st = stability(params)
     except ModelError:
         raise ConfigError(f"{where} has no period-1 fixed point (eq. 8: cos theta~ = "
-                          f"{params.cos_theta_fixed():.3g} > 1); check model.alpha and model.g")
+                          f"{params.cos_theta_fixed():.3g} > 1); check model.alpha and model.g"
+                          ) from None
     if need_stable and not st.stable:
         raise ConfigError(f"{where} has an unstable fixed point (spectral radius "
                           f"{st.spectral_radius:.3g}, AC = {st.ac_g:.3g} g): no stationary "
@@ -172,7 +168,7 @@ def acf_data_run(config, options) -> tuple[dict[str, pd.DataFrame], list[str]]:
                          "data_trials": n_seg, "theory": float(theory.correlations[name][lag])})
     acf = pd.DataFrame(rows)
     trials = [np.column_stack([s[1], s[2]]) for s in segments]
-    fits = {}
+    fits: dict[str, Var1Fit | ModelError] = {}
     for method in ("ols", "lag2"):
         try:
             fits[method] = fit_var1(trials, method, jackknife=d.jackknife)
@@ -206,7 +202,8 @@ def acf_data_run(config, options) -> tuple[dict[str, pd.DataFrame], list[str]]:
                 f"{fit.n_pairs} pairs in {fit.n_trials} runs")
         eig = fit.eigen_summary(conf)
         for name in EIGEN_QUANTITIES:
-            add(name, "1", source, *eig[name], note="delta method")
+            value, se_, low, high = eig[name]
+            add(name, "1", source, value, se_, low, high, note="delta method")
         for (i, j), name in zip(((0, 0), (1, 1), (0, 1)), ("noise_cov_vv", "noise_cov_thetatheta",
                                                            "noise_cov_vtheta")):
             add(name, "mixed", source, float(fit.noise_cov[i, j]), note="residual covariance")
@@ -294,7 +291,8 @@ def trust_frame(params, q_v, q_theta, config, segments, options) -> pd.DataFrame
                 series[:, k - 100] = y
         series += rng.standard_normal(series.shape) * meas
         for method in ("ols", "lag2"):
-            est, inside = [], 0
+            found: list[float] = []
+            inside = 0
             for r in range(reps):
                 try:
                     fit = fit_var1(list(series[r * n_trials:(r + 1) * n_trials]), method,
@@ -302,9 +300,9 @@ def trust_frame(params, q_v, q_theta, config, segments, options) -> pd.DataFrame
                 except ModelError:
                     continue
                 value, _, low, high = fit.eigen_summary(d.confidence)["spectral_radius"]
-                est.append(value)
+                found.append(value)
                 inside += low <= truth <= high
-            est = np.array(est)
+            est = np.array(found)
             q16, med, q84 = np.percentile(est, [16, 50, 84]) if len(est) else (math.nan,) * 3
             rows.append({"bounces": n_trials * per, "trials": n_trials, "method": method,
                          "repetitions": len(est), "true_spectral_radius": truth,
@@ -371,7 +369,8 @@ def _stability_figure(stab: pd.DataFrame, trust: pd.DataFrame | None):
             model = src == "model_eq10"
             ax.errorbar(re["estimate"], im["estimate"], xerr=0 if model else re["se"],
                         yerr=0 if model else im["se"], fmt=marker, color=colour,
-                        mfc="none" if model else colour, ms=12 if model else 7, mew=2 if model else 1,
+                        mfc="none" if model else colour, ms=12 if model else 7,
+                        mew=2 if model else 1,
                         capsize=2, zorder=3 if model else 2,
                         label=label if lam == "lambda_plus" else None)
     ax.set_aspect("equal")
@@ -496,15 +495,18 @@ def impulse_data_run(config, options) -> tuple[dict[str, pd.DataFrame], list[str
                           f"{rel.tolerance_v_m_s:g} m/s) and theta (tol "
                           f"{rel.tolerance_theta_deg:g} deg) from k on")
     cut = int(np.sum(np.isnan(w_v.values[:, -1])))
-    lines = [f"data {impacts.path}: {len(w_v.values)} perturbations ({int((direction == 'decrease').sum())}"
-             f" decrease, {int((direction == 'increase').sum())} increase); {cut} windows cut short "
+    n_down, n_up = int((direction == "decrease").sum()), int((direction == "increase").sum())
+    lines = [f"data {impacts.path}: {len(w_v.values)} perturbations ({n_down}"
+             f" decrease, {n_up} increase); {cut} windows cut short "
              "by the next perturbation or the trial's end (their later impacts are not averaged)",
              f"model at a_r = {params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s,"
-             f" alpha_0 = {params.alpha:g}: v~ = {fp.v_m_s:.3f} m/s, theta~ = {fp.theta_deg:.1f} deg"]
+             f" alpha_0 = {params.alpha:g}: v~ = {fp.v_m_s:.3f} m/s,"
+             f" theta~ = {fp.theta_deg:.1f} deg"]
     for row in relax.itertuples():
         lines.append(f"{row.direction} (alpha_p {row.mean_alpha_p:.3f}), {row.source}: impacts "
                      f"to relax {row.relaxation_impacts}")
-    return {"aligned.csv": aligned, "model_response.csv": model, "relaxation_data.csv": relax}, lines
+    frames = {"aligned.csv": aligned, "model_response.csv": model, "relaxation_data.csv": relax}
+    return frames, lines
 
 
 def impulse_data_draw(frames: dict[str, pd.DataFrame]) -> dict:
@@ -532,9 +534,9 @@ def impulse_data_draw(frames: dict[str, pd.DataFrame]) -> dict:
                 ax.legend(fontsize=8)
     fig.suptitle("Fig. 9 with data: relaxation after a perturbation (data black, model grey)")
     fig2, axes2 = new_figure(2, 1, width=7, height=7, sharex=True)
-    for row, (q, label, unit_scale) in enumerate((("racket_period_s", "racket period change (ms)", 1e3),
-                                                  ("racket_amplitude_m", "racket amplitude change (mm)",
-                                                   1e3))):
+    modulations = (("racket_period_s", "racket period change (ms)", 1e3),
+                   ("racket_amplitude_m", "racket amplitude change (mm)", 1e3))
+    for row, (q, label, unit_scale) in enumerate(modulations):
         ax = axes2[row, 0]
         ax.axhline(0, color="0.7", lw=0.8)
         for side, colour in (("increase", "k"), ("decrease", "0.6")):

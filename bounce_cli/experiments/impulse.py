@@ -5,6 +5,7 @@ relaxation times of opposite perturbations.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Annotated, Optional
 
@@ -12,22 +13,23 @@ import numpy as np
 import pandas as pd
 from pydantic import Field
 
+from .. import paper
 from ..config import ClassifyBlock, ExperimentConfig, StrictModel
-from ..engine import (
-    OUTCOMES,
-    ModelParams,
-    classify_batch,
+from ..engine.impulse import (
+    find_threshold,
     impulse_response_full,
     impulse_response_linear,
+    perturbed_outcome,
     perturbed_velocity,
     relaxation_impacts,
-    stability,
 )
+from ..engine.linear import stability
+from ..engine.params import ModelParams
+from ..plotting import caption_figures
 from .base import Experiment, ExperimentResult, RunOptions
 from .data_side import ImpulseDataBlock
 
 MODELS = ("full", "linear")
-PAPER_THRESHOLD = 0.65
 
 
 class RelaxationBlock(StrictModel):
@@ -45,7 +47,8 @@ class ThresholdBlock(StrictModel):
 
 
 class ImpulseConfig(ExperimentConfig):
-    alpha_p: list[Annotated[float, Field(ge=0.0, lt=1.0)]] = Field([0.4, 0.6, 0.35, 0.65], min_length=1)
+    alpha_p: list[Annotated[float, Field(ge=0.0, lt=1.0)]] = Field(
+        [*paper.ALPHA_P_SIMULATED, *paper.ALPHA_P_EXPERIMENT], min_length=1)
     iterations: int = Field(10, ge=1, description="impacts after the perturbed one, shown")
     classify: ClassifyBlock = ClassifyBlock()
     relaxation: RelaxationBlock = RelaxationBlock()
@@ -54,58 +57,24 @@ class ImpulseConfig(ExperimentConfig):
     data_analysis: ImpulseDataBlock = ImpulseDataBlock()
 
 
-# -- classification of the full response (section 3's criteria) -----------------------------
-def classify(params: ModelParams, v0: float, block: ClassifyBlock) -> tuple[str, int]:
-    """Outcome of the full map from (theta~, v0) with section 3's criteria (the basin's
-    classifier, ``engine.classify_batch``): ``period1`` | ``sticking`` | ``below_racket`` |
-    ``undecided``, and the number of impacts until it was decided."""
-    result = classify_batch(params.fixed_point().theta_rad, v0, params, block.settings())
-    return OUTCOMES[int(result.outcome)], int(result.iterations)
+# -- where the full response ends (section 3's criteria; the engine decides) -----------------
+def threshold_row(params: ModelParams, direction: int, config: ImpulseConfig) -> dict:
+    """threshold.csv's row for one direction: the engine's ``find_threshold`` and the paper's
+    value beside it (only upwards, and only at the paper's parameters)."""
+    block = config.threshold
+    found = find_threshold(params, direction, config.classify.settings(),
+                           scan_step=block.scan_step,
+                           bisection_tolerance=block.bisection_tolerance,
+                           alpha_p_max=block.alpha_p_max)
+    quoted = (paper.ALPHA_P_THRESHOLD.value if direction > 0 and at_paper_parameters(params)
+              else math.nan)
+    return {"direction": "increase" if direction > 0 else "decrease",
+            "paper_alpha_p": quoted} | dataclasses.asdict(found)
 
 
-def find_threshold(params: ModelParams, direction: int, config: ImpulseConfig) -> dict:
-    """Scan alpha_p away from alpha_0 (direction +1 or -1) in steps until the full response
-    leaves the period-1 basin, then bisect between the last inside and first outside value."""
-    block, cls = config.threshold, config.classify
-    alpha_0 = params.alpha
-    end = block.alpha_p_max if direction > 0 else 0.0
-
-    def outcome(a):
-        return classify(params, perturbed_velocity(params, a), cls)
-
-    scan = np.arange(1, int(abs(end - alpha_0) / block.scan_step) + 1)
-    values = alpha_0 + direction * block.scan_step * scan
-    outcomes = [outcome(a)[0] for a in values]
-    row = {"direction": "increase" if direction > 0 else "decrease",
-           "paper_alpha_p": PAPER_THRESHOLD if direction > 0 else math.nan}
-    leaving = [i for i, o in enumerate(outcomes) if o != "period1"]
-    if not leaving:
-        return row | {"alpha_p_inside": values[-1] if len(values) else alpha_0,
-                      "alpha_p_outside": math.nan, "alpha_p_threshold": math.nan,
-                      "v0_threshold_m_s": math.nan, "outcome_outside": "",
-                      "bisection_steps": 0, "period1_beyond_in_scan": 0}
-    first = leaving[0]
-    inside = alpha_0 if first == 0 else float(values[first - 1])
-    outside, outside_outcome = float(values[first]), outcomes[first]
-    steps = 0
-    while abs(outside - inside) > block.bisection_tolerance:
-        mid = 0.5 * (inside + outside)
-        o = outcome(mid)[0]
-        if o == "period1":
-            inside = mid
-        else:
-            outside, outside_outcome = mid, o
-        steps += 1
-    threshold = 0.5 * (inside + outside)
-    return row | {
-        "alpha_p_inside": inside,
-        "alpha_p_outside": outside,
-        "alpha_p_threshold": threshold,
-        "v0_threshold_m_s": perturbed_velocity(params, threshold),
-        "outcome_outside": outside_outcome,
-        "bisection_steps": steps,
-        "period1_beyond_in_scan": sum(o == "period1" for o in outcomes[first:]),
-    }
+def at_paper_parameters(params: ModelParams) -> bool:
+    """The paper's perturbation model (alpha_0 = 0.5, a_r = 0.30 m, tau = 0.92 s, section 7)."""
+    return paper.at_parameters(params, paper.FIG3_MODEL)
 
 
 def linear_outcome(params: ModelParams) -> str:
@@ -176,11 +145,11 @@ def run(config: ImpulseConfig, options: RunOptions) -> ExperimentResult:
     options.progress.start(len(config.alpha_p) + 2, "impulse responses")
     outcomes = {}
     for ap in config.alpha_p:
-        outcomes[ap] = classify(params, perturbed_velocity(params, ap), config.classify)
+        outcomes[ap] = perturbed_outcome(params, ap, config.classify.settings())
         options.progress.advance(1)
     thresholds = []
     for direction in (+1, -1):
-        thresholds.append(find_threshold(params, direction, config))
+        thresholds.append(threshold_row(params, direction, config))
         options.progress.advance(1)
     frames = {
         "impulse.csv": impulse_frame(params, config, outcomes),
@@ -189,17 +158,27 @@ def run(config: ImpulseConfig, options: RunOptions) -> ExperimentResult:
     }
     up = thresholds[0]
     rel = frames["relaxation.csv"]
+    at_paper = at_paper_parameters(params)
     summary = [
         f"leaves the period-1 basin above alpha_p = {up['alpha_p_threshold']:.4f} "
-        f"(v_0 = {up['v0_threshold_m_s']:.3f} m/s, then {up['outcome_outside']}; paper: about "
-        f"{PAPER_THRESHOLD}); below alpha_p = {thresholds[1]['alpha_p_threshold']:.4f}",
-        f"alpha_p = 0.7: v_0 = {perturbed_velocity(params, 0.7):.3f} m/s (paper: 5.7 m/s)",
+        f"(v_0 = {up['v0_threshold_m_s']:.3f} m/s, then {up['outcome_outside']}"
+        + (f"; paper: about {paper.ALPHA_P_THRESHOLD.text}" if at_paper else "")
+        + f"); below alpha_p = {thresholds[1]['alpha_p_threshold']:.4f}",
     ]
+    if at_paper:
+        summary.append(
+            f"alpha_p = {paper.ALPHA_P_FIG3:g}: v_0 = "
+            f"{perturbed_velocity(params, paper.ALPHA_P_FIG3):.3f} m/s "
+            f"(paper: {paper.V0_AT_ALPHA_P_FIG3})")
+    else:
+        summary.append("(not the paper's section 7 parameters: no paper value to compare)")
     for model in MODELS:
         part = rel[rel.model == model]
         summary.append(f"{model}: impacts to relax " + ", ".join(
             f"{r.alpha_p:g}: {r.relaxation_impacts}" for r in part.itertuples()))
-    return ExperimentResult(frames=frames, figures=draw(frames), summary=summary)
+    figures = draw(frames)
+    caption_figures(figures, params)
+    return ExperimentResult(frames=frames, figures=figures, summary=summary)
 
 
 # -- figures --------------------------------------------------------------------------------
@@ -227,10 +206,13 @@ def _layout(df: pd.DataFrame, title: str):
     return fig, axes
 
 
-def _side(df: pd.DataFrame) -> tuple[pd.Series, pd.Series]:
+def _side(df: pd.DataFrame) -> tuple[list[float], list[float]]:
+    """alpha_p below and above alpha_0 (the sign of v_0 - v~), each ordered by the size of the
+    perturbation |v_0 - v~| (the same order as |alpha_p - alpha_0|)."""
     first = df[df.k == 0]
     dv = first.groupby("alpha_p").dv_m_s.first()
-    return dv[dv < 0].index, dv[dv >= 0].index
+    by_size = dv.abs().sort_values(kind="stable")
+    return ([a for a in by_size.index if dv[a] < 0], [a for a in by_size.index if dv[a] >= 0])
 
 
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
@@ -244,7 +226,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
 
     fig, axes = _layout(df, "Impulse response of the full map (paper Fig. 9; model only)")
     for col, group in enumerate((lower, higher)):
-        for i, ap in enumerate(sorted(group, key=lambda a: abs(a - 0.5))):
+        for i, ap in enumerate(group):
             d = df[(df.alpha_p == ap) & (df.model == "full")].sort_values("k")
             outcome = d.outcome.iloc[0]
             label = f"alpha_p = {ap:g}" + ("" if outcome == "period1" else f" ({outcome})")
@@ -258,7 +240,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     fig, axes = _layout(df, "Full map (grey) vs linearisation with the same Jacobian (black)"
                                " (paper Fig. 10)")
     for col, group in enumerate((lower, higher)):
-        for i, ap in enumerate(sorted(group, key=lambda a: abs(a - 0.5))):
+        for i, ap in enumerate(group):
             for model, colour, ls in (("full", "0.55", "-"), ("linear", "k", "--")):
                 d = df[(df.alpha_p == ap) & (df.model == model)].sort_values("k")
                 label = f"{model}, alpha_p = {ap:g}"

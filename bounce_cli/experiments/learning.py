@@ -25,13 +25,12 @@ import pandas as pd
 from pydantic import Field
 
 from ..config import ConfigError, ExperimentConfig, ModelBlock, StrictModel
-from ..engine import ModelError, ModelParams, ols_line, racket_amplitude_for_ac, stability
 from ..engine.data_stats import apex_sd_eq19
-from ..engine.linear import stable_ac_range_g
+from ..engine.linear import jacobian, racket_amplitude_for_ac, stability, stable_ac_range_g
+from ..engine.params import ModelError, ModelParams, phase_difference
+from ..engine.regression import ols_line
 from ..engine.stochastic import map_noise_covariance, paper_noise_covariance, stationary_covariance
-from ..engine import jacobian
 from ..impacts import circular_mean, read_impacts
-from ..engine.params import phase_difference
 from ..plotting import new_figure
 from .base import Experiment, ExperimentResult, RunOptions
 
@@ -83,6 +82,7 @@ def model_curve(alpha: float, g: float, period: float, q_v: float, q_theta: floa
 def trial_table(config: LearningConfig) -> tuple[pd.DataFrame, float]:
     """Per-trial statistics of the impacts table, in the file's order of trials (trial_number
     1, 2, ...), and the data's mean racket period (NaN without that column)."""
+    assert config.data is not None
     impacts = read_impacts(config.data, needs=("racket_acc_g", "ball_apex_m"),
                            command="learning --data", min_bounces=config.min_bounces)
     rows = []

@@ -18,19 +18,19 @@ import numpy as np
 import pandas as pd
 from pydantic import Field
 
+from .. import paper
 from ..config import ConfigError, ExperimentConfig, StrictModel
-from ..engine import (
-    ModelError,
-    ModelParams,
+from ..engine.linear import stability
+from ..engine.params import ModelError, ModelParams
+from ..engine.regression import (
     eq15_amplitude,
     eq15_slope,
     ols_line,
     period_for_height,
     phase_from_slope,
     simulate_trial,
-    stability,
 )
-from ..plotting import new_figure
+from ..plotting import caption_figures, new_figure
 from .base import Experiment, ExperimentResult, RunOptions
 from ..impacts import read_data_csv
 from .data_side import is_impacts_table, trial_means_from_impacts
@@ -74,7 +74,8 @@ def simulate_trials(config: RegressionConfig, options: RunOptions) -> pd.DataFra
              for t in range(1, d.trials_per_height + 1)]
     design_seed, trial_seeds = np.random.SeedSequence(config.seed).spawn(2)
     subject_rng = np.random.default_rng(design_seed)
-    subject_phase = d.phase_mean_deg + d.subject_phase_sd_deg * subject_rng.standard_normal(d.subjects)
+    subject_phase = (d.phase_mean_deg
+                     + d.subject_phase_sd_deg * subject_rng.standard_normal(d.subjects))
     options.progress.start(len(cells), "trials")
     rows = []
     for (subject, height, trial), seed in zip(cells, trial_seeds.spawn(len(cells))):
@@ -214,6 +215,16 @@ def run(config: RegressionConfig, options: RunOptions) -> ExperimentResult:
     trials = trials.assign(tau2_s2=trials["tau_s"] ** 2)
     fit = fit_frame(trials, config)
     figures = draw({"trials.csv": trials, "fit.csv": fit})
+    if config.data is not None:
+        caption_figures(figures, None, f"data: {config.data}")
+    else:
+        caption_figures(figures, None, f"simulated trials: alpha = {config.model.alpha:g}, "
+                        f"g = {config.model.g:g} m/s^2; seed {config.seed}")
+    # the paper's R^2 (section 5) are of its subjects' trials; beside a simulation of them only
+    fig7_like = config.data is None and (config.model.alpha, config.model.g) == (
+        paper.FIG3_MODEL.alpha, paper.FIG3_MODEL.g)
+    r2_paper = (f" (paper, its subjects: {paper.FIG7_R2['vision'].text} vision / "
+                f"{paper.FIG7_R2['no vision'].text} no vision)") if fig7_like else ""
     pct = f"{config.confidence:.0%}"
     lines = [f"{source}; OLS of a_r on tau^2, {pct} confidence intervals"]
     for row in fit.itertuples():
@@ -221,7 +232,7 @@ def run(config: RegressionConfig, options: RunOptions) -> ExperimentResult:
             f"({row.condition}) slope {row.slope:.4f} m/s^2 [{row.slope_ci_low:.4f}, "
             f"{row.slope_ci_high:.4f}] vs eq. 15 {row.predicted_slope:.4f}; intercept "
             f"{row.intercept * 100:.2f} cm [{row.intercept_ci_low * 100:.2f}, "
-            f"{row.intercept_ci_high * 100:.2f}] vs 0; R^2 {row.r2:.3f} (paper 0.98 / 0.90)")
+            f"{row.intercept_ci_high * 100:.2f}] vs 0; R^2 {row.r2:.3f}{r2_paper}")
     return ExperimentResult(frames={"trials.csv": trials, "fit.csv": fit}, figures=figures,
                             summary=lines)
 

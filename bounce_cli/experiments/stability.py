@@ -14,9 +14,9 @@ import numpy as np
 import pandas as pd
 from pydantic import Field, model_validator
 
+from .. import paper
 from ..config import ExperimentConfig, StrictModel
-from ..engine import (
-    ModelParams,
+from ..engine.linear import (
     complex_boundaries_g,
     eigenvalues,
     empirical_contraction_rate,
@@ -29,6 +29,7 @@ from ..engine import (
     stability,
     stable_ac_range_g,
 )
+from ..engine.params import ModelParams
 from .base import Experiment, ExperimentResult, RunOptions
 
 
@@ -37,16 +38,16 @@ class GridBlock(StrictModel):
 
     alpha_min: float = Field(-0.2, gt=-1.0)
     alpha_max: float = Field(1.0, gt=-1.0)
-    n_alpha: int = Field(121, ge=2)
+    n_alpha: int = Field(121, ge=1)
     ac_min_g: float = -3.5
     ac_max_g: float = 0.5
-    n_ac: int = Field(201, ge=2)
+    n_ac: int = Field(201, ge=1)
 
     @model_validator(mode="after")
     def _ordered(self):
-        if self.alpha_max <= self.alpha_min:
+        if self.n_alpha > 1 and self.alpha_max <= self.alpha_min:
             raise ValueError("alpha_max must be greater than alpha_min")
-        if self.ac_max_g <= self.ac_min_g:
+        if self.n_ac > 1 and self.ac_max_g <= self.ac_min_g:
             raise ValueError("ac_max_g must be greater than ac_min_g")
         return self
 
@@ -124,6 +125,12 @@ def surface_frame(alpha: np.ndarray, n_ac: int) -> pd.DataFrame:
                          "ac_g": ac.ravel(), "spectral_radius": spectral_radius(aa, ac).ravel()})
 
 
+def paper_stable_ac_low(alpha: float) -> float:
+    """The paper's lower end of the stable AC range (section 5), which it gives for
+    alpha = 0.5 only; NaN at any other alpha."""
+    return paper.STABLE_AC_LOW.value if alpha == paper.STABLE_AC_ALPHA else math.nan
+
+
 def predictions_frame(params: ModelParams, block: PredictionsBlock) -> pd.DataFrame:
     alpha = params.alpha
     st = stability(params)
@@ -136,7 +143,8 @@ def predictions_frame(params: ModelParams, block: PredictionsBlock) -> pd.DataFr
          f"AC of the model block; {'stable' if st.stable else 'unstable'}, {st.regime} regime"),
         ("spectral_radius_model", st.spectral_radius, alpha, "1",
          "largest |lambda| at the model block (eq. 12: |alpha| in the complex regime)"),
-        ("stable_ac_low_g", low, -1.11, "g", "section 5: AC between 0 and -1.11 g (eq. 14)"),
+        ("stable_ac_low_g", low, paper_stable_ac_low(alpha), "g",
+         f"section 5: AC between 0 and {paper.STABLE_AC_LOW} (eq. 14)"),
         ("stable_ac_high_g", high, 0.0, "g", "section 5 / eq. 14: upper bound AC = 0"),
         ("complex_ac_low_g", cx_low, -1.0, "g", "eq. 11 (bounds in increasing order)"),
         ("complex_ac_high_g", cx_high, -(((1 - alpha) / (1 + alpha)) ** 2), "g", "eq. 11"),
@@ -208,12 +216,15 @@ def run(config: StabilityConfig, options: RunOptions) -> ExperimentResult:
     cross = frames["crosscheck.csv"]
     stable = cross[cross.stable]
     unstable = cross[~cross.stable]
+    quoted = paper_stable_ac_low(config.model.alpha)
     summary = [
         f"alpha = {config.model.alpha:g}: stable AC from {pred['stable_ac_low_g']:.4f} g to "
-        f"{pred['stable_ac_high_g']:g} g (paper: -1.11 to 0); min spectral radius "
-        f"{pred['min_spectral_radius_stable']:.6f} (paper: alpha)",
+        f"{pred['stable_ac_high_g']:g} g"
+        + (f" (paper: {quoted:g} to 0)" if np.isfinite(quoted) else "")
+        + f"; min spectral radius {pred['min_spectral_radius_stable']:.6f} (section 4: alpha)",
         f"crosscheck, {len(stable)} stable points: max |rel diff| finite-difference "
-        f"{stable.rel_diff_fd.abs().max():.2e}, empirical {stable.rel_diff_empirical.abs().max():.2e}",
+        f"{stable.rel_diff_fd.abs().max():.2e}, empirical "
+        f"{stable.rel_diff_empirical.abs().max():.2e}",
     ]
     if len(unstable):
         summary.append(
@@ -225,6 +236,20 @@ def run(config: StabilityConfig, options: RunOptions) -> ExperimentResult:
 
 # -- figure ---------------------------------------------------------------------------------
 REGION_COLOURS = {0: "#d9d9d9", 1: "#9ecae1", 2: "#fdd49e"}  # unstable, real, complex
+
+
+def _cell_edges(values: np.ndarray, pad: float) -> tuple[float, float]:
+    """Outer edges of cells centred on equally spaced ``values``; one value: +- ``pad``."""
+    if values.size == 1:
+        return float(values[0]) - pad, float(values[0]) + pad
+    half = float(values[-1] - values[0]) / (values.size - 1) / 2
+    return float(values[0]) - half, float(values[-1]) + half
+
+
+def _limits(values: np.ndarray, pad: float) -> tuple[float, float]:
+    """Axis limits spanning ``values``; a single value (an axis of ``n: 1``) +- ``pad``."""
+    low, high = float(values.min()), float(values.max())
+    return (low, high) if high > low else (low - pad, high + pad)
 
 
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
@@ -245,22 +270,32 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     fig, axes = new_figure(1, 2, width=13.0, height=5.6)
     ax = axes[0, 0]
     cmap = ListedColormap([REGION_COLOURS[i] for i in range(3)])
-    ax.pcolormesh(alpha, ac, region.T, cmap=cmap, norm=BoundaryNorm([-0.5, 0.5, 1.5, 2.5], 3),
-                  shading="nearest", rasterized=True)
+    # cells centred on the (equally spaced) grid values; an axis of one value gets a band
+    ax.imshow(region.T, origin="lower", aspect="auto", interpolation="nearest", cmap=cmap,
+              norm=BoundaryNorm([-0.5, 0.5, 1.5, 2.5], 3),
+              extent=(*_cell_edges(alpha, 0.05), *_cell_edges(ac, 0.1)))
     a = bnd.alpha.to_numpy()
-    ax.plot(a, bnd.ac_flip_g, color="k", lw=2, label="stability boundary, eq. 14 (flip)")
-    ax.plot(a, bnd.ac_fold_g, color="k", lw=2, ls="--", label="stability boundary AC = 0, eq. 14")
+    # a diagram at one alpha draws the boundaries as points on that vertical line
+    style = {"marker": "_", "ms": 30} if len(a) == 1 else {}
+    ax.plot(a, bnd.ac_flip_g, color="k", lw=2, label="stability boundary, eq. 14 (flip)", **style)
+    ax.plot(a, bnd.ac_fold_g, color="k", lw=2, ls="--", label="stability boundary AC = 0, eq. 14",
+            **style)
     ax.axvline(1.0, color="k", lw=2, ls=":", label="|alpha| = 1, eq. 13")
-    ax.plot(a, bnd.ac_complex_low_g, color="0.45", lw=1.5, label="real/complex, eq. 11")
-    ax.plot(a, bnd.ac_complex_high_g, color="0.45", lw=1.5)
-    ax.set_xlim(alpha.min(), alpha.max())
-    ax.set_ylim(ac.min(), ac.max())
-    # region labels along alpha = 0.5 (or the grid's middle when 0.5 is outside it)
-    a0 = 0.5 if alpha.min() < 0.5 < alpha.max() else float(np.median(alpha))
+    ax.plot(a, bnd.ac_complex_low_g, color="0.45", lw=1.5, label="real/complex, eq. 11",
+            **style)
+    ax.plot(a, bnd.ac_complex_high_g, color="0.45", lw=1.5, **style)
+    ax.set_xlim(*_limits(alpha, 0.05))
+    ax.set_ylim(*_limits(ac, 0.1))
+    # region labels along the middle of the physical alphas shown (0 <= alpha < 1), and the
+    # upper real band's label a tenth of the way in, where that band is wider
+    lo_a, hi_a = max(float(alpha.min()), 0.0), min(float(alpha.max()), 1.0)
+    if hi_a <= lo_a:
+        lo_a, hi_a = float(alpha.min()), float(alpha.max())
+    a0 = 0.5 * (lo_a + hi_a)
     b = {c: float(np.interp(a0, a, bnd[c])) for c in bnd.columns}
     hi = min(b["ac_complex_high_g"], 0.0)
     lo = max(b["ac_complex_low_g"], b["ac_flip_g"])
-    a1 = 0.1 if alpha.min() < 0.1 < alpha.max() else a0  # the upper real band is wider there
+    a1 = lo_a + 0.1 * (hi_a - lo_a)
     hi1 = min(float(np.interp(a1, a, bnd.ac_complex_high_g)), 0.0)
     ax.text(a1, hi1 / 2, "real (stable)", ha="center", va="center", fontsize=9)
     labels = [
@@ -273,7 +308,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
             ax.text(a0, y, text, ha="center", va="center", fontsize=9)
     if b["ac_complex_low_g"] > b["ac_flip_g"]:
         ax.annotate("real (stable)", xy=(a0, (b["ac_complex_low_g"] + b["ac_flip_g"]) / 2),
-                    xytext=(a0 - 0.45, b["ac_flip_g"] - 0.35), fontsize=9,
+                    xytext=(a0 - 0.45 * (hi_a - lo_a), b["ac_flip_g"] - 0.35), fontsize=9,
                     arrowprops={"arrowstyle": "->", "lw": 0.8})
     ax.set_xlabel("coefficient of restitution alpha")
     ax.set_ylabel("racket acceleration at impact AC (g)")
@@ -286,8 +321,12 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     n_frac = surf_df.fraction.nunique()
     A, C, Z = (surf_df[c].to_numpy().reshape(-1, n_frac) for c in ("alpha", "ac_g",
                                                                     "spectral_radius"))
-    surf = ax3.plot_surface(A, C, Z, cmap="viridis", vmin=0.0, vmax=1.0, rstride=1, cstride=1,
-                            linewidth=0, antialiased=False)
+    if min(A.shape) > 1:
+        surf = ax3.plot_surface(A, C, Z, cmap="viridis", vmin=0.0, vmax=1.0, rstride=1,
+                                cstride=1, linewidth=0, antialiased=False)
+    else:  # one alpha (or one AC): the surface is a curve (or a point)
+        surf = ax3.scatter(A.ravel(), C.ravel(), Z.ravel(), c=Z.ravel(), cmap="viridis",
+                           vmin=0.0, vmax=1.0)
     ax3.set_xlabel("alpha")
     ax3.set_ylabel("AC (g)")
     ax3.set_zlabel("max |lambda|")

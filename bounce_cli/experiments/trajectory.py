@@ -15,7 +15,9 @@ import pandas as pd
 from pydantic import Field, model_validator
 
 from ..config import ExperimentConfig, StrictModel
-from ..engine import FlightSettings, ModelParams, simulate, wrap_phase
+from ..engine.flight import FlightSettings, simulate
+from ..engine.params import ModelParams, wrap_phase
+from ..plotting import caption_figures
 from .base import Experiment, ExperimentResult, RunOptions
 
 
@@ -35,20 +37,27 @@ class CaseBlock(StrictModel):
 
     @property
     def theta0(self) -> float:
-        return self.theta0_rad if self.theta0_rad is not None else math.radians(self.theta0_deg)
+        if self.theta0_rad is not None:
+            return self.theta0_rad
+        assert self.theta0_deg is not None  # the validator demands exactly one
+        return math.radians(self.theta0_deg)
+
+
+#: the engine's defaults (the one place they live)
+_FLIGHT = FlightSettings()
 
 
 class StickingBlock(StrictModel):
     """When the ball counts as stuck on the racket."""
 
-    min_hop_s: float = Field(1e-3, ge=0.0)
-    min_relative_velocity_m_s: float = Field(1e-3, ge=0.0)
+    min_hop_s: float = Field(_FLIGHT.min_hop_s, ge=0.0, description="s, a shorter hop sticks")
+    min_relative_velocity_m_s: float = Field(_FLIGHT.min_relative_velocity_m_s, ge=0.0)
 
 
 class TrajectoryConfig(ExperimentConfig):
     integrator: Literal["exact", "rk4"] = "exact"
     # a coarser fixed step misses short hops (at 0.02 s, 9 of 87 impacts of the sticking case)
-    rk4_step_s: float = Field(1e-3, gt=0.0, le=5e-3)
+    rk4_step_s: float = Field(_FLIGHT.rk4_step_s, gt=0.0, le=5e-3)
     duration_s: float = Field(10.0, gt=0.0, le=1e4)
     sample_interval_s: float = Field(0.005, gt=0.0)
     sticking: StickingBlock = StickingBlock()
@@ -131,7 +140,9 @@ def run(config: TrajectoryConfig, options: RunOptions) -> ExperimentResult:
     frames["fixed_point.csv"] = pd.DataFrame(
         {"v_m_s": [fp.v_m_s], "theta_deg": [fp.theta_deg], "integrator": [config.integrator]}
     )
-    return ExperimentResult(frames=frames, figures=draw(frames), summary=summary)
+    figures = draw(frames)
+    caption_figures(figures, params)
+    return ExperimentResult(frames=frames, figures=figures, summary=summary)
 
 
 def _stuck_spans(t, stuck):
@@ -152,7 +163,8 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     """Fig. 3 style: per case, ball and racket position over time, then v_k and theta_k."""
     from ..plotting import new_figure
 
-    track, impacts, fixed = frames["trajectory.csv"], frames["impacts.csv"], frames["fixed_point.csv"]
+    track, impacts = frames["trajectory.csv"], frames["impacts.csv"]
+    fixed = frames["fixed_point.csv"]
     v_fp, th_fp = float(fixed["v_m_s"].iloc[0]), float(fixed["theta_deg"].iloc[0])
     cases = list(dict.fromkeys(track["case"]))
     fig, axes = new_figure(3 * len(cases), 1, width=8.0, height=3.2 * len(cases) + 1.0,
@@ -183,7 +195,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         ax_th.legend(loc="best", fontsize=7)
         ax_x.set_xlabel("time t (s)")
     integrator = str(fixed["integrator"].iloc[0])
-    fig.suptitle("Fig. 3: period-1 attractor and sticking solution (eqs. 1-4)\n"
+    fig.suptitle("Ball and racket trajectories (eqs. 1-4; paper Fig. 3)\n"
                  f"integrator: {integrator}; dashed: fixed point (eqs. 7, 8); "
                  "shaded: ball riding on the racket", fontsize=10)
     return {"trajectory.png": fig}

@@ -8,7 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import brentq, minimize_scalar
 
-from bounce_cli.engine import ModelParams, gap, gap_slope, next_impact_phase
+from bounce_cli.engine.impact import gap, gap_slope, next_impact_phase
+from bounce_cli.engine.params import ModelParams
 
 PARAMS = st.builds(
     ModelParams,
@@ -21,7 +22,8 @@ PARAMS = st.builds(
 
 def assert_first_root(theta, v, s, params, n_grid=4000):
     """G(s) = 0, and G > 0 strictly on (0, s): on a dense grid and at every local minimum."""
-    scale = abs(v) * s / params.omega + params.g * s * s / params.omega**2 + 2 * params.racket_amplitude
+    scale = (abs(v) * s / params.omega + params.g * s * s / params.omega**2
+             + 2 * params.racket_amplitude)
     assert abs(gap(s, theta, v, params)) <= 1e-11 * scale
     assert gap_slope(s, theta, v, params) <= 1e-9 * scale  # the ball comes down onto the racket
     grid = np.linspace(0, s, n_grid + 2)[1:-1]

@@ -4,7 +4,6 @@ import json
 
 import pandas as pd
 import pytest
-from test_cli import assert_user_error, run  # shared CliRunner helpers
 
 from bounce_cli.experiments import acf
 
@@ -12,9 +11,9 @@ SMALL = ["--set", "long_runs.runs=6", "--set", "long_runs.bounces=300", "--set",
 
 
 @pytest.fixture(scope="module")
-def small_run(tmp_path_factory):
+def small_run(tmp_path_factory, cli):
     out = tmp_path_factory.mktemp("acf")
-    result = run("acf", "--out", out, "--quiet", *SMALL)
+    result = cli("acf", "--out", out, "--quiet", *SMALL)
     assert result.exit_code == 0, result.output
     return out
 
@@ -38,13 +37,13 @@ def test_files_and_columns(small_run):
     assert manifest["seed"] == 2009 and manifest["config"]["noise"]["q_v"] == 0.04
 
 
-def test_same_seed_same_numbers_other_seed_differs(small_run, tmp_path):
+def test_same_seed_same_numbers_other_seed_differs(small_run, tmp_path, cli):
     again = tmp_path / "again"
-    assert run("acf", "--out", again, "--quiet", *SMALL).exit_code == 0
+    assert cli("acf", "--out", again, "--quiet", *SMALL).exit_code == 0
     pd.testing.assert_frame_equal(pd.read_csv(small_run / "acf.csv"),
                                   pd.read_csv(again / "acf.csv"))
     other = tmp_path / "other"
-    assert run("acf", "--out", other, "--quiet", *SMALL, "--set", "seed=1").exit_code == 0
+    assert cli("acf", "--out", other, "--quiet", *SMALL, "--set", "seed=1").exit_code == 0
     assert not pd.read_csv(other / "acf.csv")["sample_mean"].equals(
         pd.read_csv(small_run / "acf.csv")["sample_mean"])
 
@@ -65,5 +64,26 @@ def test_figure_redraws_from_csvs(small_run):
     (["--set", "noise.velocity_phase=psi"], "noise.velocity_phase"),
     (["--set", "long_runs.runs=1"], "long_runs.runs"),
 ])
-def test_user_errors(args, needle, tmp_path):
-    assert_user_error(run("acf", "--out", tmp_path / "o", *args), needle)
+def test_user_errors(args, needle, tmp_path, cli, user_error):
+    user_error(cli("acf", "--out", tmp_path / "o", *args), needle)
+
+
+def test_every_run_lost_is_a_one_line_error(tmp_path, cli, user_error):
+    # q_v = 0.5 m/s (12 x the paper's): every run knocks the ball onto the racket
+    result = cli("acf", "--out", tmp_path / "o", *SMALL, "--set", "noise.q_v=0.5")
+    user_error(result, "every run lost the ball")
+    assert not (tmp_path / "o" / "acf.csv").exists()
+
+
+def test_paper_values_only_at_the_papers_parameters(small_run, tmp_path, cli):
+    summary = pd.read_csv(small_run / "summary.csv")
+    theory = summary[summary.source == "theory_eq19"].set_index("quantity")
+    assert theory.loc["sd_v", "paper"] == 0.068 and theory.loc["sd_theta", "paper"] == 8.4
+    assert summary.source.str.startswith("candidate").any()
+    other = tmp_path / "other"
+    result = cli("acf", "--out", other, *SMALL, "--set", "model.alpha=0.5")
+    assert result.exit_code == 0, result.output
+    assert "paper: theory" not in result.stderr and "not the paper's" in result.stderr
+    summary = pd.read_csv(other / "summary.csv")
+    assert summary.paper.isna().all()
+    assert not summary.source.str.startswith("candidate").any()

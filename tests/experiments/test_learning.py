@@ -5,9 +5,9 @@ from simulated trials whose AC drifts with known slope."""
 import numpy as np
 import pandas as pd
 import pytest
-from test_cli import assert_user_error, run  # shared CliRunner helpers
 
-from bounce_cli.engine import ModelParams, flip_boundary_g, racket_amplitude_for_ac, stability
+from bounce_cli.engine.linear import flip_boundary_g, racket_amplitude_for_ac, stability
+from bounce_cli.engine.params import ModelParams
 from bounce_cli.engine.data_stats import apex_height, apex_sd_eq19, simulate_impacts
 from bounce_cli.experiments import learning
 from bounce_cli.impacts import impacts_frame
@@ -31,7 +31,7 @@ def test_model_curve_spans_the_stable_range_and_sets_ac():
 def test_apex_sd_of_long_simulations_matches_eq19_with_the_maps_noise():
     """Eq. 19's apex SD (with the printed map's noise covariance) against 20 x 1000 bounces
     of eqs. 16-18: within 3 %."""
-    from bounce_cli.engine import map_noise_covariance
+    from bounce_cli.engine.stochastic import map_noise_covariance
 
     for ac in (-0.3, -0.7):
         a_r = float(racket_amplitude_for_ac(0.5, ac, 9.81, 0.92))
@@ -43,7 +43,7 @@ def test_apex_sd_of_long_simulations_matches_eq19_with_the_maps_noise():
 
 
 @pytest.fixture(scope="module")
-def learning_run(tmp_path_factory):
+def learning_run(tmp_path_factory, cli):
     """12 trials of 120 bounces; trial i bounces at AC from -0.25 g to -0.8 g (linear in i)."""
     tmp = tmp_path_factory.mktemp("learning")
     frames = []
@@ -55,7 +55,7 @@ def learning_run(tmp_path_factory):
     path = tmp / "impacts.csv"
     pd.concat(frames).to_csv(path, index=False)
     out = tmp / "out"
-    result = run("learning", "--data", path, "--out", out, "--quiet")
+    result = cli("learning", "--data", path, "--out", out, "--quiet")
     assert result.exit_code == 0, result.output
     return path, out
 
@@ -83,26 +83,26 @@ def test_learning_figure_and_redraw(learning_run):
     assert "trial number" in labels and "racket acceleration at impact AC (g)" in labels
 
 
-def test_model_only_without_data(tmp_path):
-    result = run("learning", "--out", tmp_path, "--quiet")
+def test_model_only_without_data(tmp_path, cli):
+    result = cli("learning", "--out", tmp_path, "--quiet")
     assert result.exit_code == 0, result.output
     assert sorted(p.name for p in tmp_path.iterdir()) == ["learning.png", "model_curve.csv",
                                                           "run.json"]
 
 
-def test_learning_errors(learning_run, tmp_path):
+def test_learning_errors(learning_run, tmp_path, cli, user_error):
     path, _ = learning_run
     frame = pd.read_csv(path)
     no_apex = tmp_path / "no_apex.csv"
     frame.drop(columns=["ball_apex_m"]).to_csv(no_apex, index=False)
-    assert_user_error(run("learning", "--data", no_apex, "--out", tmp_path / "a"),
+    user_error(cli("learning", "--data", no_apex, "--out", tmp_path / "a"),
                       "missing column ball_apex_m", "SD of ball amplitude")
     two = tmp_path / "two.csv"
     frame[frame.trial.isin(["day1", "day2"])].to_csv(two, index=False)
-    assert_user_error(run("learning", "--data", two, "--out", tmp_path / "b"),
+    user_error(cli("learning", "--data", two, "--out", tmp_path / "b"),
                       "2 trial(s)", "at least 3")
     short = tmp_path / "short.csv"
     frame[(frame.trial != "day3") | (frame.k < 4)].to_csv(short, index=False)
-    assert_user_error(run("learning", "--data", short, "--out", tmp_path / "c"),
+    user_error(cli("learning", "--data", short, "--out", tmp_path / "c"),
                       "trial day3", "4 impacts")
     assert not any((tmp_path / d).exists() and any((tmp_path / d).iterdir()) for d in "abc")

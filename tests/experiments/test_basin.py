@@ -4,23 +4,16 @@ import math
 
 import numpy as np
 import pandas as pd
-from typer.testing import CliRunner
 
-from bounce_cli.cli import app
 from bounce_cli.experiments import basin
 
-runner = CliRunner()
 SMALL = ["--set", "grid.theta0_deg.num=40", "--set", "grid.v0_m_s.num=40"]
 
 
-def run(*args):
-    return runner.invoke(app, [str(a) for a in args])
-
-
-def test_basin_cli_small_grid_jobs_independent(tmp_path, paper_params):
+def test_basin_cli_small_grid_jobs_independent(tmp_path, paper_params, cli):
     out1, out2 = tmp_path / "j1", tmp_path / "j2"
-    r1 = run("basin", *SMALL, "--jobs", 1, "--out", out1, "--quiet")
-    r2 = run("basin", *SMALL, "--jobs", 2, "--out", out2, "--quiet")
+    r1 = cli("basin", *SMALL, "--jobs", 1, "--out", out1, "--quiet")
+    r2 = cli("basin", *SMALL, "--jobs", 2, "--out", out2, "--quiet")
     assert r1.exit_code == 0, r1.output
     assert r2.exit_code == 0, r2.output
     assert (out1 / "basin.csv").read_bytes() == (out2 / "basin.csv").read_bytes()
@@ -54,9 +47,9 @@ def test_basin_cli_small_grid_jobs_independent(tmp_path, paper_params):
     assert math.isclose(markers.loc["fixed_point", "v0_m_s"], paper_params.fixed_point().v_m_s)
 
 
-def test_basin_figures_redraw_from_csv(tmp_path):
+def test_basin_figures_redraw_from_csv(tmp_path, cli):
     out = tmp_path / "b"
-    assert run("basin", *SMALL, "--jobs", 1, "--out", out, "--quiet").exit_code == 0
+    assert cli("basin", *SMALL, "--jobs", 1, "--out", out, "--quiet").exit_code == 0
     frames = {name: pd.read_csv(out / name) for name in ("basin.csv", "markers.csv")}
     figures = basin.draw(frames)
     assert set(figures) == {"basin.png", "basin_iterations.png"}
@@ -72,14 +65,14 @@ def test_basin_figures_redraw_from_csv(tmp_path):
     assert iters.max() == df.iterations.max()
 
 
-def test_basin_grid_limit_and_bad_grid_are_one_line_errors(tmp_path):
+def test_basin_grid_limit_and_bad_grid_are_one_line_errors(tmp_path, cli):
     for args, needle in [
         (["--set", "limits.max_points=1000"], "limits.max_points"),
-        (["--set", "grid.v0_m_s.num=1"], "grid.v0_m_s.num"),
+        (["--set", "grid.v0_m_s.num=0"], "grid.v0_m_s.num"),
         (["--set", "grid.theta0_deg.stop=-1"], "grid.theta0_deg"),
         (["--set", "classify.tolerance=0"], "classify.tolerance"),
     ]:
-        result = run("basin", *args, "--out", tmp_path / "x", "--quiet")
+        result = cli("basin", *args, "--out", tmp_path / "x", "--quiet")
         assert result.exit_code == 2, result.output
         lines = [line for line in result.stderr.splitlines() if line.strip()]
         assert len(lines) == 1 and needle in lines[0], result.stderr
@@ -128,3 +121,52 @@ def test_run_reports_progress_per_tile_and_summary():
     assert progress.total == 120 and sum(progress.done) == 120
     assert len(result.frames["basin.csv"]) == 120
     assert any("max impacts" in line for line in result.summary)
+
+
+def test_one_value_axes_run_and_draw(tmp_path, paper_params, cli):
+    """num: 1 is linspace's one value: a basin along a line of v0 at the Fig. 3 phase, along
+    a line of theta0, and at one initial condition; each agrees with the classifier run
+    directly on those points, and its figures hold one row / column / cell."""
+    from bounce_cli.engine.classify import classify_batch
+
+    theta0 = math.degrees(math.asin(0.205 / 0.30))
+    cases = {
+        "line_v0": (["--set", f"grid.theta0_deg.start={theta0!r}", "--set", "grid.theta0_deg.num=1",
+                     "--set", "grid.v0_m_s.start=4", "--set", "grid.v0_m_s.stop=6",
+                     "--set", "grid.v0_m_s.num=21"], (21, 1)),
+        "line_theta0": (["--set", "grid.theta0_deg.num=30", "--set", "grid.v0_m_s.start=4.8",
+                         "--set", "grid.v0_m_s.num=1"], (1, 30)),
+        "point": (["--set", f"grid.theta0_deg.start={theta0!r}", "--set", "grid.theta0_deg.num=1",
+                   "--set", "grid.v0_m_s.start=5.7", "--set", "grid.v0_m_s.num=1"], (1, 1)),
+    }
+    for name, (args, shape) in cases.items():
+        out = tmp_path / name
+        result = cli("basin", *args, "--out", out, "--quiet", "--jobs", 1)
+        assert result.exit_code == 0, result.output
+        df = pd.read_csv(out / "basin.csv")
+        assert len(df) == shape[0] * shape[1]
+        direct = classify_batch(df.theta0_rad, df.v0_m_s, paper_params)
+        assert list(df.outcome) == list(direct.names())
+        figures = basin.draw({n: pd.read_csv(out / n) for n in ("basin.csv", "markers.csv")})
+        for fig in figures.values():
+            image = np.asarray(fig.axes[0].images[0].get_array())
+            assert image.shape == shape
+            x0, x1, y0, y1 = fig.axes[0].images[0].get_extent()
+            assert x1 > x0 and y1 > y0  # a one-value axis still has a width
+    point = pd.read_csv(tmp_path / "point" / "basin.csv")
+    assert list(point.outcome) == ["sticking"]  # Fig. 3's bottom panel
+
+
+def test_paper_statements_only_at_the_papers_parameters(tmp_path, cli):
+    small = [*SMALL, "--jobs", 1]
+    at_paper = cli("basin", *small, "--out", tmp_path / "p")
+    assert "paper: no point reached 100" in at_paper.stderr
+    assert "Fig. 3 initial conditions" in at_paper.stderr
+    other = cli("basin", *small, "--set", "model.alpha=0.6", "--out", tmp_path / "o")
+    assert other.exit_code == 0, other.output
+    assert "paper:" not in other.stderr and "Fig. 3" not in other.stderr
+    markers = pd.read_csv(tmp_path / "o" / "markers.csv")
+    assert list(markers.marker) == ["fixed_point"]
+    png = basin.draw({n: pd.read_csv(tmp_path / "o" / n) for n in ("basin.csv", "markers.csv")})
+    labels = png["basin.png"].legends[0].get_texts()
+    assert not any("Fig. 3" in t.get_text() for t in labels)

@@ -9,12 +9,11 @@ from typer.testing import CliRunner
 
 from bounce_cli.cli import app
 from bounce_cli.config import bundled_config_path, load_config
-from bounce_cli.engine import (
-    ModelParams,
+from bounce_cli.engine.linear import (
     ac_explicit_g,
     characteristic_c,
-    is_complex_regime,
     empirical_contraction_rate,
+    is_complex_regime,
     iterate_linear,
     jacobian,
     min_stable_spectral_radius,
@@ -23,6 +22,7 @@ from bounce_cli.engine import (
     spectral_radius,
     stability,
 )
+from bounce_cli.engine.params import ModelParams
 from bounce_cli.experiments import stability as exp
 from bounce_cli.experiments.base import RunOptions
 
@@ -88,11 +88,13 @@ def test_surface_follows_the_stable_region(result):
 
 def test_eigen_grid_matches_eq9_at_real_models():
     for alpha, ac, period in [(0.3, -0.7, 0.8), (0.5, -1.05, 0.6), (0.9, -0.2, 1.1)]:
-        p = ModelParams(alpha, 9.81, float(racket_amplitude_for_ac(alpha, ac, 9.81, period)), period)
+        a_r = float(racket_amplitude_for_ac(alpha, ac, 9.81, period))
+        p = ModelParams(alpha, 9.81, a_r, period)
         assert racket_acceleration_at_impact_g(p) == pytest.approx(ac, abs=1e-12)
         assert ac_explicit_g(alpha, 9.81, p.racket_amplitude, period) == pytest.approx(ac)
         frame = exp.eigen_frame(np.array([alpha]), np.array([ac]))
-        assert frame.spectral_radius[0] == pytest.approx(np.abs(np.linalg.eigvals(jacobian(p))).max())
+        radius = np.abs(np.linalg.eigvals(jacobian(p))).max()
+        assert frame.spectral_radius[0] == pytest.approx(radius)
 
 
 def test_crosscheck_agrees_where_stable_and_grows_where_not(result):
@@ -173,3 +175,36 @@ def test_cli_writes_files_and_rejects_bad_grid(tmp_path):
     bad = runner.invoke(app, ["stability", "--out", str(tmp_path / "b"),
                               "--set", "grid.alpha_min=-1"])
     assert bad.exit_code == 2 and "grid.alpha_min" in bad.stderr
+
+
+def test_paper_range_only_at_the_alpha_it_is_given_for(tmp_path, cli):
+    small = [a for s in SMALL for a in ("--set", s)]
+    for alpha, quoted in ((0.5, -1.11), (0.8, None)):
+        out = tmp_path / str(alpha)
+        result = cli("stability", "--out", out, *small, "--set", f"model.alpha={alpha}",
+                     "--set", "crosscheck.max_impacts=300")
+        assert result.exit_code == 0, result.output
+        pred = pd.read_csv(out / "predictions.csv").set_index("quantity")
+        if quoted is None:
+            assert math.isnan(pred.loc["stable_ac_low_g", "paper_value"])
+            assert "(paper:" not in result.stderr
+        else:
+            assert pred.loc["stable_ac_low_g", "paper_value"] == quoted
+            assert "(paper: -1.11 to 0)" in result.stderr
+
+
+def test_one_value_grid_axes_draw(tmp_path, cli):
+    """n_alpha: 1 is one column of the diagram: its regions as a band, its boundaries as
+    points on that line (the 3D surface as a curve)."""
+    small = [a for s in SMALL for a in ("--set", s)]
+    out = tmp_path / "one"
+    result = cli("stability", "--out", out, *small, "--set", "grid.n_alpha=1",
+                 "--set", "grid.alpha_min=0.5", "--set", "crosscheck.max_impacts=300", "--quiet")
+    assert result.exit_code == 0, result.output
+    frames = {n: pd.read_csv(out / n) for n in ("eigen.csv", "boundaries.csv", "surface.csv")}
+    assert frames["eigen.csv"].alpha.unique().tolist() == [0.5]
+    fig = exp.draw(frames)["stability.png"]
+    image = fig.axes[0].images[0]
+    assert np.asarray(image.get_array()).shape[1] == 1
+    x0, x1, _, _ = image.get_extent()
+    assert x0 < 0.5 < x1

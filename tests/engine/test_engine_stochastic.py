@@ -5,13 +5,13 @@ import math
 import numpy as np
 import pytest
 
-from bounce_cli.engine import (
+from bounce_cli import paper
+from bounce_cli.engine.linear import jacobian
+from bounce_cli.engine.maps import map_step
+from bounce_cli.engine.params import ModelError, ModelParams
+from bounce_cli.engine.stochastic import (
     PAIR_NAMES,
-    ModelError,
-    ModelParams,
-    jacobian,
     map_noise_covariance,
-    map_step,
     paper_noise_covariance,
     sample_correlations,
     simulate_stochastic_map,
@@ -20,7 +20,7 @@ from bounce_cli.engine import (
     var1_theory,
 )
 
-ACF_PARAMS = ModelParams(alpha=0.42, g=5.8, racket_amplitude=0.065, racket_period=0.55)
+ACF_PARAMS = paper.FIG8_MODEL  # the paper's Fig. 8 parameters (section 6)
 
 
 def covariance_by_summation(jac, noise_cov, terms=400):
@@ -133,12 +133,14 @@ def test_stochastic_step_implements_eqs_16_to_18():
     phi, hop = det.theta, det.hop_phase
     w, a, al, g = ACF_PARAMS.omega, 0.065, 0.42, 5.8
     # eq. 17 holds for phi
-    assert a * w**2 * (np.sin(theta) - np.sin(phi)) + v * w * hop - g / 2 * hop**2 == pytest.approx(0, abs=1e-9)
+    eq17 = a * w**2 * (np.sin(theta) - np.sin(phi)) + v * w * hop - g / 2 * hop**2
+    assert eq17 == pytest.approx(0, abs=1e-9)
     for vp, phase_in_cos in (("theta", phi + dth), ("phi", phi)):
         th1, v1, hop1 = stochastic_step(theta, v, ACF_PARAMS, dv, dth, vp)
         np.testing.assert_allclose(th1, phi + dth)  # eq. 18
         np.testing.assert_allclose(hop1, hop)
-        expected = (1 + al) * a * w * np.cos(phase_in_cos) - al * v + g * al / w * hop + dv  # eq. 16
+        # eq. 16
+        expected = (1 + al) * a * w * np.cos(phase_in_cos) - al * v + g * al / w * hop + dv
         np.testing.assert_allclose(v1, expected, rtol=1e-13)
 
 
@@ -167,3 +169,23 @@ def test_unstable_fixed_point_has_no_stationary_covariance():
     observed = ModelParams(alpha=0.42, g=5.8, racket_amplitude=0.076, racket_period=0.53)
     with pytest.raises(ModelError, match="spectral radius 1.3"):
         stationary_covariance(jacobian(observed), paper_noise_covariance(0.04, 0.05))
+
+
+def test_lost_runs_are_flagged_and_blank_from_the_loss_on():
+    """q_v = 0.08 m/s: one of 8 runs of 300 bounces (seed 1) loses the ball at bounce 290
+    (a hop shorter than 1 ms); its row is NaN from there on, the other runs are untouched,
+    and the lost run alone gives the same numbers (each run has its own stream)."""
+    seeds = np.random.SeedSequence(1).spawn(8)
+    runs = simulate_stochastic_map(ACF_PARAMS, 0.08, 0.05, 300, seeds)
+    assert runs.lost.tolist() == [False] * 4 + [True] + [False] * 3
+    blank = np.isnan(runs.dv[4])
+    first = int(np.argmax(blank))
+    assert 0 < first and blank[first:].all() and not blank[:first].any()
+    assert (np.isnan(runs.dtheta[4]) == blank).all()
+    assert np.isfinite(runs.dv[~runs.lost]).all()
+    alone = simulate_stochastic_map(ACF_PARAMS, 0.08, 0.05, 300, seeds[4:5])
+    assert alone.lost.tolist() == [True]
+    np.testing.assert_array_equal(alone.dv[0], runs.dv[4])
+    # a longer shortest hop loses it no later
+    strict = simulate_stochastic_map(ACF_PARAMS, 0.08, 0.05, 300, seeds[4:5], min_hop_s=0.05)
+    assert int(np.argmax(np.isnan(strict.dv[0]))) <= first

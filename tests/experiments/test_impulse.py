@@ -6,20 +6,18 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bounce_cli.config import ClassifyBlock
 from typer.testing import CliRunner
 
 from bounce_cli.cli import app
 from bounce_cli.config import bundled_config_path, load_config
-from bounce_cli.engine import (
+from bounce_cli.engine.impulse import (
     impulse_response_full,
     impulse_response_linear,
-    jacobian,
-    map_step,
     perturbed_velocity,
     relaxation_impacts,
-    velocity_after_impact,
 )
+from bounce_cli.engine.linear import jacobian
+from bounce_cli.engine.maps import map_step, velocity_after_impact
 from bounce_cli.experiments import impulse as exp
 from bounce_cli.experiments.base import RunOptions
 
@@ -100,15 +98,6 @@ def test_tables(result):
         (1 + 2 * up.alpha_p_threshold - 0.5) / 1.5 * math.pi * 9.81 * 0.92 / (2 * math.pi))
 
 
-def test_classify_criteria(paper_params):
-    block = ClassifyBlock()
-    fp = paper_params.fixed_point()
-    assert exp.classify(paper_params, fp.v_m_s, block) == ("period1", 1)
-    assert exp.classify(paper_params, perturbed_velocity(paper_params, 0.7), block)[0] == "sticking"
-    racket = paper_params.racket_velocity(fp.theta_rad)
-    assert exp.classify(paper_params, racket - 0.1, block) == ("below_racket", 0)
-
-
 def test_figures_redraw_from_csv(result, tmp_path):
     for name, frame in result.frames.items():
         frame.to_csv(tmp_path / name, index=False)
@@ -132,3 +121,14 @@ def test_cli(tmp_path):
     bad = runner.invoke(app, ["impulse", "--out", str(tmp_path / "b"),
                               "--set", "relaxation.tolerance_v_m_s=0"])
     assert bad.exit_code == 2 and "relaxation.tolerance_v_m_s" in bad.stderr
+
+
+def test_paper_values_only_at_the_papers_parameters(tmp_path, cli):
+    fast = [a for s in FAST for a in ("--set", s)]
+    at_paper = cli("impulse", "--out", tmp_path / "p", *fast)
+    assert "paper: about 0.65" in at_paper.stderr and "(paper: 5.7 m/s)" in at_paper.stderr
+    assert pd.read_csv(tmp_path / "p" / "threshold.csv").paper_alpha_p.iloc[0] == 0.65
+    other = cli("impulse", "--out", tmp_path / "o", *fast, "--set", "model.alpha=0.4")
+    assert other.exit_code == 0, other.output
+    assert "paper:" not in other.stderr and "not the paper's" in other.stderr
+    assert pd.read_csv(tmp_path / "o" / "threshold.csv").paper_alpha_p.isna().all()

@@ -7,7 +7,8 @@ import math
 import numpy as np
 import pytest
 
-from bounce_cli.engine import ModelParams, jacobian, stability
+from bounce_cli.engine.linear import jacobian, stability
+from bounce_cli.engine.params import ModelParams
 from bounce_cli.engine.data_stats import simulate_impacts
 from bounce_cli.engine.params import ModelError, phase_difference
 from bounce_cli.engine.var_fit import (

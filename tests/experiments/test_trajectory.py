@@ -6,24 +6,16 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
-from typer.testing import CliRunner
 
-from bounce_cli.cli import app
 from bounce_cli.config import bundled_config_path, load_config
 from bounce_cli.experiments import trajectory
 from bounce_cli.experiments.base import RunOptions
 
-runner = CliRunner()
-
-
-def run(*args):
-    return runner.invoke(app, [str(a) for a in args])
-
 
 @pytest.fixture(scope="module")
-def out(tmp_path_factory):
+def out(tmp_path_factory, cli):
     out = tmp_path_factory.mktemp("trajectory")
-    result = run("trajectory", "--set", "duration_s=4", "--out", out, "--quiet")
+    result = cli("trajectory", "--set", "duration_s=4", "--out", out, "--quiet")
     assert result.exit_code == 0, result.output
     return out
 
@@ -57,11 +49,11 @@ def test_files_and_columns(out):
 
 
 @pytest.mark.parametrize("case", ["period-1", "sticking"])
-def test_impacts_agree_with_bounce_orbit(out, case):
+def test_impacts_agree_with_bounce_orbit(out, case, cli):
     impacts = pd.read_csv(out / "impacts.csv")
     imp = impacts[impacts["case"] == case].reset_index(drop=True)
     theta0_deg = math.degrees(math.asin(0.205 / 0.30))
-    result = run("orbit", "--theta0-deg", repr(theta0_deg), "--v0", imp["v_m_s"][0],
+    result = cli("orbit", "--theta0-deg", repr(theta0_deg), "--v0", imp["v_m_s"][0],
                  "-n", len(imp) - 1, "--csv")
     assert result.exit_code == 0, result.output
     orbit = pd.read_csv(io.StringIO(result.stdout))
@@ -93,8 +85,8 @@ def test_figure_redrawn_from_csvs_alone(out, paper_params):
     assert original.axes[2].lines[1].get_ydata()[0] == pytest.approx(fp.theta_deg)
 
 
-def test_rk4_integrator_from_the_command_line(tmp_path, out):
-    result = run("trajectory", "--set", "duration_s=4", "--set", "integrator=rk4",
+def test_rk4_integrator_from_the_command_line(tmp_path, out, cli):
+    result = cli("trajectory", "--set", "duration_s=4", "--set", "integrator=rk4",
                  "--out", tmp_path, "--quiet")
     assert result.exit_code == 0, result.output
     a = pd.read_csv(out / "impacts.csv")
@@ -112,8 +104,8 @@ def test_rk4_integrator_from_the_command_line(tmp_path, out):
         (["--set", "cases=[]"], ["cases"]),
     ],
 )
-def test_user_errors(args, needles):
-    result = run("trajectory", *args, "--print-config")
+def test_user_errors(args, needles, cli):
+    result = cli("trajectory", *args, "--print-config")
     assert result.exit_code == 2, result.output
     lines = [line for line in result.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and lines[0].startswith("bounce: error: ")
@@ -121,11 +113,11 @@ def test_user_errors(args, needles):
         assert needle in lines[0]
 
 
-def test_case_needs_exactly_one_phase(tmp_path):
+def test_case_needs_exactly_one_phase(tmp_path, cli):
     text = bundled_config_path("trajectory").read_text().replace(
         "theta0_rad: 0.752318481155386", "theta0_rad: 0.75\n    theta0_deg: 43", 1)
     path = tmp_path / "both.yaml"
     path.write_text(text)
-    result = run("trajectory", "--config", path, "--print-config")
+    result = cli("trajectory", "--config", path, "--print-config")
     assert result.exit_code == 2
     assert "cases.0" in result.stderr and "exactly one of" in result.stderr

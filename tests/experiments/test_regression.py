@@ -4,7 +4,7 @@ import json
 
 import pandas as pd
 import pytest
-from test_cli import assert_user_error, run  # shared CliRunner helpers
+from scipy import stats
 
 from bounce_cli.experiments import regression
 
@@ -16,9 +16,9 @@ NOISELESS = ["--set", "design.subject_phase_sd_deg=0", "--set", "design.phase_sd
 
 
 @pytest.fixture(scope="module")
-def small_run(tmp_path_factory):
+def small_run(tmp_path_factory, cli):
     out = tmp_path_factory.mktemp("reg")
-    result = run("regression", "--out", out, "--quiet", *SMALL)
+    result = cli("regression", "--out", out, "--quiet", *SMALL)
     assert result.exit_code == 0, result.output
     return out
 
@@ -33,14 +33,26 @@ def test_simulated_trials_and_fit(small_run):
     assert list(fit.columns[:9]) == ["condition", "n", "slope", "slope_ci_low", "slope_ci_high",
                                      "intercept", "intercept_ci_low", "intercept_ci_high", "r2"]
     row = fit.iloc[0]
-    assert row.slope_ci_low < row.slope < row.slope_ci_high
+    # fit.csv is the OLS of the fitted trials in trials.csv (scipy, an independent route)
+    used = trials[~trials.lost.astype(bool)]
+    ref = stats.linregress(used.tau2_s2, used.a_r_m)
+    t = stats.t.ppf(0.975, len(used) - 2)
+    assert row.n == len(used)
+    assert row.slope == pytest.approx(ref.slope, rel=1e-10)
+    assert row.intercept == pytest.approx(ref.intercept, abs=1e-12)
+    assert row.r2 == pytest.approx(ref.rvalue**2, rel=1e-10)
+    assert (row.slope_ci_low, row.slope_ci_high) == pytest.approx(
+        (ref.slope - t * ref.stderr, ref.slope + t * ref.stderr), rel=1e-9)
+    assert (row.intercept_ci_low, row.intercept_ci_high) == pytest.approx(
+        (ref.intercept - t * ref.intercept_stderr, ref.intercept + t * ref.intercept_stderr),
+        rel=1e-9)
     assert row.predicted_slope > 0 and 0.5 < row.r2 <= 1
     manifest = json.loads((small_run / "run.json").read_text())
     assert manifest["config"]["data"] is None and manifest["seed"] == 1996
 
 
-def test_without_noise_the_fit_recovers_eq15_exactly(tmp_path):
-    result = run("regression", "--out", tmp_path, "--quiet", *SMALL, *NOISELESS)
+def test_without_noise_the_fit_recovers_eq15_exactly(tmp_path, cli):
+    result = cli("regression", "--out", tmp_path, "--quiet", *SMALL, *NOISELESS)
     assert result.exit_code == 0, result.output
     fit = pd.read_csv(tmp_path / "fit.csv").iloc[0]
     assert fit.slope == pytest.approx(fit.predicted_slope, rel=1e-9)
@@ -48,9 +60,9 @@ def test_without_noise_the_fit_recovers_eq15_exactly(tmp_path):
     assert fit.mean_theta_deg == pytest.approx(32.0, abs=1e-9)
 
 
-def test_data_round_trip(small_run, tmp_path):
+def test_data_round_trip(small_run, tmp_path, cli):
     out = tmp_path / "again"
-    result = run("regression", "--data", small_run / "trials.csv", "--out", out, "--quiet")
+    result = cli("regression", "--data", small_run / "trials.csv", "--out", out, "--quiet")
     assert result.exit_code == 0, result.output
     pd.testing.assert_frame_equal(pd.read_csv(out / "fit.csv"),
                                   pd.read_csv(small_run / "fit.csv"), rtol=1e-10)
@@ -58,14 +70,14 @@ def test_data_round_trip(small_run, tmp_path):
     assert manifest["config"]["data"] == str(small_run / "trials.csv")
 
 
-def test_data_with_conditions_and_only_required_columns(tmp_path):
+def test_data_with_conditions_and_only_required_columns(tmp_path, cli):
     rows = []
     for cond, k in (("vision", 0.30), ("no-vision", 0.33)):
         for i, tau in enumerate([0.55, 0.57, 0.7, 0.71, 0.8, 0.82]):
             rows.append({"condition": cond, "tau_s": tau, "a_r_m": k * tau**2 + 0.001 * (-1) ** i})
     path = tmp_path / "trials.csv"
     pd.DataFrame(rows).to_csv(path, index=False)
-    result = run("regression", "--data", path, "--out", tmp_path / "o")
+    result = cli("regression", "--data", path, "--out", tmp_path / "o")
     assert result.exit_code == 0, result.output
     fit = pd.read_csv(tmp_path / "o" / "fit.csv").set_index("condition")
     assert sorted(fit.index) == ["no-vision", "vision"]
@@ -82,14 +94,14 @@ def test_data_with_conditions_and_only_required_columns(tmp_path):
     ("a_r_m,tau_s,alpha\n0.1,0.5,0.5\n0.15,0.6,0.6\n0.2,0.7,0.5\n", ["alpha", "differs"]),
     ("", ["cannot read"]),
 ])
-def test_bad_data_is_one_line_error(tmp_path, content, needles):
+def test_bad_data_is_one_line_error(tmp_path, content, needles, cli, user_error):
     path = tmp_path / "bad.csv"
     path.write_text(content)
-    assert_user_error(run("regression", "--data", path, "--out", tmp_path / "o"), *needles)
+    user_error(cli("regression", "--data", path, "--out", tmp_path / "o"), *needles)
 
 
-def test_missing_data_file(tmp_path):
-    assert_user_error(run("regression", "--data", tmp_path / "none.csv", "--out", tmp_path / "o"),
+def test_missing_data_file(tmp_path, cli, user_error):
+    user_error(cli("regression", "--data", tmp_path / "none.csv", "--out", tmp_path / "o"),
                       "data:", "not found")
 
 

@@ -5,12 +5,12 @@ import math
 import numpy as np
 import pytest
 
-from bounce_cli.engine import (
+from bounce_cli.engine.linear import racket_acceleration_at_impact_g
+from bounce_cli.engine.params import (
     ModelError,
     ModelParams,
     NoFixedPointError,
     phase_difference,
-    racket_acceleration_at_impact_g,
     wrap_phase,
 )
 

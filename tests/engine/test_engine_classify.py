@@ -6,18 +6,17 @@ import math
 import numpy as np
 import pytest
 
-from bounce_cli.engine import (
+from bounce_cli.engine.classify import (
     BELOW_RACKET,
     OUTCOMES,
     PERIOD1,
     STICKING,
     UNDECIDED,
-    ClassifySettings,
     classify_batch,
     classify_grid,
-    iterate_orbit,
-    map_step,
+    ClassifySettings,
 )
+from bounce_cli.engine.maps import iterate_orbit, map_step
 from bounce_cli.engine.reference import classify_point_brentq, first_impact_brentq
 
 FIG3_THETA0 = math.asin(0.205 / 0.30)  # section 3: x_b(0) = 0.205 m, ball on the racket
@@ -131,7 +130,7 @@ def test_tolerance_and_sticking_interval_are_used(paper_params):
     assert np.all(loose.iterations[fly] <= base.iterations[fly])
     assert np.any(loose.iterations[fly] < base.iterations[fly])
     never_stick = classify_batch(theta, v, paper_params,
-                           ClassifySettings(max_iterations=30, sticking_interval_s=0.0))
+                           ClassifySettings(max_iterations=30, min_hop_s=0.0))
     assert not np.any(never_stick.outcome[base.outcome == STICKING] == STICKING)
 
 
@@ -147,6 +146,16 @@ def test_grid_results_independent_of_tiles_and_jobs(paper_params, jobs, tile_poi
     assert sum(done) == theta.size and max(done) <= tile_points
 
 
-def test_outcome_codes_and_names():
-    assert OUTCOMES == ("period1", "sticking", "below_racket", "undecided")
-    assert (PERIOD1, STICKING, BELOW_RACKET, UNDECIDED) == (0, 1, 2, 3)
+def test_outcome_codes_name_what_happened(paper_params):
+    """Each code and its name on a point whose fate is known independently: the fixed point,
+    Fig. 3's sticking start, a ball slower than the racket, and one impact from far away."""
+    fp = paper_params.fixed_point()
+    theta = np.array([fp.theta_rad, FIG3_THETA0, 0.0, FIG3_THETA0])
+    v = np.array([fp.v_m_s, 5.7, 0.5 * float(paper_params.racket_velocity(0.0)), 9.0])
+    first = classify_batch(theta[:3], v[:3], paper_params)
+    last = classify_batch(theta[3:], v[3:], paper_params, ClassifySettings(max_iterations=1))
+    codes = np.concatenate([first.outcome, last.outcome])
+    assert codes.tolist() == [PERIOD1, STICKING, BELOW_RACKET, UNDECIDED]
+    assert [*first.names(), *last.names()] == [OUTCOMES[c] for c in codes]
+    assert [*first.names(), *last.names()] == ["period1", "sticking", "below_racket",
+                                               "undecided"]

@@ -6,9 +6,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from bounce_cli.engine import (
-    ModelError,
-    ModelParams,
+from bounce_cli.engine.params import ModelError, ModelParams
+from bounce_cli.engine.regression import (
     eq15_amplitude,
     eq15_slope,
     ols_line,
