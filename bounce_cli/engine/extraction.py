@@ -235,7 +235,7 @@ def racket_cycles(t, racket, measured, s: ExtractionSettings) -> RacketCycles:
         up = np.flatnonzero((y[:-1] < 0.0) & (y[1:] >= 0.0))
         if up.size == 0:
             continue
-        i = a + up[len(up) // 2]
+        i = a + up[-1]  # the last one before the peak (a still racket before it may dither)
         coef = local_polynomial(t, raw, t[i], s.position_half_window_s, s.position_degree)
         if coef is None:
             continue
@@ -331,25 +331,27 @@ class TrialExtraction:
     notes: list[str] = field(default_factory=list)
 
 
-def _segment_fits(t, ball, measured, racket, lo: int, hi: int, t_after: float,
+def _segment_fits(t, ball, long_gap, racket, lo: int, hi: int, t_after: float,
                   t_before: float, s: ExtractionSettings):
-    """Fits of the samples [lo, hi) between two contacts: (fit after the first contact or
-    None, fit before the second or None, resting seconds, long gap inside)."""
+    """Fits of the samples [lo, hi) between two contacts (``ball``: measured samples, NaN
+    elsewhere; ``long_gap``: samples in gaps too long to bridge): (fit after the first contact
+    or None, fit before the second or None, resting seconds, long gap inside)."""
     seg = np.arange(max(lo, 0), min(hi, len(t)))
     if seg.size == 0:
         return None, None, 0.0, False
-    xb = np.where(measured[seg], ball[seg], np.nan)
+    xb = ball[seg]
     gap = xb - s.ball_offset_m - racket[seg]
     with np.errstate(invalid="ignore"):
         resting = gap < s.contact_tolerance_m
-    has_gap = bool(np.any(~np.isfinite(ball[seg])))
+    in_gap = long_gap[seg]
+    has_gap = bool(np.any(in_gap))
     rest_s = 0.0
     if resting.any():
         r = seg[resting]
         rest_s = float(t[r[-1]] - t[r[0]]) if r.size > 1 else 0.0
     # after-fit: up to the first resting sample or long gap
     stop = seg.size
-    bad = np.flatnonzero(resting | ~np.isfinite(ball[seg]))
+    bad = np.flatnonzero(resting | in_gap)
     if bad.size:
         stop = bad[0] - s.guard_samples
     after = None
@@ -415,7 +417,7 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
             t_after = ct[j - 1] if j > 0 else t[0]
             t_before = ct[j] if j < n else t[-1]
             after, before, rest_s, has_gap = _segment_fits(
-                t, ball_fit_data, ball_measured, racket_f, lo, hi, t_after, t_before, s)
+                t, ball_fit_data, ball_long, racket_f, lo, hi, t_after, t_before, s)
             if j > 0:
                 afters[j - 1] = after
                 if rest_s > 0.0:
@@ -429,7 +431,7 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
             if reason[j]:
                 continue
             if after is None:
-                near_gap = np.any(~np.isfinite(ball_raw[max(ci[j] - 3, 0):ci[j] + 4]))
+                near_gap = np.any(ball_long[max(ci[j] - 3, 0):ci[j] + 4])
                 reason[j] = ("gap: no ball data after the impact" if near_gap or next_unknown[j]
                              else "no free flight after the impact")
                 continue
@@ -471,6 +473,21 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
 
     hop = np.append(np.diff(t_k), np.nan)
     hop[next_unknown] = np.nan
+    k_index = np.arange(n)
+    if ball is not None and event_t is None and next_unknown.any():
+        # impacts inside a long gap of the ball data are lost: estimate how many from the
+        # typical hop, report them, and keep k counting them
+        spans = np.diff(t_k)
+        typical = np.median(spans[~next_unknown[:-1]]) if np.any(~next_unknown[:-1]) else math.nan
+        lost = np.zeros(n, dtype=int)
+        for j in np.flatnonzero(next_unknown[:-1]):
+            lost[j] = max(int(round(spans[j] / typical)) - 1, 0) if math.isfinite(typical) else 0
+            lo, hi = np.searchsorted(t, [t_k[j], t_k[j + 1]])
+            missing = np.flatnonzero(~np.isfinite(ball_f[lo:hi])) + lo
+            excluded.append((float(np.mean(t[missing])),
+                             f"gap: {t[missing[-1]] - t[missing[0]]:.3g} s without ball data; "
+                             f"about {lost[j]} impact(s) lost in it"))
+        k_index = k_index + np.concatenate([[0], np.cumsum(lost)[:-1]])
     for j in range(n):
         if not reason[j] and math.isfinite(hop[j]) and hop[j] < s.sticking_hop_s:
             reason[j] = f"chatter: hop {hop[j]:.3g} s < sticking_hop_s"
@@ -493,6 +510,7 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
     keep = np.array([not r for r in reason], dtype=bool)
     for j in np.flatnonzero(~keep):
         excluded.append((float(t_k[j]), reason[j]))
+    excluded.sort()
     if not keep.any():
         raise ModelError("no bounce found" + (f" ({excluded[0][1]}, ...)" if excluded else ""))
     apex_t = t_k + np.maximum(v_k, 0.0) / g
@@ -500,7 +518,7 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
     mid_apex[keep] = cycles.mid_position(apex_t[keep])
     cc = np.maximum(cycle, 0)
     impacts = {
-        "k": np.arange(n)[keep],
+        "k": k_index[keep],
         "t_s": t_k[keep],
         "theta_rad": theta[keep],
         "theta_deg": np.degrees(theta[keep]),

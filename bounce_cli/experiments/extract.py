@@ -132,7 +132,7 @@ def read_truth(path: str) -> pd.DataFrame:
     from ..recordings import _read_csv
 
     truth = _read_csv(Path(path))
-    missing = [c for c in ("trial",) + REQUIRED_COLUMNS if c not in truth.columns]
+    missing = [c for c in REQUIRED_COLUMNS if c not in truth.columns]
     if missing:
         raise ConfigError(f"{path}: not an impacts table: no column {missing[0]!r}")
     return truth
@@ -238,8 +238,9 @@ def run(config: ExtractConfig, options: RunOptions) -> ExperimentResult:
     settings = config.extraction.settings(config.model.g)
     summary = []
     if config.data is None:
-        if config.events is not None:
-            raise ConfigError("events: needs data (the recording the events belong to)")
+        for key in ("events", "truth"):
+            if getattr(config, key) is not None:
+                raise ConfigError(f"{key}: needs data (the recording it belongs to)")
         trials, truth = demo_session()
         source = "the simulated session of configs/recording.yaml"
         summary.append(f"no data given: extracted {source} (bounce simulate-recording's "
