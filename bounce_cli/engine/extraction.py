@@ -4,7 +4,8 @@ Definitions (section 2; on the model's own motion they return the model's variab
 
 * racket cycle: from one upward crossing of the racket's mid-position to the next; the phase of
   impact maps the time in its cycle linearly onto [0, 2 pi) (theta = w_r t of eq. 5 on a
-  sinusoidal racket, eq. 4); the cycle's period and amplitude ((peak - trough) / 2) go with it.
+  sinusoidal racket, eq. 4); the cycle's period and amplitude ((peak - trough) / 2, each about
+  the mid-position at its time) go with it.
   The mid-position may drift: it is a local quadratic fit, over ``mid_window_s`` either side,
   of the midpoints between consecutive racket extrema (peaks and troughs located by local
   quartic fits), so a slow drift is followed and cycle-to-cycle amplitude changes average out;
@@ -253,7 +254,9 @@ def racket_cycles(t, racket, measured, s: ExtractionSettings) -> RacketCycles:
             continue  # a long gap inside the cycle
         starts.append(t0)
         periods.append(t1 - t0)
-        amplitudes.append(0.5 * (ex[between & (ek == 1)][0] - ex[between & (ek == -1)][0]))
+        peak, trough = between & (ek == 1), between & (ek == -1)
+        drift = cycles.mid_position([et[peak][0], et[trough][0]])  # each about its own mid
+        amplitudes.append(0.5 * ((ex[peak][0] - drift[0]) - (ex[trough][0] - drift[1])))
         mids.append(float(cycles.mid_position(t0)[0]))
     cycles.crossings = np.array(starts)
     cycles.periods = np.array(periods)

@@ -110,6 +110,12 @@ class ExtractConfig(ExperimentConfig):
     figure: FigureBlock = FigureBlock()
 
 
+def centred_deg(theta_deg):
+    """Phases in degrees mapped to [-180, 180): means and plots of phases near 0 stay
+    meaningful (the table keeps [0, 360))."""
+    return (np.asarray(theta_deg, dtype=float) + 180.0) % 360.0 - 180.0
+
+
 # -- inputs -------------------------------------------------------------------------------------
 def demo_session():
     """(trials, truth frame) of the bundled simulated session, simulated in memory."""
@@ -262,7 +268,7 @@ def run(config: ExtractConfig, options: RunOptions) -> ExperimentResult:
     reasons = Counter(r.split(":")[0] for r in excluded["reason"])
     summary.append(
         f"{len(trials)} trial(s): {len(impacts)} impacts, mean v = {impacts['v_m_s'].mean():.4f}"
-        f" m/s, mean theta = {impacts['theta_deg'].mean():.2f} deg, mean AC = "
+        f" m/s, mean theta = {centred_deg(impacts['theta_deg']).mean():.2f} deg, mean AC = "
         f"{impacts['racket_acc_g'].mean():.3f} g; not reported: {len(excluded)}"
         + (" (" + ", ".join(f"{n} {r}" for r, n in reasons.items()) + ")" if reasons else ""))
     measured = [o for o in offsets if math.isfinite(o)]
@@ -309,6 +315,8 @@ def draw_fig2(samples: pd.DataFrame, impacts: pd.DataFrame, title: str, bounces:
     for ax, column, label_, color in ((ax_v, "v_m_s", "$v_k$ (m/s)", "C0"),
                                       (ax_th, "theta_deg", "$\\theta_k$ (deg)", "C2")):
         t, y = imp["t_s"].to_numpy(float), imp[column].to_numpy(float)
+        if column == "theta_deg":
+            y = centred_deg(y)
         ax.plot(t, y, "o-", ms=4, lw=0.8, color=color)
         if perturbed.any():
             ax.plot(t[perturbed], y[perturbed], "o", ms=6, color="C3",

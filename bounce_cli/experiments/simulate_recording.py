@@ -20,7 +20,7 @@ from ..config import ExperimentConfig, StrictModel
 from ..engine.recording import SessionSettings, simulate_session, truth_rows
 from ..impacts import EVENT_COLUMNS, REQUIRED_COLUMNS
 from .base import Experiment, ExperimentResult, RunOptions
-from .extract import draw_fig2
+from .extract import centred_deg, draw_fig2
 
 #: recorded positions are rounded to 0.1 micrometre (far below any lab's noise)
 POSITION_DECIMALS = 7
@@ -117,7 +117,8 @@ def run(config: RecordingConfig, options: RunOptions) -> ExperimentResult:
     summary = [
         f"{config.trials} trials x {config.duration_s:g} s at {config.sample_rate_hz:g} Hz: "
         f"{len(truth)} impacts ({int(truth['perturbed'].sum())} perturbed); mean v = "
-        f"{truth['v_m_s'].mean():.4f} m/s, mean theta = {truth['theta_deg'].mean():.2f} deg"
+        f"{truth['v_m_s'].mean():.4f} m/s, mean theta = {centred_deg(truth['theta_deg']).mean():.2f}"
+        " deg"
     ]
     return ExperimentResult(frames=frames, figures=draw(frames), summary=summary)
 
