@@ -64,24 +64,27 @@ class C3DBlock(StrictModel):
     vertical_axis: Literal["x", "y", "z"] = "z"
 
 
+DEFAULTS = ExtractionSettings()
+
+
 class ExtractionBlock(StrictModel):
     """The extraction's settings (``engine.extraction``; g comes from the model block)."""
 
-    max_gap_s: float = Field(0.05, ge=0.0)
-    acc_half_window_s: float = Field(0.1, gt=0.0)
-    acc_degree: int = Field(4, ge=2, le=8)
-    position_half_window_s: float = Field(0.02, gt=0.0)
-    position_degree: int = Field(3, ge=1, le=8)
-    extremum_half_window_s: float = Field(0.08, gt=0.0)
-    extremum_degree: int = Field(4, ge=2, le=8)
-    mid_window_s: float = Field(2.5, gt=0.0)
-    min_velocity_jump_m_s: float = Field(1.0, gt=0.0)
-    contact_distance_m: float = Field(0.05, gt=0.0)
-    contact_tolerance_m: float = Field(0.005, gt=0.0)
-    sticking_hop_s: float = Field(0.05, ge=0.0)
-    guard_samples: int = Field(2, ge=0, le=100)
-    min_flight_samples: int = Field(5, ge=3)
-    ball_offset_m: float = 0.0
+    max_gap_s: float = Field(DEFAULTS.max_gap_s, ge=0.0)
+    acc_half_window_s: float = Field(DEFAULTS.acc_half_window_s, gt=0.0)
+    acc_degree: int = Field(DEFAULTS.acc_degree, ge=2, le=8)
+    position_half_window_s: float = Field(DEFAULTS.position_half_window_s, gt=0.0)
+    position_degree: int = Field(DEFAULTS.position_degree, ge=1, le=8)
+    extremum_half_window_s: float = Field(DEFAULTS.extremum_half_window_s, gt=0.0)
+    extremum_degree: int = Field(DEFAULTS.extremum_degree, ge=2, le=8)
+    mid_window_s: float = Field(DEFAULTS.mid_window_s, gt=0.0)
+    min_velocity_jump_m_s: float = Field(DEFAULTS.min_velocity_jump_m_s, gt=0.0)
+    contact_distance_m: float = Field(DEFAULTS.contact_distance_m, gt=0.0)
+    contact_tolerance_m: float = Field(DEFAULTS.contact_tolerance_m, gt=0.0)
+    sticking_hop_s: float = Field(DEFAULTS.sticking_hop_s, ge=0.0)
+    guard_samples: int = Field(DEFAULTS.guard_samples, ge=0, le=100)
+    min_flight_samples: int = Field(DEFAULTS.min_flight_samples, ge=3)
+    ball_offset_m: float = DEFAULTS.ball_offset_m
 
     def settings(self, g: float) -> ExtractionSettings:
         return ExtractionSettings(g=g, **self.model_dump())
