@@ -175,6 +175,11 @@ def test_short_gaps_are_bridged_and_impacts_in_long_gaps_dropped():
     # the impact before the long gap has no known hop (the next contact is in the gap)
     before = np.flatnonzero(idx == 4)
     assert before.size == 1 and math.isnan(result.impacts["hop_s"][before[0]])
+    assert np.array_equal(result.impacts["k"], idx)  # k counts the lost impact
+    # with events the impact in the gap is known and dropped, the others keep their times
+    logged = extract_trial(t, racket_g, ball_g, rows["t_s"], None, ExtractionSettings())
+    assert 5 not in logged.impacts["k"]
+    assert any(reason.startswith("gap") and tt == lost for tt, reason in logged.excluded)
 
 
 def test_a_resting_start_is_skipped_until_bouncing_begins():
@@ -294,11 +299,14 @@ def test_researcher_workflow_mm_ms_other_names_and_events(simulated, tmp_path):
 
 def test_truth_gives_accuracy_csv(simulated, tmp_path):
     result, out = extract_cli(tmp_path, "--data", str(simulated / "recording.csv"),
-                              "--set", f"truth={simulated / 'truth.csv'}")
+                              "--set", f"truth={simulated / 'truth.csv'}",
+                              "--set", "figure.trial=2", "--set", "figure.bounces=4")
     assert result.exit_code == 0, result.output
     acc = pd.read_csv(out / "accuracy.csv").set_index("quantity")
     assert acc.loc["theta_deg", "rms_error"] <= 1.0 and acc.loc["v_m_s", "rms_error"] <= 0.03
     assert acc.loc["racket_acc_g", "rms_error"] <= 0.1
+    shown = pd.read_csv(out / "fig2_samples.csv")
+    assert set(shown["trial"]) == {2} and shown["t_s"].max() - shown["t_s"].min() < 5 * 0.92
 
 
 @pytest.mark.filterwarnings("ignore:No analog data")

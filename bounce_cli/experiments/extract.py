@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 from pathlib import Path
-from typing import Literal, Optional
+from typing import Literal, Optional, Union
 
 import numpy as np
 import pandas as pd
@@ -94,7 +94,7 @@ class FigureBlock(StrictModel):
     """Which bounces Fig. 2 shows: a trial (null: the first), from a time (null: its first
     impact), how many."""
 
-    trial: Optional[str] = None
+    trial: Optional[Union[int, str]] = None
     start_s: Optional[float] = None
     bounces: int = Field(10, ge=1, le=200)
 
