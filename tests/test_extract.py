@@ -215,6 +215,12 @@ def test_chatter_is_flagged_not_reported():
     assert np.all(result.impacts["hop_s"][np.isfinite(result.impacts["hop_s"])] >= 0.05)
     assert any(reason.startswith("chatter") for _, reason in result.excluded)
     assert not np.any(np.isclose(result.impacts["t_s"], rows["t_s"][6]))
+    # events outside the recording are listed, and k stays the event's index in the log
+    logged = np.concatenate([[-0.4], rows["t_s"], [t[-1] + 0.3]])
+    shifted = extract_trial(t, racket, None, logged, None, ExtractionSettings())
+    assert sum("outside the recording" in reason for _, reason in shifted.excluded) == 2
+    idx = match_impacts(rows["t_s"], shifted.impacts["t_s"])
+    np.testing.assert_array_equal(shifted.impacts["k"], idx + 1)
 
 
 # -- round trip with bounce trajectory --------------------------------------------------------

@@ -31,7 +31,7 @@ Times in s, positions in m, velocities in m/s, phases in rad.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -331,7 +331,6 @@ class TrialExtraction:
     excluded: list[tuple[float, str]]
     cycles: RacketCycles
     measured_offset_m: float = math.nan
-    notes: list[str] = field(default_factory=list)
 
 
 def _segment_fits(t, ball, long_gap, racket, lo: int, hi: int, t_after: float,
@@ -391,6 +390,12 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
     # contact times (crude) and sample indices
     if event_t is not None:
         ct = np.asarray(event_t, dtype=float)
+        inside = (ct > t[0]) & (ct < t[-1])
+        excluded += [(float(x), "event outside the recording's time") for x in ct[~inside]]
+        k_index = np.flatnonzero(inside)  # k: the event's index in the log
+        ct = ct[inside]
+        if event_alpha is not None:
+            event_alpha = np.asarray(event_alpha, dtype=float)[inside]
         ci = np.clip(np.searchsorted(t, ct), 1, len(t) - 2)
         exact = np.ones(ct.shape, dtype=bool)
     else:
@@ -399,6 +404,7 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
         ci = detect_contacts(t, ball_f, racket_f, s)
         ct = t[ci]
         exact = np.zeros(ct.shape, dtype=bool)
+        k_index = np.arange(len(ct))
     n = len(ct)
     alpha = (np.asarray(event_alpha, dtype=float) if event_alpha is not None
              else np.full(n, np.nan))
@@ -476,7 +482,6 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
 
     hop = np.append(np.diff(t_k), np.nan)
     hop[next_unknown] = np.nan
-    k_index = np.arange(n)
     if ball is not None and event_t is None and next_unknown.any():
         # impacts inside a long gap of the ball data are lost: estimate how many from the
         # typical hop, report them, and keep k counting them
