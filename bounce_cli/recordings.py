@@ -50,7 +50,8 @@ class Events:
     alpha: np.ndarray | None
 
 
-def _read_csv(path: Path) -> pd.DataFrame:
+def read_table(path: Path) -> pd.DataFrame:
+    """A CSV file as a DataFrame; a missing or unreadable file is a one-line ConfigError."""
     try:
         return pd.read_csv(path)
     except FileNotFoundError:
@@ -109,7 +110,7 @@ def check_trial(path: Path, label, t: np.ndarray, time_column: str) -> None:
 def read_csv_recording(path: Path, columns, units) -> list[Trial]:
     """Trials of a CSV recording (``columns``: trial, time, racket, ball names;
     ``units``: length and time units)."""
-    frame = _read_csv(path)
+    frame = read_table(path)
     length, time = LENGTH_UNITS[units.length], TIME_UNITS[units.time]
     t_all = _column(frame, path, columns.time, "columns.time") * time
     racket_all = _column(frame, path, columns.racket, "columns.racket") * length
@@ -177,7 +178,7 @@ def read_recording(path: Path, columns, units, c3d_block) -> list[Trial]:
 def read_events(path: Path, event_columns, units, trials: list[Trial]) -> dict[object, Events]:
     """Logged impacts per trial label (every trial of the recording gets an entry)."""
     path = Path(path)
-    frame = _read_csv(path)
+    frame = read_table(path)
     time = TIME_UNITS[units.time]
     t_all = _column(frame, path, event_columns.time, "event_columns.time") * time
     alpha_all = None

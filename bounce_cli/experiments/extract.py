@@ -28,7 +28,14 @@ from ..config import ConfigError, ExperimentConfig, StrictModel
 from ..engine import ModelError
 from ..engine.extraction import ExtractionSettings, extract_trial, match_impacts
 from ..impacts import EVENT_COLUMNS, REQUIRED_COLUMNS
-from ..recordings import LENGTH_UNITS, TIME_UNITS, Trial, read_events, read_recording
+from ..recordings import (
+    LENGTH_UNITS,
+    TIME_UNITS,
+    Trial,
+    read_events,
+    read_recording,
+    read_table,
+)
 from .base import Experiment, ExperimentResult, RunOptions
 
 
@@ -138,9 +145,7 @@ def trials_from_frame(frame: pd.DataFrame) -> list[Trial]:
 
 
 def read_truth(path: str) -> pd.DataFrame:
-    from ..recordings import _read_csv
-
-    truth = _read_csv(Path(path))
+    truth = read_table(Path(path))
     missing = [c for c in REQUIRED_COLUMNS if c not in truth.columns]
     if missing:
         raise ConfigError(f"{path}: not an impacts table: no column {missing[0]!r}")
