@@ -394,3 +394,20 @@ def test_extract_help_declares_data_and_events():
     text = runner.invoke(app, ["extract", "--help"]).stdout
     assert "--data" in text and "--events" in text
     assert "--events" not in runner.invoke(app, ["simulate-recording", "--help"]).stdout
+
+
+def test_one_trial_file_without_a_trial_column_in_centimetres(simulated, tmp_path):
+    rec = pd.read_csv(simulated / "recording.csv")
+    one = rec[rec.trial == 3].drop(columns="trial")
+    one[["racket_x_m", "ball_x_m"]] *= 100.0
+    one.to_csv(tmp_path / "one.csv", index=False)
+    result, out = extract_cli(tmp_path, "--data", str(tmp_path / "one.csv"),
+                              "--set", "columns.trial=null", "--set", "units.length=cm")
+    assert result.exit_code == 0, result.output
+    impacts = pd.read_csv(out / "impacts.csv")
+    truth = pd.read_csv(simulated / "truth.csv")
+    ref = truth[truth.trial == 3]
+    idx = match_impacts(ref["t_s"].to_numpy(), impacts["t_s"].to_numpy())
+    assert set(impacts["trial"]) == {1} and np.all(idx >= 0)
+    assert rms(impacts["v_m_s"] - ref["v_m_s"].to_numpy()[idx]) < 0.01
+    assert rms(impacts["racket_amplitude_m"] - ref["racket_amplitude_m"].to_numpy()[idx]) < 0.002
