@@ -183,8 +183,10 @@ def test_short_gaps_are_bridged_and_impacts_in_long_gaps_dropped():
 
 
 def test_a_resting_start_is_skipped_until_bouncing_begins():
+    # the still racket drifts: its crossings of the mid-position are not racket cycles
     resting = SessionSettings(n_trials=1, duration_s=15.0, rest_s=4.0, sample_rate_hz=200.0,
-                              position_noise_m=0.0005, velocity_noise_m_s=0.04, seed=2)
+                              position_noise_m=0.0005, velocity_noise_m_s=0.04, seed=2,
+                              drift_amplitude_m=0.03, drift_period_s=10.0)
     errors, found, total = errors_against_truth(session(resting))
     truth, (t, racket, ball) = session(resting)[0]
     result = extract_trial(t, racket, ball, s=ExtractionSettings())

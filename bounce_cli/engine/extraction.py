@@ -40,6 +40,9 @@ from scipy.signal import find_peaks
 from .params import ModelError
 
 TWO_PI = 2.0 * math.pi
+#: a racket cycle whose period differs from the trial's median by more than this fraction is
+#: not used (e.g. a crossing of a still, drifting racket before the movement starts)
+MAX_PERIOD_DEVIATION = 0.4
 
 
 @dataclass(frozen=True)
@@ -223,9 +226,10 @@ def racket_cycles(t, racket, measured, s: ExtractionSettings) -> RacketCycles:
     crossings = []
     for j in range(-1, len(et) - 1):
         if j == -1:
-            if not (len(et) and ek[0] == 1):
+            if not (len(et) > 1 and ek[0] == 1):
                 continue
-            t_before = t[0]
+            # no trough before the first peak: search at most a typical half cycle before it
+            t_before = max(t[0], et[0] - float(np.median(np.diff(et))))
         elif ek[j] == -1 and ek[j + 1] == 1:
             t_before = et[j]
         else:
@@ -258,6 +262,11 @@ def racket_cycles(t, racket, measured, s: ExtractionSettings) -> RacketCycles:
         drift = cycles.mid_position([et[peak][0], et[trough][0]])  # each about its own mid
         amplitudes.append(0.5 * ((ex[peak][0] - drift[0]) - (ex[trough][0] - drift[1])))
         mids.append(float(cycles.mid_position(t0)[0]))
+    if periods:  # a cycle far longer or shorter than the trial's typical one is not a cycle
+        typical = float(np.median(periods))
+        ok = [abs(p / typical - 1.0) <= MAX_PERIOD_DEVIATION for p in periods]
+        starts, periods, amplitudes, mids = ([v for v, keep in zip(seq, ok) if keep]
+                                             for seq in (starts, periods, amplitudes, mids))
     cycles.crossings = np.array(starts)
     cycles.periods = np.array(periods)
     cycles.amplitudes = np.array(amplitudes)
