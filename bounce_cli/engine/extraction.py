@@ -20,6 +20,9 @@ Definitions (section 2; on the model's own motion they return the model's variab
 * AC: the racket's second derivative at t_k from a local polynomial least-squares fit
   (Savitzky-Golay; evaluated at t_k, which need not be a sample) over ``acc_half_window_s``.
 
+Each local fit's half window is widened where the sampling is too coarse to give it
+degree + 3 samples.
+
 Messy recordings: gaps (NaN) shorter than ``max_gap_s`` are bridged for detection (fits use only
 measured samples); impacts whose data lie in longer gaps are dropped and reported. Contacts
 closer in time than ``sticking_hop_s`` (chatter) or followed by the ball resting on the racket
@@ -31,7 +34,7 @@ Times in s, positions in m, velocities in m/s, phases in rad.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -43,6 +46,9 @@ TWO_PI = 2.0 * math.pi
 #: a racket cycle whose period differs from the trial's median by more than this fraction is
 #: not used (e.g. a crossing of a still, drifting racket before the movement starts)
 MAX_PERIOD_DEVIATION = 0.4
+#: ball-racket closing speed (m/s) allowed for when deciding whether a velocity jump happened
+#: near the racket: ``contact_distance_m`` + this x the sampling interval
+CLOSING_SPEED_M_S = 10.0
 
 
 @dataclass(frozen=True)
@@ -312,12 +318,16 @@ def fit_flight(t, x, t_ref: float, g: float, min_samples: int) -> FlightFit | No
 # -- contacts -----------------------------------------------------------------------------------
 def detect_contacts(t, ball, racket, s: ExtractionSettings) -> np.ndarray:
     """Sample indices of contacts: the ball's velocity jumps upward (net of gravity) by more
-    than ``min_velocity_jump_m_s`` within ``contact_distance_m`` of the racket; a jump
-    straddling two samples counts once (the larger)."""
+    than ``min_velocity_jump_m_s`` within ``contact_distance_m`` (plus ``CLOSING_SPEED_M_S``
+    times the sampling interval) of the racket; a jump straddling two samples counts once (the
+    larger)."""
     v_half = np.diff(ball) / np.diff(t)
     jump = np.full(t.shape, np.nan)
     jump[1:-1] = v_half[1:] - v_half[:-1] + s.g * 0.5 * (t[2:] - t[:-2])
-    near = (ball - s.ball_offset_m - racket) < s.contact_distance_m
+    # the sample nearest a contact may be up to one interval away from it, while ball and
+    # racket approach each other at several m/s: the threshold grows with the interval
+    spacing = np.gradient(t)
+    near = (ball - s.ball_offset_m - racket) < s.contact_distance_m + CLOSING_SPEED_M_S * spacing
     with np.errstate(invalid="ignore"):
         candidate = np.flatnonzero((jump > s.min_velocity_jump_m_s) & near)
     contacts: list[int] = []
@@ -376,11 +386,26 @@ def _segment_fits(t, ball, long_gap, racket, lo: int, hi: int, t_after: float,
     return after, before, rest_s, has_gap
 
 
+def widened_windows(s: ExtractionSettings, dt: float) -> ExtractionSettings:
+    """The settings with each local-fit half window widened, where the sampling is coarse, to
+    hold at least degree + 3 samples."""
+    def wide(half: float, degree: int) -> float:
+        return max(half, 0.5 * (degree + 3) * dt)
+
+    return replace(
+        s,
+        acc_half_window_s=wide(s.acc_half_window_s, s.acc_degree),
+        position_half_window_s=wide(s.position_half_window_s, s.position_degree),
+        extremum_half_window_s=wide(s.extremum_half_window_s, s.extremum_degree),
+    )
+
+
 def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
                   s: ExtractionSettings = ExtractionSettings()) -> TrialExtraction:
     """Impacts of one trial (see the module docstring). ``ball`` may be None when events give
     the impact times; ``event_alpha`` (optional) the coefficient of restitution per event."""
     t = np.asarray(t, dtype=float)
+    s = widened_windows(s, float(np.median(np.diff(t))))
     g = s.g
     racket_raw = np.asarray(racket, dtype=float)
     racket_f, racket_long = bridge_short_gaps(t, racket_raw, s.max_gap_s)

@@ -250,9 +250,12 @@ def simulate_trial(params: ModelParams, s: SessionSettings, streams) -> TrialTru
         v_new += s.velocity_noise_m_s * float(rng_velocity.standard_normal())
         hop = t_hit - t
         if t_hit >= 0.0 and (hop < s.min_hop_s or v_new <= racket_v):
+            why = (f"a hop of {hop:.3g} s" if hop < s.min_hop_s else
+                   "it leaves the racket no faster than the racket moves")
             raise ModelError(
-                f"the ball fell into sticking at t = {t_hit:.3f} s (hop {hop:.3g} s): lower "
-                "velocity_noise_m_s or the perturbations, or change the model parameters")
+                f"the ball fell into sticking at t = {t_hit:.3f} s ({why}): lower "
+                "velocity_noise_m_s, the racket's variation or the perturbations, or change "
+                "the model parameters")
         if t_hit >= 0.0:
             times.append(t_hit)
             v_after.append(v_new)
