@@ -470,8 +470,9 @@ def main() -> None:
 
 
 def add_experiment_command(entry: Entry) -> None:
-    """Register ``bounce <name>`` for a registry entry: the common options (and ``--data``
-    where the experiment declares it), then ``run_experiment``."""
+    """Register ``bounce <name>`` for a registry entry: the common options (and the file
+    options ``--data``, ``--events`` where the experiment declares them), then
+    ``run_experiment``."""
 
     def command(
         config: ConfigOption = None,
@@ -482,19 +483,23 @@ def add_experiment_command(entry: Entry) -> None:
         print_config: PrintConfigOption = False,
         jobs: JobsOption = None,
         data: Optional[Path] = None,
+        events: Optional[Path] = None,
     ) -> None:
         overrides = list(overrides or [])
-        if data is not None:
-            overrides.append(f"data={json.dumps(str(data))}")
+        for key, path in (("data", data), ("events", events)):
+            if path is not None:
+                overrides.append(f"{key}={json.dumps(str(path))}")
         run_experiment(entry, config=config, overrides=overrides, out=out, quiet=quiet,
                        force=force, print_config=print_config, jobs=jobs)
 
-    # the signature typer reads: annotations resolved, --data only where declared
+    # the signature typer reads: annotations resolved, file options only where declared
     hints = typing.get_type_hints(command, include_extras=True)
-    hints["data"] = Annotated[Optional[Path], typer.Option("--data", help=entry.data_help)]
+    file_options = {"data": entry.data_help, "events": entry.events_help}
+    for key, help_text in file_options.items():
+        hints[key] = Annotated[Optional[Path], typer.Option(f"--{key}", help=help_text)]
     params = [p.replace(annotation=hints[p.name])
               for p in inspect.signature(command).parameters.values()
-              if p.name != "data" or entry.data_help is not None]
+              if file_options.get(p.name, "") is not None]
     command.__signature__ = inspect.Signature(params)  # type: ignore[attr-defined]
     command.__doc__ = entry.summary
     app.command(entry.name)(command)

@@ -23,7 +23,8 @@ class Entry:
     ``configs/<config>.yaml`` (both default to the name, with ``-`` as ``_`` for the module).
 
     ``data_help``: the command takes ``--data FILE``, which sets the config key ``data``
-    (the text is the option's help). ``needs_fixed_point``: the run is about the period-1
+    (the text is the option's help); ``events_help`` likewise for ``--events FILE`` (config
+    key ``events``). ``needs_fixed_point``: the run is about the period-1
     fixed point, so the CLI warns when it is unstable. ``reproduce``: part of
     ``bounce reproduce`` and of the committed ``results/``."""
 
@@ -31,6 +32,7 @@ class Entry:
     summary: str
     figures: tuple[tuple[str, str], ...]
     data_help: str | None = None
+    events_help: str | None = None
     needs_fixed_point: bool = True
     reproduce: bool = True
     module: str = ""
@@ -109,6 +111,24 @@ EXPERIMENTS: tuple[Entry, ...] = (
         data_help="Impacts table with `alpha` and `perturbed` columns: the data's responses "
         "aligned on the perturbed impacts beside the model's (Figs. 9, 11; sets the config "
         "key `data`).",
+    ),
+    Entry(
+        "simulate-recording",
+        "A simulated lab session with known truth: recording, events, exact impacts (Fig. 2).",
+        (("recording.png", "Fig. 2's raw data, simulated (section 2, eqs. 1-4 and 16): ball and "
+          "racket of trial 1 with the exact v_k and theta_k; perturbed impacts in red."),),
+        module="simulate_recording", config="recording",
+    ),
+    Entry(
+        "extract",
+        "Recording (CSV or C3D) -> impacts table: theta_k, v_k, AC per bounce (paper Fig. 2).",
+        (("fig2.png", "Fig. 2 (section 2): continuous ball and racket trajectories and the "
+          "extracted v_k and theta_k per bounce, sample means dashed."),),
+        data_help="Recording to extract: CSV (columns: trial, t_s, racket_x_m, ball_x_m) or "
+        ".c3d (sets the config key `data`; default: the bundled simulated session).",
+        events_help="Events CSV (trial, t_s[, alpha]): the impact times of a virtual set-up "
+        "(sets the config key `events`).",
+        needs_fixed_point=False,
     ),
 )
 

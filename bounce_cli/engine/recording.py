@@ -1,0 +1,324 @@
+"""A simulated lab session with known truth: sampled racket and ball positions per trial.
+
+The racket moves cycle by cycle (section 2, eq. 4): cycle c starts at an upward crossing of the
+racket's mid-position at time t_c, lasts T_c and has amplitude a_c, so inside it
+
+    x_r(t) = d(t) + a_c sin(theta),   theta = 2 pi (t - t_c) / T_c  in [0, 2 pi),
+
+with a slow drift d(t) = D sin(2 pi t / P) of the mid-position. The phase advances by 2 pi per
+cycle and is linear inside it: on this racket the data definition of the phase of impact (from
+one upward mid-position crossing to the next, mapped linearly onto [0, 2 pi)) is exactly the
+model's theta. Each cycle's T_c and a_c are drawn around the model's tau and a_r (per-cycle SDs;
+0 gives the model's sinusoid, eq. 4). Between cycles the position and the acceleration are
+continuous; the velocity jumps by 2 pi (a_{c+1}/T_{c+1} - a_c/T_c) where T or a change.
+
+The ball flies ballistically (eqs. 1, 2) and bounces by the impact law eq. 3
+(``flight.impact_velocity``), with velocity noise q_v xi_k added to every velocity after
+impact as in eq. 16. Perturbation events replace alpha by alpha_p at chosen impacts (section 7).
+The next impact is the FIRST contact after the current one, found by the safe-step iteration of
+``engine.impact`` (the gap's lower bound G + G' h - M h^2 / 2 with M >= |G''| proves each step
+root-free), here in time and for the drifting, cycle-wise racket: steps never cross a cycle
+boundary, where M changes. With zero SDs and no drift the impacts are those of
+``flight.simulate`` (tested).
+
+The ball is launched from the racket at the fixed point (eqs. 7, 8): phase theta~ of the
+racket's first cycle, velocity v~. Without ``rest_s`` that happens before the recording starts
+(t = 0 falls in the racket's second cycle); with ``rest_s`` the ball first rests on the still
+racket, which starts its first cycle at ``rest_s``, and the launch is the trial's impact 0.
+
+Randomness: one ``SeedSequence(seed).spawn(n_trials)`` stream per trial, each spawning three
+(racket cycles, velocity noise, measurement noise), so a trial does not depend on the others.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .flight import impact_velocity
+from .params import ModelError, ModelParams
+
+#: the contact iteration stops when the gap is below this (m) and polishes with one Newton step
+CONTACT_TOLERANCE_M = 1e-12
+#: safe steps allowed per flight before giving up (typical flights take 10-40)
+MAX_CONTACT_STEPS = 20_000
+
+
+@dataclass(frozen=True)
+class SessionSettings:
+    """What varies in a simulated session beyond the model's parameters (SI units)."""
+
+    n_trials: int = 2
+    duration_s: float = 20.0
+    sample_rate_hz: float = 200.0
+    position_noise_m: float = 0.0
+    period_sd_s: float = 0.0
+    amplitude_sd_m: float = 0.0
+    velocity_noise_m_s: float = 0.0
+    drift_amplitude_m: float = 0.0
+    drift_period_s: float = 20.0
+    rest_s: float = 0.0
+    ball_marker_offset_m: float = 0.0
+    perturb_every: int = 0
+    perturb_first: int = 4
+    perturb_alphas: tuple[float, ...] = ()
+    min_hop_s: float = 0.01
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class CycleRacket:
+    """The racket of one trial: cycles starting at ``starts[c]`` with ``periods[c]`` and
+    ``amplitudes[c]``, still (at the drifting mid-position) before ``starts[0]``."""
+
+    starts: np.ndarray
+    periods: np.ndarray
+    amplitudes: np.ndarray
+    drift_amplitude: float = 0.0
+    drift_period: float = 20.0
+
+    @property
+    def ends(self) -> np.ndarray:
+        return self.starts + self.periods
+
+    def cycle_index(self, t):
+        """Index of the cycle holding t (-1 before the first cycle)."""
+        return np.searchsorted(self.starts, np.asarray(t, dtype=float), side="right") - 1
+
+    def _cycle(self, t):
+        t = np.asarray(t, dtype=float)
+        c = self.cycle_index(t)
+        moving = c >= 0
+        cc = np.maximum(c, 0)
+        omega = 2.0 * np.pi / self.periods[cc]
+        theta = omega * (t - self.starts[cc])
+        amp = np.where(moving, self.amplitudes[cc], 0.0)
+        return t, amp, omega, theta
+
+    def phase(self, t):
+        """Phase of the racket in its cycle, [0, 2 pi) (NaN before the first cycle)."""
+        t, amp, omega, theta = self._cycle(t)
+        return np.where(self.cycle_index(t) >= 0, np.mod(theta, 2.0 * np.pi), np.nan)
+
+    def drift(self, t, derivative: int = 0):
+        k = 2.0 * np.pi / self.drift_period
+        arg = k * np.asarray(t, dtype=float)
+        return self.drift_amplitude * k**derivative * np.sin(arg + derivative * np.pi / 2.0)
+
+    def position(self, t):
+        t, amp, omega, theta = self._cycle(t)
+        return self.drift(t) + amp * np.sin(theta)
+
+    def velocity(self, t):
+        t, amp, omega, theta = self._cycle(t)
+        return self.drift(t, 1) + amp * omega * np.cos(theta)
+
+    def acceleration(self, t):
+        t, amp, omega, theta = self._cycle(t)
+        return self.drift(t, 2) - amp * omega**2 * np.sin(theta)
+
+    def acceleration_bound(self, c: int) -> float:
+        """max |x_r''| over cycle c (or before the first cycle, c = -1)."""
+        k = 2.0 * np.pi / self.drift_period
+        bound = abs(self.drift_amplitude) * k * k
+        if c >= 0:
+            bound += self.amplitudes[c] * (2.0 * np.pi / self.periods[c]) ** 2
+        return float(bound)
+
+    def segment_end(self, t: float) -> float:
+        """The next cycle boundary after t (inf after the last cycle)."""
+        i = int(np.searchsorted(self.starts, t, side="right"))
+        if i < len(self.starts):
+            return float(self.starts[i])
+        return float(self.ends[-1]) if t < self.ends[-1] else math.inf
+
+
+def next_contact(t0: float, x0: float, v0: float, g: float, racket: CycleRacket,
+                 t_max: float) -> float:
+    """First time t > t0 at which the ball, flying from (t0, x0, v0) with x0 >= x_r(t0),
+    meets the racket; ``inf`` when it does not before ``t_max``.
+
+    Safe steps on the gap G(t) = ball - racket: from a point with G >= 0 and G' = d, the bound
+    |G''| <= M = g + max|x_r''| keeps G > 0 for h < (d + sqrt(d^2 + 2 M G)) / M, so no step
+    jumps over a contact; the iteration approaches the first contact from above and ends with
+    a Newton step. Steps stop at cycle boundaries (M is per cycle)."""
+    t = t0
+    steps = 0
+    while t < t_max:
+        c = int(racket.cycle_index(t))
+        bound = g + racket.acceleration_bound(c)
+        seg_end = min(racket.segment_end(t), t_max)
+        while True:
+            dt = t - t0
+            gap = x0 + v0 * dt - 0.5 * g * dt * dt - float(racket.position(t))
+            slope = v0 - g * dt - float(racket.velocity(t))
+            if t > t0 and gap <= CONTACT_TOLERANCE_M:
+                if slope < 0.0:
+                    t -= gap / slope  # Newton polish from the safe side
+                return t
+            step = (slope + math.sqrt(slope * slope + 2.0 * bound * max(gap, 0.0))) / bound
+            steps += 1
+            if steps > MAX_CONTACT_STEPS:
+                raise ModelError(f"no contact found after t = {t0:.6g} s (grazing flight)")
+            if step <= 0.0:
+                raise ModelError(f"the ball cannot leave the racket at t = {t0:.6g} s")
+            if t + step >= seg_end:
+                t = seg_end
+                break
+            t += step
+    return math.inf
+
+
+@dataclass
+class TrialTruth:
+    """One simulated trial: the racket, the ball's flights and the exact impacts."""
+
+    racket: CycleRacket
+    flight_starts: np.ndarray  # (t, x, v) where each free flight begins
+    flight_x: np.ndarray
+    flight_v: np.ndarray
+    impact_t: np.ndarray
+    impact_v: np.ndarray  # ball velocity just after each impact (with the eq. 16 noise)
+    impact_alpha: np.ndarray
+    impact_perturbed: np.ndarray
+    duration_s: float
+    g: float
+    extra: dict = field(default_factory=dict)
+
+    def ball_position(self, t):
+        """Ball position (contact point) at times t."""
+        t = np.asarray(t, dtype=float)
+        i = np.searchsorted(self.flight_starts, t, side="right") - 1
+        flying = i >= 0
+        ii = np.maximum(i, 0)
+        dt = t - self.flight_starts[ii]
+        x = self.flight_x[ii] + self.flight_v[ii] * dt - 0.5 * self.g * dt * dt
+        return np.where(flying, x, self.racket.position(t))
+
+
+def _draw_racket(params: ModelParams, s: SessionSettings, rng: np.random.Generator) -> CycleRacket:
+    tau, a = params.racket_period, params.racket_amplitude
+    n = int(math.ceil((s.duration_s + s.rest_s + 3 * tau) / (0.5 * tau))) + 4
+    periods = tau + s.period_sd_s * rng.standard_normal(n)
+    amplitudes = a + s.amplitude_sd_m * rng.standard_normal(n)
+    if np.any(periods <= 0.2 * tau) or np.any(amplitudes <= 0.0):
+        raise ModelError("per-cycle period or amplitude drawn <= 0: lower period_sd_s or "
+                         "amplitude_sd_m")
+    # the recording starts at t = 0: in the racket's second cycle (a trough) unless it rests
+    first = s.rest_s if s.rest_s > 0.0 else -periods[0] - 0.75 * periods[1]
+    starts = first + np.concatenate([[0.0], np.cumsum(periods[:-1])])
+    keep = starts < s.duration_s + s.rest_s + tau
+    return CycleRacket(starts[keep], periods[keep], amplitudes[keep],
+                       s.drift_amplitude_m, s.drift_period_s)
+
+
+def alpha_at(k: int, alpha: float, s: SessionSettings) -> tuple[float, bool]:
+    """Coefficient of restitution of impact k: alpha_p at the perturbed impacts (every
+    ``perturb_every``-th from ``perturb_first``, cycling through ``perturb_alphas``)."""
+    if s.perturb_every > 0 and s.perturb_alphas and k >= s.perturb_first and (
+        (k - s.perturb_first) % s.perturb_every == 0
+    ):
+        j = (k - s.perturb_first) // s.perturb_every
+        return float(s.perturb_alphas[j % len(s.perturb_alphas)]), True
+    return alpha, False
+
+
+def simulate_trial(params: ModelParams, s: SessionSettings, streams) -> TrialTruth:
+    """One trial's continuous motion and impacts (see the module docstring)."""
+    rng_racket, rng_velocity = streams
+    g = params.g
+    racket = _draw_racket(params, s, rng_racket)
+    t_end = s.duration_s
+    fp = params.fixed_point()
+    t = float(racket.starts[0] + fp.theta_rad / params.omega)  # the launch
+    x, v = float(racket.position(t)), fp.v_m_s
+    starts, xs, vs = [t], [x], [v]
+    times, v_after, alphas, perturbed = [], [], [], []
+    if t >= 0.0:  # a resting start: the launch is the trial's first impact
+        times, v_after, alphas, perturbed = [t], [v], [params.alpha], [False]
+    while True:
+        t_hit = next_contact(t, x, v, g, racket, t_end)
+        if not math.isfinite(t_hit):
+            break
+        v_before = v - g * (t_hit - t)
+        racket_v = float(racket.velocity(t_hit))
+        k = len(times)
+        alpha_k, is_perturbed = alpha_at(k, params.alpha, s)
+        v_new = impact_velocity(v_before, racket_v, alpha_k)
+        v_new += s.velocity_noise_m_s * float(rng_velocity.standard_normal())
+        hop = t_hit - t
+        if t_hit >= 0.0 and (hop < s.min_hop_s or v_new <= racket_v):
+            why = (f"a hop of {hop:.3g} s" if hop < s.min_hop_s else
+                   "it leaves the racket no faster than the racket moves")
+            raise ModelError(
+                f"the ball fell into sticking at t = {t_hit:.3f} s ({why}): lower "
+                "velocity_noise_m_s, the racket's variation or the perturbations, or change "
+                "the model parameters")
+        if t_hit >= 0.0:
+            times.append(t_hit)
+            v_after.append(v_new)
+            alphas.append(alpha_k)
+            perturbed.append(is_perturbed)
+        t, x, v = t_hit, float(racket.position(t_hit)), v_new
+        starts.append(t)
+        xs.append(x)
+        vs.append(v)
+    return TrialTruth(racket, np.array(starts), np.array(xs), np.array(vs),
+                      np.array(times), np.array(v_after), np.array(alphas),
+                      np.array(perturbed, dtype=bool), t_end, g)
+
+
+def truth_rows(truth: TrialTruth) -> dict[str, np.ndarray]:
+    """The exact impacts in the impacts table's variables (``bounce_cli.impacts``)."""
+    r, g = truth.racket, truth.g
+    t = truth.impact_t
+    c = r.cycle_index(t)
+    theta = r.phase(t)
+    v = truth.impact_v
+    hop = np.append(np.diff(t), np.nan)
+    rise = np.maximum(v, 0.0) / g
+    apex_t = t + rise
+    apex = r.position(t) + np.maximum(v, 0.0) ** 2 / (2.0 * g) - r.drift(apex_t)
+    next_t = np.append(t[1:], truth.duration_s)
+    apex = np.where(apex_t <= next_t, apex, np.nan)
+    return {
+        "k": np.arange(len(t)),
+        "t_s": t,
+        "theta_rad": theta,
+        "theta_deg": np.degrees(theta),
+        "v_m_s": v,
+        "racket_acc_g": r.acceleration(t) / g,
+        "racket_period_s": r.periods[c],
+        "racket_amplitude_m": r.amplitudes[c],
+        "hop_s": hop,
+        "ball_apex_m": apex,
+        "alpha": truth.impact_alpha,
+        "perturbed": truth.impact_perturbed,
+    }
+
+
+def sample_trial(truth: TrialTruth, s: SessionSettings, rng: np.random.Generator):
+    """(t, racket_x, ball_x) sampled at ``sample_rate_hz`` on [0, duration] with Gaussian
+    measurement noise; the ball marker sits ``ball_marker_offset_m`` above the contact point."""
+    n = int(math.floor(s.duration_s * s.sample_rate_hz + 1e-9)) + 1
+    t = np.arange(n) / s.sample_rate_hz
+    racket = truth.racket.position(t)
+    ball = truth.ball_position(t) + s.ball_marker_offset_m
+    if s.position_noise_m > 0.0:
+        racket = racket + s.position_noise_m * rng.standard_normal(n)
+        ball = ball + s.position_noise_m * rng.standard_normal(n)
+    return t, racket, ball
+
+
+def simulate_session(params: ModelParams, s: SessionSettings):
+    """Every trial: a list of (truth, (t, racket_x, ball_x)), one stream per trial."""
+    trials = []
+    for seq in np.random.SeedSequence(s.seed).spawn(s.n_trials):
+        racket_seq, velocity_seq, noise_seq = seq.spawn(3)
+        truth = simulate_trial(params, s, (np.random.default_rng(racket_seq),
+                                           np.random.default_rng(velocity_seq)))
+        samples = sample_trial(truth, s, np.random.default_rng(noise_seq))
+        trials.append((truth, samples))
+    return trials

@@ -1,0 +1,350 @@
+"""``bounce extract``: a recording of racket and ball -> the impacts table (paper Fig. 2).
+
+Reads a lab's recording (CSV or C3D, ``bounce_cli.recordings``), optionally its event log
+(``--events``: the impact times and alpha of a virtual set-up), and extracts per bounce the
+map's variables (``engine.extraction``): phase of impact theta_k, ball velocity after impact v_k
+(eq. 5's state), racket acceleration at impact AC (section 4) and the rest of
+``bounce_cli.impacts``. Writes ``impacts.csv``, ``excluded.csv`` (contacts not reported, with
+the reason), ``cycles.csv`` (the racket cycles), ``fig2.png`` with the samples it shows
+(``fig2_samples.csv``) and, given the truth (``truth:``), ``accuracy.csv``.
+
+Without ``data`` it extracts the bundled simulated session (``configs/recording.yaml``,
+simulated in memory exactly as ``bounce simulate-recording`` writes it) and holds the result
+against that session's truth: ``bounce reproduce`` needs no file from elsewhere.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from pathlib import Path
+from typing import Literal, Optional, Union
+
+import numpy as np
+import pandas as pd
+from pydantic import Field
+
+from ..config import ConfigError, ExperimentConfig, StrictModel
+from ..engine import ModelError
+from ..engine.extraction import ExtractionSettings, extract_trial, match_impacts
+from ..impacts import EVENT_COLUMNS, REQUIRED_COLUMNS
+from ..recordings import (
+    LENGTH_UNITS,
+    TIME_UNITS,
+    Trial,
+    read_events,
+    read_recording,
+    read_table,
+)
+from .base import Experiment, ExperimentResult, RunOptions
+
+
+class ColumnsBlock(StrictModel):
+    """Column names of a CSV recording (null: the file has no such column)."""
+
+    trial: Optional[str] = "trial"
+    time: str = "t_s"
+    racket: str = "racket_x_m"
+    ball: Optional[str] = "ball_x_m"
+
+
+class EventColumnsBlock(StrictModel):
+    """Column names of the events CSV (alpha is optional in the file)."""
+
+    trial: Optional[str] = "trial"
+    time: str = "t_s"
+    alpha: Optional[str] = "alpha"
+
+
+class UnitsBlock(StrictModel):
+    """Units of a CSV recording's and the events' columns (C3D: from the file)."""
+
+    length: Literal[tuple(LENGTH_UNITS)] = "m"  # type: ignore[valid-type]
+    time: Literal[tuple(TIME_UNITS)] = "s"  # type: ignore[valid-type]
+
+
+class C3DBlock(StrictModel):
+    """Which markers of a C3D file are racket and ball, and which axis is vertical."""
+
+    racket_marker: str = "racket"
+    ball_marker: Optional[str] = "ball"
+    vertical_axis: Literal["x", "y", "z"] = "z"
+
+
+DEFAULTS = ExtractionSettings()
+
+
+class ExtractionBlock(StrictModel):
+    """The extraction's settings (``engine.extraction``; g comes from the model block)."""
+
+    max_gap_s: float = Field(DEFAULTS.max_gap_s, ge=0.0)
+    acc_half_window_s: float = Field(DEFAULTS.acc_half_window_s, gt=0.0)
+    acc_degree: int = Field(DEFAULTS.acc_degree, ge=2, le=8)
+    position_half_window_s: float = Field(DEFAULTS.position_half_window_s, gt=0.0)
+    position_degree: int = Field(DEFAULTS.position_degree, ge=1, le=8)
+    extremum_half_window_s: float = Field(DEFAULTS.extremum_half_window_s, gt=0.0)
+    extremum_degree: int = Field(DEFAULTS.extremum_degree, ge=2, le=8)
+    mid_window_s: float = Field(DEFAULTS.mid_window_s, gt=0.0)
+    min_velocity_jump_m_s: float = Field(DEFAULTS.min_velocity_jump_m_s, gt=0.0)
+    contact_distance_m: float = Field(DEFAULTS.contact_distance_m, gt=0.0)
+    contact_tolerance_m: float = Field(DEFAULTS.contact_tolerance_m, gt=0.0)
+    sticking_hop_s: float = Field(DEFAULTS.sticking_hop_s, ge=0.0)
+    guard_samples: int = Field(DEFAULTS.guard_samples, ge=0, le=100)
+    min_flight_samples: int = Field(DEFAULTS.min_flight_samples, ge=3)
+    ball_offset_m: float = DEFAULTS.ball_offset_m
+
+    def settings(self, g: float) -> ExtractionSettings:
+        return ExtractionSettings(g=g, **self.model_dump())
+
+
+class FigureBlock(StrictModel):
+    """Which bounces Fig. 2 shows: a trial (null: the first), from a time (null: its first
+    impact), how many."""
+
+    trial: Optional[Union[int, str]] = None
+    start_s: Optional[float] = None
+    bounces: int = Field(10, ge=1, le=200)
+
+
+class ExtractConfig(ExperimentConfig):
+    data: Optional[str] = Field(None, description="recording (CSV or .c3d); null: the "
+                                "simulated session of configs/recording.yaml")
+    events: Optional[str] = Field(None, description="events CSV: the impact times (and alpha)")
+    truth: Optional[str] = Field(None, description="truth.csv of a simulated session: "
+                                 "writes accuracy.csv")
+    columns: ColumnsBlock = ColumnsBlock()
+    event_columns: EventColumnsBlock = EventColumnsBlock()
+    units: UnitsBlock = UnitsBlock()
+    c3d: C3DBlock = C3DBlock()
+    extraction: ExtractionBlock = ExtractionBlock()
+    figure: FigureBlock = FigureBlock()
+
+
+def centred_deg(theta_deg):
+    """Phases in degrees mapped to [-180, 180): means and plots of phases near 0 stay
+    meaningful (the table keeps [0, 360))."""
+    return (np.asarray(theta_deg, dtype=float) + 180.0) % 360.0 - 180.0
+
+
+# -- inputs -------------------------------------------------------------------------------------
+def demo_session():
+    """(trials, truth frame) of the bundled simulated session, simulated in memory."""
+    from ..config import bundled_config_path, load_config
+    from .simulate_recording import RecordingConfig, session_frames
+
+    cfg = load_config(RecordingConfig, bundled_config_path("recording"))
+    recording, _, truth = session_frames(cfg)
+    return trials_from_frame(recording), truth
+
+
+def trials_from_frame(frame: pd.DataFrame) -> list[Trial]:
+    """Trials of a recording frame in ``simulate-recording``'s columns."""
+    return [Trial(label, g["t_s"].to_numpy(float), g["racket_x_m"].to_numpy(float),
+                  g["ball_x_m"].to_numpy(float))
+            for label, g in frame.groupby("trial", sort=False)]
+
+
+def read_truth(path: str) -> pd.DataFrame:
+    truth = read_table(Path(path))
+    missing = [c for c in REQUIRED_COLUMNS if c not in truth.columns]
+    if missing:
+        raise ConfigError(f"{path}: not an impacts table: no column {missing[0]!r}")
+    return truth
+
+
+# -- the tables ---------------------------------------------------------------------------------
+def extract_all(trials: list[Trial], events, settings: ExtractionSettings, source: str):
+    """(impacts, excluded, cycles frames, offsets) of every trial; a trial without a bounce
+    is a one-line error naming the file and the trial."""
+    impacts, excluded, cycles, offsets = [], [], [], []
+    for trial in trials:
+        ev = events.get(str(trial.label)) if events is not None else None
+        if events is not None and (ev is None or ev.t.size == 0):
+            raise ConfigError(f"{source}: trial {trial.label}: no events for this trial")
+        if trial.ball is None and ev is None:
+            raise ConfigError(f"{source}: no ball column (columns.ball is null) and no "
+                              "--events: nothing gives the impacts")
+        try:
+            result = extract_trial(trial.t, trial.racket, trial.ball,
+                                   None if ev is None else ev.t,
+                                   None if ev is None else ev.alpha, settings)
+        except ModelError as exc:
+            raise ConfigError(f"{source}: trial {trial.label}: {exc}") from None
+        frame = pd.DataFrame({"trial": trial.label, **result.impacts})
+        if ev is not None and ev.alpha is not None:
+            alpha = frame["alpha"]
+            baseline = Counter(np.round(ev.alpha, 12)).most_common(1)[0][0]
+            frame["perturbed"] = ~np.isclose(alpha, baseline)
+            frame = frame[list(REQUIRED_COLUMNS + EVENT_COLUMNS)]
+        else:
+            frame = frame[list(REQUIRED_COLUMNS)]
+        impacts.append(frame)
+        excluded += [(trial.label, t, why) for t, why in result.excluded]
+        c = result.cycles
+        cycles.append(pd.DataFrame({
+            "trial": trial.label, "cycle": np.arange(len(c.crossings)),
+            "t_start_s": c.crossings, "racket_period_s": c.periods,
+            "racket_amplitude_m": c.amplitudes, "mid_position_m": c.mids}))
+        offsets.append(result.measured_offset_m)
+    excluded_frame = pd.DataFrame(excluded, columns=["trial", "t_s", "reason"])
+    return (pd.concat(impacts, ignore_index=True), excluded_frame,
+            pd.concat(cycles, ignore_index=True), offsets)
+
+
+#: accuracy.csv: quantity, its unit and how an error is measured
+ACCURACY_QUANTITIES = (
+    ("theta_deg", "deg"), ("v_m_s", "m/s"), ("racket_acc_g", "g"), ("racket_period_s", "s"),
+    ("racket_amplitude_m", "m"), ("hop_s", "s"), ("ball_apex_m", "m"), ("t_s", "s"),
+)
+
+
+def accuracy_frame(impacts: pd.DataFrame, truth: pd.DataFrame) -> pd.DataFrame:
+    """RMS and largest error of each extracted quantity against the truth, impacts matched by
+    trial and time; plus how many of the truth's impacts were found."""
+    errors: dict[str, list[float]] = {q: [] for q, _ in ACCURACY_QUANTITIES}
+    found = 0
+    for label, tr in truth.groupby("trial", sort=False):
+        ex = impacts[impacts["trial"].astype(str) == str(label)]
+        idx = match_impacts(tr["t_s"].to_numpy(float), ex["t_s"].to_numpy(float))
+        ok = idx >= 0
+        found += int(ok.sum())
+        for q, _ in ACCURACY_QUANTITIES:
+            d = ex[q].to_numpy(float)[ok] - tr[q].to_numpy(float)[idx[ok]]
+            if q == "theta_deg":
+                d = (d + 180.0) % 360.0 - 180.0
+            errors[q].append(d[np.isfinite(d)])
+    rows = []
+    for q, unit in ACCURACY_QUANTITIES:
+        d = np.concatenate(errors[q]) if errors[q] else np.array([])
+        rows.append({"quantity": q, "unit": unit, "n": d.size,
+                     "rms_error": float(np.sqrt(np.mean(d * d))) if d.size else math.nan,
+                     "max_abs_error": float(np.max(np.abs(d))) if d.size else math.nan})
+    rows.append({"quantity": "impacts_found", "unit": "count", "n": len(truth),
+                 "rms_error": math.nan, "max_abs_error": float(len(truth) - found)})
+    return pd.DataFrame(rows)
+
+
+def figure_samples(trials: list[Trial], impacts: pd.DataFrame, fig) -> pd.DataFrame:
+    """The samples Fig. 2 shows: the chosen trial, from its chosen bounce over ``bounces``."""
+    labels = [str(t.label) for t in trials]
+    label = labels[0] if fig.trial is None else str(fig.trial)
+    if label not in labels:
+        raise ConfigError(f"figure.trial: {fig.trial!r} is not a trial of the recording "
+                          f"({', '.join(labels[:10])})")
+    trial = trials[labels.index(label)]
+    imp = impacts[impacts["trial"].astype(str) == label]
+    if fig.start_s is not None:
+        imp = imp[imp["t_s"] >= fig.start_s]
+    if imp.empty:
+        raise ConfigError(f"figure.start_s: no impact of trial {label} after {fig.start_s} s")
+    t_first = float(imp["t_s"].iloc[0])
+    after = imp["t_s"].iloc[fig.bounces] if len(imp) > fig.bounces else trial.t[-1]
+    t_lo = max(t_first - 0.25 * float(np.nanmedian(imp["hop_s"])) if imp["hop_s"].notna().any()
+               else t_first, trial.t[0])
+    sel = (trial.t >= t_lo) & (trial.t < float(after))
+    return pd.DataFrame({"trial": trial.label, "t_s": trial.t[sel],
+                         "racket_x_m": trial.racket[sel],
+                         "ball_x_m": (trial.ball[sel] if trial.ball is not None
+                                      else np.full(int(sel.sum()), np.nan))})
+
+
+def run(config: ExtractConfig, options: RunOptions) -> ExperimentResult:
+    settings = config.extraction.settings(config.model.g)
+    summary = []
+    if config.data is None:
+        for key in ("events", "truth"):
+            if getattr(config, key) is not None:
+                raise ConfigError(f"{key}: needs data (the recording it belongs to)")
+        trials, truth = demo_session()
+        source = "the simulated session of configs/recording.yaml"
+        summary.append(f"no data given: extracted {source} (bounce simulate-recording's "
+                       "recording.csv) and compared it with its truth")
+    else:
+        trials = read_recording(Path(config.data), config.columns, config.units, config.c3d)
+        source = config.data
+        truth = read_truth(config.truth) if config.truth is not None else None
+    events = None
+    if config.events is not None:
+        events = read_events(Path(config.events), config.event_columns, config.units, trials)
+    options.progress.start(len(trials), "extract")
+    impacts, excluded, cycles, offsets = extract_all(trials, events, settings, source)
+    options.progress.advance(len(trials))
+    frames = {"impacts.csv": impacts, "excluded.csv": excluded, "cycles.csv": cycles,
+              "fig2_samples.csv": figure_samples(trials, impacts, config.figure)}
+    if truth is not None:
+        frames["accuracy.csv"] = accuracy_frame(impacts, truth)
+    reasons = Counter(r.split(":")[0] for r in excluded["reason"])
+    summary.append(
+        f"{len(trials)} trial(s): {len(impacts)} impacts, mean v = {impacts['v_m_s'].mean():.4f}"
+        f" m/s, mean theta = {centred_deg(impacts['theta_deg']).mean():.2f} deg, mean AC = "
+        f"{impacts['racket_acc_g'].mean():.3f} g; not reported: {len(excluded)}"
+        + (" (" + ", ".join(f"{n} {r}" for r, n in reasons.items()) + ")" if reasons else ""))
+    measured = [o for o in offsets if math.isfinite(o)]
+    if measured:
+        summary.append(f"ball marker above the racket marker at contact: "
+                       f"{1000 * float(np.median(measured)):.2f} mm (extraction.ball_offset_m "
+                       f"= {1000 * settings.ball_offset_m:g} mm)")
+    if "accuracy.csv" in frames:
+        acc = frames["accuracy.csv"].set_index("quantity")
+        summary.append("RMS error against the truth: " + ", ".join(
+            f"{q} {acc.loc[q, 'rms_error']:.3g} {acc.loc[q, 'unit']}"
+            for q in ("theta_deg", "v_m_s", "racket_acc_g")))
+    return ExperimentResult(frames=frames, figures=draw(frames), summary=summary)
+
+
+# -- Fig. 2 -------------------------------------------------------------------------------------
+def draw_fig2(samples: pd.DataFrame, impacts: pd.DataFrame, title: str, bounces: int = 10):
+    """Fig. 2: continuous trajectories on top; v_k and theta_k of the same bounces below, each
+    with its sample mean dashed. Shows the first trial of ``samples``, its impacts within the
+    samples' time span (at most ``bounces``); perturbed impacts (if marked) in red."""
+    from ..plotting import new_figure
+
+    label = samples["trial"].iloc[0]
+    s = samples[samples["trial"].astype(str) == str(label)]
+    t0, t1 = float(s["t_s"].min()), float(s["t_s"].max())
+    imp = impacts[(impacts["trial"].astype(str) == str(label)) & (impacts["t_s"] >= t0)
+                  & (impacts["t_s"] <= t1)].head(bounces)
+    fig, axes = new_figure(3, 1, width=7.5, height=7.0, sharex=True,
+                           gridspec_kw={"height_ratios": [2.2, 1, 1]})
+    ax_x, ax_v, ax_th = axes[0, 0], axes[1, 0], axes[2, 0]
+    if imp.empty:
+        t_hi = t1
+    else:
+        last = imp.iloc[-1]
+        t_hi = min(t1, float(last["t_s"]) + (float(last["hop_s"])
+                                              if math.isfinite(last["hop_s"]) else 0.0))
+    s = s[s["t_s"] <= t_hi]
+    ax_x.plot(s["t_s"], s["ball_x_m"], color="C0", lw=1.0, label="ball $x_b$")
+    ax_x.plot(s["t_s"], s["racket_x_m"], color="k", lw=0.9, label="racket $x_r$")
+    ax_x.set_ylabel("position (m)")
+    ax_x.legend(loc="upper right", fontsize=7, ncol=2)
+    perturbed = (imp["perturbed"].astype(str).str.lower() == "true").to_numpy() \
+        if "perturbed" in imp.columns else np.zeros(len(imp), dtype=bool)
+    for ax, column, label_, color in ((ax_v, "v_m_s", "$v_k$ (m/s)", "C0"),
+                                      (ax_th, "theta_deg", "$\\theta_k$ (deg)", "C2")):
+        t, y = imp["t_s"].to_numpy(float), imp[column].to_numpy(float)
+        if column == "theta_deg":
+            y = centred_deg(y)
+        ax.plot(t, y, "o-", ms=4, lw=0.8, color=color)
+        if perturbed.any():
+            ax.plot(t[perturbed], y[perturbed], "o", ms=6, color="C3",
+                    label="perturbed impact (alpha changed)")
+            ax.legend(loc="best", fontsize=7)
+        if len(y):
+            ax.axhline(float(np.mean(y)), ls="--", color="0.4", lw=0.8)
+        ax.set_ylabel(label_)
+        for ti in t:
+            ax_x.axvline(ti, color="0.85", lw=0.6, zorder=0)
+    ax_th.set_xlabel("time t (s)")
+    fig.suptitle(f"Fig. 2: {title}\ntrial {label}; dashed: sample means of the bounces shown",
+                 fontsize=10)
+    return fig
+
+
+def draw(frames: dict[str, pd.DataFrame]) -> dict:
+    samples, impacts = frames["fig2_samples.csv"], frames["impacts.csv"]
+    return {"fig2.png": draw_fig2(samples, impacts, "extracted ball velocity after impact "
+                                  "and phase of impact", bounces=len(impacts))}
+
+
+EXPERIMENT = Experiment(name="extract", schema=ExtractConfig, run=run, draw=draw)

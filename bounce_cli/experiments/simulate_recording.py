@@ -1,0 +1,133 @@
+"""``bounce simulate-recording``: a simulated lab session with known truth (Fig. 2's raw data).
+
+The engine (``engine.recording``) moves ball and racket in continuous time (eqs. 1-4, the impact
+law eq. 3 with eq. 16's velocity noise q_v after each impact, per-cycle racket period and
+amplitude, perturbations of alpha as in section 7) and samples both positions like a motion
+capture system. Writes ``recording.csv`` (what a lab measures), ``events.csv`` (every impact's
+time and alpha, as a virtual set-up logs them), ``truth.csv`` (the exact impacts in the columns
+of ``bounce_cli.impacts``) and ``recording.png`` (Fig. 2's layout drawn from the truth).
+"""
+
+from __future__ import annotations
+
+
+import numpy as np
+import pandas as pd
+from pydantic import Field, model_validator
+
+from ..config import ExperimentConfig, StrictModel
+from ..engine.recording import SessionSettings, simulate_session, truth_rows
+from ..impacts import EVENT_COLUMNS, REQUIRED_COLUMNS
+from .base import Experiment, ExperimentResult, RunOptions
+from .extract import centred_deg, draw_fig2
+
+#: recorded positions are rounded to 0.1 micrometre (far below any lab's noise)
+POSITION_DECIMALS = 7
+
+
+class RacketBlock(StrictModel):
+    """Cycle-to-cycle variation and drift of the racket (section 2's sine, cycle by cycle)."""
+
+    period_sd_s: float = Field(0.0, ge=0.0, description="SD of each cycle's period, s")
+    amplitude_sd_m: float = Field(0.0, ge=0.0, description="SD of each cycle's amplitude, m")
+    drift_amplitude_m: float = Field(0.0, ge=0.0, description="slow drift of the mid-position, m")
+    drift_period_s: float = Field(20.0, gt=0.0, description="period of that drift, s")
+
+
+class PerturbationBlock(StrictModel):
+    """alpha replaced by alpha_p at every ``every``-th impact from impact ``first`` (section 7)."""
+
+    every: int = Field(0, ge=0, description="0: no perturbations")
+    first: int = Field(4, ge=0)
+    alphas: list[float] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _alphas(self):
+        if any(not 0.0 <= a < 1.0 for a in self.alphas):
+            raise ValueError("each alpha must be in [0, 1)")
+        if self.every and not self.alphas:
+            raise ValueError("give alphas for the perturbed impacts")
+        return self
+
+
+class RecordingConfig(ExperimentConfig):
+    seed: int = Field(13, ge=0)
+    trials: int = Field(2, ge=1, le=1000)
+    duration_s: float = Field(20.0, gt=1.0, le=3600.0)
+    sample_rate_hz: float = Field(200.0, ge=20.0, le=100_000.0)
+    position_noise_m: float = Field(0.0005, ge=0.0, le=0.05)
+    velocity_noise_m_s: float = Field(0.04, ge=0.0, description="q_v of eq. 16, m/s")
+    racket: RacketBlock = RacketBlock()
+    perturbations: PerturbationBlock = PerturbationBlock()
+    rest_s: float = Field(0.0, ge=0.0, description="ball resting on the still racket first, s")
+    ball_marker_offset_m: float = Field(0.0, description="ball marker above the contact point")
+    min_hop_s: float = Field(0.01, gt=0.0, description="a shorter hop is sticking: an error")
+
+    @model_validator(mode="after")
+    def _limits(self):
+        if self.racket.period_sd_s > 0.1 * self.model.racket_period:
+            raise ValueError("racket.period_sd_s must be at most 10% of model.racket_period")
+        if self.racket.amplitude_sd_m > 0.1 * self.model.racket_amplitude:
+            raise ValueError("racket.amplitude_sd_m must be at most 10% of "
+                             "model.racket_amplitude")
+        if self.trials * self.duration_s * self.sample_rate_hz > 2e7:
+            raise ValueError("trials x duration_s x sample_rate_hz exceeds 2e7 samples")
+        return self
+
+    def session(self) -> SessionSettings:
+        return SessionSettings(
+            n_trials=self.trials, duration_s=self.duration_s,
+            sample_rate_hz=self.sample_rate_hz, position_noise_m=self.position_noise_m,
+            period_sd_s=self.racket.period_sd_s, amplitude_sd_m=self.racket.amplitude_sd_m,
+            velocity_noise_m_s=self.velocity_noise_m_s,
+            drift_amplitude_m=self.racket.drift_amplitude_m,
+            drift_period_s=self.racket.drift_period_s, rest_s=self.rest_s,
+            ball_marker_offset_m=self.ball_marker_offset_m,
+            perturb_every=self.perturbations.every, perturb_first=self.perturbations.first,
+            perturb_alphas=tuple(self.perturbations.alphas), min_hop_s=self.min_hop_s,
+            seed=self.seed)
+
+
+def session_frames(config: RecordingConfig, options: RunOptions | None = None):
+    """(recording, events, truth) DataFrames of the configured session."""
+    params = config.params
+    params.fixed_point()  # the ball is launched at the fixed point: a clear error if none
+    recordings, events, truths = [], [], []
+    trials = simulate_session(params, config.session())
+    for i, (truth, (t, racket, ball)) in enumerate(trials, start=1):
+        recordings.append(pd.DataFrame({
+            "trial": i, "t_s": t,
+            "racket_x_m": np.round(racket, POSITION_DECIMALS),
+            "ball_x_m": np.round(ball, POSITION_DECIMALS),
+        }))
+        rows = truth_rows(truth)
+        events.append(pd.DataFrame({"trial": i, "t_s": rows["t_s"], "alpha": rows["alpha"]}))
+        truths.append(pd.DataFrame({"trial": i, **rows})[list(REQUIRED_COLUMNS + EVENT_COLUMNS)])
+        if options is not None:
+            options.progress.advance(1)
+    return (pd.concat(recordings, ignore_index=True), pd.concat(events, ignore_index=True),
+            pd.concat(truths, ignore_index=True))
+
+
+def run(config: RecordingConfig, options: RunOptions) -> ExperimentResult:
+    options.progress.start(config.trials, "simulate-recording")
+    recording, events, truth = session_frames(config, options)
+    frames = {"recording.csv": recording, "events.csv": events, "truth.csv": truth}
+    summary = [
+        f"{config.trials} trials x {config.duration_s:g} s at {config.sample_rate_hz:g} Hz: "
+        f"{len(truth)} impacts ({int(truth['perturbed'].sum())} perturbed); mean v = "
+        f"{truth['v_m_s'].mean():.4f} m/s, mean theta = "
+        f"{centred_deg(truth['theta_deg']).mean():.2f} deg"
+    ]
+    return ExperimentResult(frames=frames, figures=draw(frames), summary=summary)
+
+
+def draw(frames: dict[str, pd.DataFrame]) -> dict:
+    """Fig. 2's layout for the first trial's first 10 bounces, from the exact impacts
+    (perturbed ones marked)."""
+    fig = draw_fig2(frames["recording.csv"], frames["truth.csv"],
+                    "simulated session (truth.csv), the first 10 bounces")
+    return {"recording.png": fig}
+
+
+EXPERIMENT = Experiment(name="simulate-recording", schema=RecordingConfig, run=run, draw=draw)

@@ -1,0 +1,209 @@
+"""Reading lab recordings (racket and ball positions per trial) and event logs into SI arrays.
+
+* CSV: one row per sample, columns named in the config's ``columns`` mapping (trial, time,
+  racket, ball), units in ``units`` (length m | cm | mm, time s | ms). Several trials in one
+  file; a file without a trial column is one trial (``columns.trial: null``); without ball
+  data set ``columns.ball: null`` (then events must give the impacts). Empty cells are gaps.
+* C3D (``.c3d``, Vicon, Qualisys, OptiTrack; read with the ``c3d`` package, ``pip install
+  'bounce-cli[c3d]'``): the racket and ball markers by their labels, the vertical axis by name
+  (``c3d`` block); the length unit from the file's own ``POINT:UNITS``, the time from
+  ``POINT:RATE``; one file is one trial (named after the file); invalid points (negative
+  residual) are gaps.
+* Events CSV (``--events``): one row per impact (trial, time, optional alpha), as a virtual
+  set-up logs them, columns in ``event_columns``, time in ``units.time``.
+
+Every problem is one line naming the file and the column or trial (``ConfigError``).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from .config import ConfigError
+
+LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+TIME_UNITS = {"s": 1.0, "ms": 0.001}
+#: a trial needs at least this many samples (a few racket cycles at any sensible rate)
+MIN_SAMPLES = 50
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One trial's samples in SI units; ``ball`` is None without ball data."""
+
+    label: object
+    t: np.ndarray
+    racket: np.ndarray
+    ball: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class Events:
+    """One trial's logged impacts: times (s) and, if logged, alpha."""
+
+    t: np.ndarray
+    alpha: np.ndarray | None
+
+
+def read_table(path: Path) -> pd.DataFrame:
+    """A CSV file as a DataFrame; a missing or unreadable file is a one-line ConfigError."""
+    try:
+        return pd.read_csv(path)
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: file not found") from None
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else "empty file"
+        raise ConfigError(f"{path}: cannot read as CSV: {first}") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read: {exc.strerror}") from None
+
+
+def _column(frame: pd.DataFrame, path: Path, name: str, key: str) -> np.ndarray:
+    if name not in frame.columns:
+        have = ", ".join(map(str, frame.columns[:12]))
+        raise ConfigError(f"{path}: no column {name!r} (set {key}; the file has: {have})")
+    values = pd.to_numeric(frame[name], errors="coerce")
+    bad = values.isna() & frame[name].notna()
+    if bad.any():
+        row = int(np.flatnonzero(bad.to_numpy())[0])
+        raise ConfigError(f"{path}: column {name!r}, row {row + 2}: not a number "
+                          f"({frame[name].iloc[row]!r})")
+    return values.to_numpy(float)
+
+
+def _groups(frame: pd.DataFrame, path: Path, trial_column: str | None, key: str):
+    """(label, row indices) per trial, in order of first appearance."""
+    if trial_column is None:
+        return [(1, np.arange(len(frame)))]
+    if trial_column not in frame.columns:
+        have = ", ".join(map(str, frame.columns[:12]))
+        raise ConfigError(f"{path}: no column {trial_column!r} (set {key}, or null for a "
+                          f"single trial; the file has: {have})")
+    labels = frame[trial_column]
+    if labels.isna().any():
+        row = int(np.flatnonzero(labels.isna().to_numpy())[0])
+        raise ConfigError(f"{path}: column {trial_column!r}, row {row + 2}: empty trial label")
+    return [(label, np.flatnonzero((labels == label).to_numpy()))
+            for label in pd.unique(labels)]
+
+
+def check_trial(path: Path, label, t: np.ndarray, time_column: str) -> None:
+    """Time must increase strictly and a trial needs ``MIN_SAMPLES`` samples."""
+    if len(t) < MIN_SAMPLES:
+        raise ConfigError(f"{path}: trial {label}: only {len(t)} samples (at least "
+                          f"{MIN_SAMPLES} needed)")
+    if not np.all(np.isfinite(t)):
+        raise ConfigError(f"{path}: trial {label}: column {time_column!r} has empty cells")
+    step = np.diff(t)
+    if np.any(step <= 0.0):
+        i = int(np.flatnonzero(step <= 0.0)[0])
+        verb = "runs backwards" if step[i] < 0.0 else "repeats a time"
+        raise ConfigError(f"{path}: trial {label}: column {time_column!r} {verb} at sample "
+                          f"{i + 2} ({t[i]:g} -> {t[i + 1]:g})")
+
+
+def read_csv_recording(path: Path, columns, units) -> list[Trial]:
+    """Trials of a CSV recording (``columns``: trial, time, racket, ball names;
+    ``units``: length and time units)."""
+    frame = read_table(path)
+    length, time = LENGTH_UNITS[units.length], TIME_UNITS[units.time]
+    t_all = _column(frame, path, columns.time, "columns.time") * time
+    racket_all = _column(frame, path, columns.racket, "columns.racket") * length
+    ball_all = (_column(frame, path, columns.ball, "columns.ball") * length
+                if columns.ball is not None else None)
+    trials = []
+    for label, rows in _groups(frame, path, columns.trial, "columns.trial"):
+        t = t_all[rows]
+        check_trial(path, label, t, columns.time)
+        trials.append(Trial(label, t, racket_all[rows],
+                            None if ball_all is None else ball_all[rows]))
+    return trials
+
+
+def read_c3d_recording(path: Path, c3d_block) -> list[Trial]:
+    """One trial from a C3D file: the racket and ball markers' vertical coordinate."""
+    try:
+        import c3d  # type: ignore[import-untyped]
+    except ImportError:
+        raise ConfigError(f"{path}: reading C3D needs the c3d package: "
+                          "pip install 'bounce-cli[c3d]'") from None
+    axis = "xyz".index(c3d_block.vertical_axis)
+    try:
+        with open(path, "rb") as handle, warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            reader = c3d.Reader(handle)
+            labels = [str(label).strip() for label in reader.point_labels]
+            units = reader.get("POINT:UNITS").string_value.strip().lower()
+            rate = float(reader.point_rate)
+            frames = [points[:, [axis, 3]].copy() for _, points, _ in reader.read_frames()]
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: file not found") from None
+    except (OSError, ValueError, AttributeError, KeyError) as exc:
+        raise ConfigError(f"{path}: cannot read as C3D: {exc}") from None
+    if units not in LENGTH_UNITS:
+        raise ConfigError(f"{path}: POINT:UNITS is {units!r}; expected one of "
+                          f"{', '.join(LENGTH_UNITS)}")
+    if not frames:
+        raise ConfigError(f"{path}: trial {path.stem}: no frames")
+    data = np.stack(frames)  # frame, point, (coordinate, residual)
+    coordinate = np.where(data[:, :, 1] < 0.0, np.nan, data[:, :, 0]) * LENGTH_UNITS[units]
+
+    def marker(name: str, key: str) -> np.ndarray:
+        if name not in labels:
+            raise ConfigError(f"{path}: no marker {name!r} (set {key}; the file has: "
+                              f"{', '.join(labels)})")
+        return coordinate[:, labels.index(name)].astype(float)
+
+    racket = marker(c3d_block.racket_marker, "c3d.racket_marker")
+    ball = (marker(c3d_block.ball_marker, "c3d.ball_marker")
+            if c3d_block.ball_marker is not None else None)
+    t = np.arange(len(racket)) / rate
+    check_trial(path, path.stem, t, "POINT:RATE")
+    return [Trial(path.stem, t, racket, ball)]
+
+
+def read_recording(path: Path, columns, units, c3d_block) -> list[Trial]:
+    """A CSV or (by its suffix) C3D recording."""
+    path = Path(path)
+    if path.suffix.lower() == ".c3d":
+        return read_c3d_recording(path, c3d_block)
+    return read_csv_recording(path, columns, units)
+
+
+def read_events(path: Path, event_columns, units, trials: list[Trial]) -> dict[str, Events]:
+    """Logged impacts per trial label (every trial of the recording gets an entry)."""
+    path = Path(path)
+    frame = read_table(path)
+    time = TIME_UNITS[units.time]
+    t_all = _column(frame, path, event_columns.time, "event_columns.time") * time
+    alpha_all = None
+    if event_columns.alpha is not None and event_columns.alpha in frame.columns:
+        alpha_all = _column(frame, path, event_columns.alpha, "event_columns.alpha")
+    known = {_key(trial.label): trial.label for trial in trials}
+    if event_columns.trial is None:
+        if len(trials) != 1:
+            raise ConfigError(f"{path}: no trial column but the recording has {len(trials)} "
+                              "trials (set event_columns.trial)")
+        groups = [(trials[0].label, np.arange(len(frame)))]
+    else:
+        groups = _groups(frame, path, event_columns.trial, "event_columns.trial")
+    events = {_key(trial.label): Events(np.array([]), None) for trial in trials}
+    for label, rows in groups:
+        if _key(label) not in known:
+            raise ConfigError(f"{path}: trial {label} is not in the recording")
+        t = t_all[rows]
+        if np.any(np.diff(t) <= 0.0) or not np.all(np.isfinite(t)):
+            raise ConfigError(f"{path}: trial {label}: column {event_columns.time!r} does not "
+                              "increase")
+        events[_key(label)] = Events(t, None if alpha_all is None else alpha_all[rows])
+    return events
+
+
+def _key(label) -> str:
+    """Trial labels compare as text (1 and '1' are the same trial in two files)."""
+    return str(label)

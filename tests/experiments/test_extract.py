@@ -1,0 +1,423 @@
+"""Extraction (engine.extraction, ``bounce extract``) held against known truth: simulated
+sessions (engine.recording) and ``bounce trajectory``'s own motion, degraded as lab files are.
+
+Accuracy targets (issue 13; stated in the README):
+(a) 1 kHz, no measurement noise: every theta within 0.05 deg, v within 2 mm/s, AC within 0.01 g;
+(b) 200 Hz, 0.5 mm position noise: RMS errors theta <= 1 deg, v <= 0.03 m/s, AC <= 0.1 g;
+(c) as (b) without the ball (impact times from the events, v_k from eq. 1).
+"""
+
+import functools
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.signal import savgol_filter
+from typer.testing import CliRunner
+
+from bounce_cli.cli import app
+from bounce_cli.engine import ModelParams
+from bounce_cli.engine.extraction import (
+    ExtractionSettings,
+    extract_trial,
+    local_derivatives,
+    match_impacts,
+)
+from bounce_cli.engine.recording import SessionSettings, simulate_session, truth_rows
+from bounce_cli.impacts import EVENT_COLUMNS, REQUIRED_COLUMNS
+
+PAPER = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.30, racket_period=0.92)
+BASE = dict(n_trials=2, duration_s=20.0, velocity_noise_m_s=0.04, perturb_every=8,
+            perturb_alphas=(0.4, 0.6))
+CASE_A = SessionSettings(sample_rate_hz=1000.0, **BASE)
+CASE_B = SessionSettings(sample_rate_hz=200.0, position_noise_m=0.0005, period_sd_s=0.005,
+                         amplitude_sd_m=0.002, seed=3, **BASE)
+QUANTITIES = ("theta_deg", "v_m_s", "racket_acc_g", "racket_period_s", "racket_amplitude_m",
+              "hop_s", "ball_apex_m")
+runner = CliRunner()
+
+
+@functools.lru_cache(maxsize=None)
+def session(settings: SessionSettings):
+    return simulate_session(PAPER, settings)
+
+
+def errors_against_truth(trials, *, ball=True, events=False, settings=None, transform=None):
+    """Extraction errors of every matched impact, and (found, true) impact counts."""
+    settings = ExtractionSettings() if settings is None else settings
+    errors = {q: [] for q in QUANTITIES}
+    found = total = 0
+    for truth, (t, racket, b) in trials:
+        rows = truth_rows(truth)
+        if transform is not None:
+            t, racket, b = transform(t, racket, b)
+        result = extract_trial(t, racket, b if ball else None,
+                               truth.impact_t if events else None, None, settings)
+        idx = match_impacts(rows["t_s"], result.impacts["t_s"])
+        assert np.all(idx >= 0), "an extracted impact matches no true impact"
+        found += len(idx)
+        total += len(rows["t_s"])
+        for q in QUANTITIES:
+            d = result.impacts[q] - rows[q][idx]
+            if q == "theta_deg":
+                d = (d + 180.0) % 360.0 - 180.0
+            errors[q].append(d[np.isfinite(d)])
+    return {q: np.concatenate(v) for q, v in errors.items()}, found, total
+
+
+def rms(x):
+    return float(np.sqrt(np.mean(np.square(x))))
+
+
+# -- building blocks --------------------------------------------------------------------------
+def test_local_polynomial_is_savitzky_golay_at_the_samples():
+    rng = np.random.default_rng(0)
+    t = np.arange(400) * 0.005
+    x = 0.3 * np.sin(2 * np.pi * t / 0.92) + 0.001 * rng.standard_normal(t.size)
+    for window, degree in ((21, 4), (11, 2), (31, 3)):
+        half = (window // 2) * 0.005
+        expected = savgol_filter(x, window, degree, deriv=2, delta=0.005)
+        for i in (50, 123, 300):
+            assert local_derivatives(t, x, t[i], half, degree)[2] == pytest.approx(
+                expected[i], rel=1e-9, abs=1e-9)
+
+
+def test_second_derivative_of_a_sine_between_samples():
+    """At any time (not only at samples) on a pure sine: -a w^2 sin(w t) to 1e-4 relative."""
+    t = np.arange(0.0, 3.0, 0.005)
+    w = 2 * np.pi / 0.92
+    for t0 in (1.0, 1.0021, 1.4567):
+        acc = local_derivatives(t, 0.3 * np.sin(w * t), t0, 0.1, 4)[2]
+        assert acc == pytest.approx(-0.3 * w**2 * np.sin(w * t0), rel=1e-3, abs=1e-3)
+
+
+def test_match_impacts_by_nearest_time():
+    truth = np.array([0.3, 1.2, 2.1, 3.0])
+    np.testing.assert_array_equal(match_impacts(truth, [1.21, 2.05, 2.6, 3.0]), [1, 2, -1, 3])
+
+
+# -- accuracy (a), (b), (c) -------------------------------------------------------------------
+def test_accuracy_a_1khz_without_noise():
+    errors, found, total = errors_against_truth(session(CASE_A))
+    assert found >= total - 2 * CASE_A.n_trials  # at most the impact in each trial's last,
+    assert np.max(np.abs(errors["theta_deg"])) <= 0.05  # incomplete racket cycle is missing
+    assert np.max(np.abs(errors["v_m_s"])) <= 0.002
+    assert np.max(np.abs(errors["racket_acc_g"])) <= 0.01
+    assert np.max(np.abs(errors["racket_period_s"])) <= 1e-5
+    assert np.max(np.abs(errors["hop_s"])) <= 1e-6
+
+
+def test_accuracy_b_200hz_half_a_millimetre_noise():
+    errors, found, total = errors_against_truth(session(CASE_B))
+    assert found >= total - 2 * CASE_B.n_trials
+    assert rms(errors["theta_deg"]) <= 1.0
+    assert rms(errors["v_m_s"]) <= 0.03
+    assert rms(errors["racket_acc_g"]) <= 0.1
+    # what we measure (README): a tenth of the targets or better
+    assert rms(errors["theta_deg"]) <= 0.15 and rms(errors["v_m_s"]) <= 0.001
+    assert rms(errors["racket_acc_g"]) <= 0.04
+    assert rms(errors["racket_amplitude_m"]) <= 0.001
+    assert rms(errors["ball_apex_m"]) <= 0.002
+
+
+def test_accuracy_c_events_without_the_ball():
+    errors, found, total = errors_against_truth(session(CASE_B), ball=False, events=True)
+    assert found >= total - 2 * CASE_B.n_trials
+    assert rms(errors["theta_deg"]) <= 1.0
+    assert rms(errors["v_m_s"]) <= 0.03
+    assert rms(errors["racket_acc_g"]) <= 0.1
+    assert rms(errors["v_m_s"]) <= 0.002 and np.max(np.abs(errors["hop_s"])) == 0.0
+
+
+def test_events_with_the_ball_give_the_logged_times():
+    errors, _, _ = errors_against_truth(session(CASE_B), events=True)
+    assert rms(errors["v_m_s"]) <= 0.001 and np.max(np.abs(errors["hop_s"])) == 0.0
+
+
+# -- messy recordings -------------------------------------------------------------------------
+def test_racket_drift_and_cycle_variation_are_followed():
+    drifting = SessionSettings(sample_rate_hz=200.0, position_noise_m=0.0005,
+                               drift_amplitude_m=0.03, drift_period_s=15.0, seed=7, **BASE)
+    errors, found, total = errors_against_truth(session(drifting))
+    assert found >= total - 2 * drifting.n_trials
+    assert rms(errors["theta_deg"]) <= 0.3
+    assert rms(errors["ball_apex_m"]) <= 0.003
+    # the same without handling the drift (mid-position from one window over the whole
+    # trial) is visibly worse: the test would catch a lost drift correction
+    flat, _, _ = errors_against_truth(session(drifting),
+                                      settings=ExtractionSettings(mid_window_s=1e3))
+    assert rms(flat["theta_deg"]) > 3 * rms(errors["theta_deg"])
+
+
+def test_short_gaps_are_bridged_and_impacts_in_long_gaps_dropped():
+    trials = session(CASE_B)
+    truth, (t, racket, ball) = trials[0]
+    rng = np.random.default_rng(1)
+    ball_g, racket_g = ball.copy(), racket.copy()
+    for start in rng.choice(np.arange(100, len(t) - 100), 25, replace=False):
+        ball_g[start:start + 4] = np.nan  # 20 ms gaps: bridged
+    for start in rng.choice(np.arange(100, len(t) - 100), 10, replace=False):
+        racket_g[start:start + 3] = np.nan
+    rows = truth_rows(truth)
+    lost = rows["t_s"][5]
+    i = np.searchsorted(t, lost)
+    ball_g[i - 20:i + 20] = np.nan  # 0.2 s without the ball around impact 5: dropped
+    result = extract_trial(t, racket_g, ball_g, s=ExtractionSettings())
+    idx = match_impacts(rows["t_s"], result.impacts["t_s"])
+    assert 5 not in idx and np.all(idx >= 0)
+    assert len(idx) >= len(rows["t_s"]) - 3
+    assert any(reason.startswith("gap") and abs(tt - lost) < 0.5 for tt, reason in result.excluded)
+    assert rms(result.impacts["v_m_s"] - rows["v_m_s"][idx]) <= 0.03
+    theta_err = (result.impacts["theta_deg"] - rows["theta_deg"][idx] + 180) % 360 - 180
+    assert rms(theta_err) <= 1.0
+    # the impact before the long gap has no known hop (the next contact is in the gap)
+    before = np.flatnonzero(idx == 4)
+    assert before.size == 1 and math.isnan(result.impacts["hop_s"][before[0]])
+    assert np.array_equal(result.impacts["k"], idx)  # k counts the lost impact
+    # with events the impact in the gap is known and dropped, the others keep their times
+    logged = extract_trial(t, racket_g, ball_g, rows["t_s"], None, ExtractionSettings())
+    assert 5 not in logged.impacts["k"]
+    assert any(reason.startswith("gap") and tt == lost for tt, reason in logged.excluded)
+
+
+def test_a_resting_start_is_skipped_until_bouncing_begins():
+    # the still racket drifts: its crossings of the mid-position are not racket cycles
+    resting = SessionSettings(n_trials=1, duration_s=15.0, rest_s=4.0, sample_rate_hz=200.0,
+                              position_noise_m=0.0005, velocity_noise_m_s=0.04, seed=2,
+                              drift_amplitude_m=0.03, drift_period_s=10.0)
+    errors, found, total = errors_against_truth(session(resting))
+    truth, (t, racket, ball) = session(resting)[0]
+    result = extract_trial(t, racket, ball, s=ExtractionSettings())
+    assert result.impacts["t_s"].min() > 4.0  # nothing while the ball rests
+    assert found >= total - 2  # the launch (no racket cycle before it) and the last one
+    assert rms(errors["v_m_s"]) <= 0.03 and rms(errors["theta_deg"]) <= 1.0
+
+
+def test_marker_offset_is_measured_and_only_shifts_the_apex():
+    offset = SessionSettings(sample_rate_hz=200.0, position_noise_m=0.0005,
+                             ball_marker_offset_m=0.03, seed=4, **BASE)
+    truth, (t, racket, ball) = session(offset)[0]
+    rows = truth_rows(truth)
+    plain = extract_trial(t, racket, ball, s=ExtractionSettings())
+    assert plain.measured_offset_m == pytest.approx(0.03, abs=0.001)
+    told = extract_trial(t, racket, ball, s=ExtractionSettings(ball_offset_m=0.03))
+    idx = match_impacts(rows["t_s"], told.impacts["t_s"])
+    assert rms(told.impacts["ball_apex_m"] - rows["ball_apex_m"][idx]) <= 0.002
+    np.testing.assert_allclose(plain.impacts["v_m_s"], told.impacts["v_m_s"], atol=1e-3)
+
+
+def test_chatter_is_flagged_not_reported():
+    """A double contact 2 ms apart: the 2 ms hop is not a bounce."""
+    truth, (t, racket, ball) = session(CASE_A)[0]
+    rows = truth_rows(truth)
+    events = np.sort(np.append(rows["t_s"], rows["t_s"][6] + 0.002))
+    result = extract_trial(t, racket, None, events, None, ExtractionSettings())
+    assert np.all(result.impacts["hop_s"][np.isfinite(result.impacts["hop_s"])] >= 0.05)
+    assert any(reason.startswith("chatter") for _, reason in result.excluded)
+    assert not np.any(np.isclose(result.impacts["t_s"], rows["t_s"][6]))
+    # events outside the recording are listed, and k stays the event's index in the log
+    logged = np.concatenate([[-0.4], rows["t_s"], [t[-1] + 0.3]])
+    shifted = extract_trial(t, racket, None, logged, None, ExtractionSettings())
+    assert sum("outside the recording" in reason for _, reason in shifted.excluded) == 2
+    idx = match_impacts(rows["t_s"], shifted.impacts["t_s"])
+    np.testing.assert_array_equal(shifted.impacts["k"], idx + 1)
+
+
+# -- round trip with bounce trajectory --------------------------------------------------------
+def test_round_trip_with_bounce_trajectorys_csv(tmp_path):
+    out = tmp_path / "traj"
+    made = runner.invoke(app, ["trajectory", "--out", str(out), "--quiet"])
+    assert made.exit_code == 0, made.output
+    extracted = tmp_path / "ex"
+    result = runner.invoke(app, [
+        "extract", "--data", str(out / "trajectory.csv"), "--out", str(extracted), "--quiet",
+        "--set", "columns.trial=case"])
+    assert result.exit_code == 0, result.output
+    ours = pd.read_csv(extracted / "impacts.csv")
+    theirs = pd.read_csv(out / "impacts.csv")
+    track = pd.read_csv(out / "trajectory.csv")
+    for case in ("period-1", "sticking"):
+        mine, ref = ours[ours.trial == case], theirs[theirs.case == case]
+        idx = match_impacts(ref["t_s"].to_numpy(), mine["t_s"].to_numpy(), 0.01)
+        assert np.all(idx >= 0)
+        for q, tol in (("theta_deg", 1e-5), ("v_m_s", 1e-9), ("racket_acc_g", 2e-3)):
+            np.testing.assert_allclose(mine[q], ref[q].to_numpy()[idx], atol=tol, err_msg=q)
+    p1 = ours[ours.trial == "period-1"]
+    assert len(p1) == len(theirs[theirs.case == "period-1"]) - 2  # launch, last cycle
+    # the sticking case: every stuck phase of the trajectory is flagged, no short hop reported
+    excluded = pd.read_csv(extracted / "excluded.csv")
+    stuck = (track[track.case == "sticking"]["state"] == "stuck").astype(int).to_numpy()
+    stuck_phases = int(np.sum(np.diff(stuck) == 1))
+    flagged = excluded[(excluded.trial == "sticking")
+                       & excluded.reason.str.startswith(("sticking", "chatter"))]
+    assert stuck_phases >= 5 and len(flagged) == stuck_phases
+    assert ours[ours.trial == "sticking"]["hop_s"].min() >= 0.05
+
+
+# -- the command: files, units, columns, events, C3D, errors ----------------------------------
+@pytest.fixture(scope="module")
+def simulated(tmp_path_factory):
+    out = tmp_path_factory.mktemp("sim") / "sim"
+    result = runner.invoke(app, ["simulate-recording", "--out", str(out), "--quiet",
+                                 "--set", "trials=3", "--set", "duration_s=12"])
+    assert result.exit_code == 0, result.output
+    return out
+
+
+def extract_cli(tmp_path, *args):
+    out = tmp_path / "ex"
+    result = runner.invoke(app, ["extract", "--out", str(out), "--quiet", *args])
+    return result, out
+
+
+def test_researcher_workflow_mm_ms_other_names_and_events(simulated, tmp_path):
+    """`bounce extract --data my_lab.csv --events my_events.csv --set units.length=mm`."""
+    rec = pd.read_csv(simulated / "recording.csv")
+    lab = pd.DataFrame({"Subject trial": rec["trial"].map({1: "A", 2: "B", 3: "C"}),
+                        "time [ms]": rec["t_s"] * 1000, "paddle_z": rec["racket_x_m"] * 1000,
+                        "ball_z": rec["ball_x_m"] * 1000})
+    lab.to_csv(tmp_path / "my_lab.csv", index=False)
+    events = pd.read_csv(simulated / "events.csv")
+    events["trial"] = events["trial"].map({1: "A", 2: "B", 3: "C"})
+    events["t_s"] *= 1000
+    events.to_csv(tmp_path / "my_events.csv", index=False)
+    result, out = extract_cli(
+        tmp_path, "--data", str(tmp_path / "my_lab.csv"), "--events",
+        str(tmp_path / "my_events.csv"), "--set", "units.length=mm", "--set", "units.time=ms",
+        "--set", "columns.trial=Subject trial", "--set", "columns.time=time [ms]",
+        "--set", "columns.racket=paddle_z", "--set", "columns.ball=ball_z")
+    assert result.exit_code == 0, result.output
+    impacts = pd.read_csv(out / "impacts.csv")
+    assert list(impacts.columns) == [*REQUIRED_COLUMNS, *EVENT_COLUMNS]
+    assert list(impacts["trial"].unique()) == ["A", "B", "C"]
+    truth = pd.read_csv(simulated / "truth.csv")
+    for label, number in (("A", 1), ("B", 2), ("C", 3)):
+        mine, ref = impacts[impacts.trial == label], truth[truth.trial == number]
+        idx = match_impacts(ref["t_s"].to_numpy(), mine["t_s"].to_numpy())
+        assert np.all(idx >= 0) and len(idx) >= len(ref) - 2
+        np.testing.assert_array_equal(mine["perturbed"], ref["perturbed"].to_numpy()[idx])
+        np.testing.assert_allclose(mine["alpha"], ref["alpha"].to_numpy()[idx])
+        np.testing.assert_allclose(mine["k"], ref["k"].to_numpy()[idx])
+        assert rms(mine["v_m_s"] - ref["v_m_s"].to_numpy()[idx]) < 0.01
+    assert impacts["theta_deg"].between(0, 360, inclusive="left").all()
+    assert (out / "fig2.png").stat().st_size > 10_000
+
+
+def test_truth_gives_accuracy_csv(simulated, tmp_path):
+    result, out = extract_cli(tmp_path, "--data", str(simulated / "recording.csv"),
+                              "--set", f"truth={simulated / 'truth.csv'}",
+                              "--set", "figure.trial=2", "--set", "figure.bounces=4")
+    assert result.exit_code == 0, result.output
+    acc = pd.read_csv(out / "accuracy.csv").set_index("quantity")
+    assert acc.loc["theta_deg", "rms_error"] <= 1.0 and acc.loc["v_m_s", "rms_error"] <= 0.03
+    assert acc.loc["racket_acc_g", "rms_error"] <= 0.1
+    shown = pd.read_csv(out / "fig2_samples.csv")
+    assert set(shown["trial"]) == {2} and shown["t_s"].max() - shown["t_s"].min() < 5 * 0.92
+
+
+@pytest.mark.filterwarnings("ignore:No analog data")
+def test_c3d_recording_in_millimetres(simulated, tmp_path):
+    c3d = pytest.importorskip("c3d")
+    rec = pd.read_csv(simulated / "recording.csv")
+    one = rec[rec.trial == 2]
+    writer = c3d.Writer(point_rate=200.0, point_units="mm  ")
+    writer.set_point_labels(["Racket1", "Ball"])
+    frames = []
+    for racket, ball in zip(one["racket_x_m"], one["ball_x_m"]):
+        points = np.zeros((2, 5), dtype=np.float32)
+        points[:, 1] = [racket * 1000.0, ball * 1000.0]  # vertical axis: y
+        frames.append((points, np.zeros((0, 0), dtype=np.float32)))
+    writer.add_frames(frames)
+    path = tmp_path / "session_2.c3d"
+    with open(path, "wb") as handle:
+        writer.write(handle)
+    result, out = extract_cli(tmp_path, "--data", str(path), "--set", "c3d.racket_marker=Racket1",
+                              "--set", "c3d.ball_marker=Ball", "--set", "c3d.vertical_axis=y")
+    assert result.exit_code == 0, result.output
+    impacts = pd.read_csv(out / "impacts.csv")
+    assert set(impacts["trial"]) == {"session_2"}
+    truth = pd.read_csv(simulated / "truth.csv")
+    ref = truth[truth.trial == 2]
+    idx = match_impacts(ref["t_s"].to_numpy() - one["t_s"].iloc[0], impacts["t_s"].to_numpy())
+    assert np.all(idx >= 0) and len(idx) >= len(ref) - 2
+    assert rms(impacts["v_m_s"] - ref["v_m_s"].to_numpy()[idx]) < 0.01
+    missing, _ = extract_cli(tmp_path / "m", "--data", str(path))
+    assert missing.exit_code == 2 and "no marker 'racket'" in missing.stderr
+    assert str(path) in missing.stderr and "Racket1" in missing.stderr
+
+
+def one_line_error(result, *needles):
+    assert result.exit_code == 2, result.output
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("bounce: error: "), result.stderr
+    for needle in needles:
+        assert needle in lines[0], lines[0]
+
+
+def test_bad_recordings_are_one_line_errors_and_write_nothing(simulated, tmp_path):
+    rec = pd.read_csv(simulated / "recording.csv")
+    cases = {}
+    cases["missing"] = (rec.drop(columns="ball_x_m"), ["ball_x_m", "columns.ball"])
+    backwards = rec.copy()
+    backwards.loc[500, "t_s"] = backwards.loc[498, "t_s"]
+    cases["backwards"] = (backwards, ["trial 1", "t_s", "runs backwards"])
+    cases["few"] = (rec[rec.trial == 1].head(20), ["trial 1", "only 20 samples"])
+    resting = rec[rec.trial == 2].copy()
+    resting["ball_x_m"] = resting["racket_x_m"]
+    cases["no_bounce"] = (pd.concat([rec[rec.trial == 1], resting]), ["trial 2", "no bounce"])
+    text = rec.copy().astype({"racket_x_m": object})
+    text.loc[7, "racket_x_m"] = "n/a?"
+    cases["text"] = (text, ["racket_x_m", "row 9"])
+    for name, (frame, needles) in cases.items():
+        path = tmp_path / f"{name}.csv"
+        frame.to_csv(path, index=False)
+        out = tmp_path / f"out_{name}"
+        result = runner.invoke(app, ["extract", "--data", str(path), "--out", str(out)])
+        one_line_error(result, str(path), *needles)
+        assert not out.exists() or not any(out.iterdir()), name  # nothing written
+    result = runner.invoke(app, ["extract", "--data", str(tmp_path / "nope.csv"), "--out",
+                                 str(tmp_path / "o")])
+    one_line_error(result, "nope.csv", "not found")
+    events = pd.DataFrame({"trial": [9], "t_s": [1.0]})
+    events.to_csv(tmp_path / "ev.csv", index=False)
+    result = runner.invoke(app, ["extract", "--data", str(simulated / "recording.csv"),
+                                 "--events", str(tmp_path / "ev.csv"), "--out",
+                                 str(tmp_path / "o")])
+    one_line_error(result, "ev.csv", "trial 9")
+    no_ball = runner.invoke(app, ["extract", "--data", str(simulated / "recording.csv"),
+                                  "--set", "columns.ball=null", "--out", str(tmp_path / "o")])
+    one_line_error(no_ball, "--events")
+    assert not any((tmp_path / "o").iterdir())
+
+
+def test_extract_help_declares_data_and_events():
+    text = runner.invoke(app, ["extract", "--help"]).stdout
+    assert "--data" in text and "--events" in text
+    assert "--events" not in runner.invoke(app, ["simulate-recording", "--help"]).stdout
+
+
+def test_one_trial_file_without_a_trial_column_in_centimetres(simulated, tmp_path):
+    rec = pd.read_csv(simulated / "recording.csv")
+    one = rec[rec.trial == 3].drop(columns="trial")
+    one[["racket_x_m", "ball_x_m"]] *= 100.0
+    one.to_csv(tmp_path / "one.csv", index=False)
+    result, out = extract_cli(tmp_path, "--data", str(tmp_path / "one.csv"),
+                              "--set", "columns.trial=null", "--set", "units.length=cm")
+    assert result.exit_code == 0, result.output
+    impacts = pd.read_csv(out / "impacts.csv")
+    truth = pd.read_csv(simulated / "truth.csv")
+    ref = truth[truth.trial == 3]
+    idx = match_impacts(ref["t_s"].to_numpy(), impacts["t_s"].to_numpy())
+    assert set(impacts["trial"]) == {1} and np.all(idx >= 0)
+    assert rms(impacts["v_m_s"] - ref["v_m_s"].to_numpy()[idx]) < 0.01
+    assert rms(impacts["racket_amplitude_m"] - ref["racket_amplitude_m"].to_numpy()[idx]) < 0.002
+
+
+def test_coarse_sampling_widens_the_fits_and_still_finds_every_bounce():
+    """30 Hz: the local fits widen to hold enough samples, contacts are still found."""
+    coarse = SessionSettings(sample_rate_hz=30.0, position_noise_m=0.0005, seed=6, **BASE)
+    errors, found, total = errors_against_truth(session(coarse))
+    assert found >= total - 2 * coarse.n_trials
+    assert rms(errors["theta_deg"]) <= 1.0 and rms(errors["v_m_s"]) <= 0.03
+    assert rms(errors["racket_acc_g"]) <= 0.1
