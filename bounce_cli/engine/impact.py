@@ -72,16 +72,23 @@ def next_impact_phase(theta, v, params: ModelParams, *, max_steps: int = MAX_SAF
     theta: phase of the current impact (rad, wrapped or not); v: ball velocity just after it
     (m/s). Arrays broadcast. Returns s > 0 with G(s) = 0 and G > 0 on (0, s); NaN where the
     ball cannot fly (see ``can_fly``) or, never observed, where the iteration did not converge.
+
+    ``params`` is a ``ModelParams``, or any object with the same attributes holding arrays that
+    broadcast to the states' shape: one parameter point per state (bifurcation sweeps).
     """
     theta, v = np.broadcast_arrays(np.asarray(theta, dtype=float), np.asarray(v, dtype=float))
     shape = theta.shape
-    theta = np.mod(theta.ravel(), 2.0 * np.pi)  # sin/cos periodic: keep arguments small
-    v = v.ravel()
+    theta = np.mod(theta, 2.0 * np.pi)  # sin/cos periodic: keep arguments small
+    flies = can_fly(theta, v, params).ravel()
+    theta, v = theta.ravel(), v.ravel()
     w, a, g = params.omega, params.racket_amplitude, params.g
+    idx = np.flatnonzero(flies)
+    per_state = np.ndim(w) + np.ndim(a) + np.ndim(g) > 0
+    if per_state:  # each state carries its own parameters: subset them with the states
+        w, a, g = (np.broadcast_to(p, shape).ravel()[idx] for p in (w, a, g))
     bound = g / (w * w) + a  # M >= |G''|
 
     result = np.full(theta.shape, np.nan)
-    idx = np.flatnonzero(can_fly(theta, v, params))
     th, vv = theta[idx], v[idx]
 
     # first step from s = 0 (G = 0): smallest positive root of d + c h/2 - a h^2/6
@@ -113,5 +120,7 @@ def next_impact_phase(theta, v, params: ModelParams, *, max_steps: int = MAX_SAF
             idx, th, vv, d0, s, step = (
                 idx[keep], th[keep], vv[keep], d0[keep], s[keep], step[keep]
             )
+            if per_state:
+                w, a, g, bound = w[keep], a[keep], g[keep], bound[keep]
         s = s + step
     return result.reshape(shape)
