@@ -130,8 +130,7 @@ def run(config: BifurcationConfig, options: RunOptions) -> ExperimentResult:
     value_of_state = np.repeat(values, n_ic)
     ic_of_state = np.tile(np.arange(n_ic), values.size)
     attractors = pd.DataFrame({
-        column: value_of_state,
-        "gamma": params.gamma,
+        **with_gamma(column, value_of_state, params.gamma),
         "initial_condition": ic_of_state,
         "theta0_deg": np.tile(theta0_deg, values.size),
         "v0_m_s": np.tile(v0, values.size),
@@ -150,12 +149,17 @@ def run(config: BifurcationConfig, options: RunOptions) -> ExperimentResult:
         "theta_deg": np.degrees(orbits.theta[recorded]).ravel(),
     })
     per_value = value_summary(attractors, column, values, base, sweep.parameter)
-    thresholds = threshold_frame(config, attractors, per_value, periods.reshape(values.size, n_ic),
-                                 values, theta0_deg, v0, options)
+    thresholds = threshold_frame(config, per_value, periods.reshape(values.size, n_ic), values,
+                                 theta0_deg, v0, options)
     frames = {"bifurcation.csv": bifurcation, "attractors.csv": attractors,
               "values.csv": per_value, "thresholds.csv": thresholds}
     return ExperimentResult(frames=frames, figures=draw(frames),
                             summary=summary_lines(thresholds, per_value, column))
+
+
+def with_gamma(column: str, values, gamma) -> dict:
+    """The swept parameter's column, then Gamma = a_r w^2 / g unless Gamma is the one swept."""
+    return {column: values} if column == "gamma" else {column: values, "gamma": gamma}
 
 
 def value_summary(attractors: pd.DataFrame, column: str, values, base: ModelParams,
@@ -186,8 +190,7 @@ def value_summary(attractors: pd.DataFrame, column: str, values, base: ModelPara
         "lyapunov_per_impact"].mean()
     single = sweep_parameters(base, parameter, values)
     return pd.DataFrame({
-        column: values,
-        "gamma": single.gamma,
+        **with_gamma(column, values, single.gamma),
         "attractors": grouped["attractor"].agg(found).to_numpy(),
         "dominant_attractor": dominant_name.to_numpy(),
         "n_initial_conditions": grouped.size().to_numpy(),
@@ -198,7 +201,8 @@ def value_summary(attractors: pd.DataFrame, column: str, values, base: ModelPara
     })
 
 
-def threshold_frame(config, attractors, per_value, periods, values, theta0_deg, v0,
+def threshold_frame(config: BifurcationConfig, per_value: pd.DataFrame, periods: np.ndarray,
+                    values: np.ndarray, theta0_deg: np.ndarray, v0: np.ndarray,
                     options: RunOptions) -> pd.DataFrame:
     """Closed-form thresholds of the period-1 orbits (eqs. 8, 14; hopping 1, 2, ... racket
     cycles) that fall inside the sweep, the flip located on the map, and where chaos begins
@@ -226,8 +230,7 @@ def threshold_frame(config, attractors, per_value, periods, values, theta0_deg, 
         if periods[i, ic] == 2:
             ends.reverse()
         settings = config.iterate.settings(transient_impacts=config.flip.transient_impacts)
-        total = (config.flip.rounds * config.flip.probes + 2) * (
-            settings.transient_impacts + settings.measured_impacts)
+        total = (config.flip.rounds + 1) * (settings.transient_impacts + settings.measured_impacts)
         options.progress.start(total, "bifurcation: locating the flip")
         try:
             loc = locate_period_doubling(
