@@ -229,7 +229,9 @@ def threshold_frame(config: BifurcationConfig, per_value: pd.DataFrame, periods:
         ends = [values[max(i - 1, 0)], values[min(i + 2, values.size - 1)]]
         if periods[i, ic] == 2:
             ends.reverse()
-        settings = config.iterate.settings(transient_impacts=config.flip.transient_impacts)
+        # only the period is read: no exponent, so no measuring beyond the recorded impacts
+        settings = config.iterate.settings(transient_impacts=config.flip.transient_impacts,
+                                           measured_impacts=config.iterate.recorded_impacts)
         total = (config.flip.rounds + 1) * (settings.transient_impacts + settings.measured_impacts)
         options.progress.start(total, "bifurcation: locating the flip")
         try:
