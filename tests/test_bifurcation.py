@@ -27,6 +27,7 @@ from bounce_cli.engine.bifurcation import (
     hop_cycles,
     iterate_sweep,
     locate_period_doubling,
+    period_doubling_candidates,
     parameter_point,
     period1_thresholds,
     sweep_parameters,
@@ -190,6 +191,26 @@ def test_paper_numbers_of_the_thresholds():
 
 
 # -- the flip on the map itself ------------------------------------------------------------------
+def test_period_doubling_candidates_bridge_unsettled_values():
+    """Right at a flip the orbit has not settled (no period): a change 1 -> (none) -> 2 is a
+    candidate; 1 -> 4, or a gap longer than max_gap, is not; sweep order, first orbit."""
+    periods = np.array([
+        # ic0 ic1 ic2
+        [1, 1, 0],
+        [1, 0, 0],
+        [0, 2, 0],   # ic1: 1 -> (none) -> 2 between rows 0 and 2
+        [2, 2, 1],   # ic0: 1 -> (none) -> 2 between rows 1 and 3
+        [2, 2, 4],   # ic2: 1 -> 4 is not a flip
+        [2, 1, 0],   # ic1: 2 -> 1 between rows 4 and 5
+        [0, 0, 0],
+        [0, 0, 0],
+        [0, 0, 0],
+        [1, 0, 0],   # ic0: 2 -> 1 across a gap of 3 values: too long
+    ])
+    assert period_doubling_candidates(periods) == [(0, 2, 1), (1, 3, 0), (4, 5, 1)]
+    assert period_doubling_candidates(periods, max_gap=3)[-1] == (5, 9, 0)
+
+
 def test_period_doubling_located_where_eq14_says():
     """Multisection on the detected period of one orbit (no closed form used, except to
     choose a bracket 3 % either side) finds the period-1 -> period-2 change within 1e-3 of

@@ -295,17 +295,26 @@ def attractor_names(orbits: SweepOrbits, settings: SweepSettings) -> tuple[np.nd
 
 
 # -- the flip, located on the map itself ------------------------------------------------------
-def first_period_doubling(periods: np.ndarray) -> tuple[int, int] | None:
-    """In a (values, initial conditions) array of detected periods in sweep order, the first
-    adjacent pair of values (i, i + 1) at which one initial condition's period goes from 1 to
-    2 or from 2 to 1, as (i, initial condition); None if there is none."""
+def period_doubling_candidates(
+    periods: np.ndarray, max_gap: int = 2
+) -> list[tuple[int, int, int]]:
+    """In a (values, initial conditions) array of detected periods in sweep order, the places
+    where an initial condition's period goes from 1 to 2 or from 2 to 1: (i, j, ic) with
+    period 1 or 2 at value i, the other at value j, and at most ``max_gap`` values between
+    them without a period (right at a flip an orbit has not settled: no period is read).
+    One per i, the first initial condition, in sweep order. A change can also be a jump to a
+    coexisting orbit; ``locate_period_doubling`` tells them apart (with a longer transient
+    its ends must keep periods 1 and 2)."""
     p = np.asarray(periods)
-    change = ((p[:-1] == 1) & (p[1:] == 2)) | ((p[:-1] == 2) & (p[1:] == 1))
-    hits = np.argwhere(change)
-    if hits.size == 0:
-        return None
-    i, ic = hits[0]
-    return int(i), int(ic)
+    found: dict[int, tuple[int, int, int]] = {}
+    for step in range(1, max_gap + 2):
+        a, b = p[:-step], p[step:]
+        change = ((a == 1) & (b == 2)) | ((a == 2) & (b == 1))
+        for k in range(1, step):  # nothing settled in between
+            change &= p[k:len(p) - step + k] == 0
+        for i in np.flatnonzero(change.any(axis=1)):
+            found.setdefault(int(i), (int(i), int(i) + step, int(np.argmax(change[i]))))
+    return [found[i] for i in sorted(found)]
 
 
 def hop_cycles(v, params: ModelParams) -> int:
@@ -334,6 +343,68 @@ class FlipLocation:
         return abs(self.period2_end - self.period1_end)
 
 
+@dataclass(frozen=True)
+class FlipBracket:
+    """A candidate flip: period 1 detected at ``period1_end``, period 2 at ``period2_end``
+    (either may be the larger number), for the orbit from (theta0 rad, v0 m/s)."""
+
+    period1_end: float
+    period2_end: float
+    theta0: float
+    v0: float
+
+
+def locate_period_doublings(
+    base: ModelParams,
+    parameter: str,
+    brackets: list[FlipBracket],
+    *,
+    settings: SweepSettings,
+    probes: int = 15,
+    rounds: int = 2,
+    on_impact: Callable[[int], None] | None = None,
+) -> list[FlipLocation | None]:
+    """Narrow each bracket by multisection, all brackets in one batch: first both ends are
+    iterated again with ``settings`` (a bracket whose ends no longer show periods 1 and 2 was
+    a jump to a coexisting orbit, not a flip: None); then each round iterates ``probes``
+    values inside every interval at once and keeps the sub-interval between the last value
+    of the run of period 1 and the next value.
+
+    A finite transient biases the result toward the period-1 side: just below the flip the
+    period-1 orbit attracts like (1 - eps)^k with eps proportional to the distance, so an orbit
+    that has not settled within the tolerance looks like period 2.
+    """
+    n = len(brackets)
+    if n == 0:
+        return []
+    low = np.array([b.period1_end for b in brackets], dtype=float)
+    high = np.array([b.period2_end for b in brackets], dtype=float)
+    theta0 = np.array([b.theta0 for b in brackets], dtype=float)
+    v0 = np.array([b.v0 for b in brackets], dtype=float)
+
+    def run(values, th, v):
+        orbits = iterate_sweep(th, v, sweep_parameters(base, parameter, values), settings,
+                               on_impact)
+        return attractor_names(orbits, settings)[1], orbits
+
+    ends, orbits = run(np.concatenate([low, high]), np.tile(theta0, 2), np.tile(v0, 2))
+    confirmed = (ends[:n] == 1) & (ends[n:] == 2)
+    cycles = [hop_cycles(orbits.v[k, -1], parameter_point(base, parameter, low[k]))
+              if confirmed[k] else 0 for k in range(n)]
+    active = np.flatnonzero(confirmed)
+    for _ in range(rounds if active.size else 0):
+        inner = np.linspace(low[active], high[active], probes + 2)[1:-1]  # (probes, active)
+        p, _ = run(inner.T.ravel(), np.repeat(theta0[active], probes),
+                   np.repeat(v0[active], probes))
+        for row, k in enumerate(active):
+            seq = np.concatenate([[1], p[row * probes:(row + 1) * probes], [2]])
+            values = np.concatenate([[low[k]], inner[:, row], [high[k]]])
+            first_other = int(np.argmax(seq != 1))  # seq[-1] = 2: there is one
+            low[k], high[k] = values[first_other - 1], values[first_other]
+    return [FlipLocation(float(low[k]), float(high[k]), cycles[k]) if confirmed[k] else None
+            for k in range(n)]
+
+
 def locate_period_doubling(
     base: ModelParams,
     parameter: str,
@@ -345,35 +416,14 @@ def locate_period_doubling(
     settings: SweepSettings,
     probes: int = 15,
     rounds: int = 2,
-    on_impact: Callable[[int], None] | None = None,
 ) -> FlipLocation:
-    """Narrow the interval in which the orbit from (theta0, v0) changes from period 1 (at
-    ``period1_end``) to period 2 (at ``period2_end``) by multisection: each round iterates
-    ``probes`` values inside the interval at once and keeps the sub-interval between the last
-    value of the run of period 1 and the next value. Either end may be the larger number.
-    Raises ModelError when the ends do not show periods 1 and 2 at these settings.
-
-    A finite transient biases the result toward the period-1 side: just below the flip the
-    period-1 orbit attracts like (1 - eps)^k with eps proportional to the distance, so an orbit
-    that has not settled within the tolerance looks like period 2.
-    """
-
-    def run(values):
-        pars = sweep_parameters(base, parameter, values)
-        orbits = iterate_sweep(np.full(len(values), theta0), np.full(len(values), v0), pars,
-                               settings, on_impact)
-        return attractor_names(orbits, settings)[1], orbits
-
-    ends, orbits = run(np.array([period1_end, period2_end]))
-    if ends[0] != 1 or ends[1] != 2:
+    """``locate_period_doublings`` for one bracket; raises ModelError when its ends do not
+    show periods 1 and 2 at these settings."""
+    (loc,) = locate_period_doublings(
+        base, parameter, [FlipBracket(period1_end, period2_end, theta0, v0)],
+        settings=settings, probes=probes, rounds=rounds)
+    if loc is None:
         raise ModelError(
-            f"cannot bracket the flip: period {ends[0]} at {period1_end:g}, {ends[1]} at "
-            f"{period2_end:g} (expected 1 and 2)")
-    cycles = hop_cycles(orbits.v[0, -1], parameter_point(base, parameter, period1_end))
-    for _ in range(rounds):
-        inner = np.linspace(period1_end, period2_end, probes + 2)[1:-1]
-        p = np.concatenate([[1], run(inner)[0], [2]])
-        values = np.concatenate([[period1_end], inner, [period2_end]])
-        first_other = int(np.argmax(p != 1))  # p[-1] = 2: there is one
-        period1_end, period2_end = values[first_other - 1], values[first_other]
-    return FlipLocation(float(period1_end), float(period2_end), cycles)
+            f"cannot bracket the flip: no periods 1 and 2 at {period1_end:g} and "
+            f"{period2_end:g} from theta0 = {theta0:g} rad, v0 = {v0:g} m/s")
+    return loc

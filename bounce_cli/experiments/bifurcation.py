@@ -23,11 +23,13 @@ from ..config import ConfigError, ExperimentConfig, StrictModel
 from ..engine import ModelError, ModelParams
 from ..engine.bifurcation import (
     SWEEPABLE,
+    FlipBracket,
+    FlipLocation,
     SweepSettings,
     attractor_names,
-    first_period_doubling,
+    period_doubling_candidates,
     iterate_sweep,
-    locate_period_doubling,
+    locate_period_doublings,
     parameter_point,
     period1_log_radius,
     period1_thresholds,
@@ -154,7 +156,8 @@ def run(config: BifurcationConfig, options: RunOptions) -> ExperimentResult:
     frames = {"bifurcation.csv": bifurcation, "attractors.csv": attractors,
               "values.csv": per_value, "thresholds.csv": thresholds}
     return ExperimentResult(frames=frames, figures=draw(frames),
-                            summary=summary_lines(thresholds, per_value, column))
+                            summary=summary_lines(thresholds, per_value, column,
+                                                  config.flip.locate))
 
 
 def with_gamma(column: str, values, gamma) -> dict:
@@ -222,26 +225,8 @@ def threshold_frame(config: BifurcationConfig, per_value: pd.DataFrame, periods:
     for name in ("located", "located_period1_end", "located_period2_end", "relative_difference"):
         table[name] = math.nan
 
-    first = first_period_doubling(periods)
-    if config.flip.locate and first is not None:
-        i, ic = first
-        # widen by one value each side: the sweep's shorter transient blurs the change
-        ends = [values[max(i - 1, 0)], values[min(i + 2, values.size - 1)]]
-        if periods[i, ic] == 2:
-            ends.reverse()
-        # only the period is read: no exponent, so no measuring beyond the recorded impacts
-        settings = config.iterate.settings(transient_impacts=config.flip.transient_impacts,
-                                           measured_impacts=config.iterate.recorded_impacts)
-        total = (config.flip.rounds + 1) * (settings.transient_impacts + settings.measured_impacts)
-        options.progress.start(total, "bifurcation: locating the flip")
-        try:
-            loc = locate_period_doubling(
-                base, sweep.parameter, *ends, theta0=math.radians(theta0_deg[ic]), v0=v0[ic],
-                settings=settings, probes=config.flip.probes, rounds=config.flip.rounds,
-                on_impact=options.progress.advance)
-        except ModelError:
-            loc = None
-        if loc is not None:
+    if config.flip.locate:
+        for loc in locate_flips(config, periods, values, theta0_deg, v0, options):
             match = (table.threshold == "flip") & (table.cycles == loc.cycles)
             if not match.any():
                 th = period1_thresholds(base, sweep.parameter, loc.cycles)
@@ -272,8 +257,46 @@ ONSET_TEXT = {
 }
 
 
-def summary_lines(thresholds: pd.DataFrame, per_value: pd.DataFrame, column: str) -> list[str]:
+#: candidate period changes of the sweep checked at most (all in one batch)
+MAX_FLIP_CANDIDATES = 8
+
+
+def locate_flips(config: BifurcationConfig, periods: np.ndarray, values: np.ndarray,
+                 theta0_deg: np.ndarray, v0: np.ndarray, options: RunOptions) -> list:
+    """Every period-1 <-> period-2 change of the sweep (the first few) that a longer transient
+    confirms, narrowed by multisection, all in one batch; the first one (in sweep order) per
+    period-1 orbit (racket cycles per hop)."""
+    settings = config.iterate.settings(
+        # only the period is read: no exponent, so no measuring beyond the recorded impacts
+        transient_impacts=config.flip.transient_impacts,
+        measured_impacts=config.iterate.recorded_impacts)
+    brackets = []
+    for i, j, ic in period_doubling_candidates(periods)[:MAX_FLIP_CANDIDATES]:
+        # widen by one value each side: the sweep's shorter transient blurs the change
+        ends = [values[max(i - 1, 0)], values[min(j + 1, values.size - 1)]]
+        if periods[i, ic] == 2:
+            ends.reverse()
+        brackets.append(FlipBracket(*ends, math.radians(theta0_deg[ic]), v0[ic]))
+    options.progress.start(
+        (config.flip.rounds + 1) * (settings.transient_impacts + settings.measured_impacts),
+        "bifurcation: locating the flips")
+    located: dict[int, FlipLocation] = {}
+    for loc in locate_period_doublings(config.params, config.sweep.parameter, brackets,
+                                       settings=settings, probes=config.flip.probes,
+                                       rounds=config.flip.rounds,
+                                       on_impact=options.progress.advance):
+        if loc is not None:
+            located.setdefault(loc.cycles, loc)
+    return list(located.values())
+
+
+def summary_lines(thresholds: pd.DataFrame, per_value: pd.DataFrame, column: str,
+                  locate: bool) -> list[str]:
     lines = []
+    flips = thresholds[thresholds.threshold == "flip"]
+    if locate and flips[f"located_{column}"].isna().all():
+        lines.append("flip not located: no period-1 <-> period-2 change of the sweep was "
+                     "confirmed with flip.transient_impacts")
     for row in thresholds.itertuples(index=False):
         rec = row._asdict()
         closed, located = rec[f"closed_form_{column}"], rec[f"located_{column}"]
@@ -324,6 +347,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
             ax.axvspan(min(x[a], x[b]) - half_step, max(x[a], x[b]) + half_step, color="0.88",
                        lw=0, label="every initial condition sticks" if (k, ax) == (0, top) else None)
 
+    labelled: set = set()
     for row in thresholds[thresholds.threshold.isin(["existence", "flip"])].itertuples():
         value = getattr(row, f"closed_form_{column}")
         if not np.isfinite(value):
@@ -331,7 +355,10 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         paper_orbit = row.cycles == 1
         verb = "exists" if row.threshold == "existence" else "flips"
         text = (f"period-1 orbit {verb} ({row.equation})" if paper_orbit else
-                f"period-1 orbit hopping {row.cycles} racket cycles {verb}")
+                f"period-1 orbit hopping n >= 2 racket cycles {verb}")
+        if text in labelled:
+            text = None
+        labelled.add(text)
         for ax in (top, bottom):
             ax.axvline(value, lw=0.9 if paper_orbit else 0.7, alpha=1.0 if paper_orbit else 0.5,
                        label=text if ax is top else None, **THRESHOLD_STYLE[row.threshold])
