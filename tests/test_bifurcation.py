@@ -330,6 +330,9 @@ def test_baseline_flip_within_1e3_of_eq14(baseline):
     assert flip.closed_form_gamma == pytest.approx(1.526824, abs=1e-6)
     assert abs(flip.relative_difference) < 1e-3
     assert flip.located_period1_end_gamma < flip.located_period2_end_gamma
+    # the orbit hopping two racket cycles: eq. 14 with n = 2 (measured -1.5e-4)
+    two = th.loc[("flip", 2)]
+    assert abs(two.relative_difference) < 1e-3
 
 
 def test_baseline_period1_exponent_is_ln_spectral_radius(baseline):
