@@ -308,6 +308,7 @@ def test_cli_sweeps_where_no_period1_orbit_exists(tmp_path):
     (["--set", "sweep.stop=1.0"], "start and stop must differ"),
     (["--set", "iterate.recorded_impacts=40"], "recorded_impacts must be at least 2 * max_period"),
     (["--set", "initial_conditions.v0_m_s=[]"], "initial_conditions.v0_m_s"),
+    (["--set", "limits.max_orbits=100"], "limits.max_orbits: 400 values x 15 initial conditions"),
 ])
 def test_cli_user_errors_are_one_line(tmp_path, args, needle):
     out = tmp_path / "out"

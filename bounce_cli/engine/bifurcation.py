@@ -50,8 +50,8 @@ SWEEPABLE: dict[str, tuple[str, str]] = {
 
 @dataclass(frozen=True)
 class ParameterArrays:
-    """Model parameters per state: the attributes of ``ModelParams`` as equal-length arrays,
-    accepted wherever the engine's map functions take ``params``."""
+    """Model parameters per state: the attributes of ``ModelParams`` as arrays of the states'
+    shape, accepted wherever the engine's map functions take ``params``."""
 
     alpha: np.ndarray
     g: np.ndarray

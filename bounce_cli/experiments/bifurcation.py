@@ -96,11 +96,16 @@ class FlipBlock(StrictModel):
     rounds: int = Field(2, ge=0)
 
 
+class LimitsBlock(StrictModel):
+    max_orbits: int = Field(1_000_000, ge=1, description="values x initial conditions at most")
+
+
 class BifurcationConfig(ExperimentConfig):
     sweep: SweepBlock = SweepBlock()
     initial_conditions: InitialConditionsBlock = InitialConditionsBlock()
     iterate: IterateBlock = IterateBlock()
     flip: FlipBlock = FlipBlock()
+    limits: LimitsBlock = LimitsBlock()
 
 
 def parameter_column(parameter: str) -> str:
@@ -119,6 +124,12 @@ def run(config: BifurcationConfig, options: RunOptions) -> ExperimentResult:
     ics = config.initial_conditions
     theta0_deg, v0 = (a.ravel() for a in np.meshgrid(ics.theta0_deg, ics.v0_m_s, indexing="ij"))
     n_ic = theta0_deg.size
+    if values.size * n_ic > config.limits.max_orbits:
+        raise ConfigError(
+            f"limits.max_orbits: {values.size} values x {n_ic} initial conditions = "
+            f"{values.size * n_ic:,} orbits, more than limits.max_orbits = "
+            f"{config.limits.max_orbits:,}; reduce sweep.num or initial_conditions, or raise "
+            "limits.max_orbits")
     settings = config.iterate.settings()
 
     params = sweep_parameters(base, sweep.parameter, np.repeat(values, n_ic))
