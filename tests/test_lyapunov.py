@@ -22,7 +22,8 @@ def random_flying_states(rng, n):
                              racket_amplitude=rng.uniform(0.02, 0.6),
                              racket_period=rng.uniform(0.3, 1.5))
         theta = rng.uniform(0.0, 2 * math.pi)
-        v = float(params.racket_velocity(theta)) + rng.uniform(0.05, 3.0) * params.g * params.racket_period
+        excess = rng.uniform(0.05, 3.0) * params.g * params.racket_period
+        v = float(params.racket_velocity(theta)) + excess
         hop = float(map_step(theta, v, params).hop_phase)
         v_before = v - params.g * hop / params.omega
         approach = float(params.racket_velocity(theta + hop)) - v_before
@@ -56,7 +57,8 @@ def test_orbit_jacobian_matches_finite_differences_at_random_states():
 
 
 def test_orbit_jacobian_at_the_fixed_point_is_eq9(paper_params):
-    for params in (paper_params, ModelParams(0.3, 9.81, 0.2, 0.6), ModelParams(0.8, 5.8, 0.1, 0.55)):
+    others = (ModelParams(0.3, 9.81, 0.2, 0.6), ModelParams(0.8, 5.8, 0.1, 0.55))
+    for params in (paper_params, *others):
         fp = params.fixed_point()
         general = map_jacobian(fp.theta_rad, fp.v_m_s, 2 * math.pi, params)
         np.testing.assert_allclose(general, jacobian(params), rtol=1e-12, atol=1e-12)

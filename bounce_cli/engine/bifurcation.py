@@ -5,7 +5,8 @@ largest Lyapunov exponent.
 The map depends on its four parameters only through alpha and Gamma = a_r w^2 / g (with the
 velocity in units of g / w): eqs. 8 and 14 put the period-1 orbit's existence at
 Gamma = pi (1-alpha)/(1+alpha) (cos theta~ = 1) and its flip (period doubling, lambda_- = -1)
-where AC reaches -2 (1+alpha^2)/(1+alpha)^2, i.e. Gamma^2 = AC_flip^2 + pi^2 ((1-alpha)/(1+alpha))^2.
+where AC reaches -2 (1+alpha^2)/(1+alpha)^2, i.e.
+Gamma^2 = AC_flip^2 + pi^2 ((1-alpha)/(1+alpha))^2.
 
 Every state carries its own parameter point (:class:`ParameterArrays`), so all values and
 initial conditions advance in one vectorised first-impact solve per impact; nothing here needs
@@ -133,7 +134,8 @@ def period1_thresholds(base: ModelParams, parameter: str, cycles: int = 1) -> Pe
     ``cycles`` racket cycles; the paper's orbit: 1) in units of the swept parameter, the other
     parameters as in ``base`` (for Gamma and a_r: g and tau fixed)."""
     alpha, g = base.alpha, base.g
-    gammas = [float(threshold_gamma(alpha, ac, cycles)) for ac in (0.0, float(flip_boundary_g(alpha)))]
+    gammas = [float(threshold_gamma(alpha, ac, cycles))
+              for ac in (0.0, float(flip_boundary_g(alpha)))]
     if parameter == "gamma":
         return Period1Thresholds(*gammas)
     if parameter == "racket_amplitude":  # a_r = Gamma g / w^2

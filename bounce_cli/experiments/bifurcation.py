@@ -88,7 +88,7 @@ class IterateBlock(StrictModel):
 
 
 class FlipBlock(StrictModel):
-    """Locating the first period-1 -> period-2 change of the sweep on the map itself."""
+    """Locating the period-1 -> period-2 changes of the sweep on the map itself."""
 
     locate: bool = True
     transient_impacts: int = Field(5000, ge=0, description="longer: slow convergence at a flip")
@@ -356,7 +356,8 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     for k, (a, b) in enumerate(_runs(all_stick)):
         for ax in (top, bottom):
             ax.axvspan(min(x[a], x[b]) - half_step, max(x[a], x[b]) + half_step, color="0.88",
-                       lw=0, label="every initial condition sticks" if (k, ax) == (0, top) else None)
+                       lw=0,
+                       label="every initial condition sticks" if (k, ax) == (0, top) else None)
 
     labelled: set = set()
     for row in thresholds[thresholds.threshold.isin(["existence", "flip"])].itertuples():
