@@ -130,6 +130,14 @@ EXPERIMENTS: tuple[Entry, ...] = (
         "(sets the config key `events`).",
         needs_fixed_point=False,
     ),
+    Entry(
+        "bifurcation",
+        "Bifurcation diagram and Lyapunov exponents over one swept parameter (eqs. 5-14).",
+        (("bifurcation.png", "Beyond the paper (eqs. 5, 6, 8, 14): velocity after impact "
+          "against Gamma = a_r w^2 / g at alpha 0.5, with the period-1 orbit's existence "
+          "(eq. 8) and flip (eq. 14) thresholds, and the largest Lyapunov exponent below."),),
+        needs_fixed_point=False,
+    ),
 )
 
 BY_NAME: dict[str, Entry] = {entry.name: entry for entry in EXPERIMENTS}

@@ -74,6 +74,9 @@ def next_impact_phase(theta, v, params: ModelParams, *, max_steps: int = MAX_SAF
     theta: phase of the current impact (rad, wrapped or not); v: ball velocity just after it
     (m/s). Arrays broadcast. Returns s > 0 with G(s) = 0 and G > 0 on (0, s); NaN where the
     ball cannot fly (see ``can_fly``) or, never observed, where the iteration did not converge.
+
+    ``params`` is a ``ModelParams``, or any object with the same attributes holding arrays that
+    broadcast to the states' shape: one parameter point per state (bifurcation sweeps).
     """
     return first_impact_phase(theta, v, params.racket_amplitude, params.omega, params.g,
                               max_steps=max_steps)
