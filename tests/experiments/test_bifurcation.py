@@ -29,7 +29,7 @@ from bounce_cli.engine.bifurcation import (
     sweep_parameters,
 )
 
-RESULTS = Path(__file__).resolve().parent.parent / "results" / "bifurcation"
+RESULTS = Path(__file__).resolve().parents[2] / "results" / "bifurcation"
 TWO_PI = 2 * math.pi
 runner = CliRunner()
 
