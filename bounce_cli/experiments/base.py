@@ -21,8 +21,9 @@ What an experiment must provide (as scipy's ``OdeSolver`` documents what a solve
     CSVs): a figure can always be redrawn from its data. ``run`` builds its figures by calling
     ``draw`` on its own frames.
 
-What it gets: the validated config, and :class:`RunOptions` (worker count, a progress sink),
-which never change the numbers it produces.
+What it gets: the validated config, and :class:`RunOptions` (worker count, a progress sink,
+a warning sink), which never change the numbers it produces. Parallel work goes through
+:mod:`bounce_cli.parallel` (a list of independent tasks handed to an executor's ``map``).
 """
 
 from __future__ import annotations
@@ -53,12 +54,20 @@ class NullProgress:
         pass
 
 
+def no_warning(message: str) -> None:
+    """The default warning sink: library use and tests hear nothing."""
+
+
 @dataclass
 class RunOptions:
-    """Run-time choices that are not part of the config (they never change the results)."""
+    """Run-time choices that are not part of the config (they never change the results).
+
+    ``warn(message)`` tells the user something before or during the run (the CLI prints
+    ``bounce: warning: <message>``); an experiment never prints itself."""
 
     jobs: int = 1
     progress: Progress = field(default_factory=NullProgress)
+    warn: Callable[[str], None] = no_warning
 
 
 @dataclass
