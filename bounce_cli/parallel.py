@@ -77,10 +77,11 @@ class _Worker:
     """One worker process and the two ends of its pipes."""
 
     def __init__(self) -> None:
+        # the workers import what this process can (as multiprocessing's spawn does)
         package_root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-        python_path = os.pathsep.join(
-            p for p in (package_root, os.environ.get("PYTHONPATH", "")) if p
-        )
+        python_path = os.pathsep.join(dict.fromkeys(
+            p for p in (package_root, *sys.path) if p and os.path.isdir(p)
+        ))
         self.process = subprocess.Popen(
             [sys.executable, "-m", "bounce_cli.parallel", str(os.getpid())],
             stdin=subprocess.PIPE,
@@ -243,15 +244,20 @@ def _serve(parent_pid: int) -> None:
     sys.stdout = sys.stderr
     while True:
         try:
-            fn, task = pickle.loads(tasks.recv_bytes())
-        except EOFError:
+            message = tasks.recv_bytes()
+        except (EOFError, OSError):
             return
         try:
+            fn, task = pickle.loads(message)
             reply = (True, fn(task))
         except Exception:
             reply = (False, traceback.format_exc())
         try:
-            results.send_bytes(pickle.dumps(reply, protocol=5))
+            data = pickle.dumps(reply, protocol=5)
+        except Exception:  # a result that cannot be pickled
+            data = pickle.dumps((False, traceback.format_exc()), protocol=5)
+        try:
+            results.send_bytes(data)
         except OSError:  # the parent is gone
             return
 
