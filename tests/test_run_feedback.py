@@ -168,3 +168,17 @@ def test_small_grids_run_in_process_large_ones_on_the_pool(monkeypatch):
     assert RecordingPool.started == 1
     for name in ("basin.csv", "fractions.csv", "markers.csv"):
         pd.testing.assert_frame_equal(pooled.frames[name], in_process.frames[name])
+
+
+def test_rerunning_a_bundled_config_changes_no_committed_byte(tmp_path):
+    """What keeps `git status` clean after `bounce reproduce` on a clean checkout: run.json
+    and every CSV come out byte-identical to results/ (PNGs are compared by the reproduction
+    tests; timing.json is ignored by git)."""
+    root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    committed = os.path.join(root, "results", "trajectory")
+    result = run("trajectory", "--out", tmp_path / "trajectory", "--quiet")
+    assert result.exit_code == 0, result.output
+    for name in sorted(os.listdir(committed)):
+        if name.endswith((".csv", ".json")) and name != "timing.json":
+            with open(os.path.join(committed, name), "rb") as handle:
+                assert (tmp_path / "trajectory" / name).read_bytes() == handle.read(), name
