@@ -189,10 +189,12 @@ class RichProgress:
 class PlainProgress:
     """Progress for a log file or a batch job (stderr not a terminal): a plain line
     ``description: 45% (72,000 of 160,000), 12 s elapsed, about 15 s left`` at most every
-    ``interval`` seconds; nothing for work shorter than that."""
+    ``interval`` seconds (default INTERVAL_S); nothing for work shorter than that."""
 
-    def __init__(self, interval: float = 10.0, clock=time.monotonic) -> None:
-        self.interval = interval
+    INTERVAL_S = 10.0
+
+    def __init__(self, interval: float | None = None, clock=time.monotonic) -> None:
+        self.interval = self.INTERVAL_S if interval is None else interval
         self._clock = clock
         self._total = 0
         self._done = 0

@@ -72,12 +72,15 @@ class ProcessWatch:
         """Recorded processes running the worker module (read now: a child seen between its
         fork and its exec still showed its parent's command line)."""
         found = []
-        for pid in list(self.seen):
-            try:
-                cmd = Path(f"/proc/{pid}/cmdline").read_bytes()
-            except OSError:
-                cmd = self.seen[pid][1].encode()
-            if b"bounce_cli.parallel" in cmd:
+        for pid, (start, cmd) in list(self.seen.items()):
+            fields = stat_fields(pid)
+            if "bounce_cli.parallel" not in cmd and fields and fields[19] == start:
+                try:
+                    cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+                    self.seen[pid] = (start, cmd)
+                except OSError:
+                    pass
+            if "bounce_cli.parallel" in cmd:
                 found.append(pid)
         return found
 

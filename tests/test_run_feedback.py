@@ -102,8 +102,7 @@ def test_plain_progress_prints_a_line_per_interval_and_nothing_for_short_work(ca
 
 
 def test_off_a_terminal_the_cli_prints_plain_lines_not_a_live_bar(tmp_path, monkeypatch):
-    monkeypatch.setattr("bounce_cli.cli.PlainProgress.__init__.__defaults__", (0.0,
-                        PlainProgress.__init__.__defaults__[1]))
+    monkeypatch.setattr(PlainProgress, "INTERVAL_S", 0.0)
     result = run("basin", *SMALL, "--out", tmp_path / "b")
     assert result.exit_code == 0, result.output
     lines = [line for line in result.stderr.splitlines() if "classifying" in line]
