@@ -10,6 +10,10 @@ them.
 * :class:`InProcess`: the calling process, one task after another.
 * :class:`LocalPool`: ``jobs`` worker processes on this machine.
 
+Another backend (a Dask cluster) is a class with the same three things: ``workers``, a
+``map`` that submits the tasks and yields their results in task order, and a context manager
+that releases what it holds (and cancels what is under way when left by an exception).
+
 Process hygiene of :class:`LocalPool` (what a Ctrl-C, ``kill`` or a batch scheduler needs):
 
 * Workers are plain child processes (``python -m bounce_cli.parallel``) talking over their
