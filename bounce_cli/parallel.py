@@ -120,6 +120,10 @@ class _Worker:
                 conn.close()
 
 
+#: how many tasks per worker LocalPool.map runs ahead of the next result it yields
+AHEAD = 4
+
+
 class LocalPool:
     """``jobs`` worker processes on this machine, started on the first ``map``; use as a
     context manager (the workers are stopped when the block is left)."""
@@ -168,7 +172,9 @@ class LocalPool:
             idle.extend(self._pool)
             busy: dict[Connection, _Worker] = {}
             while True:
-                while idle and not exhausted:
+                # at most AHEAD tasks per worker past the next result to yield: results
+                # waiting for a slow earlier task are held in memory
+                while idle and not exhausted and submitted - next_out < AHEAD * self.workers:
                     try:
                         task = next(pending)
                     except StopIteration:

@@ -84,3 +84,25 @@ def test_the_engine_classifies_through_any_executor_identically(paper_params):
         pooled = classify_grid(theta, v, paper_params, map=pool.map, workers=2, tile_points=64)
     np.testing.assert_array_equal(pooled.outcome, reference.outcome)
     np.testing.assert_array_equal(pooled.iterations, reference.iterations)
+
+
+def slow_first(x):
+    time.sleep(0.5 if x == 0 else 0.0)
+    return x
+
+
+def test_results_held_for_a_slow_first_task_are_bounded():
+    """Tasks are read lazily and at most AHEAD per worker run past the next result, so a slow
+    task does not make the pool read (and hold) the whole task list."""
+    read = []
+
+    def tasks():
+        for x in range(100):
+            read.append(x)
+            yield x
+
+    with parallel.LocalPool(2) as pool:
+        results = pool.map(slow_first, tasks())
+        assert next(results) == 0
+        assert len(read) <= parallel.AHEAD * 2 + 1
+        assert list(results) == list(range(1, 100))
