@@ -1,10 +1,19 @@
 """Run directories: atomic writes of CSVs, figures and the run manifest ``run.json``.
 
 A run computes everything first and then commits its files: each is written to a temporary
-name in the output directory and moved into place with ``os.replace``, ``run.json`` last.
-An interrupted or failed run therefore leaves no half-written file and leaves the previous
-run's files as they were. A directory holding results of a different resolved config is
-refused unless ``force``.
+name in the output directory and moved into place with ``os.replace``, ``run.json`` last,
+with interrupts held while the files move (``interrupts.deferred``). An interrupted or failed
+run therefore leaves no half-written file, no temporary file, the previous run's files as
+they were, and no output folder of its own making (:meth:`RunDirectory.discard`). A
+directory holding results of a different resolved config is refused unless ``force``.
+
+``run.json`` holds what the results were made from and nothing that changes from one run to
+the next: command, config file, overrides, the resolved config, the seed (only where the
+run drew random numbers), the ``--data`` file (absolute path and SHA-256), the versions of
+the packages that shape the numbers, the files written. So rerunning an unchanged config
+rewrites it byte for byte, and ``bounce reproduce`` on a clean checkout leaves ``git status``
+clean. What does change -- start time, wall time, git commit, host -- goes to ``timing.json``
+beside it (ignored by git in ``results/``).
 """
 
 from __future__ import annotations
@@ -18,16 +27,19 @@ import platform
 import subprocess
 import tempfile
 import time
+from importlib import metadata
 from pathlib import Path
 from typing import Any, Callable
 
-import numpy as np
 import pandas as pd
-import scipy
 
 from . import __version__
+from .interrupts import deferred
 
 MANIFEST = "run.json"
+TIMING = "timing.json"
+#: the distributions whose versions shape the numbers and figures (run.json "versions")
+VERSIONED_PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "pydantic", "pyyaml")
 
 
 class OutputDirError(ValueError):
@@ -91,12 +103,22 @@ def git_commit() -> str | None:
 
 
 def versions() -> dict[str, str]:
-    return {
-        "bounce": __version__,
-        "numpy": np.__version__,
-        "scipy": scipy.__version__,
-        "python": platform.python_version(),
-    }
+    """bounce, Python and each of VERSIONED_PACKAGES (as installed)."""
+    found = {"bounce": __version__, "python": platform.python_version()}
+    for name in VERSIONED_PACKAGES:
+        try:
+            found[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            found[name] = "not installed"
+    return found
+
+
+def sha256_of(path: Path) -> str:
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
 
 
 def read_manifest(out_dir: Path) -> dict[str, Any]:
@@ -106,22 +128,6 @@ def read_manifest(out_dir: Path) -> dict[str, Any]:
     except (OSError, ValueError):
         return {}
     return data if isinstance(data, dict) else {}
-
-
-def data_file_record(data: Any) -> dict[str, Any] | None:
-    """The data file a run reads (config key ``data``): its path and SHA-256, so that a
-    result can be traced to the exact file (None without data or when it cannot be read; the
-    experiment then reports the error)."""
-    if not isinstance(data, str) or not data:
-        return None
-    digest = hashlib.sha256()
-    try:
-        with open(data, "rb") as handle:
-            for block in iter(lambda: handle.read(1 << 20), b""):
-                digest.update(block)
-    except OSError:
-        return None
-    return {"path": str(Path(data).resolve()), "sha256": digest.hexdigest()}
 
 
 class RunDirectory:
@@ -136,6 +142,7 @@ class RunDirectory:
         overrides: list[str],
         config_path: str | None,
         seed: int | None = None,
+        data_file: str | None = None,
         force: bool = False,
     ) -> None:
         self.out_dir = Path(out_dir)
@@ -144,12 +151,13 @@ class RunDirectory:
         self.overrides = list(overrides)
         self.config_path = config_path
         self.seed = seed
+        self.data_file = data_file
         self.started = _dt.datetime.now(_dt.timezone.utc)
         self._t0 = time.perf_counter()
         self._frames: dict[str, pd.DataFrame] = {}
         self._figures: dict[str, Any] = {}
         self.previous: dict[str, Any] = {}
-        self.data_file = data_file_record(resolved_config.get("data"))
+        self.created: list[Path] = []  # folders this run made, outermost first
         self.check_writable(force)
 
     def check_writable(self, force: bool) -> None:
@@ -157,11 +165,17 @@ class RunDirectory:
         hold results of a different resolved config (unless force)."""
         if self.out_dir.exists() and not self.out_dir.is_dir():
             raise OutputDirError(f"--out {self.out_dir}: exists and is not a directory")
+        missing = [d for d in (self.out_dir, *self.out_dir.parents) if not d.exists()]
         try:
-            self.out_dir.mkdir(parents=True, exist_ok=True)
+            for folder in reversed(missing):
+                folder.mkdir()
+                self.created.append(folder)
             probe = stage(self.out_dir / ".write-test", lambda tmp: None)
             probe.unlink()
-        except OSError as exc:
+        except BaseException as exc:
+            self.discard()
+            if not isinstance(exc, OSError):
+                raise
             reason = exc.strerror or type(exc).__name__
             raise OutputDirError(f"--out {self.out_dir}: cannot write there: {reason}") from None
         self.previous = read_manifest(self.out_dir)
@@ -175,9 +189,19 @@ class RunDirectory:
         if not same:
             raise OutputDirError(
                 f"--out {self.out_dir}: holds results of a different config "
-                f"({previous.get('command', '?')} run of {previous.get('started', '?')}); "
+                f"(a {previous.get('command', '?')} run); "
                 "use --force to replace them or choose another --out"
             )
+
+    def discard(self) -> None:
+        """After an error or an interrupt: remove the folders this run created, if they are
+        still empty (a previous run's folder, or one holding anything, is left alone)."""
+        for folder in reversed(self.created):
+            try:
+                folder.rmdir()
+            except OSError:
+                break
+        self.created = []
 
     def add_csv(self, name: str, frame: pd.DataFrame) -> None:
         self._frames[name] = frame
@@ -186,19 +210,29 @@ class RunDirectory:
         self._figures[name] = figure
 
     def manifest(self, status: str) -> dict[str, Any]:
-        return {
+        """``run.json``: what the results were made from; the same for the same inputs."""
+        manifest: dict[str, Any] = {
             "command": self.command,
             "status": status,
             "config_file": self.config_path,
             "overrides": self.overrides,
             "seed": self.seed,
             "config": self.resolved_config,
-            **({"data_file": self.data_file} if self.data_file else {}),
-            "versions": versions(),
-            "git_commit": git_commit(),
+        }
+        if self.data_file is not None:
+            path = Path(self.data_file).resolve()
+            manifest["data_file"] = {"path": str(path), "sha256": sha256_of(path)}
+        manifest["versions"] = versions()
+        manifest["files"] = sorted([*self._frames, *self._figures])
+        return manifest
+
+    def timing(self) -> dict[str, Any]:
+        """``timing.json``: what differs on every run (kept out of ``run.json``)."""
+        return {
             "started": self.started.isoformat(timespec="seconds"),
             "wall_seconds": round(time.perf_counter() - self._t0, 3),
-            "files": sorted([*self._frames, *self._figures]),
+            "git_commit": git_commit(),
+            "host": platform.node(),
         }
 
     def commit(self) -> list[Path]:
@@ -215,21 +249,20 @@ class RunDirectory:
         try:
             for name, write in writers.items():
                 staged.append((stage(self.out_dir / name, write), self.out_dir / name))
-            manifest = json.dumps(self.manifest("completed"), indent=2) + "\n"
-            staged.append(
-                (
-                    stage(self.out_dir / MANIFEST, lambda tmp: tmp.write_text(manifest)),
-                    self.out_dir / MANIFEST,
-                )
-            )
-            for tmp, final in staged:
-                os.replace(tmp, final)
-            # files of the run this one replaces (listed in its manifest) that this run did
-            # not write: remove them, so the folder holds one run, as run.json says
-            for name in set(self.previous.get("files", [])) - set(writers):
-                stale = self.out_dir / Path(name).name
-                if stale.is_file():
-                    stale.unlink()
+            for name, content in ((TIMING, self.timing()),
+                                  (MANIFEST, self.manifest("completed"))):
+                text = json.dumps(content, indent=2) + "\n"
+                write_json = functools.partial(Path.write_text, data=text)
+                staged.append((stage(self.out_dir / name, write_json), self.out_dir / name))
+            with deferred():  # all of the new run's files, or none
+                for tmp, final in staged:
+                    os.replace(tmp, final)
+                # files of the run this one replaces (listed in its manifest) that this run
+                # did not write: remove them, so the folder holds one run, as run.json says
+                for name in set(self.previous.get("files", [])) - set(writers):
+                    stale = self.out_dir / Path(name).name
+                    if stale.is_file():
+                        stale.unlink()
         finally:
             for tmp, _ in staged:
                 tmp.unlink(missing_ok=True)

@@ -2,7 +2,9 @@
 engine, and write or print the result. No numerics here.
 
 User errors (bad YAML, unknown keys, out-of-range values, parameters without a fixed point,
-an output directory holding another config's results) print ONE line to stderr and exit 2.
+an output directory holding another config's results, typer's own usage errors) print ONE
+line ``bounce: error: ...`` to stderr and exit 2. An interrupt (SIGINT, SIGTERM, SIGHUP)
+prints ``bounce: interrupted`` and exits 128 + the signal number (see ``interrupts``).
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ import json
 import math
 import os
 import sys
+import time
 import typing
 from pathlib import Path
 from typing import Annotated, Any, NoReturn, Optional
@@ -19,6 +22,15 @@ from typing import Annotated, Any, NoReturn, Optional
 import typer
 from rich.console import Console
 from rich.table import Table
+from typer.core import TyperGroup
+
+try:  # typer >= 0.20 vendors click
+    from typer._click.exceptions import ClickException, NoArgsIsHelpError
+except ImportError:  # pragma: no cover - older typer on click
+    from click.exceptions import (  # type: ignore[import-not-found,no-redef]
+        ClickException,
+        NoArgsIsHelpError,
+    )
 
 from . import __version__
 from .artifacts import OutputDirError, RunDirectory
@@ -36,11 +48,42 @@ from .config import (
 from .engine import ModelError, ModelParams, iterate_orbit, stability, wrap_phase
 from .engine.classify import ClassifySettings
 from .experiments.base import RunOptions
+from .interrupts import Interrupted, report as report_interrupt
 from .registry import EXPERIMENTS, Entry
 
 USER_ERRORS = (ConfigError, ModelError, OutputDirError)
 
+
+class BounceGroup(TyperGroup):
+    """typer's group, with bounce's way of ending: a usage error typer finds (``--jobs 0``, a
+    missing option, an unknown command) is one line ``bounce: error: ...`` and exit 2 like
+    ours, not a boxed usage message; an interrupt is ``bounce: interrupted`` and 128 + the
+    signal number."""
+
+    def main(self, args=None, prog_name=None, complete_var=None,  # type: ignore[override]
+             standalone_mode=True, **extra):
+        try:
+            code = super().main(args=args, prog_name=prog_name, complete_var=complete_var,
+                                standalone_mode=False, **extra)
+            code = code if isinstance(code, int) else 0
+        except NoArgsIsHelpError as exc:  # `bounce` alone: the help, as typer prints it
+            exc.show()
+            code = exc.exit_code
+        except ClickException as exc:
+            ctx = getattr(exc, "ctx", None)
+            hint = f" (see {ctx.command_path} --help)" if ctx is not None else ""
+            message = " ".join(exc.format_message().split())
+            print(f"bounce: error: {message}{hint}", file=sys.stderr)
+            code = exc.exit_code
+        except Interrupted as exc:
+            code = report_interrupt(exc)
+        if standalone_mode:
+            sys.exit(code)
+        return code
+
+
 app = typer.Typer(
+    cls=BounceGroup,
     name="bounce",
     help="Reproduce the experiments of the ball bouncing map paper from YAML configs.",
     no_args_is_help=True,
@@ -147,6 +190,54 @@ class RichProgress:
         self._progress.stop()
 
 
+class PlainProgress:
+    """Progress for a log file or a batch job (stderr not a terminal): a plain line
+    ``description: 45% (72,000 of 160,000), 12 s elapsed, about 15 s left`` at most every
+    ``interval`` seconds (default INTERVAL_S); nothing for work shorter than that."""
+
+    INTERVAL_S = 10.0
+
+    def __init__(self, interval: float | None = None, clock=time.monotonic) -> None:
+        self.interval = self.INTERVAL_S if interval is None else interval
+        self._clock = clock
+        self._total = 0
+        self._done = 0
+        self._description = ""
+        self._started = self._last = clock()
+
+    def start(self, total: int, description: str) -> None:
+        self._total, self._done, self._description = total, 0, description
+        self._started = self._last = self._clock()
+
+    def advance(self, n: int = 1) -> None:
+        self._done += n
+        now = self._clock()
+        if now - self._last < self.interval or not self._total:
+            return
+        self._last = now
+        elapsed = now - self._started
+        fraction = self._done / self._total
+        left = elapsed * (1 - fraction) / fraction if fraction > 0 else float("nan")
+        print(
+            f"{self._description}: {fraction:.0%} ({self._done:,} of {self._total:,}), "
+            f"{elapsed:.0f} s elapsed, about {left:.0f} s left",
+            file=sys.stderr,
+            flush=True,
+        )
+
+    def stop(self) -> None:
+        pass
+
+
+def make_progress():
+    """The live bar on a terminal, plain lines otherwise."""
+    return RichProgress() if stderr.is_terminal else PlainProgress()
+
+
+def warn(message: str) -> None:
+    print(f"bounce: warning: {message}", file=sys.stderr, flush=True)
+
+
 def resolve_config_path(config: Path | None, name: str) -> Path:
     return config if config is not None else bundled_config_path(name)
 
@@ -178,8 +269,10 @@ def run_experiment(
     print_config: bool,
     jobs: int | None = None,
 ) -> None:
-    """Load and validate the config, run the experiment, write its files atomically."""
+    """Load and validate the config, run the experiment, write its files atomically. On an
+    error or an interrupt nothing is written and an output folder the run made is removed."""
     overrides = list(overrides or [])
+    run_dir = None
     try:
         experiment = entry.load()
         path = resolve_config_path(config, entry.config)
@@ -190,17 +283,20 @@ def run_experiment(
         if entry.needs_fixed_point and getattr(cfg, "data", None) is None:
             warn_if_unstable(cfg.params)  # with --data the model is taken at the data's racket
         name = path.stem if config is not None else entry.name
+        data_file = getattr(cfg, "data", None)
         run_dir = RunDirectory(
             out if out is not None else Path("results") / name,
             command=entry.name,
             resolved_config=cfg.model_dump(mode="json"),
             overrides=overrides,
             config_path=str(path) if config is not None else f"bundled: configs/{path.name}",
-            seed=getattr(cfg, "seed", None),
+            # a fit to a data file draws no random numbers: its seed is not part of the run
+            seed=getattr(cfg, "seed", None) if data_file is None else None,
+            data_file=data_file,
             force=force,
         )
-        progress = RichProgress() if not quiet else None
-        options = RunOptions(jobs=jobs or os.cpu_count() or 1)
+        progress = make_progress() if not quiet else None
+        options = RunOptions(jobs=jobs or os.cpu_count() or 1, warn=warn)
         if progress is not None:
             options.progress = progress
         try:
@@ -213,12 +309,14 @@ def run_experiment(
         for name_, figure in result.figures.items():
             run_dir.add_figure(name_, figure)
         written = run_dir.commit()
-    except USER_ERRORS as exc:
-        fail(str(exc))
-        return
-    except OSError as exc:  # e.g. the disk filled up while writing
-        fail(f"writing {exc.filename or 'results'}: {exc.strerror or exc}")
-        return
+    except BaseException as exc:
+        if run_dir is not None:
+            run_dir.discard()
+        if isinstance(exc, USER_ERRORS):
+            fail(str(exc))
+        if isinstance(exc, OSError):  # e.g. the disk filled up while writing
+            fail(f"writing {exc.filename or 'results'}: {exc.strerror or exc}")
+        raise
     if not quiet:
         for line in result.summary:
             stderr.print(line, highlight=False)
@@ -466,7 +564,11 @@ def verify_command(
 
 
 def main() -> None:
-    app(prog_name="bounce")
+    """The ``bounce`` command (see ``interrupts.main``, the console script, which installs the
+    signal handlers before this module's imports)."""
+    from .interrupts import main as interrupts_main
+
+    interrupts_main()
 
 
 def add_experiment_command(entry: Entry) -> None:

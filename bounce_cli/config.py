@@ -7,12 +7,13 @@ Every experiment config has the common ``model`` block; an experiment module sub
 from __future__ import annotations
 
 import copy
+import typing
 from importlib import resources
 from pathlib import Path
 from typing import Any, TypeVar
 
 import yaml
-from pydantic import AliasChoices, BaseModel, ConfigDict, Field, ValidationError
+from pydantic import AliasChoices, BaseModel, ConfigDict, Field, ValidationError, field_validator
 
 from .engine.classify import ClassifySettings
 from .engine.params import ModelParams
@@ -23,8 +24,36 @@ class ConfigError(ValueError):
     """A user error in a config or an override: one line naming the key and the reason."""
 
 
+def expects_number(annotation) -> bool:
+    """Whether a field of this type holds numbers (int or float, possibly in an Optional, a
+    list or an Annotated) and not booleans."""
+    origin = typing.get_origin(annotation)
+    if origin is typing.Annotated:
+        return expects_number(typing.get_args(annotation)[0])
+    if origin is not None:  # Optional / Union / list / tuple
+        args = typing.get_args(annotation)
+        return bool in args or any(expects_number(a) for a in args if a is not type(None))
+    return annotation in (int, float)
+
+
 class StrictModel(BaseModel):
+    """Unknown keys, inf/nan and booleans where numbers are expected are errors. (YAML reads
+    yes/no/on/off/true/false as booleans, which pydantic would otherwise take as 1 and 0.)"""
+
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _no_booleans_for_numbers(cls, value, info):
+        values = value if isinstance(value, (list, tuple)) else [value]
+        if any(isinstance(v, bool) for v in values) and expects_number(
+            cls.model_fields[info.field_name].annotation
+        ):
+            raise ValueError(
+                "expected a number, got a boolean (YAML reads yes/no/on/off/true/false as "
+                "booleans)"
+            )
+        return value
 
 
 class ModelBlock(StrictModel):
@@ -95,8 +124,34 @@ def bundled_config_path(name: str) -> Path:
 
 
 # -- loading ---------------------------------------------------------------------------------
+class DuplicateKeyError(yaml.YAMLError):
+    def __init__(self, key, line: int) -> None:
+        super().__init__(f"line {line}: duplicate key {key!r}")
+        self.key, self.line = key, line
+
+
+class UniqueKeyLoader(yaml.SafeLoader):
+    """``yaml.SafeLoader`` that refuses a key given twice in one mapping (plain YAML keeps
+    the last one silently)."""
+
+    def construct_mapping(self, node, deep=False):
+        seen = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise DuplicateKeyError(key, key_node.start_mark.line + 1)
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+UniqueKeyLoader.add_constructor(
+    yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, UniqueKeyLoader.construct_mapping
+)
+
+
 def read_yaml(path: Path) -> dict[str, Any]:
-    """Parse a YAML config file with ``yaml.safe_load``; errors name the file and line."""
+    """Parse a YAML config file (safe loader, duplicate keys refused); errors name the file
+    and line."""
     try:
         text = Path(path).read_text(encoding="utf-8")
     except FileNotFoundError:
@@ -104,7 +159,10 @@ def read_yaml(path: Path) -> dict[str, Any]:
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read config: {exc.strerror}") from None
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=UniqueKeyLoader)
+    except DuplicateKeyError as exc:
+        raise ConfigError(f"{path}: line {exc.line}: duplicate key {exc.key!r} "
+                          "(each key may appear once in a block)") from None
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" line {mark.line + 1}, column {mark.column + 1}" if mark else ""
@@ -164,12 +222,23 @@ def format_validation_error(
     elif err["type"] == "missing":
         reason = "required key is missing"
     else:
-        reason = err["msg"]
+        reason = err["msg"].removeprefix("Value error, ")
         if "input" in err and not isinstance(err["input"], (dict, list)):
-            reason += f" (got {err['input']!r})"
+            reason += f" (got {show_value(err['input'])})"
     more = len(exc.errors()) - 1
     tail = f" (and {more} more problem{'s' if more > 1 else ''})" if more else ""
     return f"{source}: {loc}: {reason}{tail}"
+
+
+def show_value(value: Any) -> str:
+    """A value as a user wrote it: ``nan``, ``True``, ``'abc'``; numpy scalars as the Python
+    number they hold (never ``np.float64(nan)``)."""
+    if hasattr(value, "item") and callable(value.item):
+        try:
+            value = value.item()
+        except (TypeError, ValueError):
+            pass
+    return repr(value) if isinstance(value, str) else str(value)
 
 
 def validate(
@@ -190,5 +259,8 @@ def load_config(schema: type[C], path: Path, overrides: list[str] | None = None)
 
 
 def to_yaml(config: BaseModel) -> str:
-    """The resolved config as YAML (what ``--print-config`` prints and ``run.json`` keeps)."""
-    return yaml.safe_dump(config.model_dump(mode="json"), sort_keys=False)
+    """The resolved config as YAML, what ``--print-config`` prints: a config file the user can
+    edit and load again. Keys left unset are left out (every optional key of our configs
+    defaults to null), so that of two alternative keys (a case's ``theta0_deg`` or
+    ``theta0_rad``) only the one given is printed."""
+    return yaml.safe_dump(config.model_dump(mode="json", exclude_none=True), sort_keys=False)

@@ -17,7 +17,8 @@ def gallery_markdown(results: Path, claims_table: str) -> str:
         "# Reproduced figures",
         "",
         "Written by `bounce reproduce` from the bundled configs (`configs/`). Each folder holds",
-        "the CSV data behind its figures and `run.json` (resolved config, versions, timing).",
+        "the CSV data behind its figures and `run.json` (resolved config, seed, versions; the",
+        "start time, wall time and git commit of a run are in `timing.json`, not committed).",
         "",
     ]
     for entry in reproduced():

@@ -22,13 +22,15 @@ def test_commit_writes_files_and_manifest(tmp_path):
     run.add_figure("fig.png", fig)
     written = run.commit()
     names = sorted(p.name for p in written)
-    assert names == ["data.csv", "fig.png", "run.json"]
+    assert names == ["data.csv", "fig.png", "run.json", "timing.json"]
     manifest = json.loads((tmp_path / "r" / "run.json").read_text())
     assert manifest["status"] == "completed"
     assert manifest["config"] == {"a": 1} and manifest["overrides"] == ["a.b=1"]
     assert manifest["seed"] == 3
-    assert set(manifest["versions"]) == {"bounce", "numpy", "scipy", "python"}
-    assert "started" in manifest and manifest["wall_seconds"] >= 0
+    assert set(manifest["versions"]) == {"bounce", "python", "numpy", "scipy", "pandas",
+                                         "matplotlib", "pydantic", "pyyaml"}
+    timing = json.loads((tmp_path / "r" / "timing.json").read_text())
+    assert "started" in timing and timing["wall_seconds"] >= 0
     assert pd.read_csv(tmp_path / "r" / "data.csv").x_m.tolist() == [1.0, 2.0]
     assert (tmp_path / "r" / "fig.png").read_bytes()[:4] == b"\x89PNG"
     assert not list((tmp_path / "r").glob(".*tmp"))
@@ -126,5 +128,6 @@ def test_replacing_a_run_removes_the_files_only_the_old_run_wrote(tmp_path):
     second = make_run(out, {"a": 2}, force=True)
     second.add_csv("both.csv", pd.DataFrame({"x": [2]}))
     second.commit()
-    assert sorted(p.name for p in out.iterdir()) == ["both.csv", "notes.txt", "run.json"]
+    assert sorted(p.name for p in out.iterdir()) == ["both.csv", "notes.txt", "run.json",
+                                                     "timing.json"]
     assert json.loads((out / "run.json").read_text())["files"] == ["both.csv"]

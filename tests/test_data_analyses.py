@@ -136,7 +136,7 @@ def test_acf_data_files_and_manifest(acf_data):
     path, out = acf_data
     names = sorted(p.name for p in out.iterdir())
     assert names == ["acf_data.csv", "acf_data.png", "run.json", "stability_data.csv",
-                     "stability_data.png", "trust.csv"]
+                     "stability_data.png", "timing.json", "trust.csv"]
     manifest = json.loads((out / "run.json").read_text())
     assert manifest["config"]["data"] == str(path)
     import hashlib

@@ -27,11 +27,10 @@ on the still-active subset; settled points are dropped. Phases are kept wrapped 
 
 from __future__ import annotations
 
+import builtins
 import math
-import multiprocessing
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
-from typing import Callable
+from typing import Any, Callable, Iterable, Iterator
 
 import numpy as np
 
@@ -124,7 +123,9 @@ def classify_batch(theta0, v0, params: ModelParams,
     return Classification(outcome.reshape(shape), iterations.reshape(shape))
 
 
-def _classify_tile(args):
+def classify_tile(args):
+    """One task of ``classify_grid``: (theta0, v0, params, settings) -> (outcome,
+    iterations) arrays; a module-level function, so that worker processes can receive it."""
     theta0, v0, params, settings = args
     result = classify_batch(theta0, v0, params, settings)
     return result.outcome, result.iterations
@@ -136,58 +137,45 @@ def classify_grid(
     params: ModelParams,
     settings: ClassifySettings = ClassifySettings(),
     *,
-    jobs: int = 1,
+    map: Callable[[Callable[[Any], Any], Iterable[Any]], Iterator[Any]] = builtins.map,
+    workers: int = 1,
     tile_points: int = DEFAULT_TILE_POINTS,
     on_tile_done: Callable[[int], None] | None = None,
 ) -> Classification:
-    """``classify_batch`` for large arrays: cut into tiles of at most ``tile_points`` points, spread
-    over ``jobs`` worker processes (``jobs=1``: in this process, no pool).
+    """``classify_batch`` for large arrays: cut into tiles of at most ``tile_points`` points,
+    each classified by ``map(classify_tile, tiles)`` (any ``map``-like callable that yields
+    results in task order: the built-in ``map`` in this process, or an executor's ``map``
+    running tiles on ``workers`` processes; the engine starts no processes itself).
 
     Tiles interleave the points (tile i holds points i, i + n, i + 2n, ... of the flattened
     arrays), so every tile gets the same mix of cheap and expensive initial conditions and
-    the workers stay balanced; with several jobs the number of tiles is a multiple of jobs.
+    the workers stay balanced; the number of tiles is a multiple of ``workers``.
     ``on_tile_done(n_points)`` is called once per finished tile with the number of points in
-    it (for a progress bar). Results are identical for any ``jobs`` and ``tile_points``.
+    it (for a progress bar). Results are identical for any ``map``, ``workers`` and
+    ``tile_points``.
     """
     theta0, v0 = np.broadcast_arrays(np.asarray(theta0, dtype=float), np.asarray(v0, dtype=float))
     shape = theta0.shape
     theta0, v0 = theta0.ravel(), v0.ravel()
-    tiles = tile_slices(theta0.size, tile_points, jobs)
+    tiles = tile_slices(theta0.size, tile_points, workers)
     outcome = np.empty(theta0.shape, dtype=np.int8)
     iterations = np.empty(theta0.shape, dtype=np.int16)
-    # copies: contiguous arrays for the worker (and small pickles)
+    # copies: contiguous arrays for a worker (and small pickles); made as tiles are sent
     tasks = ((theta0[t].copy(), v0[t].copy(), params, settings) for t in tiles)
-
-    def store(tile, res):
-        outcome[tile], iterations[tile] = res
+    for tile, (tile_outcome, tile_iterations) in zip(tiles, map(classify_tile, tasks)):
+        outcome[tile], iterations[tile] = tile_outcome, tile_iterations
         if on_tile_done is not None:
-            on_tile_done(res[0].size)
-
-    if jobs <= 1 or len(tiles) <= 1:
-        for tile, task in zip(tiles, tasks):
-            store(tile, _classify_tile(task))
-    else:
-        workers = min(jobs, len(tiles))
-        with ProcessPoolExecutor(max_workers=workers, mp_context=pool_context()) as pool:
-            for tile, res in zip(tiles, pool.map(_classify_tile, tasks)):
-                store(tile, res)
+            on_tile_done(tile_outcome.size)
     return Classification(outcome.reshape(shape), iterations.reshape(shape))
 
 
-def pool_context():
-    """Start workers with ``forkserver`` where available (``spawn`` elsewhere): forking a
-    process that runs threads (a progress bar's refresh thread) can deadlock."""
-    methods = multiprocessing.get_all_start_methods()
-    return multiprocessing.get_context("forkserver" if "forkserver" in methods else "spawn")
-
-
-def tile_slices(size: int, tile_points: int, jobs: int = 1) -> list[slice]:
+def tile_slices(size: int, tile_points: int, workers: int = 1) -> list[slice]:
     """Interleaved tiles [slice(i, None, n) for i < n] covering range(size), each of at most
-    ``tile_points`` points; n is rounded up to a multiple of ``jobs``."""
+    ``tile_points`` points; n is rounded up to a multiple of ``workers``."""
     if tile_points < 1:
         raise ValueError("tile_points must be >= 1")
     n = max(1, -(-size // tile_points))
-    if jobs > 1:
-        n = jobs * -(-n // jobs)
+    if workers > 1:
+        n = workers * -(-n // workers)
     n = min(n, max(size, 1))
     return [slice(i, None, n) for i in range(n)]

@@ -27,8 +27,9 @@ summary line or CSV column states one only where the run is at the paper's param
 (:func:`bounce_cli.paper.at_parameters`); numerics (solvers, scans, inverse problems) live in
 :mod:`bounce_cli.engine` with their own tests.
 
-What it gets: the validated config, and :class:`RunOptions` (worker count, a progress sink),
-which never change the numbers it produces.
+What it gets: the validated config, and :class:`RunOptions` (worker count, a progress sink,
+a warning sink), which never change the numbers it produces. Parallel work goes through
+:mod:`bounce_cli.parallel` (a list of independent tasks handed to an executor's ``map``).
 """
 
 from __future__ import annotations
@@ -59,12 +60,20 @@ class NullProgress:
         pass
 
 
+def no_warning(message: str) -> None:
+    """The default warning sink: library use and tests hear nothing."""
+
+
 @dataclass
 class RunOptions:
-    """Run-time choices that are not part of the config (they never change the results)."""
+    """Run-time choices that are not part of the config (they never change the results).
+
+    ``warn(message)`` tells the user something before or during the run (the CLI prints
+    ``bounce: warning: <message>``); an experiment never prints itself."""
 
     jobs: int = 1
     progress: Progress = field(default_factory=NullProgress)
+    warn: Callable[[str], None] = no_warning
 
 
 @dataclass

@@ -19,9 +19,9 @@ import pandas as pd
 from pydantic import Field
 
 from .. import paper
-from ..config import ConfigError, ExperimentConfig, StrictModel
+from ..config import ConfigError, ExperimentConfig, StrictModel, show_value
 from ..engine.linear import stability
-from ..engine.params import ModelError, ModelParams
+from ..engine.params import ModelError, ModelParams, NoFixedPointError
 from ..engine.regression import (
     eq15_amplitude,
     eq15_slope,
@@ -92,11 +92,16 @@ def simulate_trials(config: RegressionConfig, options: RunOptions) -> pd.DataFra
         params = ModelParams(alpha, g, amplitude, tau)
         try:
             st = stability(params)
-        except ModelError as exc:
-            raise ModelError(f"{where}: {exc}; reduce design.amplitude_sd_m") from None
+        except NoFixedPointError:
+            raise ModelError(
+                f"{where}: drew amplitude {amplitude:.4g} m at period {tau:.4g} s, below the "
+                f"{params.min_racket_amplitude():.4g} m a period-1 orbit needs (eq. 8); reduce "
+                "design.amplitude_sd_m or design.phase_sd_deg") from None
         if not st.stable:
-            raise ModelError(f"{where}: fixed point unstable (spectral radius "
-                             f"{st.spectral_radius:.3g}) at a_r={amplitude:.4g} m, tau={tau:.4g} s")
+            raise ModelError(
+                f"{where}: fixed point unstable (spectral radius {st.spectral_radius:.3g}) at the "
+                f"drawn a_r={amplitude:.4g} m, tau={tau:.4g} s; reduce design.phase_sd_deg / "
+                "design.subject_phase_sd_deg or move design.phase_mean_deg")
         means = simulate_trial(params, m.q_v, m.q_theta, m.duration_s, map_seed,
                                burn_in=m.burn_in)
         rows.append({
@@ -116,6 +121,15 @@ def simulate_trials(config: RegressionConfig, options: RunOptions) -> pd.DataFra
 
 
 # -- researcher's data -----------------------------------------------------------------------
+def cell_text(path: Path, column: str, row: int) -> str:
+    """A cell as the file holds it (pandas reads ``n/a``, ``NA``, ``-`` ... as NaN), for an
+    error message: ``'n/a'``, or ``an empty cell``."""
+    raw = pd.read_csv(path, dtype=str, keep_default_na=False, na_filter=False)
+    raw.columns = [str(c).strip() for c in raw.columns]
+    text = raw[column].iloc[row]
+    return repr(text) if text.strip() else "an empty cell"
+
+
 def read_trials(path_text: str) -> pd.DataFrame:
     """Read and check a trials CSV: a_r_m, tau_s required; theta_deg, alpha, g, condition
     optional. Any problem is a one-line ConfigError naming ``data`` and the column."""
@@ -137,13 +151,13 @@ def read_trials(path_text: str) -> pd.DataFrame:
         if bad.any():
             row = int(np.flatnonzero(bad.to_numpy())[0])
             raise ConfigError(f"data: {path}: column {column}: not a number in data row {row + 1} "
-                              f"(got {frame[column].iloc[row]!r})")
+                              f"(got {cell_text(path, column, row)})")
         ok = {"> 0": values > 0, "in (-90, 90)": values.abs() < 90,
               "in [0, 1)": (values >= 0) & (values < 1)}[rule]
         if not ok.all():
             row = int(np.flatnonzero(~ok.to_numpy())[0])
             raise ConfigError(f"data: {path}: column {column}: must be {rule} "
-                              f"(data row {row + 1}: {values.iloc[row]!r})")
+                              f"(data row {row + 1}: {show_value(values.iloc[row])})")
         frame[column] = values.astype(float)
     if "condition" in frame.columns:
         if frame["condition"].isna().any():

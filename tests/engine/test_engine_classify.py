@@ -136,11 +136,15 @@ def test_tolerance_and_sticking_interval_are_used(paper_params):
 
 @pytest.mark.parametrize("jobs, tile_points", [(1, 7), (1, 333), (2, 250), (2, 10_000)])
 def test_grid_results_independent_of_tiles_and_jobs(paper_params, jobs, tile_points):
+    from bounce_cli import parallel
+
     theta, v = paper_grid(40, 25)
     direct = classify_batch(theta, v, paper_params)
     done = []
-    tiled = classify_grid(theta, v, paper_params, jobs=jobs, tile_points=tile_points,
-                          on_tile_done=done.append)
+    with parallel.executor(jobs) as executor:
+        tiled = classify_grid(theta, v, paper_params, map=executor.map,
+                              workers=executor.workers, tile_points=tile_points,
+                              on_tile_done=done.append)
     np.testing.assert_array_equal(tiled.outcome, direct.outcome)
     np.testing.assert_array_equal(tiled.iterations, direct.iterations)
     assert sum(done) == theta.size and max(done) <= tile_points

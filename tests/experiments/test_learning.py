@@ -87,7 +87,7 @@ def test_model_only_without_data(tmp_path, cli):
     result = cli("learning", "--out", tmp_path, "--quiet")
     assert result.exit_code == 0, result.output
     assert sorted(p.name for p in tmp_path.iterdir()) == ["learning.png", "model_curve.csv",
-                                                          "run.json"]
+                                                          "run.json", "timing.json"]
 
 
 def test_learning_errors(learning_run, tmp_path, cli, user_error):

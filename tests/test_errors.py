@@ -1,0 +1,168 @@
+"""Configs and errors as a new user meets them: one line ``bounce: error: ...``, exit 2, the
+key to change, the value as the user wrote it; an editable --print-config; no output folder
+left behind by a failed run."""
+
+from __future__ import annotations
+
+import pytest
+import yaml
+from typer.testing import CliRunner
+
+from bounce_cli.cli import app
+from bounce_cli.config import load_config, show_value
+from bounce_cli.registry import EXPERIMENTS
+
+runner = CliRunner()
+
+
+def run(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+def one_error_line(result, *needles) -> str:
+    """The run failed with exit 2 and exactly one line on stderr (no leading blank line, no
+    traceback, no usage box), holding each needle."""
+    assert result.exit_code == 2, result.output
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("bounce: error: ")
+    for needle in needles:
+        assert needle in lines[0], lines[0]
+    return lines[0]
+
+
+# -- typer's own usage errors ------------------------------------------------------------------
+@pytest.mark.parametrize("args, needles", [
+    (["basin", "--jobs", "0"], ["--jobs", "(see bounce basin --help)"]),
+    (["orbit", "--v0", "3"], ["Missing option", "--theta0-deg", "bounce orbit --help"]),
+    (["nosuchcommand"], ["No such command", "nosuchcommand"]),
+    (["basin", "--nosuchoption"], ["--nosuchoption"]),
+    (["basin", "--jobs", "two"], ["--jobs", "integer"]),
+])
+def test_usage_errors_are_one_line_like_ours(args, needles):
+    one_error_line(run(*args), *needles)
+
+
+def test_help_and_version_still_exit_zero():
+    assert run("--help").exit_code == 0
+    assert run("basin", "--help").exit_code == 0
+    assert run("--version").exit_code == 0
+
+
+# -- YAML booleans and duplicate keys ---------------------------------------------------------
+@pytest.mark.parametrize("command, setting, key", [
+    ("fixed-point", "model.alpha=no", "model.alpha"),
+    ("fixed-point", "model.alpha=yes", "model.alpha"),
+    ("basin", "classify.max_iterations=on", "classify.max_iterations"),
+    ("basin", "grid.v0_m_s.num=true", "grid.v0_m_s.num"),
+    ("impulse", "alpha_p=[0.4, off]", "alpha_p"),
+])
+def test_a_yaml_boolean_where_a_number_is_expected_names_the_key(tmp_path, command, setting,
+                                                                  key):
+    args = [command, "--set", setting]
+    if command != "fixed-point":
+        args += ["--out", tmp_path / "o"]
+    one_error_line(run(*args), key, "boolean")
+    assert not (tmp_path / "o").exists()
+
+
+def test_booleans_stay_booleans_and_numbers_numbers(tmp_path):
+    from bounce_cli.experiments.basin import BasinConfig
+    from bounce_cli.config import bundled_config_path
+
+    cfg = load_config(BasinConfig, bundled_config_path("basin"),
+                      ["model.alpha=0", "classify.max_iterations=7"])
+    assert cfg.model.alpha == 0.0 and cfg.classify.max_iterations == 7
+
+
+def test_duplicate_yaml_key_names_key_and_line(tmp_path):
+    path = tmp_path / "dup.yaml"
+    path.write_text("model:\n  alpha: 0.5\n  g: 9.81\n  alpha: 0.6\n")
+    one_error_line(run("fixed-point", "--config", path), "duplicate key 'alpha'", "line 4",
+                   str(path))
+    path.write_text("model:\n  alpha: 0.5\nmodel:\n  g: 9.81\n")
+    one_error_line(run("fixed-point", "--config", path), "duplicate key 'model'", "line 3")
+
+
+# -- values as written ------------------------------------------------------------------------
+def test_values_are_shown_without_numpy_reprs():
+    np = pytest.importorskip("numpy")
+    assert show_value(np.float64("nan")) == "nan"
+    assert show_value(np.int64(3)) == "3"
+    assert show_value(-0.2) == "-0.2" and show_value("abc") == "'abc'"
+
+
+@pytest.mark.parametrize("cell, shown", [("n/a", "(got 'n/a')"), ("NA", "(got 'NA')"),
+                                         ("", "(got an empty cell)"),
+                                         ("abc", "(got 'abc')")])
+def test_a_bad_data_cell_is_reported_as_the_file_holds_it(tmp_path, cell, shown):
+    path = tmp_path / "trials.csv"
+    path.write_text(f"a_r_m,tau_s\n0.1,0.5\n0.2,{cell}\n")
+    line = one_error_line(run("regression", "--data", path, "--out", tmp_path / "o"),
+                          "column tau_s", "data row 2", shown)
+    assert "np." not in line
+
+
+def test_a_data_range_error_shows_a_plain_number(tmp_path):
+    path = tmp_path / "trials.csv"
+    path.write_text("a_r_m,tau_s\n0.1,0.5\n-0.25,0.5\n")
+    line = one_error_line(run("regression", "--data", path, "--out", tmp_path / "o"),
+                          "column a_r_m", "(data row 2: -0.25)")
+    assert "np." not in line
+
+
+@pytest.mark.parametrize("setting, key", [
+    ("design.amplitude_sd_m=0.05", "design.amplitude_sd_m"),
+    ("design.phase_sd_deg=40", "design.phase_sd_deg"),
+])
+def test_a_regression_design_error_names_a_design_key(tmp_path, setting, key):
+    line = one_error_line(run("regression", "--set", setting, "--out", tmp_path / "o",
+                              "--quiet"), key)
+    assert "model.racket_amplitude" not in line  # the simulated trials draw their own
+    assert not (tmp_path / "o").exists()
+
+
+def test_grid_size_error_has_no_leading_blank_line(tmp_path):
+    one_error_line(run("basin", "--set", "limits.max_points=10", "--out", tmp_path / "o"),
+                   "limits.max_points")
+
+
+# -- --print-config ---------------------------------------------------------------------------
+@pytest.mark.parametrize("entry", EXPERIMENTS, ids=lambda e: e.name)
+def test_printed_config_loads_back_to_the_same_config(tmp_path, entry):
+    result = run(entry.name, "--print-config")
+    assert result.exit_code == 0, result.output
+    path = tmp_path / "printed.yaml"
+    path.write_text(result.stdout)
+    schema = entry.load().schema
+    from bounce_cli.config import bundled_config_path
+
+    assert load_config(schema, path) == load_config(schema, bundled_config_path(entry.config))
+
+
+def test_printed_trajectory_config_has_only_the_phase_key_given_and_stays_editable(tmp_path):
+    printed = run("trajectory", "--print-config").stdout
+    data = yaml.safe_load(printed)
+    for case in data["cases"]:
+        assert "theta0_rad" in case and "theta0_deg" not in case
+    # the user edits the printed phase into degrees
+    for case in data["cases"]:
+        case["theta0_deg"] = 43.1
+        del case["theta0_rad"]
+    path = tmp_path / "mine.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    again = run("trajectory", "--config", path, "--print-config")
+    assert again.exit_code == 0, again.output
+    assert "theta0_deg: 43.1" in again.stdout and "theta0_rad" not in again.stdout
+
+
+# -- no output folder left by a failed run ----------------------------------------------------
+def test_a_failed_run_leaves_no_folder_it_created_but_keeps_existing_ones(tmp_path):
+    out = tmp_path / "a" / "b" / "c"
+    one_error_line(run("regression", "--set", "design.amplitude_sd_m=0.05", "--out", out,
+                       "--quiet"))
+    assert not (tmp_path / "a").exists()
+    (tmp_path / "a").mkdir()
+    one_error_line(run("regression", "--set", "design.amplitude_sd_m=0.05", "--out", out,
+                       "--quiet"))
+    assert (tmp_path / "a").is_dir() and not (tmp_path / "a" / "b").exists()

@@ -1,0 +1,215 @@
+"""Interrupts of a real ``bounce basin --jobs 2`` process, as a terminal (SIGINT to the whole
+process group), ``kill`` (SIGTERM to the process) or a crash (SIGKILL) sends them, at several
+moments of a run: imports, pool start-up, computing, writing the results.
+
+After each: exit 130 / 143 within two seconds, one line ``bounce: interrupted`` and no
+traceback (from the main process or a worker), the previous results byte-identical, no
+temporary file, no output folder the run made, and no process of the run left alive.
+Processes are found in /proc (Linux): every descendant of the run, recorded while it runs.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.skipif(not Path("/proc/self/stat").exists(),
+                                reason="needs /proc (Linux)")
+
+#: 490,000 points: above basin.POOL_MIN_POINTS (a pool starts), about a second of classifying
+#: on two cores and a second of writing
+BIG_GRID = ["--set", "grid.theta0_deg.num=700", "--set", "grid.v0_m_s.num=700"]
+SMALL_GRID = ["--set", "grid.theta0_deg.num=20", "--set", "grid.v0_m_s.num=10"]
+
+
+def bounce(*args: str) -> list[str]:
+    return [sys.executable, "-m", "bounce_cli", *args]
+
+
+def stat_fields(pid: int) -> list[str] | None:
+    """/proc/<pid>/stat fields after the command name (state is [0], ppid [1],
+    start time [19]); None when there is no such process."""
+    try:
+        text = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return None
+    return text[text.rindex(")") + 2:].split()
+
+
+class ProcessWatch:
+    """Records every descendant of ``root`` (pid, start time, command line) while it runs."""
+
+    def __init__(self, root: int) -> None:
+        self.root = root
+        self.seen: dict[int, tuple[str, str]] = {}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._watch, daemon=True)
+        self._thread.start()
+
+    def _watch(self) -> None:
+        while not self._stop.is_set():
+            family = {self.root, *self.seen}
+            for entry in os.listdir("/proc"):
+                if not entry.isdigit():
+                    continue
+                fields = stat_fields(int(entry))
+                if fields and int(fields[1]) in family and int(entry) not in self.seen:
+                    try:
+                        cmd = Path(f"/proc/{entry}/cmdline").read_bytes().replace(b"\0", b" ")
+                    except OSError:
+                        cmd = b""
+                    self.seen[int(entry)] = (fields[19], cmd.decode(errors="replace"))
+            time.sleep(0.01)
+
+    def workers(self) -> list[int]:
+        """Recorded processes running the worker module (read now: a child seen between its
+        fork and its exec still showed its parent's command line)."""
+        found = []
+        for pid, (start, cmd) in list(self.seen.items()):
+            fields = stat_fields(pid)
+            if "bounce_cli.parallel" not in cmd and fields and fields[19] == start:
+                try:
+                    cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
+                    self.seen[pid] = (start, cmd)
+                except OSError:
+                    pass
+            if "bounce_cli.parallel" in cmd:
+                found.append(pid)
+        return found
+
+    def stop(self) -> None:
+        self._stop.set()
+        self._thread.join()
+
+    def alive(self) -> list[str]:
+        """Recorded processes that still exist (same pid and start time), zombies aside."""
+        left = []
+        for pid, (start, cmd) in self.seen.items():
+            fields = stat_fields(pid)
+            if fields and fields[19] == start and fields[0] != "Z":
+                left.append(f"{pid} ({fields[0]}): {cmd}")
+        return left
+
+
+def snapshot(folder: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(folder)): p.read_bytes()
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def wait_for(condition, timeout: float, what: str) -> None:
+    end = time.monotonic() + timeout
+    while not condition():
+        if time.monotonic() > end:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.005)
+
+
+def writing_started(out: Path):
+    return lambda: any(p.name.startswith(".basin.csv.") for p in out.glob(".*.tmp"))
+
+
+@pytest.fixture(scope="module")
+def previous_run(tmp_path_factory) -> Path:
+    """A finished small basin run: the results an interrupted run must leave alone."""
+    out = tmp_path_factory.mktemp("previous") / "basin"
+    subprocess.run(bounce("basin", *SMALL_GRID, "--quiet", "--jobs", "1", "--out", str(out)),
+                   check=True, capture_output=True)
+    return out
+
+
+def send(proc: subprocess.Popen, signum: int) -> None:
+    """SIGINT to the process group, as a terminal's Ctrl-C; others to the process, as kill."""
+    if signum == signal.SIGINT:
+        os.killpg(proc.pid, signum)
+    else:
+        proc.send_signal(signum)
+
+
+def catches_sigterm(pid: int) -> bool:
+    """Whether the process has installed bounce's handlers (its first act; Python alone
+    leaves SIGTERM at the default action)."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+    except OSError:
+        return False
+    caught = int(status.split("SigCgt:")[1].split()[0], 16)
+    return bool(caught >> (signal.SIGTERM - 1) & 1)
+
+
+MOMENTS = {
+    # the handlers are in place, the imports (typer, numpy, pandas ...) under way
+    "imports": lambda proc, watch, out: wait_for(lambda: catches_sigterm(proc.pid), 10,
+                                                 "the signal handlers"),
+    # the first worker process exists: the pool is starting
+    "pool start": lambda proc, watch, out: wait_for(watch.workers, 20, "a worker process"),
+    # the workers have been classifying for a while
+    "computing": lambda proc, watch, out: (
+        wait_for(lambda: len(watch.workers()) == 2, 20, "two workers"), time.sleep(1.2)),
+    # the first results file is being written under its temporary name
+    "writing": lambda proc, watch, out: wait_for(writing_started(out), 40, "writing"),
+}
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("moment", list(MOMENTS))
+def test_interrupt_stops_cleanly(tmp_path, previous_run, moment, signum):
+    """SIGINT runs over a previous run's results (--force), SIGTERM into folders it must
+    create: between them, each moment checks both."""
+    existing = tmp_path / "basin"
+    subprocess.run(["cp", "-a", str(previous_run), str(existing)], check=True)
+    before = snapshot(existing)
+    out = existing if signum == signal.SIGINT else tmp_path / "new" / "deeper"
+    proc = subprocess.Popen(
+        bounce("basin", *BIG_GRID, "--jobs", "2", "--force", "--out", str(out)),
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        start_new_session=True,  # its own process group, as a shell runs a command
+    )
+    watch = ProcessWatch(proc.pid)
+    try:
+        MOMENTS[moment](proc, watch, out)
+    except AssertionError:
+        os.killpg(proc.pid, signal.SIGKILL)
+        raise
+    sent = time.monotonic()
+    send(proc, signum)
+    try:
+        _, err = proc.communicate(timeout=10)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        raise AssertionError(f"still running 10 s after {signum!r} at {moment}") from None
+    took = time.monotonic() - sent
+    time.sleep(0.05)
+    watch.stop()
+    assert proc.returncode == 128 + signum, err
+    assert took < 2.0, f"took {took:.2f} s to stop"
+    assert "Traceback" not in err and "Error" not in err, err
+    progress = "basin: classifying: "  # plain progress lines, on a slow machine
+    assert [line for line in err.splitlines()
+            if line.strip() and not line.startswith(progress)] == ["bounce: interrupted"]
+    assert watch.alive() == [], "processes left running"
+    if moment != "imports":
+        assert watch.workers(), "the pool never started: the moment was missed"
+    assert snapshot(existing) == before, "the previous results changed"
+    assert not [p for p in tmp_path.rglob("*") if p.name.endswith(".tmp")], "temporary files"
+    assert not (tmp_path / "new").exists(), "the run left the output folder it created"
+
+
+def test_sigkill_of_the_main_process_takes_the_workers_down(tmp_path):
+    """No clean-up can run after SIGKILL: the workers must still not outlive the run."""
+    proc = subprocess.Popen(
+        bounce("basin", *BIG_GRID, "--jobs", "2", "--out", str(tmp_path / "basin")),
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    watch = ProcessWatch(proc.pid)
+    wait_for(lambda: len(watch.workers()) == 2, 20, "two workers")
+    proc.kill()
+    proc.wait()
+    time.sleep(0.3)
+    watch.stop()
+    assert watch.alive() == []

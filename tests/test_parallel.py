@@ -1,0 +1,108 @@
+"""The executor (bounce_cli.parallel): ordered results, whatever the executor; failures and
+dead workers are errors, not hangs; no worker outlives its ``with`` block."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+
+import pytest
+
+from bounce_cli import parallel
+
+
+def slow_square(x):
+    """A task whose duration varies, so that results come back out of order."""
+    time.sleep(0.02 * (x % 3))
+    return x * x
+
+
+def fail_on_three(x):
+    if x == 3:
+        raise ValueError("three is not allowed")
+    return x
+
+
+def worker_pid(_):
+    return os.getpid()
+
+
+def kill_myself(_):
+    os.kill(os.getpid(), signal.SIGKILL)
+
+
+def test_results_in_task_order_for_every_executor():
+    expected = [x * x for x in range(12)]
+    assert list(parallel.InProcess().map(slow_square, range(12))) == expected
+    for jobs in (1, 2, 3):
+        with parallel.executor(jobs) as executor:
+            assert list(executor.map(slow_square, iter(range(12)))) == expected
+
+
+def test_executor_choice():
+    assert isinstance(parallel.executor(1), parallel.InProcess)
+    pool = parallel.executor(2)
+    assert isinstance(pool, parallel.LocalPool) and pool.workers == 2
+    with pytest.raises(ValueError):
+        parallel.LocalPool(0)
+
+
+def test_workers_are_separate_processes_and_gone_after_the_block():
+    with parallel.LocalPool(2) as pool:
+        pids = set(pool.map(worker_pid, range(8)))
+        processes = [w.process for w in pool._pool]
+    assert os.getpid() not in pids and 1 <= len(pids) <= 2
+    assert all(p.returncode is not None for p in processes)
+
+
+def test_a_failing_task_raises_with_the_workers_traceback_and_stops_the_pool():
+    with pytest.raises(parallel.WorkerError, match="three is not allowed") as info:
+        with parallel.LocalPool(2) as pool:
+            processes = []
+            for _ in pool.map(fail_on_three, range(6)):
+                processes = processes or [w.process for w in pool._pool]
+    assert "ValueError" in str(info.value)
+    assert all(p.returncode is not None for p in processes)
+
+
+def test_a_dead_worker_is_an_error_not_a_hang():
+    start = time.monotonic()
+    with pytest.raises(parallel.WorkerError, match="killed by signal 9"):
+        with parallel.LocalPool(2) as pool:
+            list(pool.map(kill_myself, range(4)))
+    assert time.monotonic() - start < 10
+
+
+def test_the_engine_classifies_through_any_executor_identically(paper_params):
+    np = pytest.importorskip("numpy")
+    from bounce_cli.engine import classify_grid
+
+    theta, v = np.meshgrid(np.linspace(0, 2 * np.pi, 30), np.linspace(0, 10, 20))
+    reference = classify_grid(theta, v, paper_params)  # the built-in map
+    with parallel.LocalPool(2) as pool:
+        pooled = classify_grid(theta, v, paper_params, map=pool.map, workers=2, tile_points=64)
+    np.testing.assert_array_equal(pooled.outcome, reference.outcome)
+    np.testing.assert_array_equal(pooled.iterations, reference.iterations)
+
+
+def slow_first(x):
+    time.sleep(0.5 if x == 0 else 0.0)
+    return x
+
+
+def test_results_held_for_a_slow_first_task_are_bounded():
+    """Tasks are read lazily and at most AHEAD per worker run past the next result, so a slow
+    task does not make the pool read (and hold) the whole task list."""
+    read = []
+
+    def tasks():
+        for x in range(100):
+            read.append(x)
+            yield x
+
+    with parallel.LocalPool(2) as pool:
+        results = pool.map(slow_first, tasks())
+        assert next(results) == 0
+        assert len(read) <= 2 * parallel.AHEAD + 1 < 100
+        assert list(results) == list(range(1, 100))
