@@ -93,6 +93,19 @@ EXPERIMENTS: tuple[Entry, ...] = (
          ("impulse_linear.png", "Fig. 10 (section 7): full map vs its linearisation with the "
           "same Jacobian.")),
     ),
+    Entry(
+        "control",
+        "Racket period as a third state (active period control, sections 7-8's future work).",
+        (("control_stability.png", "Sections 7-8 (future work): spectral radius of the map "
+          "with racket period control over gain K and rate c, and along K at c = 1."),
+         ("control_impulse.png", "Fig. 9 with period control: passive (grey) and controlled "
+          "(black) impulse responses, and the racket period per impact (the model's Fig. 11)."),
+         ("control_basin.png", "Fig. 4 without and with racket period control."),
+         ("control_fit.png", "Fit of K and c to mean perturbation responses (simulated trials "
+          "of a known controller, or --data).")),
+        data_help="impacts.csv with perturbation events (trial, k, theta_rad, v_m_s, "
+        "racket_period_s, perturbed; optional alpha): fit K and c to it (sets `data`).",
+    ),
 )
 
 BY_NAME: dict[str, Entry] = {entry.name: entry for entry in EXPERIMENTS}

@@ -124,8 +124,9 @@ class PeriodController:
         return 2.0 * rate * gain / reference.g, np.zeros_like(gain * rate), 1.0 - rate
 
 
-#: the passive map as a controller: the period never changes
-PASSIVE = PeriodController(gain=0.0, rate=0.0)
+#: the passive map as a controller: the racket keeps its period tau_bar (a parameter, not a
+#: state: a period set off tau_bar returns to it at once, eigenvalue 1 - c = 0)
+PASSIVE = PeriodController(gain=0.0, rate=1.0)
 
 #: controller kinds a config may name (``control: {kind: ...}``) -> class
 CONTROLLERS: dict[str, type] = {"period": PeriodController}
@@ -644,3 +645,65 @@ def fit_period_control(params: ModelParams, responses: Sequence[MeanResponse], *
         spectral_radius=float(np.abs(eig).max()), reduced_chi2=chi2, n_residuals=m,
         success=bool(sol.success),
     )
+
+
+# -- the fastest period controller ------------------------------------------------------------
+@dataclass(frozen=True)
+class FastestController:
+    """A (K, c) where the spectral radius of the controlled map is smallest, and that radius."""
+
+    gain: float
+    rate: float
+    spectral_radius: float
+
+
+def fastest_immediate_controller(params: ModelParams) -> FastestController:
+    """Smallest spectral radius along K at c = 1, in closed form.
+
+    With c = 1 one eigenvalue is 0 and the others solve lambda^2 - T lambda + D = 0 with
+    D = alpha^2 - K A, T = 1 + alpha^2 + B - K (A + B), A = (1 - alpha)^2, B = (1+alpha)^2 AC.
+    While they are complex |lambda| = sqrt(D) falls with K; the minimum is where the pair
+    becomes real (T^2 = 4 D), at the larger root K of
+    (A + B)^2 K^2 + (4 A - 2 (1 + alpha^2 + B)(A + B)) K + (1 + alpha^2 + B)^2 - 4 alpha^2 = 0.
+    Where the pair is never complex (with D >= 0) the minimum of a fine grid of K in [-2, 2]."""
+    alpha = params.alpha
+    ac = racket_acceleration_at_impact_g(params)
+    A, B = (1.0 - alpha) ** 2, (1.0 + alpha) ** 2 * ac
+    t0, s = 1.0 + alpha**2 + B, A + B
+    roots = np.roots([s * s, 4.0 * A - 2.0 * t0 * s, t0 * t0 - 4.0 * alpha**2])
+    roots = roots[np.isreal(roots)].real
+    roots = roots[alpha**2 - roots * A >= 0.0]
+    if len(roots):
+        gain = float(roots.max())
+        return FastestController(gain, 1.0, math.sqrt(alpha**2 - gain * A))
+    # the pair never turns complex (the passive map is in eq. 14's real regime): a fine grid
+    gains = np.linspace(-2.0, 2.0, 40001)
+    radius = period_control_radius(params, gains, 1.0)
+    i = int(np.argmin(radius))
+    return FastestController(float(gains[i]), 1.0, float(radius[i]))
+
+
+def fastest_controller(params: ModelParams, guess: tuple[float, float]) -> FastestController:
+    """Smallest spectral radius over (K, c): where all three eigenvalues coincide (a triple
+    real root: the characteristic polynomial is (lambda - r)^3), found from ``guess`` (the
+    best point of a grid) by solving trace = 3 r, sum of principal 2 x 2 minors = 3 r^2,
+    det = r^3 for (K, c, r). The radius has a cusp there, which grid or simplex searches
+    resolve poorly. Falls back to the guess when the solve fails."""
+    from scipy import optimize
+
+    def radius_at(k, c):
+        return float(spectral_radius_3x3(controlled_jacobian(params, PeriodController(k, c))))
+
+    def equations(x):
+        k, c, r = x
+        poly = np.poly(controlled_jacobian(params, PeriodController(k, c)))
+        return [poly[1] + 3 * r, poly[2] - 3 * r * r, poly[3] + r**3]
+
+    k0, c0 = guess
+    r0 = radius_at(k0, c0)
+    sol, _, ok, _ = optimize.fsolve(equations, [k0, c0, r0], full_output=True, xtol=1e-13)
+    if ok == 1 and abs(sol[0] - k0) < 0.2 and abs(sol[1] - c0) < 0.2:
+        found = radius_at(sol[0], sol[1])
+        if found <= r0:
+            return FastestController(float(sol[0]), float(sol[1]), found)
+    return FastestController(float(k0), float(c0), r0)
