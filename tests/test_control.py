@@ -51,10 +51,10 @@ def test_bundled_config_is_section7s_model():
 
 def test_frames_and_figures(result):
     assert sorted(result.figures) == sorted(png for png, _ in entry("control").figures)
-    for name in ("radius_map.csv", "radius_gain.csv", "radius_zoom.csv", "eigen.csv",
-                 "regions.csv", "impulse.csv", "relaxation.csv", "threshold.csv", "basin.csv",
-                 "basin_fractions.csv", "fit.csv", "fit_responses.csv"):
-        assert name in result.frames
+    assert sorted(result.frames) == sorted([
+        "radius_map.csv", "radius_gain.csv", "radius_zoom.csv", "eigen.csv", "regions.csv",
+        "impulse.csv", "relaxation.csv", "relaxation_gain.csv", "threshold.csv", "basin.csv",
+        "basin_fractions.csv", "fit.csv", "fit_responses.csv"])
     fractions = result.frames["basin_fractions.csv"]
     for model, part in fractions.groupby("model"):
         assert part.fraction.sum() == pytest.approx(1.0)
@@ -103,6 +103,26 @@ def test_controlled_relaxes_faster_and_modulates_the_period(result):
     assert (passive.dtau_ms.dropna() == 0.0).all()  # the passive model cannot produce Fig. 11
     up = imp[(imp.model == "controlled") & (imp.alpha_p == 0.6)].set_index("k")
     assert up.loc[1, "dtau_ms"] > 0  # a faster ball: a longer racket period at once
+
+
+def test_relaxation_along_gain_matches_single_responses(result, paper_params):
+    """The vectorised scan along K equals single controlled responses (and K = 0 the
+    passive relaxation of relaxation.csv)."""
+    import math
+
+    from bounce_cli.engine.control import controlled_impulse_response
+
+    scan = result.frames["relaxation_gain.csv"]
+    relax = result.frames["relaxation.csv"].set_index(["model", "alpha_p"])
+    for gain in (0.0, 0.5, 0.7):
+        for alpha_p in (0.4, 0.65):
+            row = scan[np.isclose(scan.gain_K, gain) & (scan.alpha_p == alpha_p)].iloc[0]
+            single = controlled_impulse_response(paper_params, PeriodController(row.gain_K, 1.0),
+                                                 alpha_p, 100)
+            assert row.relaxation_impacts == single.relaxation_impacts(0.05, math.radians(1))
+            if gain == 0.0:
+                assert row.relaxation_impacts == relax.loc[("passive", alpha_p),
+                                                           "relaxation_impacts"]
 
 
 def test_zero_gain_controlled_equals_passive_end_to_end():

@@ -347,3 +347,19 @@ def test_fit_of_passive_trials_finds_no_period_control():
     fit = fit_period_control(params, list(responses.values()))
     assert fit.gain_ci[0] <= 0.0 <= fit.gain_ci[1]
     assert abs(fit.gain * fit.rate) < 0.02
+
+
+def test_flight_time_matching_returns_the_phase_in_one_impact(paper_params):
+    """K = 1, c = 1: the racket period becomes the ball's flight time 2 v_0 / g (since
+    tau_bar = 2 v~ / g, eq. 7), so a ball kicked at theta~ lands at theta~ again, exactly
+    (nonlinear, any size): section 7's subject, back after one impact. Its spectral radius
+    is 1 nonetheless (a line of fixed points): the slowest mode is not what this
+    perturbation excites."""
+    c = PeriodController(1.0, 1.0)
+    for alpha_p in (0.35, 0.6, 0.65):
+        r = controlled_impulse_response(paper_params, c, alpha_p, 20)
+        v0 = r.v[0]
+        assert r.tau[1] == pytest.approx(2 * v0 / paper_params.g, rel=1e-14)
+        assert abs(r.dtheta[1]) < 1e-9
+        assert r.relaxation_impacts(0.05, math.radians(1.0)) <= 2
+    assert float(period_control_radius(paper_params, 1.0, 1.0)) == pytest.approx(1.0, abs=1e-12)

@@ -21,7 +21,13 @@ import pandas as pd
 from pydantic import Field
 
 from ..config import ClassifyBlock, ConfigError, ExperimentConfig, ModelBlock, StrictModel
-from ..engine import OUTCOMES, ModelParams, perturbed_velocity, relaxation_impacts
+from ..engine import (
+    OUTCOMES,
+    ModelParams,
+    perturbed_velocity,
+    phase_difference,
+    relaxation_impacts,
+)
 from ..engine.control import (
     CONTROLLERS,
     PASSIVE,
@@ -35,6 +41,7 @@ from ..engine.control import (
     fastest_controller,
     fastest_immediate_controller,
     fit_period_control,
+    iterate_controlled,
     period_control_radius,
     predicted_deviations,
     simulate_perturbation_trials,
@@ -227,6 +234,30 @@ def impulse_frames(params: ModelParams, config: ControlConfig) -> dict[str, pd.D
     return {"impulse.csv": pd.DataFrame(rows), "relaxation.csv": pd.DataFrame(relax)}
 
 
+def relaxation_gain_frame(params: ModelParams, config: ControlConfig) -> pd.DataFrame:
+    """Impacts to relax of the FULL map after each alpha_p along K at c = radius.rate_line
+    (the linear spectral radius measures the slowest mode; section 7's perturbation, a
+    velocity kick at theta~, need not excite it)."""
+    gains = config.radius.gain.values()
+    rate = config.radius.rate_line
+    v_fp, theta_fp, tau_bar = params.fixed_point().v_m_s, params.fixed_point().theta_rad, \
+        params.racket_period
+    tol_theta = math.radians(config.relaxation.tolerance_theta_deg)
+    rows = []
+    for alpha_p in config.impulse.alpha_p:
+        v0 = np.full(gains.shape, perturbed_velocity(params, alpha_p))
+        theta, v, _, _ = iterate_controlled(theta_fp, v0, tau_bar, params,
+                                            PeriodController(gains, rate),
+                                            config.relaxation.max_impacts)
+        dtheta = phase_difference(theta, theta_fp)
+        for i, gain in enumerate(gains):
+            rows.append({"gain_K": gain, "rate_c": rate, "alpha_p": alpha_p,
+                         "relaxation_impacts": relaxation_impacts(
+                             v[:, i] - v_fp, dtheta[:, i], config.relaxation.tolerance_v_m_s,
+                             tol_theta)})
+    return pd.DataFrame(rows)
+
+
 def threshold_frame(params: ModelParams, config: ControlConfig) -> pd.DataFrame:
     block, settings = config.threshold, config.classify.settings()
     rows = []
@@ -409,6 +440,7 @@ def run(config: ControlConfig, options: RunOptions) -> ExperimentResult:
     frames = radius_frames(params, config)
     options.progress.advance(1)
     frames.update(impulse_frames(params, config))
+    frames["relaxation_gain.csv"] = relaxation_gain_frame(params, config)
     options.progress.advance(1)
     frames["threshold.csv"] = threshold_frame(params, config)
     options.progress.advance(1)
@@ -503,7 +535,7 @@ def draw_stability(frames):
     grid, zoom, line = frames["radius_map.csv"], frames["radius_zoom.csv"], frames["radius_gain.csv"]
     eigen = frames["eigen.csv"]
     target = float(frames["regions.csv"].set_index("region").loc["fast", "radius_below"])
-    fig, axes = new_figure(1, 3, width=17.0, height=5.6)
+    fig, axes = new_figure(2, 2, width=13.0, height=10.5)
     im = _radius_image(axes[0, 0], grid, target)
     _controller_markers(axes[0, 0], eigen)
     axes[0, 0].set_title(f"Spectral radius over (K, c); white: {target:g}, dotted: 0.5")
@@ -513,19 +545,33 @@ def draw_stability(frames):
     _controller_markers(axes[0, 1], eigen, window)
     axes[0, 1].set_title(f"Around the fastest: white {target:g}, dotted 0.25, 0.3")
     axes[0, 1].legend(fontsize=7, loc="lower left")
-    fig.colorbar(im, ax=axes[0, :2], label="spectral radius of the 3x3 Jacobian "
+    fig.colorbar(im, ax=axes[0, :], label="spectral radius of the 3x3 Jacobian "
                  "(grey: >= 1, unstable)", shrink=0.9)
 
-    ax = axes[0, 2]
+    ax = axes[1, 0]
+    rate = line.rate_c.iloc[0]
     passive = float(eigen.set_index("model").loc["passive", "spectral_radius"])
-    ax.plot(line.gain_K, line.spectral_radius, "k-", label=f"c = {line.rate_c.iloc[0]:g}")
+    ax.plot(line.gain_K, line.spectral_radius, "k-", label=f"c = {rate:g}")
     ax.axhline(passive, color="0.5", ls="--", label=f"passive K = 0: {passive:.2f} (eq. 10)")
     ax.axhline(target, color="tab:red", ls=":", label=f"data: < {target:g} (section 7)")
     ax.axhline(1.0, color="k", lw=0.6)
     ax.set_ylim(0.0, 1.5)
     ax.set_xlabel("gain K")
     ax.set_ylabel("spectral radius")
-    ax.set_title(f"Along K at c = {line.rate_c.iloc[0]:g}")
+    ax.set_title(f"Linear: spectral radius along K at c = {rate:g}")
+    ax.legend(fontsize=8)
+
+    ax = axes[1, 1]
+    relax = frames["relaxation_gain.csv"]
+    for i, (alpha_p, part) in enumerate(relax.groupby("alpha_p")):
+        n = part.relaxation_impacts.where(part.relaxation_impacts >= 0)
+        ax.plot(part.gain_K, n, ["-o", "-s", "--^", "--D"][i % 4], ms=3,
+                label=f"alpha_p = {alpha_p:g}")
+    ax.axhline(1.0, color="tab:red", ls=":", label="the subject: about 1 impact (Fig. 9)")
+    ax.set_yscale("log")
+    ax.set_xlabel("gain K")
+    ax.set_ylabel("impacts to relax (full map; missing: never)")
+    ax.set_title(f"Full map: section 7's perturbations along K at c = {rate:g}")
     ax.legend(fontsize=8)
     return fig
 
