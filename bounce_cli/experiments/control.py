@@ -81,7 +81,7 @@ class RadiusBlock(StrictModel):
     target_radius: float = Field(0.2, gt=0.0, lt=1.0,
                                  description="what the data suggest (section 7: < 0.2)")
     zoom_half_width: float = Field(0.08, gt=0.0, description="K and c around the fastest")
-    zoom_num: int = Field(161, ge=2, description="grid points per axis of the zoom")
+    zoom_num: int = Field(121, ge=2, description="grid points per axis of the zoom")
 
 
 class ImpulseBlock(StrictModel):
