@@ -97,7 +97,9 @@ EXPERIMENTS: tuple[Entry, ...] = (
         "control",
         "Racket period as a third state (active period control, sections 7-8's future work).",
         (("control_stability.png", "Sections 7-8 (future work): spectral radius of the map "
-          "with racket period control over gain K and rate c, and along K at c = 1."),
+          "with racket period control over gain K and rate c (and around its minimum); along K "
+          "at c = 1 the radius and the full map's impacts to relax after section 7's "
+          "perturbations."),
          ("control_impulse.png", "Fig. 9 with period control: passive (grey) and controlled "
           "(black) impulse responses, and the racket period per impact (the model's Fig. 11)."),
          ("control_basin.png", "Fig. 4 without and with racket period control."),
