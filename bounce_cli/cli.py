@@ -16,6 +16,7 @@ import typing
 from pathlib import Path
 from typing import Annotated, Optional
 
+import numpy as np
 import typer
 from rich.console import Console
 from rich.table import Table
@@ -150,11 +151,22 @@ def resolve_config_path(config: Path | None, name: str) -> Path:
     return config if config is not None else bundled_config_path(name)
 
 
-def warn_if_unstable(params: ModelParams) -> None:
+def warn_if_unstable(params: ModelParams, controller=None) -> None:
     """A one-line warning on stderr when the period-1 fixed point exists but is linearly
-    unstable (eq. 10): the figures then describe an orbit nothing converges to.
+    unstable (eq. 10; with racket period control the 3 x 3 Jacobian of engine.control): the
+    figures then describe an orbit nothing converges to.
     Raises NoFixedPointError when there is no fixed point at all."""
     from .engine import flip_boundary_g
+
+    if controller is not None:
+        from .engine.control import controlled_jacobian, spectral_radius_3x3
+
+        radius = float(spectral_radius_3x3(controlled_jacobian(params, controller)))
+        if not radius < 1.0:
+            print(f"bounce: warning: the period-1 fixed point is linearly unstable with this "
+                  f"racket period control (model.control: spectral radius {radius:.3g} of the "
+                  f"3 x 3 Jacobian)", file=sys.stderr)
+        return
 
     st = stability(params)
     if not st.stable:
@@ -187,7 +199,8 @@ def run_experiment(
             typer.echo(to_yaml(cfg), nl=False)
             return
         if entry.needs_fixed_point:
-            warn_if_unstable(cfg.params)
+            controller = getattr(cfg.model, "controller", lambda: None)()
+            warn_if_unstable(cfg.params, controller)
         name = path.stem if config is not None else entry.name
         run_dir = RunDirectory(
             out if out is not None else Path("results") / name,
@@ -231,6 +244,11 @@ def run_experiment(
 # -- engine commands ------------------------------------------------------------------------
 def load_model(config: Path | None, overrides: list[str] | None) -> ModelParams:
     """The ``model`` block of a config (any experiment's; other blocks are ignored here)."""
+    return load_model_block(config, overrides).to_params()
+
+
+def load_model_block(config: Path | None, overrides: list[str] | None):
+    """``load_model``'s validated block, with its ``control`` (racket period control)."""
     path = resolve_config_path(config, "model")
     overrides = list(overrides or [])
     for text in overrides:
@@ -239,9 +257,8 @@ def load_model(config: Path | None, overrides: list[str] | None) -> ModelParams:
             raise ConfigError(f"--set {'.'.join(keys)}: this command only uses the model block")
     data = apply_overrides(read_yaml(path), overrides)
     cfg = validate(ModelOnlyConfig, {"model": data.get("model") or {}}, str(path), overrides)
-    params = cfg.params
-    params.fixed_point()
-    return params
+    cfg.params.fixed_point()
+    return cfg.model
 
 
 def _model_or_fail(config: Path | None, overrides: list[str] | None) -> ModelParams:
@@ -315,10 +332,20 @@ def orbit_command(
     overrides: SetOption = None,
     as_csv: Annotated[bool, typer.Option("--csv", help="Write CSV to stdout.")] = False,
 ) -> None:
-    """Iterate the map (eqs. 5, 6) from one initial condition."""
-    params = _model_or_fail(config, overrides)
+    """Iterate the map (eqs. 5, 6) from one initial condition (with model.control: the racket
+    period as a third state, engine.control)."""
+    try:
+        block = load_model_block(config, overrides)
+    except USER_ERRORS as exc:
+        fail(str(exc))
+        raise  # unreachable
+    params, controller = block.to_params(), block.controller()
     if not (math.isfinite(theta0_deg) and math.isfinite(v0)):
         fail("--theta0-deg and --v0 must be finite numbers")
+    if controller is not None:
+        controlled_orbit_output(math.radians(theta0_deg), v0, params, controller, n_impacts,
+                                sticking_interval, as_csv)
+        return
     orbit = iterate_orbit(math.radians(theta0_deg), v0, params, n_impacts, sticking_interval)
     rows = orbit_rows(orbit, params)
     if as_csv:
@@ -342,6 +369,39 @@ def orbit_command(
     note = orbit_note(orbit, params, sticking_interval)
     if note:
         print(note, file=sys.stderr)
+
+
+def controlled_orbit_output(theta0, v0, params, controller, n_impacts, sticking_interval,
+                            as_csv) -> None:
+    """``bounce orbit`` with racket period control: the passive columns plus
+    ``racket_period_s`` (the period of the flight ending at each impact)."""
+    import pandas as pd
+
+    from .engine.control import iterate_controlled_orbit
+
+    orbit = iterate_controlled_orbit(theta0, v0, params, controller, n_impacts,
+                                     sticking_interval)
+    frame = pd.DataFrame({"k": np.arange(len(orbit.theta)), "t_s": orbit.t_s,
+                          "theta_rad": orbit.theta,
+                          "theta_deg": np.degrees(wrap_phase(orbit.theta)), "v_m_s": orbit.v,
+                          "flight_s": orbit.flight_s, "racket_period_s": orbit.tau})
+    if as_csv:
+        frame.to_csv(sys.stdout, index=False, lineterminator="\n")
+    else:
+        table = Table(title=f"Orbit with racket period control from theta0 = "
+                            f"{math.degrees(theta0):g} deg, v0 = {v0:g} m/s")
+        for col in frame.columns:
+            table.add_column(col, justify="right")
+        for row in frame.itertuples(index=False):
+            table.add_row(str(row.k), *("" if math.isnan(x) else f"{x:.5f}" for x in row[1:]))
+        Console().print(table)
+    if orbit.stop_reason == "below_racket":
+        print(f"note: stopped: the initial velocity {v0:g} m/s is not above the racket's "
+              f"velocity at that phase (below the racket)", file=sys.stderr)
+    elif orbit.stop_reason == "sticking":
+        print(f"note: stopped at impact {len(orbit.theta) - 1}: the hop lasted "
+              f"{orbit.flight_s[-1]:.3g} s < {sticking_interval:g} s, or the ball could not "
+              f"leave the racket (sticking)", file=sys.stderr)
 
 
 def orbit_rows(orbit, params: ModelParams) -> list[dict]:

@@ -363,3 +363,18 @@ def test_flight_time_matching_returns_the_phase_in_one_impact(paper_params):
         assert abs(r.dtheta[1]) < 1e-9
         assert r.relaxation_impacts(0.05, math.radians(1.0)) <= 2
     assert float(period_control_radius(paper_params, 1.0, 1.0)) == pytest.approx(1.0, abs=1e-12)
+
+
+def test_grid_tiles_and_orbit_agree_with_the_batch(paper_params):
+    from bounce_cli.engine.control import classify_controlled_grid, iterate_controlled_orbit
+
+    c = PeriodController(0.6, 0.9)
+    theta, v = np.meshgrid(np.linspace(0, 2 * np.pi, 50), np.linspace(0, 10, 50))
+    whole = classify_controlled(theta, v, paper_params, c)
+    tiled = classify_controlled_grid(theta, v, paper_params, c, tile_points=77)
+    assert np.array_equal(whole.outcome, tiled.outcome)
+    assert np.array_equal(whole.iterations, tiled.iterations)
+    orbit = iterate_controlled_orbit(0.8, 5.3, paper_params, c, 15, 1e-3)
+    batch = iterate_controlled(0.8, 5.3, paper_params.racket_period, paper_params, c, 15)
+    for a, b in zip((orbit.theta, orbit.v, orbit.tau), batch[:3]):
+        assert np.array_equal(a, b)

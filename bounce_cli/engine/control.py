@@ -55,10 +55,10 @@ from typing import Callable, Protocol, Sequence
 import numpy as np
 
 from .classify import BELOW_RACKET, OUTCOMES, PERIOD1, STICKING, UNDECIDED, Classification
-from .classify import ClassifySettings
+from .classify import ClassifySettings, tile_slices
 from .impact import first_impact_phase
 from .impulse import perturbed_velocity, relaxation_impacts
-from .linear import jacobian, racket_acceleration_at_impact_g
+from .linear import iterate_linear, jacobian, racket_acceleration_at_impact_g
 from .params import ModelParams, phase_difference
 
 TWO_PI = 2.0 * math.pi
@@ -707,3 +707,88 @@ def fastest_controller(params: ModelParams, guess: tuple[float, float]) -> Faste
         if found <= r0:
             return FastestController(float(sol[0]), float(sol[1]), found)
     return FastestController(float(k0), float(c0), r0)
+
+
+# -- one orbit (``bounce orbit`` with control) ---------------------------------------------------
+@dataclass(frozen=True)
+class ControlledOrbit:
+    """One orbit of the controlled map, stopped as ``engine.maps.Orbit`` is (stop_reason ""
+    | "below_racket" | "sticking"). Arrays over impacts k = 0..n: theta (rad, unwrapped), v
+    (m/s), tau (s, the period of the flight ending at k; tau_0 the initial one), hop_phase
+    (NaN at k = 0), t_s (time of impact k: t_0 = theta_0 / w_0, then + each flight's duration)
+    and flight_s (duration of the flight ending at k)."""
+
+    theta: np.ndarray
+    v: np.ndarray
+    tau: np.ndarray
+    hop_phase: np.ndarray
+    stop_reason: str
+
+    @property
+    def flight_s(self) -> np.ndarray:
+        return self.hop_phase / (2.0 * np.pi / self.tau)
+
+    @property
+    def t_s(self) -> np.ndarray:
+        start = self.theta[0] / (2.0 * np.pi / self.tau[0])
+        return start + np.concatenate([[0.0], np.cumsum(self.flight_s[1:])])
+
+
+def iterate_controlled_orbit(theta0: float, v0: float, params: ModelParams,
+                             controller: Controller, n_impacts: int, sticking_interval_s: float,
+                             tau0: float | None = None) -> ControlledOrbit:
+    """``engine.maps.iterate_orbit`` for the controlled map from (theta0, v0, tau0 = tau_bar):
+    stops after a hop shorter than ``sticking_interval_s`` or when the ball cannot fly (also
+    when the controller asks for a period <= 0), at once when v0 is not above the racket's
+    velocity (with tau0)."""
+    reference = Reference.of(params)
+    tau0 = params.racket_period if tau0 is None else float(tau0)
+    theta, v, tau, hop = [float(theta0)], [float(v0)], [tau0], [math.nan]
+    reason = ""
+    if not can_fly_at(theta0, v0, params.racket_amplitude, TWO_PI / tau0, params.g):
+        reason = "below_racket"
+    else:
+        for _ in range(n_impacts):
+            step = controlled_step(theta[-1], v[-1], tau[-1], params, controller,
+                                   reference=reference)
+            theta.append(float(step.theta))
+            v.append(float(step.v))
+            tau.append(float(step.tau))
+            hop.append(float(step.hop_phase))
+            if not float(step.hop_seconds()) >= sticking_interval_s:  # NaN: cannot fly
+                reason = "sticking"
+                break
+    return ControlledOrbit(np.array(theta), np.array(v), np.array(tau), np.array(hop), reason)
+
+
+def classify_controlled_grid(theta0, v0, params: ModelParams, controller: Controller,
+                             settings: ClassifySettings = ClassifySettings(), *,
+                             tile_points: int = 1 << 15, on_tile_done=None,
+                             period_tolerance_s: float | None = None) -> Classification:
+    """``classify_controlled`` over large arrays in tiles of at most ``tile_points`` (in this
+    process; ``on_tile_done(n)`` after each, for a progress bar). A point's result does not
+    depend on the tiling."""
+    theta0, v0 = np.broadcast_arrays(np.asarray(theta0, dtype=float), np.asarray(v0, dtype=float))
+    shape = theta0.shape
+    theta0, v0 = theta0.ravel(), v0.ravel()
+    outcome = np.empty(theta0.shape, dtype=np.int8)
+    iterations = np.empty(theta0.shape, dtype=np.int16)
+    for tile in tile_slices(theta0.size, tile_points):
+        res = classify_controlled(theta0[tile], v0[tile], params, controller, settings,
+                                  period_tolerance_s=period_tolerance_s)
+        outcome[tile], iterations[tile] = res.outcome, res.iterations
+        if on_tile_done is not None:
+            on_tile_done(res.outcome.size)
+    return Classification(outcome.reshape(shape), iterations.reshape(shape))
+
+
+def controlled_impulse_response_linear(params: ModelParams, controller: Controller,
+                                       alpha_p: float, n_impacts: int) -> ControlledResponse:
+    """The linearised controlled map y_{k+1} = M y_k (M: the 3 x 3 Jacobian) from
+    y_0 = (v_0 - v~, 0, 0), as ``engine.impulse_response_linear`` is for eq. 9's J."""
+    v_fp, theta_fp, tau_bar = controlled_fixed_point(params, controller)
+    y = iterate_linear(controlled_jacobian(params, controller),
+                       [perturbed_velocity(params, alpha_p) - v_fp, 0.0, 0.0], n_impacts)
+    v = v_fp + y[:, 0]  # dv = v - v~ as ``engine.impulse`` computes it (same bits at K = 0)
+    return ControlledResponse(v=v, theta=np.mod(theta_fp + y[:, 1], TWO_PI),
+                              tau=tau_bar + y[:, 2], dv=v - v_fp, dtheta=y[:, 1], dtau=y[:, 2])

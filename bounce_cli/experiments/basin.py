@@ -15,7 +15,13 @@ import numpy as np
 import pandas as pd
 from pydantic import Field, model_validator
 
-from ..config import ClassifyBlock, ConfigError, ExperimentConfig, StrictModel
+from ..config import (
+    ClassifyBlock,
+    ConfigError,
+    ControllableModelBlock,
+    ExperimentConfig,
+    StrictModel,
+)
 from ..engine import OUTCOMES, ClassifySettings, classify_batch, classify_grid
 from .base import Experiment, ExperimentResult, RunOptions
 
@@ -67,6 +73,7 @@ class LimitsBlock(StrictModel):
 
 
 class BasinConfig(ExperimentConfig):
+    model: ControllableModelBlock = ControllableModelBlock()
     grid: GridBlock = GridBlock()
     classify: ClassifyBlock = ClassifyBlock()
     limits: LimitsBlock = LimitsBlock()
@@ -89,10 +96,18 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
     theta_grid_rad = np.deg2rad(theta_grid_deg)
 
     options.progress.start(n_points, "basin: classifying")
-    result = classify_grid(
-        theta_grid_rad.ravel(), v_grid.ravel(), params, settings,
-        jobs=options.jobs, on_tile_done=options.progress.advance,
-    )
+    controller = config.model.controller()
+    if controller is None:
+        result = classify_grid(
+            theta_grid_rad.ravel(), v_grid.ravel(), params, settings,
+            jobs=options.jobs, on_tile_done=options.progress.advance,
+        )
+    else:  # racket period control (engine.control): in this process
+        from ..engine.control import classify_controlled_grid
+
+        result = classify_controlled_grid(theta_grid_rad.ravel(), v_grid.ravel(), params,
+                                          controller, settings,
+                                          on_tile_done=options.progress.advance)
     basin = pd.DataFrame(
         {
             "theta0_rad": theta_grid_rad.ravel(),
@@ -107,7 +122,7 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
     fractions = pd.DataFrame(
         {"outcome": list(OUTCOMES), "count": counts, "fraction": counts / n_points}
     )
-    markers = marker_frame(params, settings)
+    markers = marker_frame(params, settings, controller)
 
     frames = {"basin.csv": basin, "fractions.csv": fractions, "markers.csv": markers}
     summary = [
@@ -125,13 +140,19 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
     return ExperimentResult(frames=frames, figures=draw(frames), summary=summary)
 
 
-def marker_frame(params, settings: ClassifySettings) -> pd.DataFrame:
-    """The fixed point (eqs. 7, 8) and the Fig. 3 initial conditions, each classified."""
+def marker_frame(params, settings: ClassifySettings, controller=None) -> pd.DataFrame:
+    """The fixed point (eqs. 7, 8) and the Fig. 3 initial conditions, each classified (with
+    the racket period controller, if any)."""
     fp = params.fixed_point()
     names = ["fixed_point", *FIG3_V0_M_S]
     theta = np.array([fp.theta_rad] + [FIG3_THETA0_RAD] * len(FIG3_V0_M_S))
     v = np.array([fp.v_m_s, *FIG3_V0_M_S.values()])
-    res = classify_batch(theta, v, params, settings)
+    if controller is None:
+        res = classify_batch(theta, v, params, settings)
+    else:
+        from ..engine.control import classify_controlled
+
+        res = classify_controlled(theta, v, params, controller, settings)
     return pd.DataFrame(
         {
             "marker": names,

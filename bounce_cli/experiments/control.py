@@ -14,13 +14,20 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated, Literal, Optional
+from typing import Annotated, Optional
 
 import numpy as np
 import pandas as pd
 from pydantic import Field
 
-from ..config import ClassifyBlock, ConfigError, ExperimentConfig, ModelBlock, StrictModel
+from ..config import (
+    ClassifyBlock,
+    ConfigError,
+    ControlBlock,
+    ControllableModelBlock,
+    ExperimentConfig,
+    StrictModel,
+)
 from ..engine import (
     OUTCOMES,
     ModelParams,
@@ -29,7 +36,6 @@ from ..engine import (
     relaxation_impacts,
 )
 from ..engine.control import (
-    CONTROLLERS,
     PASSIVE,
     FastestController,
     PeriodController,
@@ -54,20 +60,8 @@ MODELS = ("passive", "controlled")
 
 
 # -- config -----------------------------------------------------------------------------------
-class ControlBlock(StrictModel):
-    """The racket period controller: tau_{k+1} = tau_k + c (tau_bar + K 2 (v_k - v~)/g - tau_k)."""
-
-    kind: Literal["period"] = Field("period", description="controller (engine.control)")
-    gain: float = Field(description="K: 1 = the period follows the ball's flight time in full")
-    rate: float = Field(1.0, ge=0.0, le=2.0,
-                        description="c per impact: 1 = immediate, 0 = never; > 1 overshoots")
-
-    def controller(self):
-        return CONTROLLERS[self.kind](self.gain, self.rate)
-
-
-class ControlledModelBlock(ModelBlock):
-    """The model block with the controller studied (``model.control``)."""
+class ControlledModelBlock(ControllableModelBlock):
+    """The model block with the controller studied (``model.control``, required here)."""
 
     control: ControlBlock = ControlBlock(gain=0.7, rate=1.0)
 

@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 from pydantic import Field
 
-from ..config import ClassifyBlock, ExperimentConfig, StrictModel
+from ..config import ClassifyBlock, ControllableModelBlock, ExperimentConfig, StrictModel
 from ..engine import (
     OUTCOMES,
     ModelParams,
@@ -44,6 +44,7 @@ class ThresholdBlock(StrictModel):
 
 
 class ImpulseConfig(ExperimentConfig):
+    model: ControllableModelBlock = ControllableModelBlock()
     alpha_p: list[Annotated[float, Field(ge=0.0, lt=1.0)]] = Field([0.4, 0.6, 0.35, 0.65], min_length=1)
     iterations: int = Field(10, ge=1, description="impacts after the perturbed one, shown")
     classify: ClassifyBlock = ClassifyBlock()
@@ -52,10 +53,18 @@ class ImpulseConfig(ExperimentConfig):
 
 
 # -- classification of the full response (section 3's criteria) -----------------------------
-def classify(params: ModelParams, v0: float, block: ClassifyBlock) -> tuple[str, int]:
+def classify(params: ModelParams, v0: float, block: ClassifyBlock,
+             controller=None) -> tuple[str, int]:
     """Outcome of the full map from (theta~, v0) with section 3's criteria (the basin's
     classifier, ``engine.classify_batch``): ``period1`` | ``sticking`` | ``below_racket`` |
-    ``undecided``, and the number of impacts until it was decided."""
+    ``undecided``, and the number of impacts until it was decided. With a racket period
+    controller (``model.control``), the controlled map's (``engine.control``)."""
+    if controller is not None:
+        from ..engine.control import classify_controlled
+
+        result = classify_controlled(params.fixed_point().theta_rad, v0, params, controller,
+                                     block.settings())
+        return OUTCOMES[int(result.outcome)], int(result.iterations)
     result = classify_batch(params.fixed_point().theta_rad, v0, params, block.settings())
     return OUTCOMES[int(result.outcome)], int(result.iterations)
 
@@ -68,7 +77,7 @@ def find_threshold(params: ModelParams, direction: int, config: ImpulseConfig) -
     end = block.alpha_p_max if direction > 0 else 0.0
 
     def outcome(a):
-        return classify(params, perturbed_velocity(params, a), cls)
+        return classify(params, perturbed_velocity(params, a), cls, config.model.controller())
 
     scan = np.arange(1, int(abs(end - alpha_0) / block.scan_step) + 1)
     values = alpha_0 + direction * block.scan_step * scan
@@ -105,22 +114,37 @@ def find_threshold(params: ModelParams, direction: int, config: ImpulseConfig) -
     }
 
 
-def linear_outcome(params: ModelParams) -> str:
-    """The linear map y_{k+1} = J y_k returns to the fixed point iff J is stable."""
+def linear_outcome(params: ModelParams, controller=None) -> str:
+    """The linear map y_{k+1} = J y_k returns to the fixed point iff J is stable (with a
+    controller: the 3 x 3 Jacobian of ``engine.control``)."""
+    if controller is not None:
+        from ..engine.control import controlled_jacobian, spectral_radius_3x3
+
+        radius = float(spectral_radius_3x3(controlled_jacobian(params, controller)))
+        return "period1" if radius < 1.0 else "diverges"
     return "period1" if stability(params).stable else "diverges"
 
 
 # -- tables ---------------------------------------------------------------------------------
-def responses(params: ModelParams, alpha_p: float, n: int):
+def responses(params: ModelParams, alpha_p: float, n: int, controller=None):
+    if controller is not None:  # racket period control (model.control)
+        from ..engine.control import (
+            controlled_impulse_response,
+            controlled_impulse_response_linear,
+        )
+
+        return {"full": controlled_impulse_response(params, controller, alpha_p, n),
+                "linear": controlled_impulse_response_linear(params, controller, alpha_p, n)}
     return {"full": impulse_response_full(params, alpha_p, n),
             "linear": impulse_response_linear(params, alpha_p, n)}
 
 
 def impulse_frame(params: ModelParams, config: ImpulseConfig, outcomes: dict) -> pd.DataFrame:
-    linear = linear_outcome(params)
+    controller = config.model.controller()
+    linear = linear_outcome(params, controller)
     rows = []
     for ap in config.alpha_p:
-        for model, r in responses(params, ap, config.iterations).items():
+        for model, r in responses(params, ap, config.iterations, controller).items():
             for k in range(config.iterations + 1):
                 rows.append({
                     "alpha_p": ap, "model": model, "k": k, "v_m_s": r.v[k],
@@ -136,14 +160,16 @@ def relaxation_frame(params: ModelParams, config: ImpulseConfig, outcomes: dict)
     tol_theta = math.radians(rel.tolerance_theta_deg)
     fp = params.fixed_point()
     rows = []
+    controller = config.model.controller()
     for ap in config.alpha_p:
-        for model, r in responses(params, ap, rel.max_impacts).items():
+        for model, r in responses(params, ap, rel.max_impacts, controller).items():
             shown = slice(1, config.iterations + 1)
             rows.append({
                 "alpha_p": ap, "model": model,
                 "v0_m_s": perturbed_velocity(params, ap),
                 "dv0_m_s": perturbed_velocity(params, ap) - fp.v_m_s,
-                "outcome": outcomes[ap][0] if model == "full" else linear_outcome(params),
+                "outcome": outcomes[ap][0] if model == "full" else linear_outcome(params,
+                                                                                  controller),
                 "relaxation_impacts": relaxation_impacts(r.dv, r.dtheta, rel.tolerance_v_m_s,
                                                          tol_theta),
                 "sum_abs_dv_m_s": float(np.nansum(np.abs(r.dv[shown]))),
@@ -171,7 +197,8 @@ def run(config: ImpulseConfig, options: RunOptions) -> ExperimentResult:
     options.progress.start(len(config.alpha_p) + 2, "impulse responses")
     outcomes = {}
     for ap in config.alpha_p:
-        outcomes[ap] = classify(params, perturbed_velocity(params, ap), config.classify)
+        outcomes[ap] = classify(params, perturbed_velocity(params, ap), config.classify,
+                                config.model.controller())
         options.progress.advance(1)
     thresholds = []
     for direction in (+1, -1):
