@@ -23,8 +23,7 @@ def test_passive_configs_dump_as_before():
     """No `control` key appears in a passive config's dump (run.json, --print-config)."""
     assert list(ModelOnlyConfig().model_dump()["model"]) == [
         "alpha", "g", "racket_amplitude", "racket_period"]
-    for module, name in ((basin, "basin"), (impulse, "impulse")):
-        schema = {"basin": basin.BasinConfig, "impulse": impulse.ImpulseConfig}[name]
+    for schema, name in ((basin.BasinConfig, "basin"), (impulse.ImpulseConfig, "impulse")):
         cfg = load_config(schema, bundled_config_path(name))
         assert "control" not in cfg.model_dump(mode="json")["model"]
         controlled = load_config(schema, bundled_config_path(name), ["model.control.gain=0.5"])

@@ -54,7 +54,7 @@ from typing import Callable, Protocol, Sequence
 
 import numpy as np
 
-from .classify import BELOW_RACKET, OUTCOMES, PERIOD1, STICKING, UNDECIDED, Classification
+from .classify import BELOW_RACKET, PERIOD1, STICKING, UNDECIDED, Classification
 from .classify import ClassifySettings, tile_slices
 from .impact import first_impact_phase
 from .impulse import perturbed_velocity, relaxation_impacts
