@@ -492,7 +492,8 @@ def simulate_perturbation_trials(params: ModelParams, controller: Controller, *,
 class MeanResponse:
     """Mean deviations at impacts j = 0..n after the perturbed impact (j = 0) of one direction
     of perturbation, with the standard errors of the means: v (m/s), theta (rad), racket
-    period (s). ``n_events``: perturbations averaged."""
+    period (s). ``n_events``: perturbations averaged. ``initial``: each event's own deviation
+    at j = 0, (n_events, 3) in (m/s, rad, s), or None when only the means are known."""
 
     direction: str
     dv_m_s: np.ndarray
@@ -502,6 +503,7 @@ class MeanResponse:
     se_theta_rad: np.ndarray
     se_tau_s: np.ndarray
     n_events: int
+    initial: np.ndarray | None = None
 
 
 def align_perturbations(trial, k, v, theta, tau, perturbed, *, alpha=None, alpha_0=None,
@@ -551,7 +553,7 @@ def align_perturbations(trial, k, v, theta, tau, perturbed, *, alpha=None, alpha
         mean = np.nanmean(arr, axis=0)
         n = arr.shape[0]
         se = np.nanstd(arr, axis=0, ddof=1) / math.sqrt(n) if n > 1 else np.full_like(mean, np.nan)
-        out[direction] = MeanResponse(direction, *mean, *se, n_events=n)
+        out[direction] = MeanResponse(direction, *mean, *se, n_events=n, initial=arr[:, :, 0])
     return out
 
 
@@ -580,7 +582,8 @@ class ControlFit:
 
 def predicted_deviations(params: ModelParams, controller: Controller, y0, n_impacts: int):
     """The controlled map's deviations (dv, dtheta, dtau) at impacts 0..n from the fixed point
-    (v~, theta~, tau_bar) + y0, y0 = (dv_0 m/s, dtheta_0 rad, dtau_0 s)."""
+    (v~, theta~, tau_bar) + y0, y0 = (dv_0 m/s, dtheta_0 rad, dtau_0 s); shape (3, n + 1) or,
+    for y0 of shape (3, E) (several starts), (3, n + 1, E)."""
     v_fp, theta_fp, tau_bar = controlled_fixed_point(params, controller)
     theta, v, tau, _ = iterate_controlled(theta_fp + y0[1], v_fp + y0[0], tau_bar + y0[2],
                                           params, controller, n_impacts)
@@ -596,16 +599,26 @@ def fit_period_control(params: ModelParams, responses: Sequence[MeanResponse], *
                        ) -> ControlFit:
     """Fit K and c of the period controller to mean responses (``align_perturbations``).
 
-    Each direction's model response starts from its observed mean deviation at j = 0 (minus
-    the fitted offsets) at the model's fixed point and runs the controlled map (full, not
-    linearised: perturbations of section 7's size are not small); the residuals are
+    The model's mean response of a direction is the mean of the controlled map's responses
+    (full, not linearised: section 7's perturbations are not small) started from each event's
+    own deviation at j = 0 (``MeanResponse.initial``; from the mean deviation when only means
+    are known), minus the fitted offsets, at the model's fixed point. Residuals:
     (model + offset - data) / standard error for v, theta and tau at j = 1..n of every
     direction, minimised with ``scipy.optimize.least_squares`` over (K, c, three offsets).
+
+    Measured on trials simulated with K = 0.6, c = 0.7 and section 7's protocol (24 trials
+    of 60 impacts, noise 0.05 m/s, 0.02 rad, 5 ms): K is biased by about -0.009 (c by
+    +0.007), half the 95 % interval (+-0.014); the intervals held the truth in 26 of 30 data
+    sets. The bias comes from the noise after the perturbed impact (it vanishes without
+    noise): the mean of noisy nonlinear responses is not the noiseless response. Starting
+    every model response from the mean deviation instead of each event's own adds -0.004.
     """
     from scipy import optimize, stats
 
     data = [(np.stack([r.dv_m_s, r.dtheta_rad, r.dtau_s]),
-             np.stack([r.se_v_m_s, r.se_theta_rad, r.se_tau_s])) for r in responses]
+             np.stack([r.se_v_m_s, r.se_theta_rad, r.se_tau_s]),
+             None if r.initial is None else np.asarray(r.initial, float).T)
+            for r in responses]
     scales = np.array([np.nanmax(np.abs(d[0][i])) for d in data for i in range(3)]).reshape(
         len(data), 3).max(axis=0)
     floor = 1e-6 * np.where(scales > 0, scales, 1.0)
@@ -614,9 +627,13 @@ def fit_period_control(params: ModelParams, responses: Sequence[MeanResponse], *
         controller = controller_of(x[0], x[1])
         offsets = x[2:]
         out = []
-        for mean, se in data:
+        for mean, se, initial in data:
             n = mean.shape[1] - 1
-            model = predicted_deviations(params, controller, mean[:, 0] - offsets, n)
+            if initial is None:
+                model = predicted_deviations(params, controller, mean[:, 0] - offsets, n)
+            else:
+                model = np.nanmean(predicted_deviations(
+                    params, controller, initial - offsets[:, None], n), axis=-1)
             r = (model[:, 1:] + offsets[:, None] - mean[:, 1:]) / np.maximum(se[:, 1:],
                                                                             floor[:, None])
             out.append(np.where(np.isfinite(r), r, 1e3).ravel())
