@@ -404,3 +404,22 @@ def test_fit_survives_a_labs_degradations():
     fit = fit_period_control(params, list(responses.values()))
     assert fit.gain_ci[0] <= truth.gain <= fit.gain_ci[1]
     assert fit.rate_ci[0] <= truth.rate <= fit.rate_ci[1]
+
+
+def test_fit_is_not_caught_in_a_local_minimum():
+    """At a_r = 0.5 m a start at (K, c) = (0.5, 0.5) alone ends at K = 0.31, c = 1.55 (reduced
+    chi2 ~ 4000); the grid of starts finds the truth."""
+    params = ModelParams(0.5, 9.81, 0.5, 0.92)
+    truth = PeriodController(0.7, 1.0)
+    d = simulate_perturbation_trials(params, truth, n_trials=20, impacts_per_trial=60,
+                                     velocity_noise_sd=0.05, phase_noise_sd=0.02,
+                                     period_noise_sd=0.005, seed=1)
+    responses = align_perturbations(d["trial"], d["k"], d["v_m_s"], d["theta_rad"],
+                                    d["racket_period_s"], d["perturbed"], alpha=d["alpha"],
+                                    alpha_0=0.5)
+    single = fit_period_control(params, list(responses.values()), starts_from_grid=0)
+    assert single.reduced_chi2 > 100  # the trap exists
+    fit = fit_period_control(params, list(responses.values()))
+    assert fit.gain_ci[0] <= truth.gain <= fit.gain_ci[1]
+    assert fit.rate_ci[0] <= truth.rate <= fit.rate_ci[1]
+    assert fit.reduced_chi2 < 3

@@ -342,8 +342,10 @@ def fit_inputs(config: ControlConfig) -> tuple[pd.DataFrame, ModelParams, dict]:
             alpha_p_low=sim.alpha_p_low, alpha_p_high=sim.alpha_p_high,
             velocity_noise_sd=sim.velocity_noise_sd_m_s, phase_noise_sd=sim.phase_noise_sd_rad,
             period_noise_sd=sim.period_noise_sd_s, seed=sim.seed))
+        per_trial = impacts.groupby("trial").size()
+        lost = int((per_trial < sim.impacts_per_trial).sum() + (sim.trials - len(per_trial)))
         return impacts, params, {"gain_K": control.gain, "rate_c": control.rate,
-                                 "source": "simulated"}
+                                 "source": "simulated", "trials_lost": lost}
     impacts = read_impacts(config.data)
     # the model at the data's racket (section 7: "identical to the ones of the experiment");
     # alpha_0 and g from the config
@@ -351,7 +353,8 @@ def fit_inputs(config: ControlConfig) -> tuple[pd.DataFrame, ModelParams, dict]:
                  else params.racket_amplitude)
     data_params = ModelParams(params.alpha, params.g, amplitude,
                               float(impacts["racket_period_s"].mean()))
-    return impacts, data_params, {"gain_K": math.nan, "rate_c": math.nan, "source": "data"}
+    return impacts, data_params, {"gain_K": math.nan, "rate_c": math.nan, "source": "data",
+                                  "trials_lost": math.nan}
 
 
 def align_frame(impacts: pd.DataFrame, params: ModelParams, n_after: int) -> dict:
@@ -399,6 +402,7 @@ def fit_frames(config: ControlConfig, inputs=None) -> dict[str, pd.DataFrame]:
         ("reduced_chi2", "1", math.nan, fit.reduced_chi2, math.nan, math.nan),
         ("events_decrease", "count", math.nan, n_events.get("decrease", 0), math.nan, math.nan),
         ("events_increase", "count", math.nan, n_events.get("increase", 0), math.nan, math.nan),
+        ("trials_lost", "count", math.nan, truth["trials_lost"], math.nan, math.nan),
         ("model_alpha_0", "1", math.nan, params.alpha, math.nan, math.nan),
         ("model_racket_period", "s", math.nan, params.racket_period, math.nan, math.nan),
         ("model_racket_amplitude", "m", math.nan, params.racket_amplitude, math.nan, math.nan),
@@ -479,6 +483,13 @@ def summary_lines(frames: dict[str, pd.DataFrame]) -> list[str]:
                  f"[{fit.loc['rate_c', 'ci_low']:.4f}, {fit.loc['rate_c', 'ci_high']:.4f}]"
                  + (f" (truth K = {fit.loc['gain_K', 'truth']:g}, c = "
                     f"{fit.loc['rate_c', 'truth']:g})" if source == "simulated" else ""))
+    chi2, lost = fit.loc["reduced_chi2", "estimate"], fit.loc["trials_lost", "estimate"]
+    if chi2 > 3.0:
+        lines.append(f"fit: reduced chi2 = {chi2:.3g} >> 1: the controlled map does not describe "
+                     "these mean responses (see fit.csv, control_fit.png)")
+    if lost > 0:
+        lines.append(f"fit: {lost:g} simulated trial(s) lost the ball (cut there); responses "
+                     "close to a loss are far from the fixed point")
     return lines
 
 
@@ -600,7 +611,8 @@ def draw_impulse(frames):
         axes[2, col].axhline(0.0, color="k", lw=0.8, ls=":")
         axes[0, col].set_title(f"alpha_p {'<' if col == 0 else '>'} alpha_0")
         axes[2, col].set_xlabel("impact k after the perturbation (0 = perturbed impact)")
-        axes[0, col].legend(fontsize=7)
+        if group:
+            axes[0, col].legend(fontsize=7)
     axes[0, 0].set_ylabel("velocity after impact v_k (m/s)")
     axes[1, 0].set_ylabel("phase of impact theta_k (deg)")
     axes[2, 0].set_ylabel("racket period - tau_bar (ms)")
