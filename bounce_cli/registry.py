@@ -103,6 +103,8 @@ EXPERIMENTS: tuple[Entry, ...] = (
          ("control_impulse.png", "Fig. 9 with period control: passive (grey) and controlled "
           "(black) impulse responses, and the racket period per impact (the model's Fig. 11)."),
          ("control_basin.png", "Fig. 4 without and with racket period control."),
+         ("control_acf.png", "Fig. 8's correlation functions without and with racket period "
+          "control (VAR(1) theory and the controlled stochastic map)."),
          ("control_fit.png", "Fit of K and c to mean perturbation responses (simulated trials "
           "of a known controller, or --data).")),
         data_help="impacts.csv with perturbation events (trial, k, theta_rad, v_m_s, "

@@ -54,7 +54,7 @@ def test_frames_and_figures(result):
     assert sorted(result.frames) == sorted([
         "radius_map.csv", "radius_gain.csv", "radius_zoom.csv", "eigen.csv", "regions.csv",
         "impulse.csv", "relaxation.csv", "relaxation_gain.csv", "threshold.csv", "basin.csv",
-        "basin_fractions.csv", "fit.csv", "fit_responses.csv"])
+        "basin_fractions.csv", "fit.csv", "fit_responses.csv", "acf.csv"])
     fractions = result.frames["basin_fractions.csv"]
     for model, part in fractions.groupby("model"):
         assert part.fraction.sum() == pytest.approx(1.0)
@@ -210,3 +210,20 @@ def test_cli_bad_controller_is_one_line(tmp_path, setting, needle):
     result = runner.invoke(app, ["control", "--set", setting, "--out", str(tmp_path / "o")])
     assert result.exit_code == 2
     assert needle in result.stderr and "Traceback" not in result.output
+
+
+def test_correlations_theory_matches_the_controlled_stochastic_map(result):
+    """eq. 19 with the 3 x 3 Jacobian vs runs of the controlled map of eqs. 16-18 (same noise
+    covariance): within 3 standard errors plus 0.01 (the map is not linear)."""
+    acf = result.frames["acf.csv"]
+    gap = np.abs(acf.controlled_theory - acf.controlled_sample_mean)
+    assert (gap <= 3 * acf.controlled_sample_se + 0.01).all()
+    lag1 = acf[(acf.lag == 1) & (acf.pair == "v_v")].iloc[0]
+    assert lag1.passive_theory < -0.5 < 0 < lag1.controlled_theory  # control changes the sign
+
+
+def test_zero_gain_correlations_are_the_passive_ones():
+    cfg = load(["model.control.gain=0", "correlations.runs=2", "correlations.bounces=40"])
+    frame = exp.correlations_frame(cfg.params, cfg)
+    np.testing.assert_allclose(frame.controlled_theory, frame.passive_theory, rtol=1e-10,
+                               atol=1e-12)

@@ -30,10 +30,16 @@ from ..config import (
 )
 from ..engine import (
     OUTCOMES,
+    PAIR_NAMES,
+    ModelError,
     ModelParams,
+    jacobian,
+    map_noise_covariance,
     perturbed_velocity,
     phase_difference,
     relaxation_impacts,
+    sample_correlations,
+    var1_theory,
 )
 from ..engine.control import (
     PASSIVE,
@@ -117,6 +123,21 @@ class FitBlock(StrictModel):
     simulate: SimulateBlock = SimulateBlock()
 
 
+class CorrelationsBlock(StrictModel):
+    """Correlation functions (Fig. 8, eq. 19) of the stochastic map with and without control,
+    at this config's model: VAR(1) theory with the 2 x 2 / 3 x 3 Jacobian, checked against
+    long runs of the controlled stochastic map."""
+
+    q_v_m_s: float = Field(0.04, ge=0.0, description="velocity noise (section 6)")
+    q_theta_rad: float = Field(0.05, ge=0.0, description="phase noise (section 6)")
+    q_tau_s: float = Field(0.0, ge=0.0, description="racket period noise per impact")
+    max_lag: int = Field(10, ge=1)
+    runs: int = Field(40, ge=2, description="runs of the controlled map for the check")
+    bounces: int = Field(1000, ge=20, description="bounces per run after burn-in")
+    burn_in: int = Field(50, ge=0)
+    seed: int = Field(0, ge=0)
+
+
 class ControlConfig(ExperimentConfig):
     model: ControlledModelBlock = ControlledModelBlock()
     radius: RadiusBlock = RadiusBlock()
@@ -126,6 +147,7 @@ class ControlConfig(ExperimentConfig):
     classify: ControlClassifyBlock = ControlClassifyBlock()
     basin: BasinGridBlock = BasinGridBlock()
     fit: FitBlock = FitBlock()
+    correlations: CorrelationsBlock = CorrelationsBlock()
     data: Optional[str] = Field(None, description="impacts.csv of perturbation trials to fit")
 
 
@@ -289,6 +311,56 @@ def basin_frames(params: ModelParams, config: ControlConfig,
             "basin_fractions.csv": pd.DataFrame(fractions)}
 
 
+# -- correlation functions with control (Fig. 8) -------------------------------------------------
+def correlations_frame(params: ModelParams, config: ControlConfig) -> pd.DataFrame:
+    """acf.csv: per lag and pair (``engine.PAIR_NAMES``), the VAR(1) correlation functions
+    (eq. 19) of the passive map (2 x 2 J, eq. 9) and of the controlled one (3 x 3 Jacobian,
+    the period's noise q_tau), both with the noise covariance the map of eqs. 16-18 induces
+    (``engine.map_noise_covariance``, phase noise inside cos(theta_{k+1})), and the sample
+    correlations (mean and standard error over runs) of the controlled stochastic map."""
+    block = config.correlations
+    controller = config.model.control.controller()
+    noise2 = map_noise_covariance(params, block.q_v_m_s, block.q_theta_rad, "theta")
+    noise3 = np.zeros((3, 3))
+    noise3[:2, :2], noise3[2, 2] = noise2, block.q_tau_s**2
+    passive = var1_theory(jacobian(params), noise2, block.max_lag)
+    try:
+        controlled = var1_theory(controlled_jacobian(params, controller), noise3, block.max_lag)
+    except ModelError:  # unstable with this controller: no stationary correlations
+        controlled = None
+    n = block.burn_in + block.bounces
+    sim = simulate_perturbation_trials(
+        params, controller, n_trials=block.runs, impacts_per_trial=n, perturb_every=n + 1,
+        velocity_noise_sd=block.q_v_m_s, phase_noise_sd=block.q_theta_rad,
+        period_noise_sd=block.q_tau_s, seed=block.seed)
+    complete = pd.Series(sim["trial"]).value_counts()
+    keep = np.isin(sim["trial"], complete.index[complete.to_numpy() == n])
+    v = sim["v_m_s"][keep].reshape(-1, n)[:, block.burn_in:]
+    theta = sim["theta_rad"][keep].reshape(-1, n)[:, block.burn_in:]
+    runs = v.shape[0]
+    sample = (sample_correlations(v, phase_difference(theta, params.fixed_point().theta_rad),
+                                  block.max_lag) if runs >= 2 else None)
+    rows = []
+    for name in PAIR_NAMES:
+        for lag in range(block.max_lag + 1):
+            rows.append({
+                "pair": name, "lag": lag,
+                "passive_theory": passive.correlations[name][lag],
+                "controlled_theory": (controlled.correlations[name][lag] if controlled
+                                      else math.nan),
+                "controlled_sample_mean": (sample[name][:, lag].mean() if sample else math.nan),
+                "controlled_sample_se": (sample[name][:, lag].std(ddof=1) / math.sqrt(runs)
+                                         if sample else math.nan),
+                "runs": runs,
+                "passive_sd_v_m_s": passive.sd_v_m_s,
+                "controlled_sd_v_m_s": controlled.sd_v_m_s if controlled else math.nan,
+                "passive_sd_theta_deg": math.degrees(passive.sd_theta_rad),
+                "controlled_sd_theta_deg": (math.degrees(controlled.sd_theta_rad)
+                                            if controlled else math.nan),
+            })
+    return pd.DataFrame(rows)
+
+
 # -- fit of K and c to perturbation trials ------------------------------------------------------
 DATA_COLUMNS = ("trial", "k", "theta_rad", "v_m_s", "racket_period_s", "perturbed")
 
@@ -443,6 +515,7 @@ def run(config: ControlConfig, options: RunOptions) -> ExperimentResult:
     frames["threshold.csv"] = threshold_frame(params, config)
     options.progress.advance(1)
     frames.update(basin_frames(params, config, options))
+    frames["acf.csv"] = correlations_frame(params, config)
     frames.update(fit_frames(config, fit_data))
     options.progress.advance(1)
     return ExperimentResult(frames=frames, figures=draw(frames), summary=summary_lines(frames))
@@ -502,7 +575,42 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     return {"control_stability.png": draw_stability(frames),
             "control_impulse.png": draw_impulse(frames),
             "control_basin.png": draw_basin(frames),
+            "control_acf.png": draw_acf(frames),
             "control_fit.png": draw_fit(frames)}
+
+
+def draw_acf(frames):
+    from ..plotting import new_figure
+
+    df = frames["acf.csv"]
+    panels = {(0, 0): ("v_v", "ACF of velocity: corr(v[k+l], v[k])"),
+              (0, 1): ("theta_to_v", "phase -> velocity: corr(v[k+l], theta[k])"),
+              (1, 0): ("v_to_theta", "velocity -> phase: corr(theta[k+l], v[k])"),
+              (1, 1): ("theta_theta", "ACF of phase: corr(theta[k+l], theta[k])")}
+    fig, axes = new_figure(2, 2, width=11.0, height=7.5, sharex=True)
+    first = df.iloc[0]
+    for (r, c), (pair, title) in panels.items():
+        ax = axes[r, c]
+        d = df[df.pair == pair].sort_values("lag")
+        ax.plot(d.lag, d.passive_theory, "o-", color="0.6", ms=4,
+                label=f"passive, eq. 19 (SD v {first.passive_sd_v_m_s:.3f} m/s, "
+                      f"theta {first.passive_sd_theta_deg:.2f} deg)")
+        ax.plot(d.lag, d.controlled_theory, "o-", color="k", ms=4,
+                label=f"controlled, eq. 19 with the 3x3 Jacobian (SD v "
+                      f"{first.controlled_sd_v_m_s:.3f} m/s, theta "
+                      f"{first.controlled_sd_theta_deg:.2f} deg)")
+        ax.errorbar(d.lag, d.controlled_sample_mean, yerr=2 * d.controlled_sample_se, fmt="x",
+                    color="tab:red", ms=6, label=f"controlled map, {int(first.runs)} runs "
+                    "(+-2 SE)")
+        ax.axhline(0.0, color="k", lw=0.6)
+        ax.set_title(title, fontsize=10)
+        ax.set_ylabel("correlation")
+    for ax in axes[1]:
+        ax.set_xlabel("lag l (bounces)")
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle("Correlation functions (paper Fig. 8) without and with racket period control, "
+                 "at the config's model")
+    return fig
 
 
 def _radius_image(ax, frame: pd.DataFrame, target: float, levels_extra=(0.5,)):
