@@ -19,6 +19,7 @@ import typing
 from pathlib import Path
 from typing import Annotated, Any, NoReturn, Optional
 
+import numpy as np
 import typer
 from rich.console import Console
 from rich.table import Table
@@ -242,11 +243,22 @@ def resolve_config_path(config: Path | None, name: str) -> Path:
     return config if config is not None else bundled_config_path(name)
 
 
-def warn_if_unstable(params: ModelParams) -> None:
+def warn_if_unstable(params: ModelParams, controller=None) -> None:
     """A one-line warning on stderr when the period-1 fixed point exists but is linearly
-    unstable (eq. 10): the figures then describe an orbit nothing converges to.
+    unstable (eq. 10; with racket period control the 3 x 3 Jacobian of engine.control): the
+    figures then describe an orbit nothing converges to.
     Raises NoFixedPointError when there is no fixed point at all."""
     from .engine import flip_boundary_g
+
+    if controller is not None:
+        from .engine.control import controlled_jacobian, spectral_radius_3x3
+
+        radius = float(spectral_radius_3x3(controlled_jacobian(params, controller)))
+        if not radius < 1.0:
+            print(f"bounce: warning: the period-1 fixed point is linearly unstable with this "
+                  f"racket period control (model.control: spectral radius {radius:.3g} of the "
+                  f"3 x 3 Jacobian)", file=sys.stderr)
+        return
 
     st = stability(params)
     if not st.stable:
@@ -281,7 +293,9 @@ def run_experiment(
             typer.echo(to_yaml(cfg), nl=False)
             return
         if entry.needs_fixed_point and getattr(cfg, "data", None) is None:
-            warn_if_unstable(cfg.params)  # with --data the model is taken at the data's racket
+            # with --data the model is taken at the data's racket, not the config's
+            controller = getattr(cfg.model, "controller", lambda: None)()
+            warn_if_unstable(cfg.params, controller)
         name = path.stem if config is not None else entry.name
         data_file = getattr(cfg, "data", None)
         run_dir = RunDirectory(
@@ -333,6 +347,12 @@ def load_model(config: Path | None, overrides: list[str] | None, *,
     """The ``model`` block of a config (any experiment's; other blocks are ignored here).
     With ``need_fixed_point``, parameters without a period-1 fixed point (eq. 8) are a user
     error; the map itself (``orbit``) is defined at any valid parameters."""
+    return load_model_block(config, overrides, need_fixed_point=need_fixed_point).to_params()
+
+
+def load_model_block(config: Path | None, overrides: list[str] | None, *,
+                     need_fixed_point: bool = True):
+    """``load_model``'s validated block, with its ``control`` (racket period control)."""
     path = resolve_config_path(config, "model")
     overrides = list(overrides or [])
     for text in overrides:
@@ -341,10 +361,9 @@ def load_model(config: Path | None, overrides: list[str] | None, *,
             raise ConfigError(f"--set {'.'.join(keys)}: this command only uses the model block")
     data = apply_overrides(read_yaml(path), overrides)
     cfg = validate(ModelOnlyConfig, {"model": data.get("model") or {}}, str(path), overrides)
-    params = cfg.params
     if need_fixed_point:
-        params.fixed_point()
-    return params
+        cfg.params.fixed_point()
+    return cfg.model
 
 
 def _model_or_fail(config: Path | None, overrides: list[str] | None, *,
@@ -420,10 +439,21 @@ def orbit_command(
     overrides: SetOption = None,
     as_csv: Annotated[bool, typer.Option("--csv", help="Write CSV to stdout.")] = False,
 ) -> None:
-    """Iterate the map (eqs. 5, 6) from one initial condition, at any parameters."""
-    params = _model_or_fail(config, overrides, need_fixed_point=False)
+    """Iterate the map (eqs. 5, 6) from one initial condition, at any parameters (with
+    model.control: the racket period as a third state, engine.control)."""
+    try:
+        block = load_model_block(config, overrides, need_fixed_point=False)
+        params, controller = block.to_params(), block.controller()
+        if controller is not None:
+            params.fixed_point()  # the controller steers toward the period-1 orbit
+    except USER_ERRORS as exc:
+        fail(str(exc))
     if not (math.isfinite(theta0_deg) and math.isfinite(v0)):
         fail("--theta0-deg and --v0 must be finite numbers")
+    if controller is not None:
+        controlled_orbit_output(math.radians(theta0_deg), v0, params, controller, n_impacts,
+                                min_hop_s, as_csv)
+        return
     orbit = iterate_orbit(math.radians(theta0_deg), v0, params, n_impacts, min_hop_s)
     rows = orbit_rows(orbit, params)
     if as_csv:
@@ -446,6 +476,39 @@ def orbit_command(
         Console().print(table)
     for note in orbit_notes(orbit, params, min_hop_s):
         print(note, file=sys.stderr)
+
+
+def controlled_orbit_output(theta0, v0, params, controller, n_impacts, min_hop_s,
+                            as_csv) -> None:
+    """``bounce orbit`` with racket period control: the passive columns plus
+    ``racket_period_s`` (the period of the flight ending at each impact)."""
+    import pandas as pd
+
+    from .engine.control import iterate_controlled_orbit
+
+    orbit = iterate_controlled_orbit(theta0, v0, params, controller, n_impacts,
+                                     min_hop_s)
+    frame = pd.DataFrame({"k": np.arange(len(orbit.theta)), "t_s": orbit.t_s,
+                          "theta_rad": orbit.theta,
+                          "theta_deg": np.degrees(wrap_phase(orbit.theta)), "v_m_s": orbit.v,
+                          "flight_s": orbit.flight_s, "racket_period_s": orbit.tau})
+    if as_csv:
+        frame.to_csv(sys.stdout, index=False, lineterminator="\n")
+    else:
+        table = Table(title=f"Orbit with racket period control from theta0 = "
+                            f"{math.degrees(theta0):g} deg, v0 = {v0:g} m/s")
+        for col in frame.columns:
+            table.add_column(col, justify="right")
+        for row in frame.itertuples(index=False):
+            table.add_row(str(row.k), *("" if math.isnan(x) else f"{x:.5f}" for x in row[1:]))
+        Console().print(table)
+    if orbit.stop_reason == "below_racket":
+        print(f"note: stopped: the initial velocity {v0:g} m/s is not above the racket's "
+              f"velocity at that phase (below the racket)", file=sys.stderr)
+    elif orbit.stop_reason == "sticking":
+        print(f"note: stopped at impact {len(orbit.theta) - 1}: the hop lasted "
+              f"{orbit.flight_s[-1]:.3g} s < {min_hop_s:g} s, or the ball could not "
+              f"leave the racket (sticking)", file=sys.stderr)
 
 
 def orbit_rows(orbit, params: ModelParams) -> list[dict]:

@@ -10,10 +10,18 @@ import copy
 import typing
 from importlib import resources
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import Any, Literal, Optional, TypeVar
 
 import yaml
-from pydantic import AliasChoices, BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import (
+    AliasChoices,
+    BaseModel,
+    ConfigDict,
+    Field,
+    ValidationError,
+    field_validator,
+    model_serializer,
+)
 
 from .engine.classify import ClassifySettings
 from .engine.params import ModelParams
@@ -70,6 +78,40 @@ class ModelBlock(StrictModel):
         return ModelParams(self.alpha, self.g, self.racket_amplitude, self.racket_period)
 
 
+class ControlBlock(StrictModel):
+    """Racket period control (``engine.control``, the paper's future work, sections 7-8):
+    tau_{k+1} = tau_k + c (tau_bar + K 2 (v_k - v~) / g - tau_k), tau_bar = racket_period."""
+
+    kind: Literal["period"] = Field("period", description="controller (engine.control)")
+    gain: float = Field(description="K: 1 = the period follows the ball's flight time in full")
+    rate: float = Field(1.0, ge=0.0, le=2.0,
+                        description="c per impact: 1 = immediate, 0 = never; > 1 overshoots")
+
+    def controller(self):
+        from .engine.control import CONTROLLERS
+
+        return CONTROLLERS[self.kind](self.gain, self.rate)
+
+
+class ControllableModelBlock(ModelBlock):
+    """The model block of a command that iterates the map: ``control`` (default none, the
+    passive map) makes the racket period a state. A config without it dumps exactly as
+    before (``run.json`` of passive runs is unchanged)."""
+
+    control: Optional[ControlBlock] = Field(None, description="racket period control")
+
+    @model_serializer(mode="wrap")
+    def _passive_without_control(self, handler):
+        data = handler(self)
+        if self.control is None:
+            data.pop("control", None)
+        return data
+
+    def controller(self):
+        """The engine controller, or None for the passive map."""
+        return None if self.control is None else self.control.controller()
+
+
 #: section 3's stopping conditions as the engine defines them (the one place of the defaults)
 _SECTION3 = ClassifySettings()
 
@@ -104,6 +146,8 @@ class ExperimentConfig(StrictModel):
 
 class ModelOnlyConfig(ExperimentConfig):
     """A config holding just the model block (used by ``fixed-point`` and ``orbit``)."""
+
+    model: ControllableModelBlock = ControllableModelBlock()
 
 
 C = TypeVar("C", bound=BaseModel)

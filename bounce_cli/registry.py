@@ -138,6 +138,23 @@ EXPERIMENTS: tuple[Entry, ...] = (
           "(eq. 8) and flip (eq. 14) thresholds, and the largest Lyapunov exponent below."),),
         needs_fixed_point=False,
     ),
+    Entry(
+        "control",
+        "Racket period as a third state (active period control, sections 7-8's future work).",
+        (("control_stability.png", "Sections 7-8 (future work): spectral radius of the map "
+          "with racket period control over gain K and rate c (and around its minimum); along K "
+          "at c = 1 the radius and the full map's impacts to relax after section 7's "
+          "perturbations."),
+         ("control_impulse.png", "Fig. 9 with period control: passive (grey) and controlled "
+          "(black) impulse responses, and the racket period per impact (the model's Fig. 11)."),
+         ("control_basin.png", "Fig. 4 without and with racket period control."),
+         ("control_acf.png", "Fig. 8's correlation functions without and with racket period "
+          "control (VAR(1) theory and the controlled stochastic map)."),
+         ("control_fit.png", "Fit of K and c to mean perturbation responses (simulated trials "
+          "of a known controller, or --data).")),
+        data_help="impacts.csv with perturbation events (trial, k, theta_rad, v_m_s, "
+        "racket_period_s, perturbed; optional alpha): fit K and c to it (sets `data`).",
+    ),
 )
 
 BY_NAME: dict[str, Entry] = {entry.name: entry for entry in EXPERIMENTS}

@@ -179,7 +179,7 @@ class SweepSettings:
     transient_impacts: discarded. measured_impacts: after the transient; the Lyapunov exponent
     is their mean log growth. recorded_impacts: the last ones of the measured impacts, kept
     (v, wrapped theta) for the diagram and the period (>= 2 max_period). period_tolerance:
-    m/s and rad. sticking_interval_s: a shorter hop is sticking (section 3). chaos_threshold:
+    m/s and rad. min_hop_s: a shorter hop is sticking (section 3). chaos_threshold:
     an orbit without a period is chaotic when its exponent (per impact) exceeds this.
     """
 
@@ -188,7 +188,7 @@ class SweepSettings:
     recorded_impacts: int = 64
     max_period: int = 32
     period_tolerance: float = 1e-6
-    sticking_interval_s: float = 1e-3
+    min_hop_s: float = 1e-3
     chaos_threshold: float = 0.0
 
     def __post_init__(self) -> None:
@@ -256,7 +256,7 @@ def iterate_sweep(
                 v_rec[idx, k - first_recorded] = vv
                 theta_rec[idx, k - first_recorded] = th
             # a NaN hop (the ball cannot leave after the impact: alpha = 0) is sticking too
-            stuck = ~(hop / pars.omega >= settings.sticking_interval_s)
+            stuck = ~(hop / pars.omega >= settings.min_hop_s)
             if stuck.any():
                 stuck_at[idx[stuck]] = k
                 keep = ~stuck

@@ -59,7 +59,7 @@ def simulate_impacts(
     *,
     alpha: np.ndarray | None = None,
     burn_in: int = 20,
-    sticking_interval_s: float = 1e-3,
+    min_hop_s: float = 1e-3,
 ) -> SimulatedImpacts:
     """Iterate eqs. 16-18 (cos(theta_{k+1}) in eq. 16, as printed and as ``map_step``) for
     ``n_trials`` independent trials of ``n_bounces`` impacts after ``burn_in``, all trials at
@@ -93,7 +93,7 @@ def simulate_impacts(
         theta_next = theta + hop + q_theta * noise[step, :, 1]
         v_next = (velocity_after_impact(theta_next, v, hop, params, alpha=a)
                   + q_v * noise[step, :, 0])
-        bad = ~(hop >= sticking_interval_s * w) | ~np.isfinite(v_next)
+        bad = ~(hop >= min_hop_s * w) | ~np.isfinite(v_next)
         lost |= bad
         theta = np.where(lost, fp.theta_rad + 2 * math.pi * (step + 1), theta_next)
         v = np.where(lost, fp.v_m_s, v_next)

@@ -77,12 +77,19 @@ def relaxation_impacts(dv, dtheta, tol_v: float, tol_theta: float) -> int:
 
 # -- where the perturbed response goes (section 3's criteria) ----------------------------------
 def perturbed_outcome(params: ModelParams, alpha_p: float,
-                      settings: ClassifySettings = ClassifySettings()) -> tuple[str, int]:
+                      settings: ClassifySettings = ClassifySettings(), *,
+                      controller=None) -> tuple[str, int]:
     """Where the full map from (theta~, v_0(alpha_p)) ends with section 3's criteria (the
     basin's classifier, ``classify_batch``): ``period1`` | ``sticking`` | ``below_racket`` |
-    ``undecided``, and the number of impacts until it was decided."""
-    result = classify_batch(params.fixed_point().theta_rad, perturbed_velocity(params, alpha_p),
-                            params, settings)
+    ``undecided``, and the number of impacts until it was decided. With a racket period
+    ``controller`` (``engine.control``), the controlled map's outcome."""
+    theta0, v0 = params.fixed_point().theta_rad, perturbed_velocity(params, alpha_p)
+    if controller is not None:
+        from .control import classify_controlled  # control builds on this module
+
+        result = classify_controlled(theta0, v0, params, controller, settings)
+    else:
+        result = classify_batch(theta0, v0, params, settings)
     return OUTCOMES[int(result.outcome)], int(result.iterations)
 
 
@@ -106,7 +113,7 @@ class Threshold:
 
 def find_threshold(
     params: ModelParams, direction: int, settings: ClassifySettings = ClassifySettings(), *,
-    scan_step: float, bisection_tolerance: float, alpha_p_max: float,
+    scan_step: float, bisection_tolerance: float, alpha_p_max: float, controller=None,
 ) -> Threshold:
     """Scan alpha_p away from alpha_0 = params.alpha (``direction`` +1: up to ``alpha_p_max``,
     -1: down to 0) in steps of ``scan_step`` until the full response leaves the period-1
@@ -121,7 +128,7 @@ def find_threshold(
     end = alpha_p_max if direction > 0 else 0.0
 
     def outcome(a: float) -> str:
-        return perturbed_outcome(params, a, settings)[0]
+        return perturbed_outcome(params, a, settings, controller=controller)[0]
 
     # steps that fit between alpha_0 and the end, the end included: 0.1 / 0.01 is
     # 9.999999999999998 in floating point, so a plain int() would drop the last step

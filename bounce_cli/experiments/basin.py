@@ -17,8 +17,15 @@ import pandas as pd
 from pydantic import Field, model_validator
 
 from .. import paper, parallel
-from ..config import ClassifyBlock, ConfigError, ExperimentConfig, StrictModel
+from ..config import (
+    ClassifyBlock,
+    ConfigError,
+    ControllableModelBlock,
+    ExperimentConfig,
+    StrictModel,
+)
 from ..engine.classify import OUTCOMES, ClassifySettings, classify_batch, classify_grid
+from ..engine.control import is_passive
 from ..engine.params import ModelParams
 from ..plotting import caption_figures
 from .base import Experiment, ExperimentResult, RunOptions
@@ -81,6 +88,7 @@ class LimitsBlock(StrictModel):
 
 
 class BasinConfig(ExperimentConfig):
+    model: ControllableModelBlock = ControllableModelBlock()
     grid: GridBlock = GridBlock()
     classify: ClassifyBlock = ClassifyBlock()
     limits: LimitsBlock = LimitsBlock()
@@ -110,12 +118,21 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
     theta_grid_rad = np.deg2rad(theta_grid_deg)
 
     options.progress.start(n_points, "basin: classifying")
-    jobs = options.jobs if n_points >= POOL_MIN_POINTS else 1
-    with parallel.executor(jobs) as executor:
-        result = classify_grid(
-            theta_grid_rad.ravel(), v_grid.ravel(), params, settings,
-            map=executor.map, workers=executor.workers, on_tile_done=options.progress.advance,
-        )
+    controller = config.model.controller()
+    if controller is None:
+        jobs = options.jobs if n_points >= POOL_MIN_POINTS else 1
+        with parallel.executor(jobs) as executor:
+            result = classify_grid(
+                theta_grid_rad.ravel(), v_grid.ravel(), params, settings,
+                map=executor.map, workers=executor.workers,
+                on_tile_done=options.progress.advance,
+            )
+    else:  # racket period control (engine.control): in this process
+        from ..engine.control import classify_controlled_grid
+
+        result = classify_controlled_grid(theta_grid_rad.ravel(), v_grid.ravel(), params,
+                                          controller, settings,
+                                          on_tile_done=options.progress.advance)
     basin = pd.DataFrame(
         {
             "theta0_rad": theta_grid_rad.ravel(),
@@ -130,8 +147,8 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
     fractions = pd.DataFrame(
         {"outcome": list(OUTCOMES), "count": counts, "fraction": counts / n_points}
     )
-    at_paper = at_paper_parameters(params, settings)
-    markers = marker_frame(params, settings, fig3=at_paper)
+    at_paper = is_passive(controller) and at_paper_parameters(params, settings)
+    markers = marker_frame(params, settings, fig3=at_paper, controller=controller)
 
     frames = {"basin.csv": basin, "fractions.csv": fractions, "markers.csv": markers}
     summary = [
@@ -168,16 +185,22 @@ def at_paper_parameters(params: ModelParams, settings: ClassifySettings) -> bool
 
 
 def marker_frame(params: ModelParams, settings: ClassifySettings, *,
-                 fig3: bool = True) -> pd.DataFrame:
+                 fig3: bool = True, controller=None) -> pd.DataFrame:
     """The fixed point (eqs. 7, 8) and, with ``fig3``, Fig. 3's two initial conditions (the
-    ball on the racket at x_b(0) = 0.205 m, theta0 = asin(x_b(0) / a_r)), each classified."""
+    ball on the racket at x_b(0) = 0.205 m, theta0 = asin(x_b(0) / a_r)), each classified
+    (with the racket period controller, if any)."""
     fp = params.fixed_point()
     starts = paper.FIG3_V0_M_S if fig3 else {}
     names = ["fixed_point", *starts]
     theta0 = math.asin(paper.FIG3_BALL_HEIGHT_M / params.racket_amplitude) if fig3 else 0.0
     theta = np.array([fp.theta_rad] + [theta0] * len(starts))
     v = np.array([fp.v_m_s, *starts.values()])
-    res = classify_batch(theta, v, params, settings)
+    if controller is None:
+        res = classify_batch(theta, v, params, settings)
+    else:
+        from ..engine.control import classify_controlled
+
+        res = classify_controlled(theta, v, params, controller, settings)
     return pd.DataFrame(
         {
             "marker": names,

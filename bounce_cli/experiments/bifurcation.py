@@ -70,7 +70,7 @@ class IterateBlock(StrictModel):
     recorded_impacts: int = Field(64, ge=2, description="last measured impacts kept")
     max_period: int = Field(32, ge=1, description="longest period detected")
     period_tolerance: float = Field(1e-6, gt=0.0, description="m/s and rad")
-    sticking_interval_s: float = Field(1e-3, ge=0.0, description="s, shortest hop not sticking")
+    min_hop_s: float = Field(1e-3, ge=0.0, description="s, shortest hop not sticking")
     chaos_threshold: float = Field(0.01, ge=0.0, description="per impact")
 
     @model_validator(mode="after")

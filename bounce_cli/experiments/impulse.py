@@ -14,7 +14,7 @@ import pandas as pd
 from pydantic import Field
 
 from .. import paper
-from ..config import ClassifyBlock, ExperimentConfig, StrictModel
+from ..config import ClassifyBlock, ControllableModelBlock, ExperimentConfig, StrictModel
 from ..engine.impulse import (
     find_threshold,
     impulse_response_full,
@@ -23,6 +23,7 @@ from ..engine.impulse import (
     perturbed_velocity,
     relaxation_impacts,
 )
+from ..engine.control import is_passive
 from ..engine.linear import stability
 from ..engine.params import ModelParams
 from ..plotting import caption_figures
@@ -47,6 +48,7 @@ class ThresholdBlock(StrictModel):
 
 
 class ImpulseConfig(ExperimentConfig):
+    model: ControllableModelBlock = ControllableModelBlock()
     alpha_p: list[Annotated[float, Field(ge=0.0, lt=1.0)]] = Field(
         [*paper.ALPHA_P_SIMULATED, *paper.ALPHA_P_EXPERIMENT], min_length=1)
     iterations: int = Field(10, ge=1, description="impacts after the perturbed one, shown")
@@ -62,12 +64,13 @@ def threshold_row(params: ModelParams, direction: int, config: ImpulseConfig) ->
     """threshold.csv's row for one direction: the engine's ``find_threshold`` and the paper's
     value beside it (only upwards, and only at the paper's parameters)."""
     block = config.threshold
+    controller = config.model.controller()
     found = find_threshold(params, direction, config.classify.settings(),
                            scan_step=block.scan_step,
                            bisection_tolerance=block.bisection_tolerance,
-                           alpha_p_max=block.alpha_p_max)
-    quoted = (paper.ALPHA_P_THRESHOLD.value if direction > 0 and at_paper_parameters(params)
-              else math.nan)
+                           alpha_p_max=block.alpha_p_max, controller=controller)
+    passive_paper = is_passive(controller) and at_paper_parameters(params)
+    quoted = paper.ALPHA_P_THRESHOLD.value if direction > 0 and passive_paper else math.nan
     return {"direction": "increase" if direction > 0 else "decrease",
             "paper_alpha_p": quoted} | dataclasses.asdict(found)
 
@@ -77,22 +80,37 @@ def at_paper_parameters(params: ModelParams) -> bool:
     return paper.at_parameters(params, paper.FIG3_MODEL)
 
 
-def linear_outcome(params: ModelParams) -> str:
-    """The linear map y_{k+1} = J y_k returns to the fixed point iff J is stable."""
+def linear_outcome(params: ModelParams, controller=None) -> str:
+    """The linear map y_{k+1} = J y_k returns to the fixed point iff J is stable (with a
+    controller: the 3 x 3 Jacobian of ``engine.control``)."""
+    if controller is not None:
+        from ..engine.control import controlled_jacobian, spectral_radius_3x3
+
+        radius = float(spectral_radius_3x3(controlled_jacobian(params, controller)))
+        return "period1" if radius < 1.0 else "diverges"
     return "period1" if stability(params).stable else "diverges"
 
 
 # -- tables ---------------------------------------------------------------------------------
-def responses(params: ModelParams, alpha_p: float, n: int):
+def responses(params: ModelParams, alpha_p: float, n: int, controller=None):
+    if controller is not None:  # racket period control (model.control)
+        from ..engine.control import (
+            controlled_impulse_response,
+            controlled_impulse_response_linear,
+        )
+
+        return {"full": controlled_impulse_response(params, controller, alpha_p, n),
+                "linear": controlled_impulse_response_linear(params, controller, alpha_p, n)}
     return {"full": impulse_response_full(params, alpha_p, n),
             "linear": impulse_response_linear(params, alpha_p, n)}
 
 
 def impulse_frame(params: ModelParams, config: ImpulseConfig, outcomes: dict) -> pd.DataFrame:
-    linear = linear_outcome(params)
+    controller = config.model.controller()
+    linear = linear_outcome(params, controller)
     rows = []
     for ap in config.alpha_p:
-        for model, r in responses(params, ap, config.iterations).items():
+        for model, r in responses(params, ap, config.iterations, controller).items():
             for k in range(config.iterations + 1):
                 rows.append({
                     "alpha_p": ap, "model": model, "k": k, "v_m_s": r.v[k],
@@ -108,14 +126,16 @@ def relaxation_frame(params: ModelParams, config: ImpulseConfig, outcomes: dict)
     tol_theta = math.radians(rel.tolerance_theta_deg)
     fp = params.fixed_point()
     rows = []
+    controller = config.model.controller()
+    linear = linear_outcome(params, controller)
     for ap in config.alpha_p:
-        for model, r in responses(params, ap, rel.max_impacts).items():
+        for model, r in responses(params, ap, rel.max_impacts, controller).items():
             shown = slice(1, config.iterations + 1)
             rows.append({
                 "alpha_p": ap, "model": model,
                 "v0_m_s": perturbed_velocity(params, ap),
                 "dv0_m_s": perturbed_velocity(params, ap) - fp.v_m_s,
-                "outcome": outcomes[ap][0] if model == "full" else linear_outcome(params),
+                "outcome": outcomes[ap][0] if model == "full" else linear,
                 "relaxation_impacts": relaxation_impacts(r.dv, r.dtheta, rel.tolerance_v_m_s,
                                                          tol_theta),
                 "sum_abs_dv_m_s": float(np.nansum(np.abs(r.dv[shown]))),
@@ -145,7 +165,8 @@ def run(config: ImpulseConfig, options: RunOptions) -> ExperimentResult:
     options.progress.start(len(config.alpha_p) + 2, "impulse responses")
     outcomes = {}
     for ap in config.alpha_p:
-        outcomes[ap] = perturbed_outcome(params, ap, config.classify.settings())
+        outcomes[ap] = perturbed_outcome(params, ap, config.classify.settings(),
+                                         controller=config.model.controller())
         options.progress.advance(1)
     thresholds = []
     for direction in (+1, -1):
