@@ -75,6 +75,23 @@ def threshold_row(params: ModelParams, direction: int, config: ImpulseConfig) ->
             "paper_alpha_p": quoted} | dataclasses.asdict(found)
 
 
+def exit_line(row: dict, scan_end: float, paper_note: str) -> str:
+    """One direction of threshold.csv in words: where the response leaves the basin, or that
+    the scan never left it."""
+    side = "above" if row["direction"] == "increase" else "below"
+    if not math.isfinite(row["alpha_p_threshold"]):
+        return (f"stays in the period-1 basin for every alpha_p {side} alpha_0 scanned "
+                f"(to {scan_end:g}){paper_note}")
+    return (f"leaves the period-1 basin {side} alpha_p = {row['alpha_p_threshold']:.4f} "
+            f"(v_0 = {row['v0_threshold_m_s']:.3f} m/s, then {row['outcome_outside']}"
+            f"{paper_note})")
+
+
+def relaxed_text(impacts: int, horizon: int) -> str:
+    """relaxation.csv's count in words (-1 there: not back within the horizon)."""
+    return str(impacts) if impacts >= 0 else f"not within {horizon}"
+
+
 def at_paper_parameters(params: ModelParams) -> bool:
     """The paper's perturbation model (alpha_0 = 0.5, a_r = 0.30 m, tau = 0.92 s, section 7)."""
     return paper.at_parameters(params, paper.FIG3_MODEL)
@@ -179,24 +196,23 @@ def run(config: ImpulseConfig, options: RunOptions) -> ExperimentResult:
     }
     up = thresholds[0]
     rel = frames["relaxation.csv"]
-    at_paper = at_paper_parameters(params)
-    summary = [
-        f"leaves the period-1 basin above alpha_p = {up['alpha_p_threshold']:.4f} "
-        f"(v_0 = {up['v0_threshold_m_s']:.3f} m/s, then {up['outcome_outside']}"
-        + (f"; paper: about {paper.ALPHA_P_THRESHOLD.text}" if at_paper else "")
-        + f"); below alpha_p = {thresholds[1]['alpha_p_threshold']:.4f}",
-    ]
+    at_paper = is_passive(config.model.controller()) and at_paper_parameters(params)
+    summary = [exit_line(up, config.threshold.alpha_p_max,
+                         f"; paper: about {paper.ALPHA_P_THRESHOLD.text}" if at_paper else "")
+               + "; " + exit_line(thresholds[1], 0.0, "")]
     if at_paper:
         summary.append(
             f"alpha_p = {paper.ALPHA_P_FIG3:g}: v_0 = "
             f"{perturbed_velocity(params, paper.ALPHA_P_FIG3):.3f} m/s "
             f"(paper: {paper.V0_AT_ALPHA_P_FIG3})")
     else:
-        summary.append("(not the paper's section 7 parameters: no paper value to compare)")
+        summary.append("(not the paper's passive model at section 7's parameters: no paper value "
+                       "to compare)")
     for model in MODELS:
         part = rel[rel.model == model]
         summary.append(f"{model}: impacts to relax " + ", ".join(
-            f"{r.alpha_p:g}: {r.relaxation_impacts}" for r in part.itertuples()))
+            f"{r.alpha_p:g}: {relaxed_text(r.relaxation_impacts, config.relaxation.max_impacts)}"
+            for r in part.itertuples()))
     figures = draw(frames)
     caption_figures(figures, params)
     return ExperimentResult(frames=frames, figures=figures, summary=summary)

@@ -168,6 +168,11 @@ def read_trials(path_text: str) -> pd.DataFrame:
 
 
 # -- fit ----------------------------------------------------------------------------------
+#: tau^2 spanning less than this fraction of its mean determines no slope worth reporting
+#: (the paper's Fig. 7 spans about a factor 2); the fit is still written, with a warning
+NARROW_TAU2 = 0.01
+
+
 def fit_frame(trials: pd.DataFrame, config: RegressionConfig) -> pd.DataFrame:
     """fit.csv: one row per condition ("all" without a condition column); simulated trials
     that lost the ball are left out."""
@@ -228,6 +233,16 @@ def run(config: RegressionConfig, options: RunOptions) -> ExperimentResult:
                   "and are not fitted)")
     trials = trials.assign(tau2_s2=trials["tau_s"] ** 2)
     fit = fit_frame(trials, config)
+    fitted = trials[~trials["lost"].astype(bool)] if "lost" in trials.columns else trials
+    groups = (fitted.groupby("condition") if "condition" in fitted.columns
+              else [("all", fitted)])
+    for condition, group in groups:
+        spread = float(np.ptp(group["tau2_s2"]) / group["tau2_s2"].mean())
+        if spread < NARROW_TAU2:
+            options.warn(
+                f"condition {condition!r}: the trials' squared racket periods span only "
+                f"{spread:.2%} of their mean, so eq. 15's slope is not determined (fit "
+                "trials at different racket periods, e.g. different target heights)")
     figures = draw({"trials.csv": trials, "fit.csv": fit})
     if config.data is not None:
         caption_figures(figures, None, f"data: {config.data}")
