@@ -130,6 +130,27 @@ def read_manifest(out_dir: Path) -> dict[str, Any]:
     return data if isinstance(data, dict) else {}
 
 
+def files_named_in(config: Any) -> set[Path]:
+    """Every existing file a (resolved, JSON-like) config names in one of its string values,
+    resolved: the files a run reads (``data``, ``events``, ``truth``, ...)."""
+    found: set[Path] = set()
+    stack = [config]
+    while stack:
+        node = stack.pop()
+        if isinstance(node, dict):
+            stack.extend(node.values())
+        elif isinstance(node, (list, tuple)):
+            stack.extend(node)
+        elif isinstance(node, str) and node:
+            try:
+                path = Path(node)
+                if path.is_file():
+                    found.add(path.resolve())
+            except (OSError, ValueError):
+                pass
+    return found
+
+
 class RunDirectory:
     """Collects a run's outputs and commits them atomically into ``out_dir``."""
 
@@ -258,10 +279,13 @@ class RunDirectory:
                 for tmp, final in staged:
                     os.replace(tmp, final)
                 # files of the run this one replaces (listed in its manifest) that this run
-                # did not write: remove them, so the folder holds one run, as run.json says
+                # did not write: remove them, so the folder holds one run, as run.json says --
+                # except a file this run read (a --data file in the folder of the run that
+                # wrote it): a run never deletes its own input
+                inputs = files_named_in(self.resolved_config)
                 for name in set(self.previous.get("files", [])) - set(writers):
                     stale = self.out_dir / Path(name).name
-                    if stale.is_file():
+                    if stale.is_file() and stale.resolve() not in inputs:
                         stale.unlink()
         finally:
             for tmp, _ in staged:

@@ -131,3 +131,18 @@ def test_replacing_a_run_removes_the_files_only_the_old_run_wrote(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == ["both.csv", "notes.txt", "run.json",
                                                      "timing.json"]
     assert json.loads((out / "run.json").read_text())["files"] == ["both.csv"]
+
+
+def test_replacing_a_run_never_deletes_the_file_it_reads(tmp_path, cli):
+    """`--force` into the folder of the run that wrote the --data file: the old run's files
+    are replaced, but not the input the new run reads (the new-user review lost impacts.csv)."""
+    out = tmp_path / "lab"
+    first = cli("simulate-recording", "--set", "trials=1", "--set", "duration_s=8",
+                "--out", out, "--quiet")
+    assert first.exit_code == 0, first.output
+    recording = out / "recording.csv"
+    before = recording.read_bytes()
+    second = cli("extract", "--data", recording, "--out", out, "--force", "--quiet")
+    assert second.exit_code == 0, second.output
+    assert recording.read_bytes() == before
+    assert (out / "impacts.csv").is_file()
