@@ -18,6 +18,7 @@ from pydantic import Field, model_validator
 from ..config import ExperimentConfig, StrictModel
 from ..engine.recording import SessionSettings, simulate_session, truth_rows
 from ..impacts import EVENT_COLUMNS, REQUIRED_COLUMNS
+from ..plotting import caption_figures
 from .base import Experiment, ExperimentResult, RunOptions
 from .extract import centred_deg, draw_fig2
 
@@ -119,7 +120,10 @@ def run(config: RecordingConfig, options: RunOptions) -> ExperimentResult:
         f"{truth['v_m_s'].mean():.4f} m/s, mean theta = "
         f"{centred_deg(truth['theta_deg']).mean():.2f} deg"
     ]
-    return ExperimentResult(frames=frames, figures=draw(frames), summary=summary)
+    figures = draw(frames)
+    caption_figures(figures, config.params, f"{config.trials} trials x {config.duration_s:g} s, "
+                    f"{config.sample_rate_hz:g} Hz, seed {config.seed}")
+    return ExperimentResult(frames=frames, figures=figures, summary=summary)
 
 
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
