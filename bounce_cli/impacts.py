@@ -28,6 +28,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Union
 
 import numpy as np
 import pandas as pd
@@ -114,13 +115,25 @@ def _fail(path: Path, message: str) -> ConfigError:
     return ConfigError(f"data: {path}: {message}")
 
 
-def read_impacts(path_text: str | Path, needs: tuple[str, ...] = (), command: str = "",
+#: where an impacts table comes from: a CSV file, or (label, table) already in memory (a
+#: simulated lab session, ``experiments.lab``)
+ImpactsSource = Union[str, Path, tuple[str, pd.DataFrame]]
+
+
+def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: str = "",
                  min_bounces: int = 2) -> Impacts:
     """Read and check an impacts table (ours or a lab's own). Every problem is one line naming
     the file and the column, row or trial (ConfigError). ``needs``: the optional columns the
-    analysis ``command`` requires; ``min_bounces``: fewest impacts a trial may have."""
-    path = Path(path_text)
-    frame = read_data_csv(path)
+    analysis ``command`` requires; ``min_bounces``: fewest impacts a trial may have.
+    ``source`` may also be ``(label, frame)``: a table in memory, checked the same way (the
+    label stands for the file name in messages)."""
+    if isinstance(source, tuple):
+        label, frame = source
+        path = Path(label)
+        frame = frame.copy()
+    else:
+        path = Path(source)
+        frame = read_data_csv(path)
     who = f"bounce {command} needs" if command else "needed"
     missing = [c for c in CORE_COLUMNS if c not in frame.columns]
     if "theta_rad" not in frame.columns and "theta_deg" not in frame.columns:
