@@ -135,7 +135,8 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
                  ) -> tuple[dict[str, pd.DataFrame], list[str]]:
     """``source``: the impacts (default: the file ``config.data``)."""
     d = config.data_analysis
-    impacts = read_impacts(config.data if source is None else source, needs=MODEL_COLUMNS, command="acf --data",
+    impacts = read_impacts(config.data if source is None else source, needs=MODEL_COLUMNS,
+                           command="acf --data",
                            min_bounces=config.max_lag + 2)
     params = model_at_data(impacts, config.model.alpha, config.model.g)
     segments = stationary_segments(impacts, d.settle_after_perturbation, config.max_lag + 2)
@@ -417,7 +418,8 @@ def impulse_data_run(config, options, source: ImpactsSource | None = None
     """``source``: the impacts (default: the file ``config.data``)."""
     d = config.data_analysis
     needs = ("alpha", "perturbed", *MODEL_COLUMNS)
-    impacts = read_impacts(config.data if source is None else source, needs=needs, command="impulse --data", min_bounces=2)
+    impacts = read_impacts(config.data if source is None else source, needs=needs,
+                           command="impulse --data", min_bounces=2)
     frame = impacts.frame
     if not frame["perturbed"].any():
         raise ConfigError(f"data: {impacts.path}: column perturbed: no perturbed impact, nothing "

@@ -120,7 +120,7 @@ def lab_experiment(name: str, base: Experiment,
     extracts the session and hands the impacts to ``analyse(config, options, source)`` (the
     base's data path, as ``--data`` would)."""
 
-    class LabConfig(base.schema):  # type: ignore[name-defined, misc]
+    class LabConfig(base.schema):  # type: ignore[name-defined]
         lab: LabBlock = LabBlock()
 
         @model_validator(mode="after")

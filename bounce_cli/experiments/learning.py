@@ -83,7 +83,10 @@ def trial_table(config: LearningConfig, source=None) -> tuple[pd.DataFrame, floa
     """Per-trial statistics of the impacts table (``source``, default the file
     ``config.data``), in the file's order of trials (trial_number 1, 2, ...), and the data's
     mean racket period (NaN without that column)."""
-    impacts = read_impacts(config.data if source is None else source, needs=("racket_acc_g", "ball_apex_m"),
+    if source is None:
+        assert config.data is not None
+        source = config.data
+    impacts = read_impacts(source, needs=("racket_acc_g", "ball_apex_m"),
                            command="learning --data", min_bounces=config.min_bounces)
     rows = []
     for number, (trial, g) in enumerate(impacts.by_trial(), start=1):
