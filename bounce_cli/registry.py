@@ -134,7 +134,7 @@ EXPERIMENTS: tuple[Entry, ...] = (
     ),
     Entry(
         "learning-data",
-        "Fig. 6 on a synthetic lab: a learning series simulated, extracted, analysed as --data.",
+        "Fig. 6 on a synthetic lab: a learning series simulated, extracted and analysed.",
         (("learning.png", "Fig. 6 (section 5) on a simulated lab session: a learning series of "
           "racket amplitudes (AC from -0.25 to -0.75 g), recorded, extracted and analysed as "
           "`bounce learning --data`; per-trial AC and SD of ball amplitude beside eq. 19."),),
@@ -150,7 +150,7 @@ EXPERIMENTS: tuple[Entry, ...] = (
     ),
     Entry(
         "acf-data",
-        "Fig. 8 on a synthetic lab: steady bouncing simulated, extracted, analysed as --data.",
+        "Fig. 8 on a synthetic lab: steady bouncing simulated, extracted and analysed.",
         (("acf_data.png", "Fig. 8 (section 6) on a simulated lab session at Fig. 8's "
           "parameters: the extracted data's correlation functions (grey) beside eq. 19."),
          ("stability_data.png", "Stability measured from the simulated session: VAR(1) "
