@@ -59,7 +59,7 @@ from .classify import ClassifySettings, tile_slices
 from .impact import first_impact_phase
 from .impulse import perturbed_velocity, relaxation_impacts
 from .linear import iterate_linear, jacobian, racket_acceleration_at_impact_g
-from .params import ModelParams, phase_difference
+from .params import ModelError, ModelParams, phase_difference
 
 TWO_PI = 2.0 * math.pi
 
@@ -459,52 +459,48 @@ class MeanResponse:
 
 
 def align_perturbations(trial, k, v, theta, tau, perturbed, *, alpha=None, alpha_0=None,
-                        n_after: int = 4) -> dict[str, MeanResponse]:
-    """Mean responses to perturbations, by direction ("decrease" / "increase").
+                        n_after: int = 4, settle: int = 0) -> dict[str, MeanResponse]:
+    """Mean responses to perturbations, by direction ("decrease" / "increase"), with the data
+    side's alignment (``engine.data_stats.align``, the one ``bounce impulse --data`` uses).
 
     One window per perturbed impact: impacts j = 0..n_after of the same trial with
-    consecutive k (a window that crosses a trial's end or a gap in k is dropped, and so is one
-    holding another perturbation at j >= 1). Deviations are from each trial's mean (v, tau;
-    the circular mean for theta). The direction is alpha > alpha_0 when alpha is given,
-    else the sign of dv at j = 0.
+    consecutive k; only complete windows are kept (one cut by a trial's end, a gap in k or
+    another perturbation at j >= 1 is dropped: the fit compares whole responses).
+    Deviations are from each trial's baseline: the mean of its unperturbed impacts at least
+    ``settle`` impacts after a perturbation (v, tau; the circular mean for theta). The
+    direction is alpha > alpha_0 when alpha is given, else the sign of dv at j = 0.
     """
+    from .data_stats import align
+
     trial, k = np.asarray(trial), np.asarray(k)
     v, theta, tau = (np.asarray(x, float) for x in (v, theta, tau))
     perturbed = np.asarray(perturbed, bool)
-    dv, dth, dtau = np.empty_like(v), np.empty_like(v), np.empty_like(v)
-    for t in np.unique(trial):
-        rows = trial == t
-        dv[rows] = v[rows] - np.nanmean(v[rows])
-        centre = np.angle(np.nanmean(np.exp(1j * theta[rows])))
-        dth[rows] = phase_difference(theta[rows], centre)
-        dtau[rows] = tau[rows] - np.nanmean(tau[rows])
-    windows: dict[str, list[np.ndarray]] = {"decrease": [], "increase": []}
+    alpha_all = np.zeros_like(v) if alpha is None else np.asarray(alpha, float)
     order = np.lexsort((k, trial))
-    trial, k, perturbed = trial[order], k[order], perturbed[order]
-    dv, dth, dtau = dv[order], dth[order], dtau[order]
-    alpha = None if alpha is None else np.asarray(alpha, float)[order]
-    for i in np.flatnonzero(perturbed):
-        j = i + n_after
-        if j >= len(k):
-            continue
-        span = slice(i, j + 1)
-        if (np.any(trial[span] != trial[i]) or np.any(np.diff(k[span]) != 1)
-                or np.any(perturbed[i + 1:j + 1])):
-            continue
-        if alpha is not None and alpha_0 is not None:
-            up = alpha[i] > alpha_0
-        else:
-            up = dv[i] > 0.0
-        windows["increase" if up else "decrease"].append(np.stack([dv[span], dth[span],
-                                                                   dtau[span]]))
+    groups = [order[trial[order] == t] for t in dict.fromkeys(trial[order])]
+    try:
+        aligned = [align([x[g] for g in groups], [perturbed[g] for g in groups],
+                         [alpha_all[g] for g in groups], n_after, settle, phase=is_phase,
+                         k_trials=[k[g] for g in groups])
+                   for x, is_phase in ((v, False), (theta, True), (tau, False))]
+    except ModelError as exc:
+        if "no perturbed impact" in str(exc):
+            return {}
+        raise
+    values = np.stack([w.values for w in aligned], axis=1)  # (windows, 3, n_after + 1)
+    complete = np.all(np.isfinite(values), axis=(1, 2))
+    if alpha is not None and alpha_0 is not None:
+        up = aligned[0].alpha_p > alpha_0
+    else:
+        up = values[:, 0, 0] > 0.0
     out = {}
-    for direction, stack in windows.items():
-        if not stack:
+    for direction, sel in (("decrease", ~up & complete), ("increase", up & complete)):
+        if not sel.any():
             continue
-        arr = np.array(stack)  # (events, 3, n_after + 1)
-        mean = np.nanmean(arr, axis=0)
+        arr = values[sel]
+        mean = arr.mean(axis=0)
         n = arr.shape[0]
-        se = np.nanstd(arr, axis=0, ddof=1) / math.sqrt(n) if n > 1 else np.full_like(mean, np.nan)
+        se = arr.std(axis=0, ddof=1) / math.sqrt(n) if n > 1 else np.full_like(mean, np.nan)
         out[direction] = MeanResponse(direction, mean[0], mean[1], mean[2], se[0], se[1], se[2],
                                       n_events=n, initial=arr[:, :, 0])
     return out

@@ -13,13 +13,13 @@ control, and -- on perturbation trials, simulated with a known controller or a l
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Annotated, Optional
 
 import numpy as np
 import pandas as pd
 from pydantic import Field
 
+from ..impacts import read_impacts as shared_read_impacts
 from ..config import (
     ClassifyBlock,
     ConfigError,
@@ -362,38 +362,15 @@ DATA_COLUMNS = ("trial", "k", "theta_rad", "v_m_s", "racket_period_s", "perturbe
 
 
 def read_impacts(path_text: str) -> pd.DataFrame:
-    """An impacts table (``bounce_cli.impacts``) with the columns the fit needs:
-    trial, k, theta_rad, v_m_s, racket_period_s, perturbed (and alpha, racket_amplitude_m if
-    present). Problems are one-line ConfigErrors naming ``data``."""
-    path = Path(path_text)
-    try:
-        frame = pd.read_csv(path)
-    except FileNotFoundError:
-        raise ConfigError(f"data: {path}: file not found") from None
-    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise ConfigError(f"data: {path}: cannot read as CSV: {first}") from None
-    missing = [c for c in DATA_COLUMNS if c not in frame.columns]
-    if missing:
-        raise ConfigError(f"data: {path}: missing column(s) {', '.join(missing)} (an impacts "
-                          f"table with perturbation events: {', '.join(DATA_COLUMNS)})")
-    for column in ("k", "theta_rad", "v_m_s", "racket_period_s", "alpha", "racket_amplitude_m"):
-        if column not in frame.columns:
-            continue
-        values = pd.to_numeric(frame[column], errors="coerce")
-        if values.isna().any():
-            row = int(np.flatnonzero(values.isna().to_numpy())[0])
-            raise ConfigError(f"data: {path}: column {column}: not a number in data row "
-                              f"{row + 1} (got {frame[column].iloc[row]!r})")
-        frame[column] = values.astype(float)
-    if not (frame["racket_period_s"] > 0).all():
-        raise ConfigError(f"data: {path}: column racket_period_s: must be > 0")
-    perturbed = frame["perturbed"].astype(str).str.strip().str.lower()
-    if not perturbed.isin(["true", "false", "1", "0"]).all():
-        raise ConfigError(f"data: {path}: column perturbed: must be True/False")
-    frame["perturbed"] = perturbed.isin(["true", "1"])
+    """An impacts table (``bounce_cli.impacts``, the data side's reader) with the columns the
+    fit needs: trial, k, theta_rad (or theta_deg), v_m_s, racket_period_s, perturbed (and
+    alpha, racket_amplitude_m if present). Problems are one-line ConfigErrors naming ``data``."""
+    impacts = shared_read_impacts(path_text, needs=("racket_period_s", "perturbed"),
+                                  command="control --data",
+                                  optional=("alpha", "racket_amplitude_m"))
+    frame = impacts.frame
     if not frame["perturbed"].any():
-        raise ConfigError(f"data: {path}: no perturbed impact (column perturbed)")
+        raise ConfigError(f"data: {impacts.path}: no perturbed impact (column perturbed)")
     return frame
 
 

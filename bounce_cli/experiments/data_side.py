@@ -437,7 +437,7 @@ def impulse_data_run(config, options, source: ImpactsSource | None = None
         w = align([g[column].to_numpy() for _, g in groups],
                   [g["perturbed"].to_numpy() for _, g in groups],
                   [g["alpha"].to_numpy() for _, g in groups], n, d.settle_after_perturbation,
-                  phase=is_phase)
+                  phase=is_phase, k_trials=[g["k"].to_numpy() for _, g in groups])
         windows[name] = (w, scale)
         options.progress.advance(1)
     w_v = windows["v_m_s"][0]
