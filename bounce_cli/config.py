@@ -86,11 +86,21 @@ class ControlBlock(StrictModel):
     gain: float = Field(description="K: 1 = the period follows the ball's flight time in full")
     rate: float = Field(1.0, ge=0.0, le=2.0,
                         description="c per impact: 1 = immediate, 0 = never; > 1 overshoots")
+    switch: Literal["impact", "cycle"] = Field(
+        "impact", description="the new period starts at the impact, or at the racket's next "
+        "upward mid-position crossing (a racket moved cycle by cycle, as simulate-recording's)")
+
+    @model_serializer(mode="wrap")
+    def _default_switch_unwritten(self, handler):
+        data = handler(self)
+        if self.switch == "impact":  # configs written before the key existed dump unchanged
+            data.pop("switch", None)
+        return data
 
     def controller(self):
         from .engine.control import CONTROLLERS
 
-        return CONTROLLERS[self.kind](self.gain, self.rate)
+        return CONTROLLERS[self.kind](self.gain, self.rate, switch=self.switch)
 
 
 class ControllableModelBlock(ModelBlock):

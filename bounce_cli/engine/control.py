@@ -112,6 +112,11 @@ class PeriodController:
     gain: Any  # float, or an array of gains (a grid of controllers)
     rate: Any = 1.0
     kind: str = "period"
+    #: when the new period starts: "impact" (the flight after impact k runs at tau_{k+1}; the
+    #: model of this module) or "cycle" (at the racket's next upward mid-position crossing:
+    #: the rest of the current cycle keeps tau_k, a racket moved cycle by cycle as
+    #: ``engine.recording`` moves it; see ``controlled_step``)
+    switch: str = "impact"
 
     def target(self, v, reference: Reference):
         """tau_bar + K * 2 (v - v~) / g: the period that matches the ball's flight time."""
@@ -189,6 +194,9 @@ def controlled_step(theta, v, tau, params: ModelParams, controller: Controller, 
     tau_next = np.asarray(controller.next_period(v, theta, tau, reference), dtype=float)
     tau_next = tau_next + period_noise
     tau_next = np.where(tau_next > 0.0, tau_next, np.nan)  # no racket has a period <= 0
+    if getattr(controller, "switch", "impact") == "cycle":
+        return _step_switching_at_crossing(theta, v, tau, tau_next, params, alpha,
+                                           velocity_noise, phase_noise, wrap)
     omega = 2.0 * np.pi / tau_next
     hop = first_impact_phase(theta, v, params.racket_amplitude, omega, params.g)
     theta_next = theta + hop + phase_noise
@@ -199,6 +207,70 @@ def controlled_step(theta, v, tau, params: ModelParams, controller: Controller, 
                           params.g) + velocity_noise
     return ControlledStep(theta=theta_next, v=v_next, tau=np.broadcast_to(tau_next, hop.shape),
                           hop_phase=hop, omega=np.broadcast_to(omega, hop.shape))
+
+
+def contact_after_crossing(height, v, amplitude, omega, g, *, max_steps: int = 2000):
+    """Phase s >= 0 (rad of a racket a sin(s) at angular frequency omega, from its upward
+    mid-position crossing s = 0) of the first contact of a ball that is ``height`` (> 0) above
+    the racket at s = 0 with velocity v (arrays broadcast). The safe steps of
+    ``engine.impact``: from G > 0 with G' = d, |G''| <= M = g / w^2 + a keeps G > 0 for
+    h < (d + sqrt(d^2 + 2 M G)) / M; a Newton polish ends it. NaN where none is found."""
+    height, v, amplitude, omega, g = np.broadcast_arrays(
+        *(np.asarray(x, float) for x in (height, v, amplitude, omega, g)))
+    s = np.zeros(height.shape)
+    result = np.full(height.shape, np.nan)
+    active = np.isfinite(height) & np.isfinite(v) & np.isfinite(omega) & (height >= 0.0)
+    bound = g / omega**2 + amplitude
+    for _ in range(max_steps):
+        if not active.any():
+            break
+        G = height + v * s / omega - g * s * s / (2.0 * omega**2) - amplitude * np.sin(s)
+        d = v / omega - g * s / omega**2 - amplitude * np.cos(s)
+        scale = np.abs(height) + np.abs(v * s / omega) + g * s * s / (2.0 * omega**2) + amplitude
+        done = active & (G <= 1e-13 * scale)
+        if done.any():
+            with np.errstate(divide="ignore", invalid="ignore"):
+                corr = np.where(d < 0.0, G / d, 0.0)
+            result = np.where(done, s - np.where(np.abs(corr) < 1e-6, corr, 0.0), result)
+            active &= ~done
+        step = (d + np.sqrt(d * d + 2.0 * bound * np.maximum(G, 0.0))) / bound
+        s = np.where(active, s + step, s)
+    return result
+
+
+def _step_switching_at_crossing(theta, v, tau, tau_next, params: ModelParams, alpha,
+                                velocity_noise, phase_noise, wrap: bool) -> ControlledStep:
+    """``controlled_step`` for ``switch = "cycle"``: the racket finishes its current cycle
+    with tau_k (its velocity does not jump at the impact) and runs with tau_{k+1} from the
+    next upward crossing of its mid-position. The next impact is then the first contact
+    with the old racket before the crossing (the impact falls in the same cycle, which keeps
+    tau_k) or the first contact after it (``contact_after_crossing``); eq. 3 with the
+    racket's velocity at that contact. ``hop_phase`` is the flight time times the angular
+    frequency at the contact, so ``hop_seconds`` is the flight time."""
+    a, g = params.racket_amplitude, params.g
+    omega_now, omega_next = TWO_PI / tau, TWO_PI / tau_next
+    phase = np.mod(theta, TWO_PI)
+    hop_before = first_impact_phase(theta, v, a, omega_now, g)
+    flies = np.isfinite(hop_before)
+    same_cycle = flies & (phase + hop_before < TWO_PI)
+    to_crossing = TWO_PI - phase
+    dt = to_crossing / omega_now
+    height = a * np.sin(phase) + v * dt - 0.5 * g * dt * dt
+    after = contact_after_crossing(np.where(same_cycle | ~flies, np.nan, height),
+                                   v - g * dt, a, omega_next, g)
+    advance = np.where(same_cycle, hop_before, to_crossing + after)
+    flight = np.where(same_cycle, hop_before / omega_now, dt + after / omega_next)
+    omega_at = np.where(same_cycle, omega_now, omega_next)
+    tau_at = np.where(same_cycle, tau, tau_next)
+    advance = np.where(flies, advance, np.nan)
+    theta_next = theta + advance + phase_noise
+    if wrap:
+        theta_next = np.mod(theta_next, TWO_PI)
+    alpha = params.alpha if alpha is None else alpha
+    v_next = ((1.0 + alpha) * a * omega_at * np.cos(theta_next) - alpha * v
+              + alpha * g * flight + velocity_noise)
+    return ControlledStep(theta=theta_next, v=v_next, tau=tau_at, hop_phase=flight * omega_at,
+                          omega=omega_at)
 
 
 def iterate_controlled(theta0, v0, tau0, params: ModelParams, controller: Controller,
@@ -261,8 +333,12 @@ def jacobian_from_gradient(params: ModelParams, gradient) -> np.ndarray:
 
 
 def controlled_jacobian(params: ModelParams, controller: Controller) -> np.ndarray:
-    """The analytic 3 x 3 Jacobian of the controlled map at (v~, theta~, tau_bar)."""
+    """The analytic 3 x 3 Jacobian of the controlled map at (v~, theta~, tau_bar); for a
+    controller whose period starts at the next cycle (``switch = "cycle"``) the central
+    differences of ``finite_difference_controlled_jacobian``."""
     params.fixed_point()  # NoFixedPointError where eq. 8 has no solution
+    if getattr(controller, "switch", "impact") == "cycle":
+        return finite_difference_controlled_jacobian(params, controller)
     return jacobian_from_gradient(params, controller.gradient(Reference.of(params)))
 
 
