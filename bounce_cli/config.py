@@ -121,6 +121,14 @@ class ControllableModelBlock(ModelBlock):
         """The engine controller, or None for the passive map."""
         return None if self.control is None else self.control.controller()
 
+    def active_controller(self):
+        """The engine controller, or None when the map is the passive one (no control, or
+        gain 0: then every result is the passive run's byte for byte)."""
+        from .engine.control import is_passive
+
+        controller = self.controller()
+        return None if is_passive(controller) else controller
+
 
 #: section 3's stopping conditions as the engine defines them (the one place of the defaults)
 _SECTION3 = ClassifySettings()

@@ -636,9 +636,10 @@ def fit_period_control(params: ModelParams, responses: Sequence[MeanResponse], *
     Measured on trials simulated with K = 0.6, c = 0.7 and section 7's protocol (24 trials
     of 60 impacts, noise 0.05 m/s, 0.02 rad, 5 ms; seeds 100-129, the shared alignment): K is
     biased by about -0.003 (c by +0.002), the 95 % interval's half width is 0.020; the
-    intervals held the truth in 29 (K) and 30 (c) of 30 data sets. The bias comes from the noise after the perturbed impact (it vanishes without
-    noise): the mean of noisy nonlinear responses is not the noiseless response. Starting
-    every model response from the mean deviation instead of each event's own adds -0.004.
+    intervals held the truth in 29 (K) and 30 (c) of 30 data sets. The bias comes from the
+    noise after the perturbed impact (it vanishes without noise): the mean of noisy
+    nonlinear responses is not the noiseless response. Starting every model response from
+    the mean deviation instead of each event's own adds -0.004 (measured before).
     """
     from scipy import optimize, stats
 
@@ -842,3 +843,102 @@ def controlled_impulse_response_linear(params: ModelParams, controller: Controll
     v = v_fp + y[:, 0]  # dv = v - v~ as ``engine.impulse`` computes it (same bits at K = 0)
     return ControlledResponse(v=v, theta=np.mod(theta_fp + y[:, 1], TWO_PI),
                               tau=tau_bar + y[:, 2], dv=v - v_fp, dtheta=y[:, 1], dtau=y[:, 2])
+
+
+# -- continuous-time motion with control (``bounce trajectory`` with ``model.control``) ----------
+@dataclass(frozen=True)
+class RacketClock:
+    """The controlled racket's phase in time: from ``t_start[i]`` on it is
+    ``phase_start[i] + omega[i] (t - t_start[i])`` (continuous; the rate changes at impacts)."""
+
+    t_start: np.ndarray
+    phase_start: np.ndarray
+    omega: np.ndarray
+
+    def phase(self, t):
+        """(phase, angular frequency) at times t."""
+        t = np.asarray(t, dtype=float)
+        i = np.clip(np.searchsorted(self.t_start, t, side="right") - 1, 0, len(self.t_start) - 1)
+        return self.phase_start[i] + self.omega[i] * (t - self.t_start[i]), self.omega[i]
+
+
+def simulate_controlled_motion(theta0: float, v0: float, params: ModelParams,
+                               controller: Controller, duration_s: float, settings):
+    """``engine.flight.simulate`` (exact integrator) with racket period control: the ball
+    leaves the racket at phase theta0 (t0 = theta0 / w_bar) with v0; at the launch and at
+    every impact the controller sets the racket's period from then on (``switch: impact``,
+    the map of this module: the phase stays continuous, the racket's velocity jumps). Sticking
+    as in ``engine.flight`` (a hop shorter than ``settings.min_hop_s``, or a ball that leaves no
+    faster than the racket then moves): the ball rides on the racket, which keeps its period,
+    until the racket's downward acceleration exceeds g. Returns (Trajectory, RacketClock,
+    periods): the racket's period during the flight that ended at each impact (s), as
+    ``iterate_controlled_orbit``'s tau."""
+    from .flight import LEAVE_NUDGE_PHASE, Impact, Segment, Trajectory, impact_velocity
+
+    a, g = params.racket_amplitude, params.g
+    reference = Reference.of(params)
+    tau = params.racket_period
+    t = theta0 * tau / TWO_PI
+    t0, t_end = t, t + duration_s
+    phase = float(theta0)
+    tau = float(controller.next_period(v0, theta0, tau, reference))
+    if not tau > 0.0:
+        raise ModelError("the controller asks for a racket period <= 0 at the launch")
+    starts, phases, omegas = [t], [phase], [TWO_PI / tau]
+    segments: list = []
+    impacts: list = []
+    periods: list[float] = []
+    v = float(v0)
+    omega = omegas[-1]
+
+    def racket(time):
+        ph = phases[-1] + omega * (time - starts[-1])
+        return ph, a * math.sin(ph), a * omega * math.cos(ph)
+
+    stuck = not bool(can_fly_at(phase, v, a, omega, g))
+    while t < t_end:
+        ph, x_r, v_r = racket(t)
+        if stuck:
+            ratio = g / (a * omega**2)
+            if ratio >= 1.0:
+                leave = math.inf
+            elif math.sin(ph) > ratio:
+                leave = ph
+            else:
+                leave = ph + float(np.mod(math.asin(ratio) - ph, TWO_PI))
+            t_leave = t + (leave - ph) / omega
+            segments.append(Segment("stuck", t, min(t_leave, t_end), x_r, v_r))
+            t = t_leave
+            if math.isfinite(t):
+                v = racket(t)[2]
+            stuck = False
+            continue
+        launch_ph, launch_v = ph, v
+        if v - v_r <= 0.0:  # leaving with the racket's velocity: hand over just after
+            launch_ph, launch_v = ph + LEAVE_NUDGE_PHASE, v - g * LEAVE_NUDGE_PHASE / omega
+        hop = float(first_impact_phase(launch_ph, launch_v, a, omega, g))
+        if not math.isfinite(hop):
+            raise ModelError(f"no next impact found after t = {t:.6g} s")
+        t_hit = t + (launch_ph - ph + hop) / omega
+        segments.append(Segment("flight", t, min(t_hit, t_end), x_r, v))
+        if t_hit > t_end:
+            break
+        ph_hit, _, racket_v = racket(t_hit)
+        v_before = v - g * (t_hit - t)
+        v_after = impact_velocity(v_before, racket_v, params.alpha)
+        impacts.append(Impact(t_hit, ph_hit, v_before, v_after, racket_v, t_hit - t))
+        periods.append(tau)  # the period of the flight that ended at this impact
+        tau_next = float(controller.next_period(v_after, ph_hit, tau, reference))
+        if not tau_next > 0.0:
+            raise ModelError(f"the controller asks for a racket period <= 0 at t = {t_hit:.4g} s")
+        tau, omega = tau_next, TWO_PI / tau_next
+        starts.append(t_hit)
+        phases.append(ph_hit)
+        omegas.append(omega)
+        t, v = t_hit, v_after
+        stuck = (t_hit - segments[-1].t_start < settings.min_hop_s
+                 or v - a * omega * math.cos(ph_hit) <= settings.min_relative_velocity_m_s
+                 or not bool(can_fly_at(ph_hit, v, a, omega, g)))
+    clock = RacketClock(np.array(starts), np.array(phases), np.array(omegas))
+    trajectory = Trajectory(params, t0, t_end, tuple(segments), tuple(impacts))
+    return trajectory, clock, np.array(periods)

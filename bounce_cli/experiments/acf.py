@@ -20,7 +20,7 @@ from pydantic import Field
 from .. import paper
 from ..config import ConfigError, ControllableModelBlock, ExperimentConfig, StrictModel
 from ..engine.linear import jacobian, stability
-from ..engine.control import controlled_jacobian, is_passive
+from ..engine.control import controlled_jacobian
 from ..engine.params import ModelError, ModelParams, phase_difference
 from ..engine.stochastic import (
     PAIR_NAMES,
@@ -88,9 +88,7 @@ def run(config: AcfConfig, options: RunOptions) -> ExperimentResult:
         return run_data(config, options)
     params = config.params
     noise = config.noise
-    controller = config.model.controller()
-    if controller is not None and is_passive(controller):
-        controller = None  # gain 0: the passive map, byte for byte
+    controller = config.model.active_controller()  # None: the passive map
     if controller is not None and noise.velocity_phase != "theta":
         raise ConfigError("noise.velocity_phase: with model.control only eq. 16 as printed "
                           "(theta) is implemented")
@@ -180,7 +178,9 @@ def run(config: AcfConfig, options: RunOptions) -> ExperimentResult:
         f"long runs: {n_kept} x {config.long_runs.bounces} bounces; trials: {reps} x {n_trial} "
         f"bounces ({config.trials.duration_s:g} s); runs lost to sticking: {lost}",
     ]
-    caption_figures(figures, params, f"{config.long_runs.runs} runs x "
+    control = ("" if controller is None else
+               f"racket period control K = {controller.gain:g}, c = {controller.rate:g}; ")
+    caption_figures(figures, params, f"{control}{config.long_runs.runs} runs x "
                     f"{config.long_runs.bounces} bounces; {reps} simulated trials of "
                     f"{config.trials.duration_s:g} s ({n_trial} bounces); seed {config.seed}")
     return ExperimentResult(frames={"acf.csv": acf, "summary.csv": summary_df},

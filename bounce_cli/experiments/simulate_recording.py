@@ -81,9 +81,6 @@ class RecordingConfig(ExperimentConfig):
         return self
 
     def session(self) -> SessionSettings:
-        from ..engine.control import is_passive
-
-        controller = self.model.controller()  # gain 0: the passive session, bit for bit
         return SessionSettings(
             n_trials=self.trials, duration_s=self.duration_s,
             sample_rate_hz=self.sample_rate_hz, position_noise_m=self.position_noise_m,
@@ -94,7 +91,7 @@ class RecordingConfig(ExperimentConfig):
             ball_marker_offset_m=self.ball_marker_offset_m,
             perturb_every=self.perturbations.every, perturb_first=self.perturbations.first,
             perturb_alphas=tuple(self.perturbations.alphas), min_hop_s=self.min_hop_s,
-            seed=self.seed, controller=None if is_passive(controller) else controller)
+            seed=self.seed, controller=self.model.active_controller())
 
 
 def session_frames(config: RecordingConfig, options: RunOptions | None = None):
