@@ -293,10 +293,11 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
 
 
 # -- the data's side (--data impacts.csv): bounce_cli/experiments/data_side.py ----------------
-def run_data(config: ImpulseConfig, options: RunOptions) -> ExperimentResult:
+def run_data(config: ImpulseConfig, options: RunOptions, source=None) -> ExperimentResult:
+    """The data's side; ``source``: the impacts (default: the file ``config.data``)."""
     from .data_side import impulse_data_run
 
-    frames, lines = impulse_data_run(config, options)
+    frames, lines = impulse_data_run(config, options, source)
     return ExperimentResult(frames=frames, figures=draw_data(frames), summary=lines)
 
 

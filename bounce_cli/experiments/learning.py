@@ -45,7 +45,7 @@ TREND_QUANTITIES = {
 
 class LearningNoiseBlock(StrictModel):
     q_v: float = Field(0.04, gt=0.0, description="velocity noise strength of the model curve, m/s")
-    q_theta: float = Field(0.05, gt=0.0, description="phase noise strength of the model curve, rad")
+    q_theta: float = Field(0.05, ge=0.0, description="phase noise strength of the model curve, rad")
 
 
 class LearningConfig(ExperimentConfig):
@@ -79,11 +79,14 @@ def model_curve(alpha: float, g: float, period: float, q_v: float, q_theta: floa
     return pd.DataFrame(rows)
 
 
-def trial_table(config: LearningConfig) -> tuple[pd.DataFrame, float]:
-    """Per-trial statistics of the impacts table, in the file's order of trials (trial_number
-    1, 2, ...), and the data's mean racket period (NaN without that column)."""
-    assert config.data is not None
-    impacts = read_impacts(config.data, needs=("racket_acc_g", "ball_apex_m"),
+def trial_table(config: LearningConfig, source=None) -> tuple[pd.DataFrame, float]:
+    """Per-trial statistics of the impacts table (``source``, default the file
+    ``config.data``), in the file's order of trials (trial_number 1, 2, ...), and the data's
+    mean racket period (NaN without that column)."""
+    if source is None:
+        assert config.data is not None
+        source = config.data
+    impacts = read_impacts(source, needs=("racket_acc_g", "ball_apex_m"),
                            command="learning --data", min_bounces=config.min_bounces)
     rows = []
     for number, (trial, g) in enumerate(impacts.by_trial(), start=1):
@@ -123,15 +126,17 @@ def trend_table(trials: pd.DataFrame, confidence: float) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def run(config: LearningConfig, options: RunOptions) -> ExperimentResult:
+def run(config: LearningConfig, options: RunOptions, source=None) -> ExperimentResult:
+    """``source``: an impacts table in memory, ``(label, frame)`` (default: ``config.data``)."""
     m = config.model
     frames: dict[str, pd.DataFrame] = {}
     lines = []
     period = m.racket_period
-    if config.data is not None:
-        trials, data_period = trial_table(config)
+    if config.data is not None or source is not None:
+        trials, data_period = trial_table(config, source)
         if len(trials) < 3:
-            raise ConfigError(f"data: {config.data}: {len(trials)} trial(s); a trend over "
+            label = config.data if source is None else source[0]
+            raise ConfigError(f"data: {label}: {len(trials)} trial(s); a trend over "
                               "trials needs at least 3")
         if math.isfinite(data_period):
             period = data_period

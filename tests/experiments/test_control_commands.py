@@ -93,7 +93,7 @@ def test_impulse_with_control_stays_in_the_basin_and_relaxes_faster():
     assert (linear.outcome == "period1").all()
 
 
-@pytest.mark.parametrize("command", ["stability", "regression", "acf", "trajectory"])
+@pytest.mark.parametrize("command", ["stability", "regression"])
 def test_commands_without_control_refuse_it(command, tmp_path):
     result = runner.invoke(app, [command, "--set", "model.control.gain=0.5",
                                  "--out", str(tmp_path / "o")])
