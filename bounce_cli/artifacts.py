@@ -347,7 +347,7 @@ def _distinct_texts(column: pd.Series):
         codes = column.cat.codes.to_numpy()
         # code -1 (missing) picks the appended empty cell
         return codes, np.append(categories[1][categories[0]], "")
-    if isinstance(dtype, pd.StringDtype) or dtype == object:
+    if isinstance(dtype, pd.StringDtype) or (isinstance(dtype, np.dtype) and dtype.kind == "O"):
         # strings (pandas' str dtype or objects): missing cells are written empty
         codes, keys = pd.factorize(column.to_numpy(dtype=object))
         keys = np.asarray(keys, dtype=object)
