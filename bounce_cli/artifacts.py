@@ -371,7 +371,9 @@ def _distinct_texts(column: pd.Series):
 
 
 def _csv_cells(column: pd.Series):
-    codes, texts = _distinct_texts(column)  # type: ignore[misc]  # checked by _csv_header
+    found = _distinct_texts(column)
+    assert found is not None  # _csv_header checked every column
+    codes, texts = found
     return texts[codes].tolist()
 
 
