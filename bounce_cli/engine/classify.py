@@ -19,10 +19,11 @@ The initial state itself is NOT compared with the fixed point: the first check i
 impact 1, so even the fixed point itself is ``period1`` after 1 iteration. At each impact
 the sticking test comes first (a hop that short is never near the fixed point anyway).
 
-All points of a batch advance together: one vectorised first-impact solve (``next_impact_phase``'s
-``first_impact_phase``) per impact on the still-active subset; settled points are dropped. Phases are kept wrapped in
-[0, 2 pi). The result of a point does not depend on which other points share its batch, so
-``classify_grid`` gives identical results for any tile size and number of worker processes.
+All points of a batch advance together: one vectorised first-impact solve
+(``impact.first_impact_phase``) per impact on the still-active subset; settled points are
+dropped. Phases are kept wrapped in [0, 2 pi). The result of a point does not depend on
+which other points share its batch, so ``classify_grid`` gives identical results for any
+tile size and number of worker processes.
 """
 
 from __future__ import annotations
