@@ -49,10 +49,11 @@ LEGEND_BELOW: dict[str, Any] = dict(loc="outside lower center", ncol=3, fontsize
 
 
 #: below this many grid points the basin is classified in this process whatever --jobs says:
-#: starting worker processes costs about 0.8 s (each imports numpy and scipy), and one core
-#: classifies about 200,000 points/s of the paper's grid, so two workers win only above some
-#: 3-4e5 points (measured: 400 x 400 in 0.80 s in-process vs 1.06 s with 2 workers; 800 x 800
-#: 3.3 s vs 2.3 s)
+#: starting two worker processes costs about 0.15 s (each imports numpy and the classifier
+#: only; 0.8 s when they imported scipy too), and one core classifies about 200,000 points/s
+#: of the paper's grid; measured on the shared 2-core machine: 400 x 400 in 0.78 s
+#: in-process vs 0.76-0.84 s with 2 workers, 300 x 300 0.42 vs 0.39-0.55 s; 1000 x 1000
+#: end to end 6.5 s vs 4.3 s
 POOL_MIN_POINTS = 400_000
 
 #: basin.csv bytes per row (the paper's grid: 10.7 MB for 160,000 rows) and the size above
