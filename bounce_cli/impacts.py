@@ -28,12 +28,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Union
+from typing import Any, Union
 
 import numpy as np
 import pandas as pd
 
-from .config import ConfigError
+from .config import ConfigError, show_value
 
 #: the columns every impacts table has, in this order
 REQUIRED_COLUMNS: tuple[str, ...] = (
@@ -101,7 +101,9 @@ def read_data_csv(path: Path) -> pd.DataFrame:
     """A ``--data`` CSV as a DataFrame with stripped column names; an unreadable file is one
     line naming ``data`` and the file."""
     try:
-        frame = pd.read_csv(path)
+        # only an empty cell is missing: a cell such as 'n/a' stays text, so that an error
+        # can show what the file holds
+        frame = pd.read_csv(path, keep_default_na=False, na_values=[""])
     except FileNotFoundError:
         raise ConfigError(f"data: {path}: file not found") from None
     except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
@@ -109,6 +111,13 @@ def read_data_csv(path: Path) -> pd.DataFrame:
         raise _fail(path, f"cannot read as CSV: {first}") from None
     frame.columns = [str(c).strip() for c in frame.columns]
     return frame
+
+
+def cell_text(value: Any) -> str:
+    """A cell as the file holds it: ``'n/a'``, ``-0.9``, or 'an empty cell'."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "an empty cell"
+    return show_value(value)
 
 
 def _fail(path: Path, message: str) -> ConfigError:
@@ -163,7 +172,8 @@ def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: st
         if bad.any():
             row = int(np.flatnonzero(bad.to_numpy())[0])
             raise _fail(path, f"column {column}: not a number in data row {row + 1} (trial "
-                              f"{frame['trial'].iloc[row]}, got {frame[column].iloc[row]!r})")
+                              f"{frame['trial'].iloc[row]}, "
+                              f"got {cell_text(frame[column].iloc[row])})")
         frame[column] = values.astype(float)
     if "theta_rad" not in frame.columns:
         frame["theta_rad"] = np.radians(frame["theta_deg"])
@@ -177,7 +187,8 @@ def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: st
         if column in checked and not ok(frame[column]).all():
             row = int(np.flatnonzero(~ok(frame[column]).to_numpy())[0])
             raise _fail(path, f"column {column}: must be {rule} (data row {row + 1}, trial "
-                              f"{frame['trial'].iloc[row]}: {frame[column].iloc[row]!r})")
+                              f"{frame['trial'].iloc[row]}: "
+                              f"{cell_text(frame[column].iloc[row])})")
     if "perturbed" in frame.columns:
         text = frame["perturbed"].astype(str).str.strip().str.lower()
         mapping = {"true": True, "false": False, "1": True, "0": False, "1.0": True, "0.0": False}
@@ -185,7 +196,7 @@ def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: st
         if "perturbed" in checked and unknown.any():
             row = int(np.flatnonzero(unknown.to_numpy())[0])
             raise _fail(path, f"column perturbed: expected True/False in data row {row + 1} "
-                              f"(got {frame['perturbed'].iloc[row]!r})")
+                              f"(got {cell_text(frame['perturbed'].iloc[row])})")
         frame["perturbed"] = text.map(mapping).fillna(False).astype(bool)
     frame["trial"] = frame["trial"].astype(str)
     order = list(dict.fromkeys(frame["trial"]))
