@@ -541,6 +541,11 @@ def summary_lines(frames: dict[str, pd.DataFrame]) -> list[str]:
                  f"[{fit.loc['rate_c', 'ci_low']:.4f}, {fit.loc['rate_c', 'ci_high']:.4f}]"
                  + (f" (truth K = {fit.loc['gain_K', 'truth']:g}, c = "
                     f"{fit.loc['rate_c', 'truth']:g})" if source == "simulated" else ""))
+    if fit.loc["gain_K", "ci_low"] <= 0.0 <= fit.loc["gain_K", "ci_high"]:
+        lines.append("fit: K's interval includes 0, no period control is detected: c then "
+                     "only describes how the racket period relaxes on its own, and the fitted "
+                     "model's spectral radius (|1 - c| when that is the largest) says nothing "
+                     "about the ball; read the passive eigenvalues (eq. 10) for these data")
     chi2, lost = fit.loc["reduced_chi2", "estimate"], fit.loc["trials_lost", "estimate"]
     if chi2 > 3.0:
         lines.append(f"fit: reduced chi2 = {chi2:.3g} >> 1: the controlled map does not describe "
