@@ -216,6 +216,16 @@ def perturbation_windows(perturbed: np.ndarray, n_after: int,
     return windows
 
 
+def settled_mask(perturbed: np.ndarray, settle: int) -> np.ndarray:
+    """Impacts of the stationary state for the steady-state statistics (correlations,
+    per-trial SDs): every impact but the perturbed ones and the ``settle`` impacts after each
+    (the relaxation is not the stationary state)."""
+    keep = np.ones(len(perturbed), bool)
+    for i in np.flatnonzero(np.asarray(perturbed, bool)):
+        keep[i:i + settle + 1] = False
+    return keep
+
+
 def baseline_mask(perturbed: np.ndarray, settle: int) -> np.ndarray:
     """Impacts that describe the unperturbed steady state: not perturbed, and at least
     ``settle`` impacts after the last perturbation (before the first, all count)."""

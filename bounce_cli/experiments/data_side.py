@@ -27,6 +27,7 @@ from ..engine.data_stats import (
     align,
     noise_from_sds,
     relaxation_impact,
+    settled_mask,
     trial_correlations,
 )
 from ..engine.var_fit import EIGEN_QUANTITIES, J_ENTRIES, Var1Fit, fit_var1
@@ -98,10 +99,8 @@ def stationary_segments(impacts: Impacts, settle: int, min_length: int):
     dtheta is the phase minus the trial's circular mean, wrapped to [-pi, pi)."""
     out = []
     for trial, rows in impacts.by_trial():
-        keep = np.ones(len(rows), bool)
-        if "perturbed" in rows.columns:
-            for i in np.flatnonzero(rows["perturbed"].to_numpy()):
-                keep[i:i + settle + 1] = False
+        keep = (settled_mask(rows["perturbed"].to_numpy(), settle)
+                if "perturbed" in rows.columns else np.ones(len(rows), bool))
         theta = rows["theta_rad"].to_numpy()
         ref = circular_mean(theta[keep]) if keep.any() else 0.0
         dtheta = phase_difference(theta, ref)

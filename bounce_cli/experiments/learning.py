@@ -25,7 +25,7 @@ import pandas as pd
 from pydantic import Field
 
 from ..config import ConfigError, ExperimentConfig, ModelBlock, StrictModel
-from ..engine.data_stats import apex_sd_eq19
+from ..engine.data_stats import apex_sd_eq19, settled_mask
 from ..engine.linear import jacobian, racket_amplitude_for_ac, stability, stable_ac_range_g
 from ..engine.params import ModelError, ModelParams, phase_difference
 from ..engine.regression import ols_line
@@ -53,6 +53,9 @@ class LearningConfig(ExperimentConfig):
     noise: LearningNoiseBlock = LearningNoiseBlock()
     ac_points: int = Field(81, ge=5, description="AC values on the model curve")
     min_bounces: int = Field(10, ge=3, description="fewest impacts a trial may have")
+    settle_after_perturbation: int = Field(
+        4, ge=0, description="with --data: impacts after a perturbed one left out of the "
+                             "per-trial statistics (as acf --data)")
     confidence: float = Field(0.95, gt=0.0, lt=1.0, description="level of the trend intervals")
     data: Optional[str] = Field(None, description="impacts table with ball_apex_m (--data)")
 
@@ -90,8 +93,8 @@ def trial_table(config: LearningConfig, source=None) -> tuple[pd.DataFrame, floa
                            command="learning --data", min_bounces=config.min_bounces)
     rows = []
     for number, (trial, g) in enumerate(impacts.by_trial(), start=1):
-        if "perturbed" in g.columns:
-            g = g[~g["perturbed"]]
+        if "perturbed" in g.columns:  # the stationary state: not the relaxations
+            g = g[settled_mask(g["perturbed"].to_numpy(), config.settle_after_perturbation)]
         theta = g["theta_rad"].to_numpy()
         dtheta = phase_difference(theta, circular_mean(theta))
         apex = g["ball_apex_m"].dropna()
