@@ -237,8 +237,9 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
     trust = trust_frame(params, q_v, q_theta, config, segments, options)
     frames = {"acf_data.csv": acf, "stability_data.csv": stab, "trust.csv": trust}
     lines = [f"data {impacts.path}: {n_seg} runs, {len(dv_all)} bounces; model at a_r = "
-             f"{params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s, alpha = "
-             f"{params.alpha:g}, g = {params.g:g}: spectral radius {st.spectral_radius:.3f}"]
+             f"{params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s (the data's), "
+             f"alpha = {params.alpha:g}, g = {params.g:g} m/s^2 (model.alpha, model.g: set "
+             f"them to your lab's): spectral radius {st.spectral_radius:.3f}"]
     for method, fit in fits.items():
         if isinstance(fit, ModelError):
             lines.append(f"{method}: {fit}")
@@ -504,8 +505,9 @@ def impulse_data_run(config, options, source: ImpactsSource | None = None
     lines = [f"data {impacts.path}: {len(w_v.values)} perturbations ({n_down}"
              f" decrease, {n_up} increase); {cut} windows cut short "
              "by the next perturbation or the trial's end (their later impacts are not averaged)",
-             f"model at a_r = {params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s,"
-             f" alpha_0 = {params.alpha:g}: v~ = {fp.v_m_s:.3f} m/s,"
+             f"model at a_r = {params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s"
+             f" (the data's), alpha_0 = {params.alpha:g}, g = {params.g:g} m/s^2 (model.alpha, "
+             f"model.g): v~ = {fp.v_m_s:.3f} m/s,"
              f" theta~ = {fp.theta_deg:.1f} deg"]
     for row in relax.itertuples():
         lines.append(f"{row.direction} (alpha_p {row.mean_alpha_p:.3f}), {row.source}: impacts "
