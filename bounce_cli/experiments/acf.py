@@ -33,7 +33,7 @@ from ..engine.stochastic import (
     stationary_sds,
     var1_theory,
 )
-from ..plotting import caption_figures, new_figure
+from ..plotting import caption_figures, data_caption, new_figure
 from .base import Experiment, ExperimentResult, RunOptions
 from .data_side import AcfDataBlock
 
@@ -404,7 +404,9 @@ def run_data(config: AcfConfig, options: RunOptions, source=None) -> ExperimentR
     from .data_side import acf_data_run
 
     frames, lines = acf_data_run(config, options, source)
-    return ExperimentResult(frames=frames, figures=draw_data(frames), summary=lines)
+    figures = draw_data(frames)
+    caption_figures(figures, None, data_caption(config, source))
+    return ExperimentResult(frames=frames, figures=figures, summary=lines)
 
 
 def draw_data(frames: dict[str, pd.DataFrame]) -> dict:

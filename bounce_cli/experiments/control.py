@@ -503,7 +503,13 @@ def run(config: ControlConfig, options: RunOptions) -> ExperimentResult:
     frames["acf.csv"] = correlations_frame(params, config)
     frames.update(fit_frames(config, fit_data))
     options.progress.advance(1)
-    return ExperimentResult(frames=frames, figures=draw(frames), summary=summary_lines(frames))
+    from ..plotting import caption_figures
+
+    figures = draw(frames)
+    caption_figures(figures, params, f"controller K = {config.model.control.gain:g}, "
+                    f"c = {config.model.control.rate:g}"
+                    + (f"; fit to data: {config.data}" if config.data is not None else ""))
+    return ExperimentResult(frames=frames, figures=figures, summary=summary_lines(frames))
 
 
 def summary_lines(frames: dict[str, pd.DataFrame]) -> list[str]:

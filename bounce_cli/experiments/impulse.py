@@ -26,7 +26,7 @@ from ..engine.impulse import (
 from ..engine.control import is_passive
 from ..engine.linear import stability
 from ..engine.params import ModelParams
-from ..plotting import caption_figures
+from ..plotting import caption_figures, data_caption
 from .base import Experiment, ExperimentResult, RunOptions
 from .data_side import ImpulseDataBlock
 
@@ -298,7 +298,9 @@ def run_data(config: ImpulseConfig, options: RunOptions, source=None) -> Experim
     from .data_side import impulse_data_run
 
     frames, lines = impulse_data_run(config, options, source)
-    return ExperimentResult(frames=frames, figures=draw_data(frames), summary=lines)
+    figures = draw_data(frames)
+    caption_figures(figures, None, data_caption(config, source))
+    return ExperimentResult(frames=frames, figures=figures, summary=lines)
 
 
 def draw_data(frames: dict[str, pd.DataFrame]) -> dict:

@@ -31,7 +31,7 @@ from ..engine.params import ModelError, ModelParams, phase_difference
 from ..engine.regression import ols_line
 from ..engine.stochastic import map_noise_covariance, paper_noise_covariance, stationary_covariance
 from ..impacts import circular_mean, read_impacts
-from ..plotting import new_figure
+from ..plotting import caption_figures, data_caption, new_figure
 from .base import Experiment, ExperimentResult, RunOptions
 
 TREND_QUANTITIES = {
@@ -159,7 +159,9 @@ def run(config: LearningConfig, options: RunOptions, source=None) -> ExperimentR
                  f"{config.noise.q_v:g} m/s, q_theta = {config.noise.q_theta:g} rad: SD of ball "
                  f"amplitude smallest ({best.apex_sd_m * 100:.2f} cm) at AC = {best.ac_g:.3f} g; "
                  f"stable AC range ({float(stable_ac_range_g(m.alpha)[0]):.3f}, 0) g (eq. 14)")
-    return ExperimentResult(frames=frames, figures=draw(frames), summary=lines)
+    figures = draw(frames)
+    caption_figures(figures, None, data_caption(config, source))
+    return ExperimentResult(frames=frames, figures=figures, summary=lines)
 
 
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
