@@ -58,6 +58,7 @@ from ..engine.control import (
 from .base import Experiment, ExperimentResult, RunOptions
 from .basin import OUTCOME_COLOURS, OUTCOME_LABELS, GridAxis
 from .impulse import RelaxationBlock, ThresholdBlock
+from .data_side import relaxed_text
 
 MODELS = ("passive", "controlled")
 
@@ -528,7 +529,7 @@ def summary_lines(frames: dict[str, pd.DataFrame]) -> list[str]:
     for model in MODELS:
         part = relax[relax.model == model]
         lines.append(f"{model}: impacts to relax " + ", ".join(
-            f"{r.alpha_p:g}: {r.relaxation_impacts}" for r in part.itertuples()))
+            f"{r.alpha_p:g}: {relaxed_text(r.relaxation_impacts)}" for r in part.itertuples()))
     th = frames["threshold.csv"]
     for model in MODELS:
         part = th[th.model == model].set_index("direction")

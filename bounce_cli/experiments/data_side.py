@@ -93,6 +93,13 @@ def model_at_data(
     return params
 
 
+def relaxed_text(impacts: int, horizon: int | None = None) -> str:
+    """An impacts-to-relax count in words (-1 in the CSVs: not back within the horizon)."""
+    if impacts >= 0:
+        return str(impacts)
+    return "not within the impacts shown" if horizon is None else f"not within {horizon}"
+
+
 def stationary_segments(impacts: Impacts, settle: int, min_length: int):
     """(trial, v, dtheta, theta) of each run of consecutive, unperturbed impacts: perturbed impacts
     and the ``settle`` impacts after each are cut out (they are not the stationary state),
@@ -511,7 +518,7 @@ def impulse_data_run(config, options, source: ImpactsSource | None = None
              f" theta~ = {fp.theta_deg:.1f} deg"]
     for row in relax.itertuples():
         lines.append(f"{row.direction} (alpha_p {row.mean_alpha_p:.3f}), {row.source}: impacts "
-                     f"to relax {row.relaxation_impacts}")
+                     f"to relax {relaxed_text(row.relaxation_impacts)}")
     frames = {"aligned.csv": aligned, "model_response.csv": model, "relaxation_data.csv": relax}
     return frames, lines
 

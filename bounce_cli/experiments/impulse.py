@@ -28,7 +28,7 @@ from ..engine.linear import stability
 from ..engine.params import ModelParams
 from ..plotting import caption_figures, data_caption
 from .base import Experiment, ExperimentResult, RunOptions
-from .data_side import ImpulseDataBlock
+from .data_side import ImpulseDataBlock, relaxed_text
 
 MODELS = ("full", "linear")
 
@@ -85,11 +85,6 @@ def exit_line(row: dict, scan_end: float, paper_note: str) -> str:
     return (f"leaves the period-1 basin {side} alpha_p = {row['alpha_p_threshold']:.4f} "
             f"(v_0 = {row['v0_threshold_m_s']:.3f} m/s, then {row['outcome_outside']}"
             f"{paper_note})")
-
-
-def relaxed_text(impacts: int, horizon: int) -> str:
-    """relaxation.csv's count in words (-1 there: not back within the horizon)."""
-    return str(impacts) if impacts >= 0 else f"not within {horizon}"
 
 
 def at_paper_parameters(params: ModelParams) -> bool:
