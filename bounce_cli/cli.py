@@ -28,7 +28,9 @@ from typer.core import TyperGroup
 try:  # typer >= 0.20 vendors click
     from typer._click.exceptions import ClickException, NoArgsIsHelpError
 except ImportError:  # pragma: no cover - older typer on click
-    from click.exceptions import (  # type: ignore[import-not-found,no-redef]
+    # (mypy: click may be absent, or installed beside typer's vendored copy, e.g. by the
+    # cluster extra's distributed; either way this branch is only for older typer)
+    from click.exceptions import (  # type: ignore[import-not-found,no-redef,assignment,unused-ignore]
         ClickException,
         NoArgsIsHelpError,
     )

@@ -258,6 +258,7 @@ class DaskCluster:
                 raise ClusterError(
                     "--scheduler needs Dask's distributed package: "
                     "pip install 'bounce-cli[cluster]'") from None
+            self._check_reachable()
             try:
                 with deferred():  # a client is either made and kept (to close) or not made
                     self._client = Client(self.address, timeout=self.timeout_s,
@@ -269,6 +270,28 @@ class DaskCluster:
         threads = self._client.nthreads()
         self.workers = max(1, sum(threads.values()))
         return self
+
+    def _check_reachable(self) -> None:
+        """A quick TCP connect to a ``tcp://host:port`` address: a refused connection or an
+        unknown host is one clear error at once, not after the client's timeout."""
+        import socket
+        from urllib.parse import urlsplit
+
+        assert self.address is not None
+        try:
+            parts = urlsplit(self.address if "://" in self.address
+                             else f"tcp://{self.address}")
+            host, port = parts.hostname, parts.port
+        except ValueError:
+            host = port = None
+        if parts.scheme != "tcp" or not host or not port:
+            return  # another protocol (tls://, inproc://): the client says what is wrong
+        try:
+            socket.create_connection((host, port), timeout=self.timeout_s).close()
+        except OSError as exc:
+            reason = exc.strerror or str(exc) or type(exc).__name__
+            raise ClusterError(f"--scheduler {self.address}: cannot connect: "
+                               f"{reason}") from None
 
     def __exit__(self, exc_type, exc, tb) -> None:
         try:

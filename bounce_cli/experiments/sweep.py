@@ -18,7 +18,7 @@ arrive, so that ``--resume`` continues an interrupted sweep (the CLI keeps them 
 from __future__ import annotations
 
 import math
-from typing import Literal, Optional
+from typing import Any, Literal, Optional
 
 import numpy as np
 import pandas as pd
@@ -131,7 +131,7 @@ def parameter_grid(config: SweepConfig) -> tuple[list[ModelParams], np.ndarray]:
     axes = config.sweep.axes()
     base = config.params
     for corner in np.ndindex(*(2,) * len(axes)):  # the valid ranges are boxes: corners do
-        values = {a.parameter: (a.start, a.stop)[c] for a, c in zip(axes, corner)}
+        values = {str(a.parameter): (a.start, a.stop)[c] for a, c in zip(axes, corner)}
         try:
             parameter_point(base, values)
         except ModelError as exc:
@@ -141,7 +141,8 @@ def parameter_grid(config: SweepConfig) -> tuple[list[ModelParams], np.ndarray]:
     shape = tuple(a.num for a in axes)
     index = np.array([i[::-1] for i in np.ndindex(*shape[::-1])], dtype=int)
     grids = [a.values() for a in axes]
-    points = [parameter_point(base, {a.parameter: float(g[i]) for a, g, i in zip(axes, grids, idx)})
+    points = [parameter_point(base, {str(a.parameter): float(g[i])
+                                     for a, g, i in zip(axes, grids, idx)})
               for idx in index]
     return points, index
 
@@ -216,7 +217,7 @@ def tables(axes: list[SweepAxis], points: list[ModelParams], index: np.ndarray,
            results: list[dict]) -> dict[str, pd.DataFrame]:
     """sweep.csv (one row per point), axes.csv (the grid) and, with the uncertainty
     exponent, uncertainty.csv (f(eps) per point)."""
-    columns = {"point": np.arange(len(points))}
+    columns: dict[str, Any] = {"point": np.arange(len(points))}
     for k, name in enumerate(("ix", "iy")[: len(axes)]):
         columns[name] = index[:, k]
     for field in MODEL_FIELDS:

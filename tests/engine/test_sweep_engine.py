@@ -13,7 +13,7 @@ from bounce_cli.engine.basin_measures import basin_entropy
 from bounce_cli.engine.classify import OUTCOMES, ClassifySettings, classify_batch
 from bounce_cli.engine.linear import flip_boundary_g, racket_acceleration_at_impact_g, stability
 from bounce_cli.engine.maps import iterate_orbit
-from bounce_cli.engine.params import ModelError, ModelParams, NoFixedPointError
+from bounce_cli.engine.params import ModelError, NoFixedPointError
 from bounce_cli.engine.sweep import (
     Axis,
     UncertaintySettings,
