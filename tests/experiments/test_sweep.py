@@ -6,6 +6,11 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -195,3 +200,36 @@ def test_the_bundled_sweep_runs_in_the_library_without_files(paper_params):
     result = sweep_experiment.run(config, RunOptions())
     assert len(result.frames["sweep.csv"]) == 4
     assert isinstance(config.params, ModelParams)
+
+
+@pytest.mark.skipif(not hasattr(signal, "SIGINT") or sys.platform == "win32",
+                    reason="POSIX signals")
+def test_a_real_ctrl_c_mid_sweep_then_resume(cli, tmp_path):
+    """``bounce sweep --jobs 2`` in its own process, SIGINT to its process group (a terminal's
+    Ctrl-C) once a point is on disk: exit 130, the finished points kept; ``--resume`` then
+    writes the sweep.csv of an uninterrupted run."""
+    grid = ("--set", "sweep.x.num=6", "--set", "sweep.y.num=4",
+            "--set", "basin.theta0_deg.num=40", "--set", "basin.v0_m_s.num=40")
+    out = tmp_path / "run"
+    command = [sys.executable, "-m", "bounce_cli", "sweep", "--quiet", "--jobs", "2",
+               "--out", str(out), *grid]
+    process = subprocess.Popen(command, stderr=subprocess.PIPE, text=True,
+                               start_new_session=True)
+    deadline = time.monotonic() + 60
+    while not list((out / "points").glob("point-*.json")) and process.poll() is None:
+        assert time.monotonic() < deadline, "no point finished within a minute"
+        time.sleep(0.01)
+    os.killpg(process.pid, signal.SIGINT)
+    _, stderr = process.communicate(timeout=30)
+    assert process.returncode == 130, stderr
+    assert stderr.strip() == "bounce: interrupted"
+    kept = len(list((out / "points").glob("point-*.json")))
+    assert 1 <= kept < 24 and not (out / "sweep.csv").exists()
+
+    resumed = subprocess.run([*command, "--resume"], capture_output=True, text=True,
+                             timeout=120)
+    assert resumed.returncode == 0, resumed.stderr
+    reference = cli("sweep", "--quiet", "--jobs", "1", "--out", tmp_path / "reference", *grid)
+    assert reference.exit_code == 0, reference.output
+    assert (out / "sweep.csv").read_bytes() == (tmp_path / "reference" / "sweep.csv").read_bytes()
+    assert not (out / "points").exists()

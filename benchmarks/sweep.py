@@ -1,0 +1,64 @@
+"""Throughput of `bounce sweep` (basin points per second per core) and its scaling from 1 to
+2 local workers: the bundled alpha x AC sweep, enlarged, run through the experiment (no CLI
+start-up, no figure files), each job count ``--repeat`` times, the minimum wall time kept
+(the machine may be shared). The tables of every run must be identical.
+
+    python benchmarks/sweep.py                       # 6 x 4 points, 150 x 150 basins
+    python benchmarks/sweep.py --points 8 6 --basin 200 --repeat 3
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import time
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+from bounce_cli.config import bundled_config_path, load_config  # noqa: E402
+from bounce_cli.experiments import sweep  # noqa: E402
+from bounce_cli.experiments.base import RunOptions  # noqa: E402
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--points", type=int, nargs=2, default=(6, 4), metavar=("NX", "NY"))
+    parser.add_argument("--basin", type=int, default=150, help="basin grid points per axis")
+    parser.add_argument("--repeat", type=int, default=2)
+    parser.add_argument("--jobs", type=int, nargs="+", default=(1, 2))
+    args = parser.parse_args()
+    nx, ny = args.points
+    config = load_config(sweep.SweepConfig, bundled_config_path("sweep"), [
+        f"sweep.x.num={nx}", f"sweep.y.num={ny}",
+        f"basin.theta0_deg.num={args.basin}", f"basin.v0_m_s.num={args.basin}"])
+    basin_points = nx * ny * args.basin**2
+    print(f"{nx} x {ny} parameter points, basin {args.basin} x {args.basin}: "
+          f"{basin_points:,} basin points; {os.cpu_count()} cores; "
+          f"load average {os.getloadavg()[0]:.2f} at start")
+    reference = None
+    best: dict[int, float] = {}
+    for jobs in args.jobs:
+        times = []
+        for _ in range(args.repeat):
+            start = time.perf_counter()
+            result = sweep.run(config, RunOptions(jobs=jobs))
+            times.append(time.perf_counter() - start)
+            table = result.frames["sweep.csv"]
+            if reference is None:
+                reference = table
+            assert table.equals(reference), "the tables differ between runs"
+        best[jobs] = min(times)
+        print(f"--jobs {jobs}: {best[jobs]:.2f} s (runs: "
+              f"{', '.join(f'{t:.2f}' for t in times)}), {basin_points / best[jobs]:,.0f} "
+              f"basin points/s, {basin_points / best[jobs] / jobs:,.0f} per core")
+    if 1 in best:
+        for jobs, t in best.items():
+            if jobs > 1:
+                print(f"speed-up 1 -> {jobs} workers: {best[1] / t:.2f}x")
+    print(f"load average {os.getloadavg()[0]:.2f} at the end")
+
+
+if __name__ == "__main__":
+    main()
