@@ -4,6 +4,7 @@ a bad address or a missing package is one clear error."""
 
 from __future__ import annotations
 
+import os
 import time
 
 import pytest
@@ -72,6 +73,23 @@ def test_leaving_by_an_exception_cancels_what_was_submitted(cluster):
             time.sleep(0.05)
         assert [f.status for f in outstanding] == ["cancelled"] * 4
         assert client.status == "running"  # a client passed in is the caller's to close
+
+
+def die_once(args):
+    """Kill this worker process the first time task 2 runs (a node lost mid-task)."""
+    x, marker = args
+    if x == 2 and not os.path.exists(marker):
+        open(marker, "w").close()
+        os._exit(1)
+    return x * 10
+
+
+def test_a_task_on_a_lost_worker_is_rerun_and_nothing_is_lost(cluster, tmp_path):
+    marker = str(tmp_path / "died")
+    with parallel.DaskCluster(cluster.scheduler_address) as executor:
+        results = list(executor.map(die_once, [(x, marker) for x in range(6)]))
+    assert os.path.exists(marker)  # a worker did die
+    assert results == [0, 10, 20, 30, 40, 50]
 
 
 def test_a_bad_address_is_a_cluster_error():
