@@ -150,7 +150,7 @@ JobsOption = Annotated[
     Optional[int],
     typer.Option(
         "--jobs", "-j", min=1,
-        help="Worker processes for grid work (bounce basin; default: all cores).",
+        help="Worker processes for grid work (basin, sweep; default: all cores).",
     ),
 ]
 ResumeOption = Annotated[
