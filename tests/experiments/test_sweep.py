@@ -131,7 +131,7 @@ def test_an_interrupted_sweep_resumes_to_the_same_result(cli, tmp_path, monkeypa
     resumed = cli("sweep", "--out", out, *SMALL, "--jobs", "1", "--resume")
     assert resumed.exit_code == 0, resumed.output
     assert evaluated == [2, 3, 4, 5]
-    assert "2 resumed from an interrupted run" in resumed.stderr
+    assert "2 resumed from an interrupted run" in " ".join(resumed.stderr.split())
     for name in ("sweep.csv", "axes.csv", "run.json"):
         assert (out / name).read_bytes() == (reference / name).read_bytes(), name
     assert not (out / "points").exists()
@@ -202,6 +202,7 @@ def test_the_bundled_sweep_runs_in_the_library_without_files(paper_params):
     assert isinstance(config.params, ModelParams)
 
 
+@pytest.mark.slow  # about 10 s: three sweeps, two of them in their own processes
 @pytest.mark.skipif(not hasattr(signal, "SIGINT") or sys.platform == "win32",
                     reason="POSIX signals")
 def test_a_real_ctrl_c_mid_sweep_then_resume(cli, tmp_path):
