@@ -27,6 +27,7 @@ from pydantic import Field, model_validator
 from .. import parallel
 from ..config import ClassifyBlock, ConfigError, ExperimentConfig, StrictModel
 from ..engine.classify import OUTCOMES
+from ..engine.linear import flip_boundary_g
 from ..engine.params import ModelError, ModelParams
 from ..engine.sweep import (
     MODEL_FIELDS,
@@ -283,6 +284,7 @@ def _draw_plane(sweep: pd.DataFrame, axes: pd.DataFrame, quantities: list[str]):
         return out
 
     radius = image("spectral_radius")
+    plane = (str(x_axis["parameter"]), str(y_axis["parameter"]))
     for k, ax in enumerate(panels.ravel()):
         if k >= len(quantities):
             ax.set_visible(False)
@@ -296,16 +298,35 @@ def _draw_plane(sweep: pd.DataFrame, axes: pd.DataFrame, quantities: list[str]):
                        interpolation="nearest", vmin=0 if fraction else None,
                        vmax=1 if fraction else None)
         fig.colorbar(im, ax=ax, label=QUANTITIES[q])
-        if xs.size > 1 and ys.size > 1 and np.nanmin(radius, initial=np.inf) < 1 < np.nanmax(
-                radius, initial=-np.inf):
-            ax.contour(xs, ys, radius, levels=[1.0], colors="white", linestyles="--",
-                       linewidths=1.2)
+        _draw_flip_boundary(ax, plane, xs, ys, radius)
         ax.set_xlabel(SWEEP_PARAMETERS[x_axis["parameter"]][1])
         ax.set_ylabel(SWEEP_PARAMETERS[y_axis["parameter"]][1])
         ax.set_title(QUANTITIES[q].split(" (")[0], fontsize=9)
     fig.suptitle("Basin atlas over parameters (grey: no period-1 fixed point, eq. 8; "
-                 "dashed: spectral radius 1, eq. 14)")
+                 "dashed: spectral radius 1, eq. 14's flip boundary)")
     return fig
+
+
+def _draw_flip_boundary(ax, plane: tuple[str, str], xs: np.ndarray, ys: np.ndarray,
+                        radius: np.ndarray) -> None:
+    """Where the fixed point loses stability: in the alpha x AC plane eq. 14's closed form
+    AC = -2 (1 + alpha^2) / (1 + alpha)^2; elsewhere the contour of the sweep's spectral
+    radius at 1 (interpolated between the points)."""
+    style = dict(color="white", ls="--", lw=1.2)
+    if set(plane) == {"alpha", "ac_g"}:
+        alpha_axis = xs if plane[0] == "alpha" else ys
+        alpha = np.linspace(alpha_axis[0], alpha_axis[-1], 200)
+        flip = flip_boundary_g(alpha)
+        limits = ys if plane[0] == "alpha" else xs
+        inside = (flip >= limits[0]) & (flip <= limits[-1])
+        if inside.any():
+            x, y = (alpha, flip) if plane[0] == "alpha" else (flip, alpha)
+            ax.plot(np.where(inside, x, np.nan), np.where(inside, y, np.nan), **style)
+        return
+    finite = radius[np.isfinite(radius)]
+    if xs.size > 1 and ys.size > 1 and finite.size and finite.min() < 1 < finite.max():
+        ax.contour(xs, ys, radius, levels=[1.0], colors="white", linestyles="--",
+                   linewidths=1.2)
 
 
 def _edges(values: np.ndarray) -> tuple[float, float]:

@@ -234,3 +234,27 @@ def test_a_real_ctrl_c_mid_sweep_then_resume(cli, tmp_path):
     assert reference.exit_code == 0, reference.output
     assert (out / "sweep.csv").read_bytes() == (tmp_path / "reference" / "sweep.csv").read_bytes()
     assert not (out / "points").exists()
+
+
+RESULTS = Path(__file__).resolve().parents[2] / "results"
+
+
+def test_the_committed_atlas_agrees_with_eq14_and_with_the_bifurcation_diagram():
+    """results/sweep (bundled alpha x AC): stable exactly where eq. 14 says (the radius from
+    the Jacobian of eq. 9 at each point, the boundary from its closed form), and at alpha 0.5,
+    AC -1.6 g (Gamma 1.91) the basin all but sticks, as results/bifurcation's orbits do there
+    (2000 impacts each, an independent route to the attractor)."""
+    from bounce_cli.engine.linear import flip_boundary_g
+
+    atlas = pd.read_csv(RESULTS / "sweep" / "sweep.csv")
+    stable = atlas.spectral_radius < 1
+    assert stable.equals(atlas.ac_g > flip_boundary_g(atlas.alpha))
+    assert 0 < stable.sum() < len(atlas)
+    assert (atlas.loc[~stable, "fraction_period1"] < 0.01).all()
+    assert (atlas.loc[stable & (atlas.ac_g < -0.5), "fraction_period1"] > 0.2).all()
+    point = atlas[(atlas.alpha == 0.5) & np.isclose(atlas.ac_g, -1.6)].iloc[0]
+    attractors = pd.read_csv(RESULTS / "bifurcation" / "attractors.csv")
+    nearest = attractors.gamma.iloc[(attractors.gamma - point.gamma).abs().argmin()]
+    assert abs(nearest - point.gamma) < 0.005
+    assert set(attractors.loc[attractors.gamma == nearest, "attractor"]) == {"sticking"}
+    assert point.fraction_sticking > 0.85 and point.fraction_undecided < 0.01
