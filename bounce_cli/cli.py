@@ -162,8 +162,8 @@ SchedulerOption = Annotated[
     Optional[str],
     typer.Option("--scheduler", metavar="ADDRESS",
                  help="Run the tasks on the Dask cluster whose scheduler is at ADDRESS "
-                 "(e.g. tcp://host:8786) instead of local processes (needs the optional "
-                 "extra: pip install 'bounce-cli[cluster]')."),
+                 "(e.g. tcp://host:8786) instead of local processes (needs bounce-cli's "
+                 "optional extra named cluster, Dask's distributed package)."),
 ]
 
 

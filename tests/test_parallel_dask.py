@@ -98,3 +98,12 @@ def test_a_bad_address_is_a_cluster_error():
         with parallel.DaskCluster("tcp://127.0.0.1:9", timeout_s=1):
             pass
     assert time.monotonic() - start < 15
+
+
+def test_without_the_extra_installed_the_error_names_it(monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "distributed", None)  # import distributed fails
+    with pytest.raises(parallel.ClusterError, match=r"bounce-cli\[cluster\]"):
+        with parallel.executor(2, scheduler="tcp://127.0.0.1:8786"):
+            pass
