@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import time
 
 import matplotlib
@@ -20,6 +21,13 @@ matplotlib.use("Agg")
 from bounce_cli.config import bundled_config_path, load_config  # noqa: E402
 from bounce_cli.experiments import sweep  # noqa: E402
 from bounce_cli.experiments.base import RunOptions  # noqa: E402
+
+
+def cpu_seconds() -> float:
+    """User + system CPU time of this process and its reaped children (the pool's workers)."""
+    return sum(getattr(resource.getrusage(who), field)
+               for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)
+               for field in ("ru_utime", "ru_stime"))
 
 
 def main() -> None:
@@ -40,11 +48,12 @@ def main() -> None:
     reference = None
     best: dict[int, float] = {}
     for jobs in args.jobs:
-        times = []
+        times, cpu = [], []
         for _ in range(args.repeat):
-            start = time.perf_counter()
+            start, cpu_start = time.perf_counter(), cpu_seconds()
             result = sweep.run(config, RunOptions(jobs=jobs))
             times.append(time.perf_counter() - start)
+            cpu.append(cpu_seconds() - cpu_start)
             table = result.frames["sweep.csv"]
             if reference is None:
                 reference = table
@@ -52,7 +61,8 @@ def main() -> None:
         best[jobs] = min(times)
         print(f"--jobs {jobs}: {best[jobs]:.2f} s (runs: "
               f"{', '.join(f'{t:.2f}' for t in times)}), {basin_points / best[jobs]:,.0f} "
-              f"basin points/s, {basin_points / best[jobs] / jobs:,.0f} per core")
+              f"basin points/s, {basin_points / best[jobs] / jobs:,.0f} per core; CPU "
+              f"{min(cpu):.2f} s (this process and its workers)")
     if 1 in best:
         for jobs, t in best.items():
             if jobs > 1:
