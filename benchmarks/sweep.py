@@ -36,6 +36,10 @@ def main() -> None:
     parser.add_argument("--basin", type=int, default=150, help="basin grid points per axis")
     parser.add_argument("--repeat", type=int, default=2)
     parser.add_argument("--jobs", type=int, nargs="+", default=(1, 2))
+    parser.add_argument("--estimate", action="store_true",
+                        help="also the speed-up an idle machine would give: each point timed "
+                        "alone, scheduled as LocalPool does (in order, to the first idle "
+                        "worker) after the measured pool start")
     args = parser.parse_args()
     nx, ny = args.points
     config = load_config(sweep.SweepConfig, bundled_config_path("sweep"), [
@@ -67,7 +71,40 @@ def main() -> None:
         for jobs, t in best.items():
             if jobs > 1:
                 print(f"speed-up 1 -> {jobs} workers: {best[1] / t:.2f}x")
+    if args.estimate:
+        estimate(config, args.jobs)
     print(f"load average {os.getloadavg()[0]:.2f} at the end")
+
+
+def estimate(config, job_counts) -> None:
+    """Per-point CPU times, one after another in this process, and the makespan of
+    LocalPool's schedule for each job count: the speed-up when every worker has a core."""
+    from bounce_cli import parallel
+    from bounce_cli.engine.linear import stability
+    from bounce_cli.engine.sweep import evaluate_point
+
+    tasks = sweep.point_tasks_of(config)
+    costs = []
+    for task in tasks:
+        start = time.process_time()
+        evaluate_point(task)
+        costs.append(time.process_time() - start)
+    start = time.perf_counter()
+    with parallel.LocalPool(2) as pool:
+        list(pool.map(stability, [config.params] * 2))  # each worker imports the engine
+    pool_start = time.perf_counter() - start
+    serial = sum(costs)
+    print(f"per point: {min(costs):.3f} to {max(costs):.3f} s CPU, {serial:.2f} s in all; "
+          f"pool start {pool_start:.2f} s")
+    for jobs in job_counts:
+        if jobs < 2:
+            continue
+        free = [pool_start] * jobs
+        for cost in costs:  # in order, to the worker that is free first
+            k = free.index(min(free))
+            free[k] += cost
+        print(f"--jobs {jobs} on an idle machine (estimate): {max(free):.2f} s, speed-up "
+              f"{serial / max(free):.2f}x")
 
 
 if __name__ == "__main__":

@@ -148,6 +148,20 @@ def parameter_grid(config: SweepConfig) -> tuple[list[ModelParams], np.ndarray]:
     return points, index
 
 
+def point_tasks_of(config: SweepConfig, points: list[ModelParams] | None = None):
+    """The sweep's tasks, one per parameter point (``points``: from ``parameter_grid``)."""
+    if points is None:
+        points, _ = parameter_grid(config)
+    theta_axis, v_axis = config.basin.theta0_deg, config.basin.v0_m_s
+    measures = config.measures
+    uncertainty = (UncertaintySettings(tuple(measures.eps), measures.samples)
+                   if measures.uncertainty else None)
+    return point_tasks(points, Axis(theta_axis.start, theta_axis.stop, theta_axis.num),
+                       Axis(v_axis.start, v_axis.stop, v_axis.num),
+                       config.classify.settings(), measures.entropy_box, uncertainty,
+                       config.seed)
+
+
 def run(config: SweepConfig, options: RunOptions) -> ExperimentResult:
     axes = config.sweep.axes()
     points, index = parameter_grid(config)
@@ -159,13 +173,7 @@ def run(config: SweepConfig, options: RunOptions) -> ExperimentResult:
             f"basin points = {len(points) * basin_points:,}, more than "
             f"limits.max_basin_points = {config.limits.max_basin_points:,}; reduce sweep.*.num "
             "or basin.*.num, or raise limits.max_basin_points")
-    measures = config.measures
-    uncertainty = (UncertaintySettings(tuple(measures.eps), measures.samples)
-                   if measures.uncertainty else None)
-    tasks = point_tasks(points, Axis(theta_axis.start, theta_axis.stop, theta_axis.num),
-                        Axis(v_axis.start, v_axis.stop, v_axis.num),
-                        config.classify.settings(), measures.entropy_box, uncertainty,
-                        config.seed)
+    tasks = point_tasks_of(config, points)
 
     done = {i: r for i, r in options.checkpoints.load().items() if 0 <= i < len(tasks)}
     todo = [t for t in tasks if t.index not in done]
