@@ -291,6 +291,9 @@ def _draw_plane(sweep: pd.DataFrame, axes: pd.DataFrame, quantities: list[str]):
         out[sweep["iy"].to_numpy(), sweep["ix"].to_numpy()] = sweep[column].to_numpy()
         return out
 
+    import matplotlib
+
+    cmap = matplotlib.colormaps["viridis"].with_extremes(bad="0.75")  # grey: NaN
     radius = image("spectral_radius")
     plane = (str(x_axis["parameter"]), str(y_axis["parameter"]))
     for k, ax in enumerate(panels.ravel()):
@@ -298,9 +301,6 @@ def _draw_plane(sweep: pd.DataFrame, axes: pd.DataFrame, quantities: list[str]):
             ax.set_visible(False)
             continue
         q = quantities[k]
-        import matplotlib
-
-        cmap = matplotlib.colormaps["viridis"].with_extremes(bad="0.75")
         fraction = q.startswith("fraction_")
         im = ax.imshow(image(q), origin="lower", extent=extent, aspect="auto", cmap=cmap,
                        interpolation="nearest", vmin=0 if fraction else None,
