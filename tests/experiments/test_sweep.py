@@ -42,7 +42,7 @@ def test_every_backend_writes_the_same_sweep(cli, tmp_path):
     two = run_sweep(cli, tmp_path / "two", *UNCERTAINTY, "--jobs", "2")
     assert two.exit_code == 0, two.output
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=None) as cluster:
+                                  dashboard_address=":0") as cluster:
         dask = run_sweep(cli, tmp_path / "dask", *UNCERTAINTY,
                          "--scheduler", cluster.scheduler_address)
     assert dask.exit_code == 0, dask.output
