@@ -8,9 +8,18 @@ subsample of the grid, extrapolated to the whole grid. Prints points per second 
 With ``--memory-size M`` it also runs ``bounce basin`` on an M x M grid (CSV and figures
 included) in a subprocess and reports its peak resident memory.
 
+With ``--end-to-end`` it times the whole command -- ``bounce basin`` on the N x N grid in a
+subprocess: start-up, classification, basin.csv, figures -- with one job and with ``--jobs``,
+against the plain single-thread vectorised numpy kernel of the same map alone
+(``benchmarks/plain_kernel.py``), each ``--repeat`` times, and reports the minimum of each (the
+machine may be shared: the minimum is the run least disturbed). ``--scaling 250,500,1000``
+does the same end-to-end timing at several grid sizes.
+
     python benchmarks/basin.py                       # 1000 x 1000, 1000-point subsample
     python benchmarks/basin.py --size 200 --subsample 200
-    python benchmarks/basin.py --skip-grid --memory-size 4000
+    python benchmarks/basin.py --skip-grid --end-to-end --repeat 5
+    python benchmarks/basin.py --skip-grid --scaling 250,500,1000,2000 --repeat 3
+    python benchmarks/basin.py --skip-grid --memory-size 4000 --memory-format npz
 """
 
 from __future__ import annotations
@@ -34,6 +43,9 @@ from bounce_cli import parallel  # noqa: E402
 from bounce_cli.engine.classify import OUTCOMES, ClassifySettings, classify_grid  # noqa: E402
 from bounce_cli.engine.params import ModelParams  # noqa: E402
 from bounce_cli.engine.reference import classify_point_brentq  # noqa: E402
+
+sys.path.insert(0, str(ROOT / "benchmarks"))
+from plain_kernel import classify_plain  # noqa: E402
 
 PARAMS = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.30, racket_period=0.92)
 SETTINGS = ClassifySettings(max_iterations=100, tolerance=1e-3, min_hop_s=1e-3)
@@ -65,19 +77,67 @@ def time_reference(theta, v, m: int, seed: int, fast):
     return elapsed, len(pick), agree
 
 
-def memory_run(m: int, jobs: int) -> None:
+def basin_command(m: int, jobs: int, out: str, fmt: str = "csv") -> list[str]:
+    return [sys.executable, "-m", "bounce_cli", "basin", "--quiet", "--jobs", str(jobs),
+            "--set", f"grid.theta0_deg.num={m}", "--set", f"grid.v0_m_s.num={m}",
+            "--set", f"output.format={fmt}", "--out", out, "--force"]
+
+
+def memory_run(m: int, jobs: int, fmt: str) -> None:
     with tempfile.TemporaryDirectory() as out:
-        cmd = [sys.executable, "-m", "bounce_cli", "basin", "--quiet", "--jobs", str(jobs),
-               "--set", f"grid.theta0_deg.num={m}", "--set", f"grid.v0_m_s.num={m}",
-               "--out", out]
         t0 = time.perf_counter()
-        subprocess.run(cmd, cwd=ROOT, check=True)
+        subprocess.run(basin_command(m, jobs, out, fmt), cwd=ROOT, check=True)
         wall = time.perf_counter() - t0
         peak_kib = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
-        size = (Path(out) / "basin.csv").stat().st_size
-    print(f"bounce basin {m} x {m} (--jobs {jobs}, CSV + figures): {wall:.1f} s, "
+        size = (Path(out) / f"basin.{fmt}").stat().st_size
+    print(f"bounce basin {m} x {m} (--jobs {jobs}, basin.{fmt} + figures): {wall:.1f} s, "
           f"peak RSS of the largest process {peak_kib / 1024:.0f} MiB, "
-          f"basin.csv {size / 1e6:.0f} MB")
+          f"basin.{fmt} {size / 1e6:.0f} MB")
+
+
+def time_command(m: int, jobs: int, repeat: int) -> list[float]:
+    """Wall times of ``bounce basin`` m x m (a fresh process each time: start-up included)."""
+    times = []
+    with tempfile.TemporaryDirectory() as out:
+        for _ in range(repeat):
+            t0 = time.perf_counter()
+            subprocess.run(basin_command(m, jobs, out), cwd=ROOT, check=True)
+            times.append(time.perf_counter() - t0)
+    return times
+
+
+def time_plain(m: int, repeat: int) -> list[float]:
+    theta, v = grid(m)
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        classify_plain(theta, v)
+        times.append(time.perf_counter() - t0)
+    return times
+
+
+def runs(times: list[float]) -> str:
+    return f"min {min(times):.2f} s of {len(times)} ({', '.join(f'{t:.2f}' for t in times)})"
+
+
+def end_to_end(sizes: list[int], jobs: int, repeat: int) -> None:
+    """``bounce basin`` end to end with 1 and ``jobs`` jobs against the plain kernel alone,
+    runs interleaved (so that a busy spell of a shared machine hits all three alike)."""
+    for m in sizes:
+        plain: list[float] = []
+        one: list[float] = []
+        many: list[float] = []
+        for _ in range(repeat):
+            plain += time_plain(m, 1)
+            one += time_command(m, 1, 1)
+            if jobs > 1:
+                many += time_command(m, jobs, 1)
+        print(f"{m} x {m}: plain numpy kernel alone {runs(plain)}")
+        print(f"{m} x {m}: bounce basin end to end --jobs 1 {runs(one)}: "
+              f"{min(plain) / min(one):.2f}x the plain kernel's speed")
+        if jobs > 1:
+            print(f"{m} x {m}: bounce basin end to end --jobs {jobs} {runs(many)}: "
+                  f"{min(plain) / min(many):.2f}x the plain kernel's speed")
 
 
 def main() -> None:
@@ -88,6 +148,12 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0, help="seed of the subsample")
     ap.add_argument("--skip-grid", action="store_true", help="only the memory run")
     ap.add_argument("--memory-size", type=int, default=0, help="also run bounce basin M x M")
+    ap.add_argument("--memory-format", default="csv", choices=["csv", "npz", "parquet"],
+                    help="output.format of the memory run")
+    ap.add_argument("--end-to-end", action="store_true",
+                    help="time bounce basin N x N end to end against the plain kernel")
+    ap.add_argument("--scaling", default="", help="comma-separated sizes for --end-to-end")
+    ap.add_argument("--repeat", type=int, default=3, help="repeats of each end-to-end timing")
     args = ap.parse_args()
 
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
@@ -117,8 +183,11 @@ def main() -> None:
         if args.jobs > 1:
             print(f"ratio, vectorised --jobs {args.jobs} vs brentq loop: "
                   f"{per_point * n / tj:,.0f}x")
+    if args.end_to_end or args.scaling:
+        sizes = [int(x) for x in args.scaling.split(",")] if args.scaling else [args.size]
+        end_to_end(sizes, args.jobs, args.repeat)
     if args.memory_size:
-        memory_run(args.memory_size, args.jobs)
+        memory_run(args.memory_size, args.jobs, args.memory_format)
 
 
 if __name__ == "__main__":

@@ -24,17 +24,21 @@ import hashlib
 import json
 import os
 import platform
+import re
 import subprocess
 import tempfile
 import time
 from importlib import metadata
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
-import pandas as pd
+import numpy as np
 
 from . import __version__
 from .interrupts import deferred
+
+if TYPE_CHECKING:  # pandas is imported where a table is written or read (fast start-up)
+    import pandas as pd
 
 MANIFEST = "run.json"
 TIMING = "timing.json"
@@ -130,6 +134,27 @@ def read_manifest(out_dir: Path) -> dict[str, Any]:
     return data if isinstance(data, dict) else {}
 
 
+def files_named_in(config: Any) -> set[Path]:
+    """Every existing file a (resolved, JSON-like) config names in one of its string values,
+    resolved: the files a run reads (``data``, ``events``, ``truth``, ...)."""
+    found: set[Path] = set()
+    stack = [config]
+    while stack:
+        node = stack.pop()
+        if isinstance(node, dict):
+            stack.extend(node.values())
+        elif isinstance(node, (list, tuple)):
+            stack.extend(node)
+        elif isinstance(node, str) and node:
+            try:
+                path = Path(node)
+                if path.is_file():
+                    found.add(path.resolve())
+            except (OSError, ValueError):
+                pass
+    return found
+
+
 class RunDirectory:
     """Collects a run's outputs and commits them atomically into ``out_dir``."""
 
@@ -204,6 +229,7 @@ class RunDirectory:
         self.created = []
 
     def add_csv(self, name: str, frame: pd.DataFrame) -> None:
+        """A table to write, in the format its name ends with (``FRAME_FORMATS``)."""
         self._frames[name] = frame
 
     def add_figure(self, name: str, figure) -> None:
@@ -242,7 +268,7 @@ class RunDirectory:
         self.out_dir.mkdir(parents=True, exist_ok=True)
         writers: dict[str, Callable[[Path], object]] = {}
         for name, frame in self._frames.items():
-            writers[name] = functools.partial(frame.to_csv, index=False)
+            writers[name] = functools.partial(write_frame, frame, kind=frame_format(name))
         for name, figure in self._figures.items():
             writers[name] = functools.partial(figure.savefig, format="png", dpi=150)
         staged: list[tuple[Path, Path]] = []
@@ -258,12 +284,168 @@ class RunDirectory:
                 for tmp, final in staged:
                     os.replace(tmp, final)
                 # files of the run this one replaces (listed in its manifest) that this run
-                # did not write: remove them, so the folder holds one run, as run.json says
+                # did not write: remove them, so the folder holds one run, as run.json says --
+                # except a file this run read (a --data file in the folder of the run that
+                # wrote it): a run never deletes its own input
+                inputs = files_named_in(self.resolved_config)
                 for name in set(self.previous.get("files", [])) - set(writers):
                     stale = self.out_dir / Path(name).name
-                    if stale.is_file():
+                    if stale.is_file() and stale.resolve() not in inputs:
                         stale.unlink()
         finally:
             for tmp, _ in staged:
                 tmp.unlink(missing_ok=True)
         return [final for _, final in staged]
+
+
+# -- tables: CSV (fast, byte for byte what pandas writes) and binary formats -----------------
+#: file name suffix -> table format; ``read_frame`` reads each back into the same DataFrame
+FRAME_FORMATS = (".csv", ".npz", ".parquet")
+#: rows per chunk of the CSV writer (bounds its memory: ~100 bytes a row while a chunk is built)
+CSV_CHUNK_ROWS = 1 << 20
+#: npz key suffix of a categorical column's categories (the column itself holds the codes)
+NPZ_CATEGORIES = ".categories"
+_CSV_SPECIAL = re.compile(r'[,"\r\n]')
+
+
+def write_frame(frame: pd.DataFrame, path: Path, kind: str | None = None) -> None:
+    """Write a table to ``path`` as ``kind`` (a ``FRAME_FORMATS`` suffix; default: the one
+    ``path`` ends with, CSV for any other)."""
+    kind = kind or frame_format(Path(path).name)
+    if kind == ".npz":
+        write_npz(frame, path)
+    elif kind == ".parquet":
+        frame.to_parquet(path, index=False)
+    else:
+        write_csv(frame, path)
+
+
+def frame_format(name: str) -> str:
+    """The table format of a file name: its suffix if one of ``FRAME_FORMATS``, else CSV."""
+    suffix = Path(name).suffix
+    return suffix if suffix in FRAME_FORMATS else ".csv"
+
+
+def write_csv(frame: pd.DataFrame, path: Path) -> None:
+    """``frame.to_csv(path, index=False)``, byte for byte, about ten times faster for large
+    tables of numbers, categories and plain strings: every column is factorised, its distinct
+    values formatted once the way pandas formats them (``astype(str)``: repr-exact floats,
+    NaN as an empty cell) and the rows joined in chunks of ``CSV_CHUNK_ROWS``. Anything else
+    (quoting, nullable or date types, an empty table or one column) goes to pandas."""
+    columns = _csv_header(frame)
+    if columns is None:
+        frame.to_csv(path, index=False)
+        return
+    with open(path, "w", encoding="utf-8", newline="") as handle:
+        handle.write(columns + os.linesep)
+        for start in range(0, len(frame), CSV_CHUNK_ROWS):
+            chunk = frame.iloc[start:start + CSV_CHUNK_ROWS]
+            cells = [_csv_cells(chunk.iloc[:, j]) for j in range(chunk.shape[1])]
+            handle.write(os.linesep.join(map(",".join, zip(*cells))) + os.linesep)
+
+
+def _csv_header(frame: pd.DataFrame) -> str | None:
+    """The header line if every column can take the fast path, else None."""
+    if len(frame) == 0 or frame.shape[1] < 2:  # pandas writes a lone empty cell as ""
+        return None
+    names = list(frame.columns)
+    if not all(isinstance(n, str) and n and not _CSV_SPECIAL.search(n) for n in names):
+        return None
+    if len(set(names)) != len(names):
+        return None
+    for j in range(frame.shape[1]):
+        if _distinct_texts(frame.iloc[:, j]) is None:
+            return None
+    return ",".join(names)
+
+
+def _distinct_texts(column: pd.Series):
+    """(codes, texts): each row's cell is ``texts[code]``; None if not on the fast path."""
+    import pandas as pd
+
+    dtype = column.dtype
+    if isinstance(dtype, pd.CategoricalDtype):
+        categories = _distinct_texts(pd.Series(dtype.categories))
+        if categories is None:
+            return None
+        codes = column.cat.codes.to_numpy()
+        # code -1 (missing) picks the appended empty cell
+        return codes, np.append(categories[1][categories[0]], "")
+    if isinstance(dtype, pd.StringDtype) or (isinstance(dtype, np.dtype) and dtype.kind == "O"):
+        # strings (pandas' str dtype or objects): missing cells are written empty
+        codes, keys = pd.factorize(column.to_numpy(dtype=object))
+        keys = np.asarray(keys, dtype=object)
+        if not all(type(k) is str and k and not _CSV_SPECIAL.search(k) for k in keys):
+            return None
+        return codes, np.append(keys, "")
+    values = column.to_numpy()
+    if not isinstance(dtype, np.dtype):
+        return None
+    if dtype.kind == "f" and dtype.itemsize == 8:
+        # factorise the bit patterns: 0.0 and -0.0 are written differently
+        codes, keys = pd.factorize(values.view(np.int64))
+        distinct = np.asarray(keys).view(np.float64)
+        texts = distinct.astype(str).astype(object)
+        texts[np.isnan(distinct)] = ""
+        return codes, texts
+    if dtype.kind in "iub":
+        codes, keys = pd.factorize(values)
+        return codes, np.asarray(keys).astype(str).astype(object)
+    return None
+
+
+def _csv_cells(column: pd.Series):
+    found = _distinct_texts(column)
+    assert found is not None  # _csv_header checked every column
+    codes, texts = found
+    return texts[codes].tolist()
+
+
+def write_npz(frame: pd.DataFrame, path: Path) -> None:
+    """The table as an uncompressed ``.npz`` (numpy only): one array per column; a
+    categorical column as its integer codes plus ``<name>.categories``; strings as unicode.
+    ``read_frame`` reads it back to the same DataFrame."""
+    import pandas as pd
+
+    arrays: dict[str, np.ndarray] = {}
+    for name in frame.columns:
+        column = frame[name]
+        if isinstance(column.dtype, pd.CategoricalDtype):
+            arrays[str(name)] = column.cat.codes.to_numpy()
+            arrays[f"{name}{NPZ_CATEGORIES}"] = np.asarray(column.cat.categories, dtype=str)
+        elif isinstance(column.dtype, pd.StringDtype) or column.dtype == object:
+            arrays[str(name)] = np.asarray(column.to_numpy(dtype=object), dtype=str)
+        else:
+            arrays[str(name)] = column.to_numpy()
+    with open(path, "wb") as handle:
+        np.savez(handle, allow_pickle=False, **arrays)
+
+
+def read_frame(path: Path) -> pd.DataFrame:
+    """A table written by a run (``.csv``, ``.npz`` or ``.parquet``) as a DataFrame."""
+    import pandas as pd
+
+    path = Path(path)
+    kind = frame_format(path.name)
+    if kind == ".parquet":
+        return pd.read_parquet(path)
+    if kind == ".csv":
+        return pd.read_csv(path)
+    with np.load(path, allow_pickle=False) as data:
+        names = [k for k in data.files if not k.endswith(NPZ_CATEGORIES)]
+        columns: dict[str, Any] = {}
+        for name in names:
+            if f"{name}{NPZ_CATEGORIES}" in data.files:
+                categories = data[f"{name}{NPZ_CATEGORIES}"].tolist()
+                columns[name] = pd.Categorical.from_codes(data[name], categories=categories)
+            elif data[name].dtype.kind == "U":
+                columns[name] = data[name].astype(object)
+            else:
+                columns[name] = data[name]
+    return pd.DataFrame(columns)
+
+
+def read_frames(folder: Path) -> dict[str, pd.DataFrame]:
+    """Every table of a run directory, file name -> DataFrame: what ``draw(frames)`` takes."""
+    return {p.name: read_frame(p) for p in sorted(Path(folder).iterdir())
+            if p.is_file() and not p.name.startswith(".") and p.suffix in FRAME_FORMATS}

@@ -86,11 +86,21 @@ class ControlBlock(StrictModel):
     gain: float = Field(description="K: 1 = the period follows the ball's flight time in full")
     rate: float = Field(1.0, ge=0.0, le=2.0,
                         description="c per impact: 1 = immediate, 0 = never; > 1 overshoots")
+    switch: Literal["impact", "cycle"] = Field(
+        "impact", description="the new period starts at the impact, or at the racket's next "
+        "upward mid-position crossing (a racket moved cycle by cycle, as simulate-recording's)")
+
+    @model_serializer(mode="wrap")
+    def _default_switch_unwritten(self, handler):
+        data = handler(self)
+        if self.switch == "impact":  # configs written before the key existed dump unchanged
+            data.pop("switch", None)
+        return data
 
     def controller(self):
         from .engine.control import CONTROLLERS
 
-        return CONTROLLERS[self.kind](self.gain, self.rate)
+        return CONTROLLERS[self.kind](self.gain, self.rate, switch=self.switch)
 
 
 class ControllableModelBlock(ModelBlock):
@@ -110,6 +120,14 @@ class ControllableModelBlock(ModelBlock):
     def controller(self):
         """The engine controller, or None for the passive map."""
         return None if self.control is None else self.control.controller()
+
+    def active_controller(self):
+        """The engine controller, or None when the map is the passive one (no control, or
+        gain 0: then every result is the passive run's byte for byte)."""
+        from .engine.control import is_passive
+
+        controller = self.controller()
+        return None if is_passive(controller) else controller
 
 
 #: section 3's stopping conditions as the engine defines them (the one place of the defaults)

@@ -28,11 +28,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any, Union
 
 import numpy as np
 import pandas as pd
 
-from .config import ConfigError
+from .config import ConfigError, show_value
 
 #: the columns every impacts table has, in this order
 REQUIRED_COLUMNS: tuple[str, ...] = (
@@ -100,7 +101,9 @@ def read_data_csv(path: Path) -> pd.DataFrame:
     """A ``--data`` CSV as a DataFrame with stripped column names; an unreadable file is one
     line naming ``data`` and the file."""
     try:
-        frame = pd.read_csv(path)
+        # only an empty cell is missing: a cell such as 'n/a' stays text, so that an error
+        # can show what the file holds
+        frame = pd.read_csv(path, keep_default_na=False, na_values=[""])
     except FileNotFoundError:
         raise ConfigError(f"data: {path}: file not found") from None
     except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
@@ -110,18 +113,39 @@ def read_data_csv(path: Path) -> pd.DataFrame:
     return frame
 
 
+def cell_text(value: Any) -> str:
+    """A cell as the file holds it: ``'n/a'``, ``-0.9``, or 'an empty cell'."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
+        return "an empty cell"
+    return show_value(value)
+
+
 def _fail(path: Path, message: str) -> ConfigError:
     return ConfigError(f"data: {path}: {message}")
 
 
-def read_impacts(path_text: str | Path, needs: tuple[str, ...] = (), command: str = "",
-                 min_bounces: int = 2) -> Impacts:
+#: where an impacts table comes from: a CSV file, or (label, table) already in memory (a
+#: simulated lab session, ``experiments.lab``)
+ImpactsSource = Union[str, Path, tuple[str, pd.DataFrame]]
+
+
+def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: str = "",
+                 min_bounces: int = 2, optional: tuple[str, ...] = ()) -> Impacts:
     """Read and check an impacts table (ours or a lab's own). Every problem is one line naming
     the file and the column, row or trial (ConfigError). ``needs``: the optional columns the
-    analysis ``command`` requires; ``min_bounces``: fewest impacts a trial may have."""
-    path = Path(path_text)
-    frame = read_data_csv(path)
+    analysis ``command`` requires; ``min_bounces``: fewest impacts a trial may have.
+    ``source`` may also be ``(label, frame)``: a table in memory, checked the same way (the
+    label stands for the file name in messages). ``optional``: columns the analysis uses
+    when present, checked like ``needs`` then."""
+    if isinstance(source, tuple):
+        label, frame = source
+        path = Path(label)
+        frame = frame.copy()
+    else:
+        path = Path(source)
+        frame = read_data_csv(path)
     who = f"bounce {command} needs" if command else "needed"
+    checked = (*needs, *(c for c in optional if c in frame.columns))
     missing = [c for c in CORE_COLUMNS if c not in frame.columns]
     if "theta_rad" not in frame.columns and "theta_deg" not in frame.columns:
         missing.append("theta_rad (or theta_deg)")
@@ -138,7 +162,7 @@ def read_impacts(path_text: str | Path, needs: tuple[str, ...] = (), command: st
         row = int(np.flatnonzero(frame["trial"].isna().to_numpy())[0])
         raise _fail(path, f"column trial: empty in data row {row + 1}")
     numeric = ["k", "v_m_s", "theta_rad" if "theta_rad" in frame.columns else "theta_deg",
-               *[c for c in needs if c not in ("perturbed",)]]
+               *[c for c in checked if c not in ("perturbed",)]]
     allow_nan = {"hop_s", "ball_apex_m"}  # a trial's last impact has no following flight
     for column in dict.fromkeys(numeric):
         values = pd.to_numeric(frame[column], errors="coerce")
@@ -148,7 +172,8 @@ def read_impacts(path_text: str | Path, needs: tuple[str, ...] = (), command: st
         if bad.any():
             row = int(np.flatnonzero(bad.to_numpy())[0])
             raise _fail(path, f"column {column}: not a number in data row {row + 1} (trial "
-                              f"{frame['trial'].iloc[row]}, got {frame[column].iloc[row]!r})")
+                              f"{frame['trial'].iloc[row]}, "
+                              f"got {cell_text(frame[column].iloc[row])})")
         frame[column] = values.astype(float)
     if "theta_rad" not in frame.columns:
         frame["theta_rad"] = np.radians(frame["theta_deg"])
@@ -159,18 +184,19 @@ def read_impacts(path_text: str | Path, needs: tuple[str, ...] = (), command: st
               "racket_amplitude_m": ("> 0", lambda x: x > 0),
               "alpha": ("in [0, 1)", lambda x: (x >= 0) & (x < 1))}
     for column, (rule, ok) in checks.items():
-        if column in needs and not ok(frame[column]).all():
+        if column in checked and not ok(frame[column]).all():
             row = int(np.flatnonzero(~ok(frame[column]).to_numpy())[0])
             raise _fail(path, f"column {column}: must be {rule} (data row {row + 1}, trial "
-                              f"{frame['trial'].iloc[row]}: {frame[column].iloc[row]!r})")
+                              f"{frame['trial'].iloc[row]}: "
+                              f"{cell_text(frame[column].iloc[row])})")
     if "perturbed" in frame.columns:
         text = frame["perturbed"].astype(str).str.strip().str.lower()
         mapping = {"true": True, "false": False, "1": True, "0": False, "1.0": True, "0.0": False}
         unknown = ~text.isin(list(mapping))
-        if "perturbed" in needs and unknown.any():
+        if "perturbed" in checked and unknown.any():
             row = int(np.flatnonzero(unknown.to_numpy())[0])
             raise _fail(path, f"column perturbed: expected True/False in data row {row + 1} "
-                              f"(got {frame['perturbed'].iloc[row]!r})")
+                              f"(got {cell_text(frame['perturbed'].iloc[row])})")
         frame["perturbed"] = text.map(mapping).fillna(False).astype(bool)
     frame["trial"] = frame["trial"].astype(str)
     order = list(dict.fromkeys(frame["trial"]))

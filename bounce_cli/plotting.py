@@ -31,3 +31,15 @@ def caption_figures(figures: dict[str, Figure], params: ModelParams | None,
         title = fig.get_suptitle()
         fig.suptitle(f"{title}\n{line}" if title else line,
                      fontsize=10 if title else 9)
+
+
+def data_caption(config: Any, source: Any = None) -> str:
+    """A data-side figure's caption line: where the impacts came from and the model's alpha
+    and g (the config's; the racket is the data's)."""
+    if source is not None:
+        where = "data: a simulated lab session"
+    elif config.data is not None:
+        where = f"data: {config.data}"
+    else:
+        where = "model only (no --data)"
+    return f"{where}; model alpha = {config.model.alpha:g}, g = {config.model.g:g} m/s^2"

@@ -17,6 +17,7 @@ Every problem is one line naming the file and the column or trial (``ConfigError
 
 from __future__ import annotations
 
+import struct
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
@@ -143,8 +144,13 @@ def read_c3d_recording(path: Path, c3d_block) -> list[Trial]:
             frames = [points[:, [axis, 3]].copy() for _, points, _ in reader.read_frames()]
     except FileNotFoundError:
         raise ConfigError(f"{path}: file not found") from None
-    except (OSError, ValueError, AttributeError, KeyError) as exc:
-        raise ConfigError(f"{path}: cannot read as C3D: {exc}") from None
+    except (OSError, ValueError, AttributeError, KeyError, AssertionError, struct.error,
+            IndexError, TypeError, EOFError) as exc:
+        # the c3d reader checks its header with assert and struct: a damaged, truncated or
+        # renamed non-C3D file surfaces as any of these
+        reason = " ".join(str(exc).split()) or type(exc).__name__
+        raise ConfigError(f"{path}: cannot read as C3D (damaged or not a C3D file): "
+                          f"{reason}") from None
     if units not in LENGTH_UNITS:
         raise ConfigError(f"{path}: POINT:UNITS is {units!r}; expected one of "
                           f"{', '.join(LENGTH_UNITS)}")

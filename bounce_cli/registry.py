@@ -28,7 +28,8 @@ class Entry:
     fixed point, so the CLI warns when it is unstable. ``reproduce``: part of
     ``bounce reproduce`` and of the committed ``results/``. ``resumable``: the command takes
     ``--resume`` (the run keeps finished tasks in ``RunOptions.checkpoints``); ``cluster``:
-    it takes ``--scheduler ADDRESS`` (its tasks can run on a Dask cluster)."""
+    it takes ``--scheduler ADDRESS`` (its tasks can run on a Dask cluster). ``attribute``:
+    the module's attribute holding the :class:`Experiment` (one module may define several)."""
 
     name: str
     summary: str
@@ -41,6 +42,7 @@ class Entry:
     cluster: bool = False
     module: str = ""
     config: str = ""
+    attribute: str = "EXPERIMENT"
 
     def __post_init__(self) -> None:
         if not self.module:
@@ -50,7 +52,7 @@ class Entry:
 
     def load(self) -> Experiment:
         module = importlib.import_module(f"bounce_cli.experiments.{self.module}")
-        experiment: Experiment = module.EXPERIMENT
+        experiment: Experiment = getattr(module, self.attribute)
         return experiment
 
 
@@ -133,6 +135,41 @@ EXPERIMENTS: tuple[Entry, ...] = (
         events_help="Events CSV (trial, t_s[, alpha]): the impact times of a virtual set-up "
         "(sets the config key `events`).",
         needs_fixed_point=False,
+    ),
+    Entry(
+        "learning-data",
+        "Fig. 6 on a synthetic lab: a learning series simulated, extracted and analysed.",
+        (("learning.png", "Fig. 6 (section 5) on a simulated lab session: a learning series of "
+          "racket amplitudes (AC from -0.25 to -0.75 g), recorded, extracted and analysed as "
+          "`bounce learning --data`; per-trial AC and SD of ball amplitude beside eq. 19."),),
+        needs_fixed_point=False, module="lab", attribute="LEARNING",
+    ),
+    Entry(
+        "regression-data",
+        "Fig. 7 on a synthetic lab: trials at three rackets simulated, extracted, analysed.",
+        (("regression.png", "Fig. 7 (section 5, eq. 15) on a simulated lab session: trials at "
+          "three racket periods with eq. 15's amplitudes, recorded, extracted, averaged per "
+          "trial and regressed as `bounce regression --data impacts.csv`."),),
+        module="lab", attribute="REGRESSION",
+    ),
+    Entry(
+        "acf-data",
+        "Fig. 8 on a synthetic lab: steady bouncing simulated, extracted and analysed.",
+        (("acf_data.png", "Fig. 8 (section 6) on a simulated lab session at Fig. 8's "
+          "parameters: the extracted data's correlation functions (grey) beside eq. 19."),
+         ("stability_data.png", "Stability measured from the simulated session: VAR(1) "
+          "eigenvalues (OLS and lag-2) beside eq. 10, and the bounces each estimate needs.")),
+        module="lab", attribute="ACF",
+    ),
+    Entry(
+        "impulse-data",
+        "Figs. 9, 11 on a synthetic lab: perturbations simulated, extracted, aligned.",
+        (("impulse_data.png", "Fig. 9 (section 7) on a simulated lab session: responses to "
+          "alpha perturbations aligned on the perturbed impacts (black) beside the model's "
+          "(grey)."),
+         ("modulation_data.png", "Fig. 11 on the simulated session: racket period and "
+          "amplitude per impact after a perturbation (the passive racket: flat).")),
+        module="lab", attribute="IMPULSE",
     ),
     Entry(
         "bifurcation",

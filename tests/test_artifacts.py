@@ -1,11 +1,14 @@
 """Run directories: atomic writes, refusal to overwrite another config's results, run.json."""
 
 import json
+from pathlib import Path
 
 import matplotlib.pyplot as plt
+import numpy as np
 import pandas as pd
 import pytest
 
+from bounce_cli import artifacts
 from bounce_cli.artifacts import OutputDirError, RunDirectory, atomic_write
 
 
@@ -131,3 +134,93 @@ def test_replacing_a_run_removes_the_files_only_the_old_run_wrote(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == ["both.csv", "notes.txt", "run.json",
                                                      "timing.json"]
     assert json.loads((out / "run.json").read_text())["files"] == ["both.csv"]
+
+
+def test_replacing_a_run_never_deletes_the_file_it_reads(tmp_path, cli):
+    """`--force` into the folder of the run that wrote the --data file: the old run's files
+    are replaced, but not the input the new run reads (the new-user review lost impacts.csv)."""
+    out = tmp_path / "lab"
+    first = cli("simulate-recording", "--set", "trials=1", "--set", "duration_s=8",
+                "--out", out, "--quiet")
+    assert first.exit_code == 0, first.output
+    recording = out / "recording.csv"
+    before = recording.read_bytes()
+    second = cli("extract", "--data", recording, "--out", out, "--force", "--quiet")
+    assert second.exit_code == 0, second.output
+    assert recording.read_bytes() == before
+    assert (out / "impacts.csv").is_file()
+
+
+# -- the table writers --------------------------------------------------------------------
+RESULTS = Path(__file__).resolve().parents[1] / "results"
+
+
+def awkward_frame(n=3000, seed=1):
+    """Every kind of cell the fast CSV writer formats itself, with the values whose text is
+    easy to get wrong: -0.0 next to 0.0, NaN, inf, huge, tiny and subnormal floats, repeated
+    and distinct values, categories with a missing one, plain strings."""
+    rng = np.random.default_rng(seed)
+    special = np.array([0.0, -0.0, np.nan, np.inf, -np.inf, 1e16, 1e-5, 1e-4, 5e-324, 0.1,
+                        1 / 3, 123456789.0, -2.5])
+    return pd.DataFrame({
+        "x_m": rng.choice(special, n),
+        "y_s": rng.standard_normal(n) * 10.0 ** rng.integers(-8, 8, n),
+        "grid_deg": np.tile(np.linspace(0, 360, 30), n // 30),
+        "count": rng.integers(-5, 300, n).astype(np.int16),
+        "big": rng.integers(-2**62, 2**62, n),
+        "flag": rng.random(n) < 0.5,
+        "outcome": pd.Categorical.from_codes(rng.integers(-1, 3, n).astype(np.int8),
+                                             categories=["period1", "sticking", "undecided"]),
+        "name": rng.choice(np.array(["a", "fixed_point", "x y"], dtype=object), n),
+    })
+
+
+def test_fast_csv_writer_writes_what_pandas_writes(tmp_path, monkeypatch):
+    frame = awkward_frame()
+    monkeypatch.setattr(artifacts, "CSV_CHUNK_ROWS", 700)  # several chunks, a short last one
+    assert artifacts._csv_header(frame) is not None  # the fast path, not the fallback
+    artifacts.write_csv(frame, tmp_path / "fast.csv")
+    frame.to_csv(tmp_path / "pandas.csv", index=False)
+    assert (tmp_path / "fast.csv").read_bytes() == (tmp_path / "pandas.csv").read_bytes()
+    back = pd.read_csv(tmp_path / "fast.csv")
+    np.testing.assert_array_equal(back["y_s"].to_numpy(), frame["y_s"].to_numpy())
+    np.testing.assert_array_equal(np.signbit(back["x_m"]), np.signbit(frame["x_m"]))
+
+
+@pytest.mark.parametrize("column, fast", [
+    (["a,b", "c"], False), (['say "hi"', "x"], False), (["", "x"], False), ([1.5, "x"], False),
+    ([None, "x"], True), ([np.nan, "x"], True),
+])
+def test_cells_that_need_quoting_or_mixed_types_go_to_pandas(tmp_path, column, fast):
+    frame = pd.DataFrame({"text": column, "v": [1.0, 2.0]})
+    assert (artifacts._csv_header(frame) is not None) == fast
+    artifacts.write_csv(frame, tmp_path / "a.csv")
+    frame.to_csv(tmp_path / "b.csv", index=False)
+    assert (tmp_path / "a.csv").read_bytes() == (tmp_path / "b.csv").read_bytes()
+
+
+def test_every_committed_csv_is_rewritten_byte_for_byte(tmp_path):
+    """The committed results stay byte-identical under the fast writer: each CSV read back and
+    written again gives its own bytes."""
+    paths = sorted(RESULTS.glob("*/*.csv"))
+    assert len(paths) > 20
+    fast = 0
+    for path in paths:
+        frame = pd.read_csv(path)
+        fast += artifacts._csv_header(frame) is not None
+        artifacts.write_csv(frame, tmp_path / "x.csv")
+        assert (tmp_path / "x.csv").read_bytes() == path.read_bytes(), path
+    assert fast > len(paths) // 2
+
+
+@pytest.mark.parametrize("suffix", [".npz", ".csv"])
+def test_tables_read_back_to_the_frame_written(tmp_path, suffix):
+    frame = awkward_frame(300).drop(columns="name" if suffix == ".csv" else [])
+    frame["name"] = ["p"] * 300
+    artifacts.write_frame(frame, tmp_path / f"t{suffix}")
+    back = artifacts.read_frame(tmp_path / f"t{suffix}")
+    if suffix == ".csv":
+        back["outcome"] = pd.Categorical(back["outcome"], categories=["period1", "sticking",
+                                                                      "undecided"])
+    pd.testing.assert_frame_equal(back, frame, check_dtype=suffix != ".csv")
+    assert artifacts.read_frames(tmp_path).keys() == {f"t{suffix}"}

@@ -101,3 +101,20 @@ def test_circular_mean_across_zero():
     assert circular_mean(np.radians([350.0, 10.0])) == pytest.approx(0.0, abs=1e-12) or \
         circular_mean(np.radians([350.0, 10.0])) == pytest.approx(2 * np.pi, abs=1e-12)
     assert np.degrees(circular_mean(np.radians([40.0, 44.0]))) == pytest.approx(42.0)
+
+
+@pytest.mark.parametrize("cell, shown", [("n/a", "got 'n/a'"), ("", "got an empty cell"),
+                                         ("fast", "got 'fast'")])
+def test_a_bad_cell_is_shown_as_the_file_holds_it(tmp_path, cell, shown):
+    """Errors name the cell as written, never numpy's repr (np.float64(nan))."""
+    from bounce_cli.config import ConfigError
+    from bounce_cli.impacts import read_impacts
+
+    rows = ["trial,k,t_s,theta_rad,v_m_s", "1,0,0.0,0.7,4.5", f"1,1,0.92,0.7,{cell}",
+            "1,2,1.84,0.7,4.5"]
+    path = tmp_path / "i.csv"
+    path.write_text("\n".join(rows) + "\n")
+    with pytest.raises(ConfigError) as info:
+        read_impacts(path)
+    assert shown in str(info.value) and "np.float64" not in str(info.value)
+    assert "column v_m_s" in str(info.value)

@@ -137,6 +137,7 @@ def test_a_huge_grid_warns_of_its_csv_size_before_computing(monkeypatch):
     assert computed == []  # the warning came first
     assert len(heard) == 1 and "basin.csv will be about 6.7 GB" in heard[0]
     assert "100,000,000 rows" in heard[0] and "grid.v0_m_s.num" in heard[0]
+    assert "--set output.format=npz" in heard[0] and "2.7 GB" in heard[0]  # the binary way
     heard.clear()
     monkeypatch.undo()
     basin.run(small_basin_config(), RunOptions(jobs=1, warn=warn))  # small: no warning

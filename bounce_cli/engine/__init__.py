@@ -9,15 +9,55 @@ The entry points a library user needs; everything else lives in the submodules
     p.fixed_point(), stability(p).spectral_radius
 """
 
-from .classify import OUTCOMES, Classification, ClassifySettings, classify_batch, classify_grid
-from .flight import FlightSettings, Trajectory, simulate
-from .impact import next_impact_phase
-from .impulse import find_threshold, impulse_response_full, impulse_response_linear
-from .linear import Stability, flip_boundary_g, jacobian, stability
-from .maps import Orbit, iterate_map, iterate_orbit, map_step
-from .params import FixedPoint, ModelError, ModelParams, NoFixedPointError, wrap_phase
-from .regression import eq15_slope, ols_line
-from .stochastic import simulate_stochastic_map, var1_theory
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # for type checkers: the names as if imported eagerly
+    from .classify import OUTCOMES, Classification, ClassifySettings, classify_batch, classify_grid
+    from .flight import FlightSettings, Trajectory, simulate
+    from .impact import next_impact_phase
+    from .impulse import find_threshold, impulse_response_full, impulse_response_linear
+    from .linear import Stability, flip_boundary_g, jacobian, stability
+    from .maps import Orbit, iterate_map, iterate_orbit, map_step
+    from .params import FixedPoint, ModelError, ModelParams, NoFixedPointError, wrap_phase
+    from .regression import eq15_slope, ols_line
+    from .stochastic import simulate_stochastic_map, var1_theory
+
+#: exported name -> its submodule, imported on first use (PEP 562), so that importing one
+#: submodule (the CLI's start, a worker process) does not import them all (scipy among them)
+_EXPORTS = {
+    "OUTCOMES": "classify",
+    "Classification": "classify",
+    "ClassifySettings": "classify",
+    "classify_batch": "classify",
+    "classify_grid": "classify",
+    "FlightSettings": "flight",
+    "Trajectory": "flight",
+    "simulate": "flight",
+    "next_impact_phase": "impact",
+    "find_threshold": "impulse",
+    "impulse_response_full": "impulse",
+    "impulse_response_linear": "impulse",
+    "Stability": "linear",
+    "flip_boundary_g": "linear",
+    "jacobian": "linear",
+    "stability": "linear",
+    "Orbit": "maps",
+    "iterate_map": "maps",
+    "iterate_orbit": "maps",
+    "map_step": "maps",
+    "FixedPoint": "params",
+    "ModelError": "params",
+    "ModelParams": "params",
+    "NoFixedPointError": "params",
+    "wrap_phase": "params",
+    "eq15_slope": "regression",
+    "ols_line": "regression",
+    "simulate_stochastic_map": "stochastic",
+    "var1_theory": "stochastic",
+}
 
 __all__ = [
     # parameters, fixed point (eqs. 4, 7, 8)
@@ -37,3 +77,17 @@ __all__ = [
     # eq. 15 (section 5)
     "eq15_slope", "ols_line",
 ]
+
+
+def __getattr__(name: str) -> Any:
+    try:
+        module = _EXPORTS[name]
+    except KeyError:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}") from None
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_EXPORTS])

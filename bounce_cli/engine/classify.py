@@ -19,10 +19,11 @@ The initial state itself is NOT compared with the fixed point: the first check i
 impact 1, so even the fixed point itself is ``period1`` after 1 iteration. At each impact
 the sticking test comes first (a hop that short is never near the fixed point anyway).
 
-All points of a batch advance together: one vectorised ``next_impact_phase`` call per impact
-on the still-active subset; settled points are dropped. Phases are kept wrapped in
-[0, 2 pi). The result of a point does not depend on which other points share its batch, so
-``classify_grid`` gives identical results for any tile size and number of worker processes.
+All points of a batch advance together: one vectorised first-impact solve
+(``impact.first_impact_phase``) per impact on the still-active subset; settled points are
+dropped. Phases are kept wrapped in [0, 2 pi). The result of a point does not depend on
+which other points share its batch, so ``classify_grid`` gives identical results for any
+tile size and number of worker processes.
 """
 
 from __future__ import annotations
@@ -34,7 +35,7 @@ from typing import Any, Callable, Iterable, Iterator
 
 import numpy as np
 
-from .impact import can_fly, next_impact_phase
+from .impact import can_fly, first_impact_phase
 from .maps import velocity_after_impact
 from .params import ModelParams, phase_difference
 
@@ -100,12 +101,17 @@ def classify_batch(theta0, v0, params: ModelParams,
     idx = np.flatnonzero(flies)
     th = np.mod(theta0[idx], TWO_PI)
     vv = v0[idx]
+    # cos and sin of the wrapped phase, each computed once per impact: eq. 5 and the solver's
+    # start share them (the same values each would compute)
+    cos_th = np.cos(th)
+    a, g = params.racket_amplitude, params.g
     for k in range(1, settings.max_iterations + 1):
         if idx.size == 0:
             break
-        hop = next_impact_phase(th, vv, params)
+        hop = first_impact_phase(th, vv, a, w, g, cos_theta=cos_th, sin_theta=np.sin(th))
         th = np.mod(th + hop, TWO_PI)
-        vv = velocity_after_impact(th, vv, hop, params)
+        cos_th = np.cos(th)
+        vv = velocity_after_impact(th, vv, hop, params, cos_theta_next=cos_th)
         # NaN hop (cannot leave the racket) compares False: sticking
         sticking = ~(hop / w >= min_hop)
         period1 = (
@@ -119,7 +125,7 @@ def classify_batch(theta0, v0, params: ModelParams,
             outcome[done] = np.where(sticking[settled], STICKING, PERIOD1)
             iterations[done] = k
             keep = ~settled
-            idx, th, vv = idx[keep], th[keep], vv[keep]
+            idx, th, vv, cos_th = idx[keep], th[keep], vv[keep], cos_th[keep]
     return Classification(outcome.reshape(shape), iterations.reshape(shape))
 
 

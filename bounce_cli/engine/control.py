@@ -59,7 +59,7 @@ from .classify import ClassifySettings, tile_slices
 from .impact import first_impact_phase
 from .impulse import perturbed_velocity, relaxation_impacts
 from .linear import iterate_linear, jacobian, racket_acceleration_at_impact_g
-from .params import ModelParams, phase_difference
+from .params import ModelError, ModelParams, phase_difference
 
 TWO_PI = 2.0 * math.pi
 
@@ -112,6 +112,11 @@ class PeriodController:
     gain: Any  # float, or an array of gains (a grid of controllers)
     rate: Any = 1.0
     kind: str = "period"
+    #: when the new period starts: "impact" (the flight after impact k runs at tau_{k+1}; the
+    #: model of this module) or "cycle" (at the racket's next upward mid-position crossing:
+    #: the rest of the current cycle keeps tau_k, a racket moved cycle by cycle as
+    #: ``engine.recording`` moves it; see ``controlled_step``)
+    switch: str = "impact"
 
     def target(self, v, reference: Reference):
         """tau_bar + K * 2 (v - v~) / g: the period that matches the ball's flight time."""
@@ -189,6 +194,9 @@ def controlled_step(theta, v, tau, params: ModelParams, controller: Controller, 
     tau_next = np.asarray(controller.next_period(v, theta, tau, reference), dtype=float)
     tau_next = tau_next + period_noise
     tau_next = np.where(tau_next > 0.0, tau_next, np.nan)  # no racket has a period <= 0
+    if getattr(controller, "switch", "impact") == "cycle":
+        return _step_switching_at_crossing(theta, v, tau, tau_next, params, alpha,
+                                           velocity_noise, phase_noise, wrap)
     omega = 2.0 * np.pi / tau_next
     hop = first_impact_phase(theta, v, params.racket_amplitude, omega, params.g)
     theta_next = theta + hop + phase_noise
@@ -199,6 +207,70 @@ def controlled_step(theta, v, tau, params: ModelParams, controller: Controller, 
                           params.g) + velocity_noise
     return ControlledStep(theta=theta_next, v=v_next, tau=np.broadcast_to(tau_next, hop.shape),
                           hop_phase=hop, omega=np.broadcast_to(omega, hop.shape))
+
+
+def contact_after_crossing(height, v, amplitude, omega, g, *, max_steps: int = 2000):
+    """Phase s >= 0 (rad of a racket a sin(s) at angular frequency omega, from its upward
+    mid-position crossing s = 0) of the first contact of a ball that is ``height`` (> 0) above
+    the racket at s = 0 with velocity v (arrays broadcast). The safe steps of
+    ``engine.impact``: from G > 0 with G' = d, |G''| <= M = g / w^2 + a keeps G > 0 for
+    h < (d + sqrt(d^2 + 2 M G)) / M; a Newton polish ends it. NaN where none is found."""
+    height, v, amplitude, omega, g = np.broadcast_arrays(
+        *(np.asarray(x, float) for x in (height, v, amplitude, omega, g)))
+    s = np.zeros(height.shape)
+    result = np.full(height.shape, np.nan)
+    active = np.isfinite(height) & np.isfinite(v) & np.isfinite(omega) & (height >= 0.0)
+    bound = g / omega**2 + amplitude
+    for _ in range(max_steps):
+        if not active.any():
+            break
+        G = height + v * s / omega - g * s * s / (2.0 * omega**2) - amplitude * np.sin(s)
+        d = v / omega - g * s / omega**2 - amplitude * np.cos(s)
+        scale = np.abs(height) + np.abs(v * s / omega) + g * s * s / (2.0 * omega**2) + amplitude
+        done = active & (G <= 1e-13 * scale)
+        if done.any():
+            with np.errstate(divide="ignore", invalid="ignore"):
+                corr = np.where(d < 0.0, G / d, 0.0)
+            result = np.where(done, s - np.where(np.abs(corr) < 1e-6, corr, 0.0), result)
+            active &= ~done
+        step = (d + np.sqrt(d * d + 2.0 * bound * np.maximum(G, 0.0))) / bound
+        s = np.where(active, s + step, s)
+    return result
+
+
+def _step_switching_at_crossing(theta, v, tau, tau_next, params: ModelParams, alpha,
+                                velocity_noise, phase_noise, wrap: bool) -> ControlledStep:
+    """``controlled_step`` for ``switch = "cycle"``: the racket finishes its current cycle
+    with tau_k (its velocity does not jump at the impact) and runs with tau_{k+1} from the
+    next upward crossing of its mid-position. The next impact is then the first contact
+    with the old racket before the crossing (the impact falls in the same cycle, which keeps
+    tau_k) or the first contact after it (``contact_after_crossing``); eq. 3 with the
+    racket's velocity at that contact. ``hop_phase`` is the flight time times the angular
+    frequency at the contact, so ``hop_seconds`` is the flight time."""
+    a, g = params.racket_amplitude, params.g
+    omega_now, omega_next = TWO_PI / tau, TWO_PI / tau_next
+    phase = np.mod(theta, TWO_PI)
+    hop_before = first_impact_phase(theta, v, a, omega_now, g)
+    flies = np.isfinite(hop_before)
+    same_cycle = flies & (phase + hop_before < TWO_PI)
+    to_crossing = TWO_PI - phase
+    dt = to_crossing / omega_now
+    height = a * np.sin(phase) + v * dt - 0.5 * g * dt * dt
+    after = contact_after_crossing(np.where(same_cycle | ~flies, np.nan, height),
+                                   v - g * dt, a, omega_next, g)
+    advance = np.where(same_cycle, hop_before, to_crossing + after)
+    flight = np.where(same_cycle, hop_before / omega_now, dt + after / omega_next)
+    omega_at = np.where(same_cycle, omega_now, omega_next)
+    tau_at = np.where(same_cycle, tau, tau_next)
+    advance = np.where(flies, advance, np.nan)
+    theta_next = theta + advance + phase_noise
+    if wrap:
+        theta_next = np.mod(theta_next, TWO_PI)
+    alpha = params.alpha if alpha is None else alpha
+    v_next = ((1.0 + alpha) * a * omega_at * np.cos(theta_next) - alpha * v
+              + alpha * g * flight + velocity_noise)
+    return ControlledStep(theta=theta_next, v=v_next, tau=tau_at, hop_phase=flight * omega_at,
+                          omega=omega_at)
 
 
 def iterate_controlled(theta0, v0, tau0, params: ModelParams, controller: Controller,
@@ -261,8 +333,12 @@ def jacobian_from_gradient(params: ModelParams, gradient) -> np.ndarray:
 
 
 def controlled_jacobian(params: ModelParams, controller: Controller) -> np.ndarray:
-    """The analytic 3 x 3 Jacobian of the controlled map at (v~, theta~, tau_bar)."""
+    """The analytic 3 x 3 Jacobian of the controlled map at (v~, theta~, tau_bar); for a
+    controller whose period starts at the next cycle (``switch = "cycle"``) the central
+    differences of ``finite_difference_controlled_jacobian``."""
     params.fixed_point()  # NoFixedPointError where eq. 8 has no solution
+    if getattr(controller, "switch", "impact") == "cycle":
+        return finite_difference_controlled_jacobian(params, controller)
     return jacobian_from_gradient(params, controller.gradient(Reference.of(params)))
 
 
@@ -459,52 +535,48 @@ class MeanResponse:
 
 
 def align_perturbations(trial, k, v, theta, tau, perturbed, *, alpha=None, alpha_0=None,
-                        n_after: int = 4) -> dict[str, MeanResponse]:
-    """Mean responses to perturbations, by direction ("decrease" / "increase").
+                        n_after: int = 4, settle: int = 0) -> dict[str, MeanResponse]:
+    """Mean responses to perturbations, by direction ("decrease" / "increase"), with the data
+    side's alignment (``engine.data_stats.align``, the one ``bounce impulse --data`` uses).
 
     One window per perturbed impact: impacts j = 0..n_after of the same trial with
-    consecutive k (a window that crosses a trial's end or a gap in k is dropped, and so is one
-    holding another perturbation at j >= 1). Deviations are from each trial's mean (v, tau;
-    the circular mean for theta). The direction is alpha > alpha_0 when alpha is given,
-    else the sign of dv at j = 0.
+    consecutive k; only complete windows are kept (one cut by a trial's end, a gap in k or
+    another perturbation at j >= 1 is dropped: the fit compares whole responses).
+    Deviations are from each trial's baseline: the mean of its unperturbed impacts at least
+    ``settle`` impacts after a perturbation (v, tau; the circular mean for theta). The
+    direction is alpha > alpha_0 when alpha is given, else the sign of dv at j = 0.
     """
+    from .data_stats import align
+
     trial, k = np.asarray(trial), np.asarray(k)
     v, theta, tau = (np.asarray(x, float) for x in (v, theta, tau))
     perturbed = np.asarray(perturbed, bool)
-    dv, dth, dtau = np.empty_like(v), np.empty_like(v), np.empty_like(v)
-    for t in np.unique(trial):
-        rows = trial == t
-        dv[rows] = v[rows] - np.nanmean(v[rows])
-        centre = np.angle(np.nanmean(np.exp(1j * theta[rows])))
-        dth[rows] = phase_difference(theta[rows], centre)
-        dtau[rows] = tau[rows] - np.nanmean(tau[rows])
-    windows: dict[str, list[np.ndarray]] = {"decrease": [], "increase": []}
+    alpha_all = np.zeros_like(v) if alpha is None else np.asarray(alpha, float)
     order = np.lexsort((k, trial))
-    trial, k, perturbed = trial[order], k[order], perturbed[order]
-    dv, dth, dtau = dv[order], dth[order], dtau[order]
-    alpha = None if alpha is None else np.asarray(alpha, float)[order]
-    for i in np.flatnonzero(perturbed):
-        j = i + n_after
-        if j >= len(k):
-            continue
-        span = slice(i, j + 1)
-        if (np.any(trial[span] != trial[i]) or np.any(np.diff(k[span]) != 1)
-                or np.any(perturbed[i + 1:j + 1])):
-            continue
-        if alpha is not None and alpha_0 is not None:
-            up = alpha[i] > alpha_0
-        else:
-            up = dv[i] > 0.0
-        windows["increase" if up else "decrease"].append(np.stack([dv[span], dth[span],
-                                                                   dtau[span]]))
+    groups = [order[trial[order] == t] for t in dict.fromkeys(trial[order])]
+    try:
+        aligned = [align([x[g] for g in groups], [perturbed[g] for g in groups],
+                         [alpha_all[g] for g in groups], n_after, settle, phase=is_phase,
+                         k_trials=[k[g] for g in groups])
+                   for x, is_phase in ((v, False), (theta, True), (tau, False))]
+    except ModelError as exc:
+        if "no perturbed impact" in str(exc):
+            return {}
+        raise
+    values = np.stack([w.values for w in aligned], axis=1)  # (windows, 3, n_after + 1)
+    complete = np.all(np.isfinite(values), axis=(1, 2))
+    if alpha is not None and alpha_0 is not None:
+        up = aligned[0].alpha_p > alpha_0
+    else:
+        up = values[:, 0, 0] > 0.0
     out = {}
-    for direction, stack in windows.items():
-        if not stack:
+    for direction, sel in (("decrease", ~up & complete), ("increase", up & complete)):
+        if not sel.any():
             continue
-        arr = np.array(stack)  # (events, 3, n_after + 1)
-        mean = np.nanmean(arr, axis=0)
+        arr = values[sel]
+        mean = arr.mean(axis=0)
         n = arr.shape[0]
-        se = np.nanstd(arr, axis=0, ddof=1) / math.sqrt(n) if n > 1 else np.full_like(mean, np.nan)
+        se = arr.std(axis=0, ddof=1) / math.sqrt(n) if n > 1 else np.full_like(mean, np.nan)
         out[direction] = MeanResponse(direction, mean[0], mean[1], mean[2], se[0], se[1], se[2],
                                       n_events=n, initial=arr[:, :, 0])
     return out
@@ -562,11 +634,12 @@ def fit_period_control(params: ModelParams, responses: Sequence[MeanResponse], *
     has local minima); the lowest minimum wins.
 
     Measured on trials simulated with K = 0.6, c = 0.7 and section 7's protocol (24 trials
-    of 60 impacts, noise 0.05 m/s, 0.02 rad, 5 ms): K is biased by about -0.009 (c by
-    +0.007), half the 95 % interval (+-0.014); the intervals held the truth in 26 of 30 data
-    sets. The bias comes from the noise after the perturbed impact (it vanishes without
-    noise): the mean of noisy nonlinear responses is not the noiseless response. Starting
-    every model response from the mean deviation instead of each event's own adds -0.004.
+    of 60 impacts, noise 0.05 m/s, 0.02 rad, 5 ms; seeds 100-129, the shared alignment): K is
+    biased by about -0.003 (c by +0.002), the 95 % interval's half width is 0.020; the
+    intervals held the truth in 29 (K) and 30 (c) of 30 data sets. The bias comes from the
+    noise after the perturbed impact (it vanishes without noise): the mean of noisy
+    nonlinear responses is not the noiseless response. Starting every model response from
+    the mean deviation instead of each event's own adds -0.004 (measured before).
     """
     from scipy import optimize, stats
 
@@ -770,3 +843,102 @@ def controlled_impulse_response_linear(params: ModelParams, controller: Controll
     v = v_fp + y[:, 0]  # dv = v - v~ as ``engine.impulse`` computes it (same bits at K = 0)
     return ControlledResponse(v=v, theta=np.mod(theta_fp + y[:, 1], TWO_PI),
                               tau=tau_bar + y[:, 2], dv=v - v_fp, dtheta=y[:, 1], dtau=y[:, 2])
+
+
+# -- continuous-time motion with control (``bounce trajectory`` with ``model.control``) ----------
+@dataclass(frozen=True)
+class RacketClock:
+    """The controlled racket's phase in time: from ``t_start[i]`` on it is
+    ``phase_start[i] + omega[i] (t - t_start[i])`` (continuous; the rate changes at impacts)."""
+
+    t_start: np.ndarray
+    phase_start: np.ndarray
+    omega: np.ndarray
+
+    def phase(self, t):
+        """(phase, angular frequency) at times t."""
+        t = np.asarray(t, dtype=float)
+        i = np.clip(np.searchsorted(self.t_start, t, side="right") - 1, 0, len(self.t_start) - 1)
+        return self.phase_start[i] + self.omega[i] * (t - self.t_start[i]), self.omega[i]
+
+
+def simulate_controlled_motion(theta0: float, v0: float, params: ModelParams,
+                               controller: Controller, duration_s: float, settings):
+    """``engine.flight.simulate`` (exact integrator) with racket period control: the ball
+    leaves the racket at phase theta0 (t0 = theta0 / w_bar) with v0; at the launch and at
+    every impact the controller sets the racket's period from then on (``switch: impact``,
+    the map of this module: the phase stays continuous, the racket's velocity jumps). Sticking
+    as in ``engine.flight`` (a hop shorter than ``settings.min_hop_s``, or a ball that leaves no
+    faster than the racket then moves): the ball rides on the racket, which keeps its period,
+    until the racket's downward acceleration exceeds g. Returns (Trajectory, RacketClock,
+    periods): the racket's period during the flight that ended at each impact (s), as
+    ``iterate_controlled_orbit``'s tau."""
+    from .flight import LEAVE_NUDGE_PHASE, Impact, Segment, Trajectory, impact_velocity
+
+    a, g = params.racket_amplitude, params.g
+    reference = Reference.of(params)
+    tau = params.racket_period
+    t = theta0 * tau / TWO_PI
+    t0, t_end = t, t + duration_s
+    phase = float(theta0)
+    tau = float(controller.next_period(v0, theta0, tau, reference))
+    if not tau > 0.0:
+        raise ModelError("the controller asks for a racket period <= 0 at the launch")
+    starts, phases, omegas = [t], [phase], [TWO_PI / tau]
+    segments: list = []
+    impacts: list = []
+    periods: list[float] = []
+    v = float(v0)
+    omega = omegas[-1]
+
+    def racket(time):
+        ph = phases[-1] + omega * (time - starts[-1])
+        return ph, a * math.sin(ph), a * omega * math.cos(ph)
+
+    stuck = not bool(can_fly_at(phase, v, a, omega, g))
+    while t < t_end:
+        ph, x_r, v_r = racket(t)
+        if stuck:
+            ratio = g / (a * omega**2)
+            if ratio >= 1.0:
+                leave = math.inf
+            elif math.sin(ph) > ratio:
+                leave = ph
+            else:
+                leave = ph + float(np.mod(math.asin(ratio) - ph, TWO_PI))
+            t_leave = t + (leave - ph) / omega
+            segments.append(Segment("stuck", t, min(t_leave, t_end), x_r, v_r))
+            t = t_leave
+            if math.isfinite(t):
+                v = racket(t)[2]
+            stuck = False
+            continue
+        launch_ph, launch_v = ph, v
+        if v - v_r <= 0.0:  # leaving with the racket's velocity: hand over just after
+            launch_ph, launch_v = ph + LEAVE_NUDGE_PHASE, v - g * LEAVE_NUDGE_PHASE / omega
+        hop = float(first_impact_phase(launch_ph, launch_v, a, omega, g))
+        if not math.isfinite(hop):
+            raise ModelError(f"no next impact found after t = {t:.6g} s")
+        t_hit = t + (launch_ph - ph + hop) / omega
+        segments.append(Segment("flight", t, min(t_hit, t_end), x_r, v))
+        if t_hit > t_end:
+            break
+        ph_hit, _, racket_v = racket(t_hit)
+        v_before = v - g * (t_hit - t)
+        v_after = impact_velocity(v_before, racket_v, params.alpha)
+        impacts.append(Impact(t_hit, ph_hit, v_before, v_after, racket_v, t_hit - t))
+        periods.append(tau)  # the period of the flight that ended at this impact
+        tau_next = float(controller.next_period(v_after, ph_hit, tau, reference))
+        if not tau_next > 0.0:
+            raise ModelError(f"the controller asks for a racket period <= 0 at t = {t_hit:.4g} s")
+        tau, omega = tau_next, TWO_PI / tau_next
+        starts.append(t_hit)
+        phases.append(ph_hit)
+        omegas.append(omega)
+        t, v = t_hit, v_after
+        stuck = (t_hit - segments[-1].t_start < settings.min_hop_s
+                 or v - a * omega * math.cos(ph_hit) <= settings.min_relative_velocity_m_s
+                 or not bool(can_fly_at(ph_hit, v, a, omega, g)))
+    clock = RacketClock(np.array(starts), np.array(phases), np.array(omegas))
+    trajectory = Trajectory(params, t0, t_end, tuple(segments), tuple(impacts))
+    return trajectory, clock, np.array(periods)

@@ -194,19 +194,36 @@ class AlignedWindows:
     alpha_p: np.ndarray
 
 
-def perturbation_windows(perturbed: np.ndarray, n_after: int) -> list[tuple[int, int]]:
+def perturbation_windows(perturbed: np.ndarray, n_after: int,
+                         k: np.ndarray | None = None) -> list[tuple[int, int]]:
     """(start, stop) of each window in one trial: from a perturbed impact k = 0 up to
-    ``n_after`` impacts later, cut before the next perturbed impact and at the trial's end,
-    so no window holds the response to another perturbation or another trial's impacts."""
+    ``n_after`` impacts later, cut before the next perturbed impact, at the trial's end and,
+    given the impact indices ``k``, at a gap in k (an impact the table lacks), so no window
+    holds the response to another perturbation, another trial's impacts or a missing bounce."""
     idx = np.flatnonzero(np.asarray(perturbed, bool))
     n = len(perturbed)
+    gaps = (np.flatnonzero(np.diff(np.asarray(k)) != 1) + 1 if k is not None
+            else np.array([], dtype=int))
     windows = []
     for i, start in enumerate(idx):
         stop = min(start + n_after + 1, n)
         if i + 1 < len(idx):
             stop = min(stop, idx[i + 1])
+        later = gaps[gaps > start]
+        if len(later):
+            stop = min(stop, int(later[0]))
         windows.append((int(start), int(stop)))
     return windows
+
+
+def settled_mask(perturbed: np.ndarray, settle: int) -> np.ndarray:
+    """Impacts of the stationary state for the steady-state statistics (correlations,
+    per-trial SDs): every impact but the perturbed ones and the ``settle`` impacts after each
+    (the relaxation is not the stationary state)."""
+    keep = np.ones(len(perturbed), bool)
+    for i in np.flatnonzero(np.asarray(perturbed, bool)):
+        keep[i:i + settle + 1] = False
+    return keep
 
 
 def baseline_mask(perturbed: np.ndarray, settle: int) -> np.ndarray:
@@ -225,15 +242,19 @@ def baseline_mask(perturbed: np.ndarray, settle: int) -> np.ndarray:
 
 def align(values_trials: Sequence[np.ndarray], perturbed_trials: Sequence[np.ndarray],
           alpha_trials: Sequence[np.ndarray], n_after: int, settle: int,
-          phase: bool = False) -> AlignedWindows:
-    """Align one quantity on the perturbed impacts of every trial.
+          phase: bool = False, k_trials: Sequence[np.ndarray] | None = None) -> AlignedWindows:
+    """Align one quantity on the perturbed impacts of every trial: the one alignment of the
+    data side (``bounce impulse --data``, and ``bounce control --data`` through
+    ``engine.control.align_perturbations``).
 
     Baseline per trial: the mean over :func:`baseline_mask` impacts (for a phase, the
     circular mean, and deviations wrapped to [-pi, pi)). Windows from
-    :func:`perturbation_windows`. Raises ModelError when there is no perturbed impact or a
-    trial has no baseline impact."""
+    :func:`perturbation_windows` (cut at gaps in the trials' impact indices ``k_trials`` when
+    given). Raises ModelError when there is no perturbed impact or a trial has no baseline
+    impact."""
     rows, trials, starts, alphas = [], [], [], []
-    for i, (x, p, a) in enumerate(zip(values_trials, perturbed_trials, alpha_trials)):
+    ks = k_trials if k_trials is not None else [None] * len(values_trials)
+    for i, (x, p, a, kk) in enumerate(zip(values_trials, perturbed_trials, alpha_trials, ks)):
         x = np.asarray(x, float)
         p = np.asarray(p, bool)
         if not p.any():
@@ -247,7 +268,7 @@ def align(values_trials: Sequence[np.ndarray], perturbed_trials: Sequence[np.nda
             dev = phase_difference(x, ref)
         else:
             dev = x - x[base].mean()
-        for start, stop in perturbation_windows(p, n_after):
+        for start, stop in perturbation_windows(p, n_after, kk):
             row = np.full(n_after + 1, np.nan)
             row[: stop - start] = dev[start:stop]
             rows.append(row)

@@ -82,12 +82,24 @@ def next_impact_phase(theta, v, params: ModelParams, *, max_steps: int = MAX_SAF
                               max_steps=max_steps)
 
 
-def first_impact_phase(theta, v, amplitude, omega, g, *, max_steps: int = MAX_SAFE_STEPS):
+def first_impact_phase(theta, v, amplitude, omega, g, *, max_steps: int = MAX_SAFE_STEPS,
+                       cos_theta=None, sin_theta=None):
     """``next_impact_phase`` with the racket's amplitude a (m), angular frequency w (rad/s)
     and gravity g (m/s^2) given directly, each a scalar or an array broadcasting with theta
     and v: one call serves states at different parameters (a sweep of the map, or a racket
     whose period changes from one flight to the next under period control). Scalars take the
-    same arithmetic as arrays of one value, so results do not depend on the form."""
+    same arithmetic as arrays of one value, so results do not depend on the form.
+
+    ``cos_theta`` and ``sin_theta``, when given, are ``np.cos`` and ``np.sin`` of theta
+    wrapped to [0, 2 pi) (a caller that has them, the basin's classifier, saves two
+    transcendental functions per state); the result is the same to the last bit.
+
+    The work per step is that of the module docstring's safe step, written to compute each
+    subexpression once; finished states are dropped from the arrays only when at least an
+    eighth of them are finished (until then they are carried along, their results already
+    stored), which saves copying every array at nearly every step. Neither changes a bit of
+    the result, nor does the batch a state shares: each state's arithmetic is its own.
+    """
     theta, v, *given = np.broadcast_arrays(*(np.asarray(x, dtype=float)
                                              for x in (theta, v, amplitude, omega, g)))
     shape = theta.shape
@@ -99,32 +111,69 @@ def first_impact_phase(theta, v, amplitude, omega, g, *, max_steps: int = MAX_SA
                          for x in given]
     a, w, g = racket
     bound: Any = g / (w * w) + a  # M >= |G''|
+    cos_th = np.cos(theta) if cos_theta is None else np.broadcast_to(cos_theta, shape).ravel()
+    sin_th = np.sin(theta) if sin_theta is None else np.broadcast_to(sin_theta, shape).ravel()
 
     result = np.full(theta.shape, np.nan)
-    slope = (v - a * w * np.cos(theta)) / w
-    curvature = -g / w**2 + a * np.sin(theta)
+    slope = (v - a * w * cos_th) / w
+    curvature = -g / w**2 + a * sin_th
     idx = np.flatnonzero((slope > 0.0) | ((slope == 0.0) & (curvature > 0.0)))  # can_fly
     th, vv = theta[idx], v[idx]
     a, w, g, bound = (x if isinstance(x, float) else x[idx] for x in (a, w, g, bound))
 
     # first step from s = 0 (G = 0): smallest positive root of d + c h/2 - a h^2/6
-    d0 = vv / w - a * np.cos(th)
-    c0 = -g / (w * w) + a * np.sin(th)
+    d0 = vv / w - a * cos_th[idx]
+    c0 = -g / (w * w) + a * sin_th[idx]
     s = (c0 / 2.0 + np.sqrt(c0 * c0 / 4.0 + 2.0 * a * np.maximum(d0, 0.0) / 3.0)) / (a / 3.0)
+    del slope, curvature, cos_th, sin_th, c0
 
     eps = np.finfo(float).eps
+    # scalars of the step, computed once (the same values the array expressions would use)
+    w_sq: Any = w * w
+    two_w_sq: Any = 2.0 * w * w
+    two_a: Any = 2.0 * a
+    two_bound: Any = 2.0 * bound
+    live = np.ones(idx.size, dtype=bool)  # not yet finished (finished ones may be carried)
+    n_live = idx.size
     for _ in range(max_steps):
-        if idx.size == 0:
+        if n_live == 0:
             break
         half = s / 2.0
-        sin_half, mid = np.sin(half), th + half
-        racket_rise = 2.0 * a * np.cos(mid) * sin_half  # a (sin(th + s) - sin(th))
-        G = vv * s / w - g * s * s / (2.0 * w * w) - racket_rise
-        d = d0 - g * s / (w * w) + 2.0 * a * np.sin(mid) * sin_half
-        scale = np.abs(vv * s / w) + g * s * s / (2.0 * w * w) + np.abs(racket_rise)
-        step = (d + np.sqrt(d * d + 2.0 * bound * np.maximum(G, 0.0))) / bound
-        done = (G <= 8.0 * eps * scale) | (step <= 4.0 * eps * s)
-        if np.any(done):
+        sin_half = np.sin(half)
+        mid = np.add(th, half, out=half)
+        cos_mid = np.cos(mid)
+        sin_mid = np.sin(mid, out=mid)
+        racket_rise = np.multiply(two_a, cos_mid, out=cos_mid)
+        racket_rise *= sin_half  # a (sin(th + s) - sin(th)) = 2 a cos(th + s/2) sin(s/2)
+        ball = vv * s
+        ball /= w
+        g_s = g * s
+        drop = g_s * s
+        drop /= two_w_sq
+        G = ball - drop
+        G -= racket_rise
+        # d = d0 - g s / w^2 + 2 a sin(th + s/2) sin(s/2)
+        d = np.divide(g_s, w_sq, out=g_s)
+        np.subtract(d0, d, out=d)
+        rate = np.multiply(two_a, sin_mid, out=sin_mid)
+        rate *= sin_half
+        d += rate
+        # scale = |v s / w| + g s^2 / (2 w^2) + |racket rise|
+        scale = np.abs(ball, out=ball)
+        scale += drop
+        scale += np.abs(racket_rise, out=racket_rise)
+        # step = (d + sqrt(d^2 + 2 M max(G, 0))) / M
+        step = np.maximum(G, 0.0, out=drop)
+        step *= two_bound
+        step += np.multiply(d, d, out=sin_half)
+        np.sqrt(step, out=step)
+        step += d
+        step /= bound
+        scale *= 8.0 * eps
+        done = G <= scale
+        done |= step <= 4.0 * eps * s
+        done &= live
+        if done.any():
             # Newton polish of the converged ones, only where the crossing is transversal and
             # the correction tiny, so that a polish can never move to another root
             sd, Gd, dd = s[done], G[done], d[done]
@@ -132,10 +181,15 @@ def first_impact_phase(theta, v, amplitude, omega, g, *, max_steps: int = MAX_SA
                 corr = np.where(dd < 0.0, Gd / dd, 0.0)
             corr = np.where(np.abs(corr) < 1e-6 * sd, corr, 0.0)
             result[idx[done]] = sd - corr
-            keep = ~done
-            idx, th, vv, d0, s, step = (
-                idx[keep], th[keep], vv[keep], d0[keep], s[keep], step[keep]
-            )
-            a, w, g, bound = (x if isinstance(x, float) else x[keep] for x in (a, w, g, bound))
+            live &= ~done
+            n_live = int(np.count_nonzero(live))
+            if n_live <= live.size - live.size // 8:  # compact: drop the finished ones
+                idx, th, vv, d0, s, step = (
+                    idx[live], th[live], vv[live], d0[live], s[live], step[live]
+                )
+                a, w, g, bound = (x if isinstance(x, float) else x[live]
+                                  for x in (a, w, g, bound))
+                w_sq, two_w_sq, two_a, two_bound = w * w, 2.0 * w * w, 2.0 * a, 2.0 * bound
+                live = np.ones(n_live, dtype=bool)
         s = s + step
     return result.reshape(shape)

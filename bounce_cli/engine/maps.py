@@ -14,17 +14,20 @@ from .impact import can_fly, next_impact_phase
 from .params import ModelParams
 
 
-def velocity_after_impact(theta_next, v, hop_phase, params: ModelParams, alpha=None):
+def velocity_after_impact(theta_next, v, hop_phase, params: ModelParams, alpha=None, *,
+                          cos_theta_next=None):
     """Velocity map, eq. 5:
     v_{k+1} = (1+alpha) a_r w cos(theta_{k+1}) - alpha v_k + (g alpha / w)(theta_{k+1} - theta_k).
 
     ``hop_phase`` is theta_{k+1} - theta_k (in eq. 16 the noiseless phi_{k+1} - theta_k).
     ``alpha`` overrides the model's coefficient of restitution for this impact (section 7).
+    ``cos_theta_next``: ``np.cos(theta_next)`` if the caller has it already.
     """
     alpha = params.alpha if alpha is None else alpha
     w = params.omega
+    cos_next = np.cos(theta_next) if cos_theta_next is None else cos_theta_next
     return (
-        (1.0 + alpha) * params.racket_amplitude * w * np.cos(theta_next)
+        (1.0 + alpha) * params.racket_amplitude * w * cos_next
         - alpha * v
         + params.g * alpha / w * hop_phase
     )

@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -66,6 +67,9 @@ class SessionSettings:
     perturb_alphas: tuple[float, ...] = ()
     min_hop_s: float = 0.01
     seed: int = 0
+    #: racket period control (``engine.control``): at each impact the controller sets the
+    #: period of the racket's NEXT cycle (``switch = "cycle"``); None: the periods are drawn
+    controller: Any = None
 
 
 @dataclass(frozen=True)
@@ -209,7 +213,8 @@ def _draw_racket(params: ModelParams, s: SessionSettings, rng: np.random.Generat
     # the recording starts at t = 0: in the racket's second cycle (a trough) unless it rests
     first = s.rest_s if s.rest_s > 0.0 else -periods[0] - 0.75 * periods[1]
     starts = first + np.concatenate([[0.0], np.cumsum(periods[:-1])])
-    keep = starts < s.duration_s + s.rest_s + tau
+    # with control the periods change during the trial: keep every drawn cycle
+    keep = (starts < s.duration_s + s.rest_s + tau) | (s.controller is not None)
     return CycleRacket(starts[keep], periods[keep], amplitudes[keep],
                        s.drift_amplitude_m, s.drift_period_s)
 
@@ -230,6 +235,12 @@ def simulate_trial(params: ModelParams, s: SessionSettings, streams) -> TrialTru
     rng_racket, rng_velocity = streams
     g = params.g
     racket = _draw_racket(params, s, rng_racket)
+    period_noise = racket.periods - params.racket_period  # each cycle's own deviation
+    reference = None
+    if s.controller is not None:
+        from .control import Reference
+
+        reference = Reference.of(params)
     t_end = s.duration_s
     fp = params.fixed_point()
     t = float(racket.starts[0] + fp.theta_rad / params.omega)  # the launch
@@ -261,6 +272,9 @@ def simulate_trial(params: ModelParams, s: SessionSettings, streams) -> TrialTru
             v_after.append(v_new)
             alphas.append(alpha_k)
             perturbed.append(is_perturbed)
+        if s.controller is not None:
+            set_next_period(racket, t_hit, v_new, s.controller, reference, period_noise,
+                            params.racket_period)
         t, x, v = t_hit, float(racket.position(t_hit)), v_new
         starts.append(t)
         xs.append(x)
@@ -268,6 +282,27 @@ def simulate_trial(params: ModelParams, s: SessionSettings, streams) -> TrialTru
     return TrialTruth(racket, np.array(starts), np.array(xs), np.array(vs),
                       np.array(times), np.array(v_after), np.array(alphas),
                       np.array(perturbed, dtype=bool), t_end, g)
+
+
+def set_next_period(racket: CycleRacket, t: float, v: float, controller, reference,
+                    period_noise: np.ndarray, tau_bar: float) -> None:
+    """Racket period control at an impact at time t with ball velocity v (after impact):
+    the controller's tau_{k+1} from (v, the phase of the impact in its cycle, that cycle's
+    period) becomes the period of every later cycle (plus each cycle's own drawn deviation
+    ``period_noise``) until the next impact sets another; the later cycles' starts follow.
+    The current cycle is not changed (the racket's position and velocity stay continuous
+    up to the next crossing)."""
+    c = int(racket.cycle_index(t))
+    if c < 0 or c + 1 >= len(racket.periods):
+        return
+    tau_k = float(racket.periods[c])
+    tau_next = float(controller.next_period(v, float(racket.phase(t)), tau_k, reference))
+    periods = tau_next + period_noise[c + 1:]
+    if not np.all(periods > 0.2 * tau_bar):
+        raise ModelError(f"the controller asks for a racket period of {tau_next:.3g} s at "
+                         f"t = {t:.3f} s (below 20 % of {tau_bar:g} s): lower the gain")
+    racket.periods[c + 1:] = periods
+    racket.starts[c + 2:] = racket.starts[c + 1] + np.cumsum(periods[:-1])
 
 
 def truth_rows(truth: TrialTruth) -> dict[str, np.ndarray]:

@@ -10,6 +10,7 @@ The inverse problems behind the candidate explanations are solved by the engine
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 from typing import Any, Literal, Optional
 
 import numpy as np
@@ -17,9 +18,10 @@ import pandas as pd
 from pydantic import Field
 
 from .. import paper
-from ..config import ExperimentConfig, ModelBlock, StrictModel
+from ..config import ConfigError, ControllableModelBlock, ExperimentConfig, StrictModel
 from ..engine.linear import jacobian, stability
-from ..engine.params import ModelError, ModelParams
+from ..engine.control import controlled_jacobian
+from ..engine.params import ModelError, ModelParams, phase_difference
 from ..engine.stochastic import (
     PAIR_NAMES,
     map_noise_covariance,
@@ -31,7 +33,7 @@ from ..engine.stochastic import (
     stationary_sds,
     var1_theory,
 )
-from ..plotting import caption_figures, new_figure
+from ..plotting import caption_figures, data_caption, new_figure
 from .base import Experiment, ExperimentResult, RunOptions
 from .data_side import AcfDataBlock
 
@@ -67,9 +69,10 @@ class LongRunsBlock(StrictModel):
 
 
 class AcfConfig(ExperimentConfig):
-    model: ModelBlock = ModelBlock(alpha=paper.FIG8_MODEL.alpha, g=paper.FIG8_MODEL.g,
-                                   racket_amplitude=paper.FIG8_MODEL.racket_amplitude,
-                                   racket_period=paper.FIG8_MODEL.racket_period)
+    model: ControllableModelBlock = ControllableModelBlock(
+        alpha=paper.FIG8_MODEL.alpha, g=paper.FIG8_MODEL.g,
+        racket_amplitude=paper.FIG8_MODEL.racket_amplitude,
+        racket_period=paper.FIG8_MODEL.racket_period)
     noise: NoiseBlock = NoiseBlock()
     trials: TrialsBlock = TrialsBlock()
     long_runs: LongRunsBlock = LongRunsBlock()
@@ -85,29 +88,55 @@ def run(config: AcfConfig, options: RunOptions) -> ExperimentResult:
         return run_data(config, options)
     params = config.params
     noise = config.noise
-    if not stability(params).stable:
+    controller = config.model.active_controller()  # None: the passive map
+    if controller is not None and noise.velocity_phase != "theta":
+        raise ConfigError("noise.velocity_phase: with model.control only eq. 16 as printed "
+                          "(theta) is implemented")
+    jac = jacobian(params) if controller is None else controlled_jacobian(params, controller)
+    radius = float(np.abs(np.linalg.eigvals(jac)).max())
+    if not radius < 1.0:
         raise ModelError(
-            f"the fixed point is unstable (spectral radius {stability(params).spectral_radius:.4g}"
+            f"the fixed point is unstable (spectral radius {radius:.4g}"
             " >= 1): no stationary correlation functions (eq. 19)"
         )
     n_trial = max(int(round(config.trials.duration_s / params.racket_period)), config.max_lag + 2)
-    jac = jacobian(params)
-    theory = var1_theory(jac, paper_noise_covariance(noise.q_v, noise.q_theta), config.max_lag)
+
+    def covariance(cov2: np.ndarray) -> np.ndarray:
+        """The noise covariance of the state: (v, theta), with control also tau (no noise)."""
+        if controller is None:
+            return cov2
+        cov3 = np.zeros((3, 3))
+        cov3[:2, :2] = cov2
+        return cov3
+
+    theory = var1_theory(jac, covariance(paper_noise_covariance(noise.q_v, noise.q_theta)),
+                         config.max_lag)
     theory_map = var1_theory(
-        jac, map_noise_covariance(params, noise.q_v, noise.q_theta, noise.velocity_phase),
+        jac, covariance(map_noise_covariance(params, noise.q_v, noise.q_theta,
+                                             noise.velocity_phase)),
         config.max_lag,
     )
     trial_seeds, long_seeds = np.random.SeedSequence(config.seed).spawn(2)
     reps, runs = config.trials.repetitions, config.long_runs.runs
     total = (n_trial + config.burn_in) + (config.long_runs.bounces + config.burn_in)
     options.progress.start(total, "stochastic map")
-    trials, long = (
-        simulate_stochastic_map(params, noise.q_v, noise.q_theta, n_bounces, seeds,
-                                burn_in=config.burn_in, velocity_phase=noise.velocity_phase,
-                                on_block=options.progress.advance)
-        for n_bounces, seeds in ((n_trial, trial_seeds.spawn(reps)),
-                                 (config.long_runs.bounces, long_seeds.spawn(runs)))
-    )
+    trials: Any
+    long: Any
+    if controller is None:
+        trials, long = (
+            simulate_stochastic_map(params, noise.q_v, noise.q_theta, n_bounces, seeds,
+                                    burn_in=config.burn_in, velocity_phase=noise.velocity_phase,
+                                    on_block=options.progress.advance)
+            for n_bounces, seeds in ((n_trial, trial_seeds.spawn(reps)),
+                                     (config.long_runs.bounces, long_seeds.spawn(runs)))
+        )
+    else:
+        trials, long = (
+            controlled_runs(params, controller, noise.q_v, noise.q_theta, n_bounces, count,
+                            seeds, config.burn_in, options.progress.advance)
+            for n_bounces, count, seeds in ((n_trial, reps, trial_seeds),
+                                            (config.long_runs.bounces, runs, long_seeds))
+        )
     lost = int(long.lost.sum() + trials.lost.sum())
     if long.lost.all() or trials.lost.all():
         raise ModelError("every run lost the ball (it stuck to the racket): noise too strong")
@@ -149,11 +178,50 @@ def run(config: AcfConfig, options: RunOptions) -> ExperimentResult:
         f"long runs: {n_kept} x {config.long_runs.bounces} bounces; trials: {reps} x {n_trial} "
         f"bounces ({config.trials.duration_s:g} s); runs lost to sticking: {lost}",
     ]
-    caption_figures(figures, params, f"{config.long_runs.runs} runs x "
+    control = ("" if controller is None else
+               f"racket period control K = {controller.gain:g}, c = {controller.rate:g}; ")
+    caption_figures(figures, params, f"{control}{config.long_runs.runs} runs x "
                     f"{config.long_runs.bounces} bounces; {reps} simulated trials of "
                     f"{config.trials.duration_s:g} s ({n_trial} bounces); seed {config.seed}")
     return ExperimentResult(frames={"acf.csv": acf, "summary.csv": summary_df},
                             figures=figures, summary=lines)
+
+
+@dataclass(frozen=True)
+class ControlledRuns:
+    """Runs of the controlled stochastic map: deviations from the fixed point (runs, bounces)
+    of v (m/s) and theta (rad, wrapped), and which runs lost the ball (rows NaN)."""
+
+    dv: np.ndarray
+    dtheta: np.ndarray
+    lost: np.ndarray
+
+
+def controlled_runs(params: ModelParams, controller, q_v: float, q_theta: float,
+                    n_bounces: int, n_runs: int, seeds: np.random.SeedSequence, burn_in: int,
+                    advance) -> ControlledRuns:
+    """The stochastic map of eqs. 16-18 with racket period control (``engine.control``: the
+    same noise, eq. 16 as printed), ``n_runs`` runs of ``n_bounces`` after ``burn_in``,
+    started at the fixed point, one stream per run (spawned from ``seeds``). A run whose ball
+    stops is lost (rows NaN)."""
+    from ..engine.control import simulate_perturbation_trials
+
+    n = burn_in + n_bounces + 1  # impact 0 is the start
+    sim = simulate_perturbation_trials(
+        params, controller, n_trials=n_runs, impacts_per_trial=n, perturb_every=n + 1,
+        velocity_noise_sd=q_v, phase_noise_sd=q_theta, seed=int(seeds.generate_state(1)[0]))
+    advance(n)
+    fp = params.fixed_point()
+    dv = np.full((n_runs, n_bounces), np.nan)
+    dtheta = np.full_like(dv, np.nan)
+    lost = np.ones(n_runs, dtype=bool)
+    for i in range(n_runs):
+        rows = sim["trial"] == i
+        if rows.sum() == n:
+            lost[i] = False
+            dv[i] = sim["v_m_s"][rows][burn_in + 1:] - fp.v_m_s
+            dtheta[i] = phase_difference(sim["theta_rad"][rows][burn_in + 1:], fp.theta_rad)
+    return ControlledRuns(dv, dtheta, lost)
 
 
 def _sds(params: ModelParams, noise_cov: np.ndarray) -> tuple[float, float]:
@@ -331,11 +399,14 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
 
 
 # -- the data's side (--data impacts.csv): bounce_cli/experiments/data_side.py ----------------
-def run_data(config: AcfConfig, options: RunOptions) -> ExperimentResult:
+def run_data(config: AcfConfig, options: RunOptions, source=None) -> ExperimentResult:
+    """The data's side; ``source``: the impacts (default: the file ``config.data``)."""
     from .data_side import acf_data_run
 
-    frames, lines = acf_data_run(config, options)
-    return ExperimentResult(frames=frames, figures=draw_data(frames), summary=lines)
+    frames, lines = acf_data_run(config, options, source)
+    figures = draw_data(frames)
+    caption_figures(figures, None, data_caption(config, source))
+    return ExperimentResult(frames=frames, figures=figures, summary=lines)
 
 
 def draw_data(frames: dict[str, pd.DataFrame]) -> dict:

@@ -36,11 +36,12 @@ produces. Parallel work goes through
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Callable, Protocol
-
-import pandas as pd
+from typing import TYPE_CHECKING, Any, Callable, Protocol
 
 from ..config import ExperimentConfig
+
+if TYPE_CHECKING:  # annotations only: ``bounce --help`` does not import pandas
+    import pandas as pd
 
 
 class Progress(Protocol):

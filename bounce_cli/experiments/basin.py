@@ -9,8 +9,9 @@ velocities not above the racket's are "below the racket". The numerics live in
 
 from __future__ import annotations
 
+import importlib.util
 import math
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
@@ -48,16 +49,21 @@ LEGEND_BELOW: dict[str, Any] = dict(loc="outside lower center", ncol=3, fontsize
 
 
 #: below this many grid points the basin is classified in this process whatever --jobs says:
-#: starting worker processes costs about 0.8 s (each imports numpy and scipy), and one core
-#: classifies about 200,000 points/s of the paper's grid, so two workers win only above some
-#: 3-4e5 points (measured: 400 x 400 in 0.80 s in-process vs 1.06 s with 2 workers; 800 x 800
-#: 3.3 s vs 2.3 s)
+#: starting two worker processes costs about 0.15 s (each imports numpy and the classifier
+#: only; 0.8 s when they imported scipy too), and one core classifies about 200,000 points/s
+#: of the paper's grid; measured on the shared 2-core machine: 400 x 400 in 0.78 s
+#: in-process vs 0.76-0.84 s with 2 workers, 300 x 300 0.42 vs 0.39-0.55 s; 1000 x 1000
+#: end to end 6.5 s vs 4.3 s
 POOL_MIN_POINTS = 400_000
 
 #: basin.csv bytes per row (the paper's grid: 10.7 MB for 160,000 rows) and the size above
 #: which the run warns before computing
 CSV_BYTES_PER_ROW = 67
 CSV_WARN_BYTES = 500_000_000
+#: basin.npz bytes per row: three float64 columns, int8 outcome codes, int16 iterations
+NPZ_BYTES_PER_ROW = 27
+#: output.format -> the file name of the grid's table (artifacts writes it by its suffix)
+BASIN_TABLES = {"csv": "basin.csv", "npz": "basin.npz", "parquet": "basin.parquet"}
 
 
 class GridAxis(StrictModel):
@@ -87,11 +93,18 @@ class LimitsBlock(StrictModel):
     max_points: int = Field(100_000_000, ge=1, description="largest grid accepted")
 
 
+class OutputBlock(StrictModel):
+    format: Literal["csv", "npz", "parquet"] = Field(
+        "csv", description="file format of the grid's table: basin.csv, basin.npz (numpy) or "
+        "basin.parquet (needs pyarrow); the small tables are CSV always")
+
+
 class BasinConfig(ExperimentConfig):
     model: ControllableModelBlock = ControllableModelBlock()
     grid: GridBlock = GridBlock()
     classify: ClassifyBlock = ClassifyBlock()
     limits: LimitsBlock = LimitsBlock()
+    output: OutputBlock = OutputBlock()
 
 
 def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
@@ -105,12 +118,19 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
             f"({theta_deg.size} x {v0.size}), more than limits.max_points = "
             f"{config.limits.max_points:,}; reduce grid.*.num or raise limits.max_points"
         )
+    table = BASIN_TABLES[config.output.format]
+    if config.output.format == "parquet" and importlib.util.find_spec("pyarrow") is None:
+        raise ConfigError(
+            "output.format: parquet needs the pyarrow package "
+            "(pip install 'bounce-cli[parquet]'), or use output.format=npz (numpy only)"
+        )
     csv_bytes = n_points * CSV_BYTES_PER_ROW
-    if csv_bytes > CSV_WARN_BYTES:
+    if config.output.format == "csv" and csv_bytes > CSV_WARN_BYTES:
         options.warn(
-            f"basin.csv will be about {format_bytes(csv_bytes)} ({n_points:,} rows); reduce "
-            "grid.theta0_deg.num / grid.v0_m_s.num if that is more than you need "
-            "(a binary format for large grids is planned)"
+            f"basin.csv will be about {format_bytes(csv_bytes)} ({n_points:,} rows); "
+            f"--set output.format=npz writes basin.npz instead (about "
+            f"{format_bytes(n_points * NPZ_BYTES_PER_ROW)}, read back with "
+            "bounce_cli.artifacts.read_frame), or reduce grid.theta0_deg.num / grid.v0_m_s.num"
         )
     settings = config.classify.settings()
     # rows: v0 outer, theta0 inner
@@ -150,7 +170,7 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
     at_paper = is_passive(controller) and at_paper_parameters(params, settings)
     markers = marker_frame(params, settings, fig3=at_paper, controller=controller)
 
-    frames = {"basin.csv": basin, "fractions.csv": fractions, "markers.csv": markers}
+    frames = {table: basin, "fractions.csv": fractions, "markers.csv": markers}
     summary = [
         f"basin: {theta_deg.size} x {v0.size} grid, "
         + ", ".join(f"{o} {f:.4f}" for o, f in zip(OUTCOMES, counts / n_points)),
@@ -268,14 +288,23 @@ def _draw_markers(ax, markers: pd.DataFrame, extent) -> None:
                     label=f"Fig. 3: v0 = {row.v0_m_s:g} m/s ({row.outcome})")
 
 
+def basin_table(frames: dict[str, pd.DataFrame]) -> pd.DataFrame:
+    """The grid's table among a run's frames, whatever its format (``BASIN_TABLES``)."""
+    for name in BASIN_TABLES.values():
+        if name in frames:
+            return frames[name]
+    raise KeyError("basin.csv")
+
+
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
-    """basin.png and basin_iterations.png, from basin.csv and markers.csv only."""
+    """basin.png and basin_iterations.png, from basin.csv (or basin.npz / basin.parquet) and
+    markers.csv only."""
     from matplotlib.colors import BoundaryNorm, ListedColormap
     from matplotlib.patches import Patch
 
     from ..plotting import new_figure
 
-    basin, markers = frames["basin.csv"], frames["markers.csv"]
+    basin, markers = basin_table(frames), frames["markers.csv"]
     codes = pd.Categorical(basin["outcome"], categories=list(OUTCOMES)).codes
     grid = _Grid(basin)
     image, extent = grid.image(codes), grid.extent

@@ -35,6 +35,7 @@ from ..engine.bifurcation import (
     period1_thresholds,
     sweep_parameters,
 )
+from ..plotting import caption_figures
 from .base import Experiment, ExperimentResult, RunOptions
 
 Parameter = Literal["gamma", "racket_amplitude", "racket_period", "alpha"]
@@ -166,7 +167,14 @@ def run(config: BifurcationConfig, options: RunOptions) -> ExperimentResult:
                                  theta0_deg, v0, options)
     frames = {"bifurcation.csv": bifurcation, "attractors.csv": attractors,
               "values.csv": per_value, "thresholds.csv": thresholds}
-    return ExperimentResult(frames=frames, figures=draw(frames),
+    figures = draw(frames)
+    fixed = {"alpha": f"alpha = {base.alpha:g}", "g": f"g = {base.g:g} m/s^2",
+             "racket_amplitude": f"a_r = {base.racket_amplitude:g} m",
+             "racket_period": f"tau = {base.racket_period:g} s"}
+    fixed.pop("racket_amplitude" if sweep.parameter == "gamma" else sweep.parameter)
+    caption_figures(figures, None, ", ".join(fixed.values()) + f"; {sweep.parameter} from "
+                    f"{values.min():g} to {values.max():g}")
+    return ExperimentResult(frames=frames, figures=figures,
                             summary=summary_lines(thresholds, per_value, column,
                                                   config.flip.locate))
 

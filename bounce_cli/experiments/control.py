@@ -13,13 +13,13 @@ control, and -- on perturbation trials, simulated with a known controller or a l
 from __future__ import annotations
 
 import math
-from pathlib import Path
 from typing import Annotated, Optional
 
 import numpy as np
 import pandas as pd
 from pydantic import Field
 
+from ..impacts import read_impacts as shared_read_impacts
 from ..config import (
     ClassifyBlock,
     ConfigError,
@@ -46,6 +46,7 @@ from ..engine.control import (
     classify_controlled,
     controlled_impulse_response,
     controlled_jacobian,
+    spectral_radius_3x3,
     fastest_controller,
     fastest_immediate_controller,
     fit_period_control,
@@ -116,6 +117,9 @@ class FitBlock(StrictModel):
     initial_gain: float = 0.5
     initial_rate: float = Field(0.5, ge=0.0, le=2.0)
     confidence: float = Field(0.95, gt=0.0, lt=1.0)
+    racket_period_s: Optional[float] = Field(
+        None, gt=0.0, description="with data: the controller's set point tau_bar, s (null: the "
+        "data's mean racket period, which control shifts: +4 ms in the README's example)")
     simulate: SimulateBlock = SimulateBlock()
 
 
@@ -362,38 +366,15 @@ DATA_COLUMNS = ("trial", "k", "theta_rad", "v_m_s", "racket_period_s", "perturbe
 
 
 def read_impacts(path_text: str) -> pd.DataFrame:
-    """An impacts table (``bounce_cli.impacts``) with the columns the fit needs:
-    trial, k, theta_rad, v_m_s, racket_period_s, perturbed (and alpha, racket_amplitude_m if
-    present). Problems are one-line ConfigErrors naming ``data``."""
-    path = Path(path_text)
-    try:
-        frame = pd.read_csv(path)
-    except FileNotFoundError:
-        raise ConfigError(f"data: {path}: file not found") from None
-    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise ConfigError(f"data: {path}: cannot read as CSV: {first}") from None
-    missing = [c for c in DATA_COLUMNS if c not in frame.columns]
-    if missing:
-        raise ConfigError(f"data: {path}: missing column(s) {', '.join(missing)} (an impacts "
-                          f"table with perturbation events: {', '.join(DATA_COLUMNS)})")
-    for column in ("k", "theta_rad", "v_m_s", "racket_period_s", "alpha", "racket_amplitude_m"):
-        if column not in frame.columns:
-            continue
-        values = pd.to_numeric(frame[column], errors="coerce")
-        if values.isna().any():
-            row = int(np.flatnonzero(values.isna().to_numpy())[0])
-            raise ConfigError(f"data: {path}: column {column}: not a number in data row "
-                              f"{row + 1} (got {frame[column].iloc[row]!r})")
-        frame[column] = values.astype(float)
-    if not (frame["racket_period_s"] > 0).all():
-        raise ConfigError(f"data: {path}: column racket_period_s: must be > 0")
-    perturbed = frame["perturbed"].astype(str).str.strip().str.lower()
-    if not perturbed.isin(["true", "false", "1", "0"]).all():
-        raise ConfigError(f"data: {path}: column perturbed: must be True/False")
-    frame["perturbed"] = perturbed.isin(["true", "1"])
+    """An impacts table (``bounce_cli.impacts``, the data side's reader) with the columns the
+    fit needs: trial, k, theta_rad (or theta_deg), v_m_s, racket_period_s, perturbed (and
+    alpha, racket_amplitude_m if present). Problems are one-line ConfigErrors naming ``data``."""
+    impacts = shared_read_impacts(path_text, needs=("racket_period_s", "perturbed"),
+                                  command="control --data",
+                                  optional=("alpha", "racket_amplitude_m"))
+    frame = impacts.frame
     if not frame["perturbed"].any():
-        raise ConfigError(f"data: {path}: no perturbed impact (column perturbed)")
+        raise ConfigError(f"data: {impacts.path}: no perturbed impact (column perturbed)")
     return frame
 
 
@@ -419,8 +400,10 @@ def fit_inputs(config: ControlConfig) -> tuple[pd.DataFrame, ModelParams, dict]:
     # alpha_0 and g from the config
     amplitude = (float(impacts["racket_amplitude_m"].mean()) if "racket_amplitude_m" in impacts
                  else params.racket_amplitude)
+    period = config.fit.racket_period_s
     data_params = ModelParams(params.alpha, params.g, amplitude,
-                              float(impacts["racket_period_s"].mean()))
+                              float(impacts["racket_period_s"].mean()) if period is None
+                              else period)
     return impacts, data_params, {"gain_K": math.nan, "rate_c": math.nan, "source": "data",
                                   "trials_lost": math.nan}
 
@@ -450,11 +433,17 @@ def fit_frames(config: ControlConfig, inputs=None) -> dict[str, pd.DataFrame]:
     except Exception as exc:
         raise ConfigError(f"data: the model at the data's racket has no fixed point: {exc}") \
             from None
+    switch = config.model.control.switch  # when the racket takes the new period (the data's)
+
+    def controller_of(gain: float, rate: float) -> PeriodController:
+        return PeriodController(gain, rate, switch=switch)
+
     fit = fit_period_control(params, list(responses.values()),
                              initial=(block.initial_gain, block.initial_rate),
-                             confidence=block.confidence)
-    truth_radius = (float(period_control_radius(params, truth["gain_K"], truth["rate_c"]))
-                    if truth["source"] == "simulated" else math.nan)
+                             confidence=block.confidence, controller_of=controller_of)
+    truth_radius = (float(spectral_radius_3x3(controlled_jacobian(
+        params, controller_of(truth["gain_K"], truth["rate_c"]))))
+        if truth["source"] == "simulated" else math.nan)
     n_events = {d: r.n_events for d, r in responses.items()}
     rows = [
         ("gain_K", "1", truth["gain_K"], fit.gain, *fit.gain_ci),
@@ -478,7 +467,7 @@ def fit_frames(config: ControlConfig, inputs=None) -> dict[str, pd.DataFrame]:
     table = pd.DataFrame(rows, columns=["quantity", "unit", "truth", "estimate", "ci_low",
                                         "ci_high"])
     table.insert(0, "source", truth["source"])
-    fitted = PeriodController(fit.gain, fit.rate)
+    fitted = controller_of(fit.gain, fit.rate)
     offsets = np.array(fit.offsets)
     curves = []
     for direction, r in responses.items():
@@ -514,7 +503,13 @@ def run(config: ControlConfig, options: RunOptions) -> ExperimentResult:
     frames["acf.csv"] = correlations_frame(params, config)
     frames.update(fit_frames(config, fit_data))
     options.progress.advance(1)
-    return ExperimentResult(frames=frames, figures=draw(frames), summary=summary_lines(frames))
+    from ..plotting import caption_figures
+
+    figures = draw(frames)
+    caption_figures(figures, params, f"controller K = {config.model.control.gain:g}, "
+                    f"c = {config.model.control.rate:g}"
+                    + (f"; fit to data: {config.data}" if config.data is not None else ""))
+    return ExperimentResult(frames=frames, figures=figures, summary=summary_lines(frames))
 
 
 def summary_lines(frames: dict[str, pd.DataFrame]) -> list[str]:
@@ -552,6 +547,11 @@ def summary_lines(frames: dict[str, pd.DataFrame]) -> list[str]:
                  f"[{fit.loc['rate_c', 'ci_low']:.4f}, {fit.loc['rate_c', 'ci_high']:.4f}]"
                  + (f" (truth K = {fit.loc['gain_K', 'truth']:g}, c = "
                     f"{fit.loc['rate_c', 'truth']:g})" if source == "simulated" else ""))
+    if fit.loc["gain_K", "ci_low"] <= 0.0 <= fit.loc["gain_K", "ci_high"]:
+        lines.append("fit: K's interval includes 0, no period control is detected: c then "
+                     "only describes how the racket period relaxes on its own, and the fitted "
+                     "model's spectral radius (|1 - c| when that is the largest) says nothing "
+                     "about the ball; read the passive eigenvalues (eq. 10) for these data")
     chi2, lost = fit.loc["reduced_chi2", "estimate"], fit.loc["trials_lost", "estimate"]
     if chi2 > 3.0:
         lines.append(f"fit: reduced chi2 = {chi2:.3g} >> 1: the controlled map does not describe "

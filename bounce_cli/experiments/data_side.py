@@ -27,10 +27,11 @@ from ..engine.data_stats import (
     align,
     noise_from_sds,
     relaxation_impact,
+    settled_mask,
     trial_correlations,
 )
 from ..engine.var_fit import EIGEN_QUANTITIES, J_ENTRIES, Var1Fit, fit_var1
-from ..impacts import Impacts, circular_mean, read_impacts
+from ..impacts import Impacts, ImpactsSource, circular_mean, read_impacts
 from ..plotting import new_figure
 
 MODEL_COLUMNS = ("racket_period_s", "racket_amplitude_m")
@@ -98,10 +99,8 @@ def stationary_segments(impacts: Impacts, settle: int, min_length: int):
     dtheta is the phase minus the trial's circular mean, wrapped to [-pi, pi)."""
     out = []
     for trial, rows in impacts.by_trial():
-        keep = np.ones(len(rows), bool)
-        if "perturbed" in rows.columns:
-            for i in np.flatnonzero(rows["perturbed"].to_numpy()):
-                keep[i:i + settle + 1] = False
+        keep = (settled_mask(rows["perturbed"].to_numpy(), settle)
+                if "perturbed" in rows.columns else np.ones(len(rows), bool))
         theta = rows["theta_rad"].to_numpy()
         ref = circular_mean(theta[keep]) if keep.any() else 0.0
         dtheta = phase_difference(theta, ref)
@@ -131,9 +130,12 @@ def implied_alpha(params: ModelParams, theta_rad: float) -> float:
 
 
 # -- acf --data (Fig. 8 and the stability measured from data) --------------------------------
-def acf_data_run(config, options) -> tuple[dict[str, pd.DataFrame], list[str]]:
+def acf_data_run(config, options, source: ImpactsSource | None = None
+                 ) -> tuple[dict[str, pd.DataFrame], list[str]]:
+    """``source``: the impacts (default: the file ``config.data``)."""
     d = config.data_analysis
-    impacts = read_impacts(config.data, needs=MODEL_COLUMNS, command="acf --data",
+    impacts = read_impacts(config.data if source is None else source, needs=MODEL_COLUMNS,
+                           command="acf --data",
                            min_bounces=config.max_lag + 2)
     params = model_at_data(impacts, config.model.alpha, config.model.g)
     segments = stationary_segments(impacts, d.settle_after_perturbation, config.max_lag + 2)
@@ -235,8 +237,9 @@ def acf_data_run(config, options) -> tuple[dict[str, pd.DataFrame], list[str]]:
     trust = trust_frame(params, q_v, q_theta, config, segments, options)
     frames = {"acf_data.csv": acf, "stability_data.csv": stab, "trust.csv": trust}
     lines = [f"data {impacts.path}: {n_seg} runs, {len(dv_all)} bounces; model at a_r = "
-             f"{params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s, alpha = "
-             f"{params.alpha:g}, g = {params.g:g}: spectral radius {st.spectral_radius:.3f}"]
+             f"{params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s (the data's), "
+             f"alpha = {params.alpha:g}, g = {params.g:g} m/s^2 (model.alpha, model.g: set "
+             f"them to your lab's): spectral radius {st.spectral_radius:.3f}"]
     for method, fit in fits.items():
         if isinstance(fit, ModelError):
             lines.append(f"{method}: {fit}")
@@ -410,10 +413,13 @@ def _stability_figure(stab: pd.DataFrame, trust: pd.DataFrame | None):
 
 
 # -- impulse --data (Figs. 9 and 11) ----------------------------------------------------------
-def impulse_data_run(config, options) -> tuple[dict[str, pd.DataFrame], list[str]]:
+def impulse_data_run(config, options, source: ImpactsSource | None = None
+                     ) -> tuple[dict[str, pd.DataFrame], list[str]]:
+    """``source``: the impacts (default: the file ``config.data``)."""
     d = config.data_analysis
     needs = ("alpha", "perturbed", *MODEL_COLUMNS)
-    impacts = read_impacts(config.data, needs=needs, command="impulse --data", min_bounces=2)
+    impacts = read_impacts(config.data if source is None else source, needs=needs,
+                           command="impulse --data", min_bounces=2)
     frame = impacts.frame
     if not frame["perturbed"].any():
         raise ConfigError(f"data: {impacts.path}: column perturbed: no perturbed impact, nothing "
@@ -431,7 +437,7 @@ def impulse_data_run(config, options) -> tuple[dict[str, pd.DataFrame], list[str
         w = align([g[column].to_numpy() for _, g in groups],
                   [g["perturbed"].to_numpy() for _, g in groups],
                   [g["alpha"].to_numpy() for _, g in groups], n, d.settle_after_perturbation,
-                  phase=is_phase)
+                  phase=is_phase, k_trials=[g["k"].to_numpy() for _, g in groups])
         windows[name] = (w, scale)
         options.progress.advance(1)
     w_v = windows["v_m_s"][0]
@@ -499,8 +505,9 @@ def impulse_data_run(config, options) -> tuple[dict[str, pd.DataFrame], list[str
     lines = [f"data {impacts.path}: {len(w_v.values)} perturbations ({n_down}"
              f" decrease, {n_up} increase); {cut} windows cut short "
              "by the next perturbation or the trial's end (their later impacts are not averaged)",
-             f"model at a_r = {params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s,"
-             f" alpha_0 = {params.alpha:g}: v~ = {fp.v_m_s:.3f} m/s,"
+             f"model at a_r = {params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s"
+             f" (the data's), alpha_0 = {params.alpha:g}, g = {params.g:g} m/s^2 (model.alpha, "
+             f"model.g): v~ = {fp.v_m_s:.3f} m/s,"
              f" theta~ = {fp.theta_deg:.1f} deg"]
     for row in relax.itertuples():
         lines.append(f"{row.direction} (alpha_p {row.mean_alpha_p:.3f}), {row.source}: impacts "
@@ -565,11 +572,11 @@ def is_impacts_table(path_text: str) -> bool:
     return {"trial", "k", "racket_period_s", "racket_amplitude_m"} <= cols and "a_r_m" not in cols
 
 
-def trial_means_from_impacts(path_text: str, alpha: float) -> pd.DataFrame:
+def trial_means_from_impacts(source: ImpactsSource, alpha: float) -> pd.DataFrame:
     """One row per trial: mean racket amplitude (a_r_m), mean racket period (tau_s), the
     circular mean phase of impact (theta_deg, in (-180, 180]), and the trial's alpha (the
     median of its impacts' alpha when given: perturbed impacts do not move it)."""
-    impacts = read_impacts(path_text, needs=MODEL_COLUMNS, command="regression --data",
+    impacts = read_impacts(source, needs=MODEL_COLUMNS, command="regression --data",
                            min_bounces=2)
     rows = []
     for trial, g in impacts.by_trial():
@@ -582,7 +589,7 @@ def trial_means_from_impacts(path_text: str, alpha: float) -> pd.DataFrame:
     frame = pd.DataFrame(rows)
     if (frame["theta_deg"].abs() >= 90).any():
         bad = frame[frame["theta_deg"].abs() >= 90].iloc[0]
-        raise ConfigError(f"data: {path_text}: trial {bad['trial']}: mean phase of impact "
+        raise ConfigError(f"data: {impacts.path}: trial {bad['trial']}: mean phase of impact "
                           f"{bad['theta_deg']:.1f} deg is outside (-90, 90): eq. 15 has no "
                           "positive slope there")
     if frame["alpha"].nunique() > 1:

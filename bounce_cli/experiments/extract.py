@@ -36,6 +36,7 @@ from ..recordings import (
     read_recording,
     read_table,
 )
+from ..plotting import caption_figures
 from .base import Experiment, ExperimentResult, RunOptions
 
 
@@ -289,7 +290,10 @@ def run(config: ExtractConfig, options: RunOptions) -> ExperimentResult:
         summary.append("RMS error against the truth: " + ", ".join(
             f"{q} {acc.loc[q, 'rms_error']:.3g} {acc.loc[q, 'unit']}"
             for q in ("theta_deg", "v_m_s", "racket_acc_g")))
-    return ExperimentResult(frames=frames, figures=draw(frames), summary=summary)
+    figures = draw(frames)
+    caption_figures(figures, None, f"data: {config.data}" if config.data is not None
+                    else "the bundled simulated session (no --data)")
+    return ExperimentResult(frames=frames, figures=figures, summary=summary)
 
 
 # -- Fig. 2 -------------------------------------------------------------------------------------

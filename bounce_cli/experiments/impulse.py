@@ -26,7 +26,7 @@ from ..engine.impulse import (
 from ..engine.control import is_passive
 from ..engine.linear import stability
 from ..engine.params import ModelParams
-from ..plotting import caption_figures
+from ..plotting import caption_figures, data_caption
 from .base import Experiment, ExperimentResult, RunOptions
 from .data_side import ImpulseDataBlock
 
@@ -73,6 +73,23 @@ def threshold_row(params: ModelParams, direction: int, config: ImpulseConfig) ->
     quoted = paper.ALPHA_P_THRESHOLD.value if direction > 0 and passive_paper else math.nan
     return {"direction": "increase" if direction > 0 else "decrease",
             "paper_alpha_p": quoted} | dataclasses.asdict(found)
+
+
+def exit_line(row: dict, scan_end: float, paper_note: str) -> str:
+    """One direction of threshold.csv in words: where the response leaves the basin, or that
+    the scan never left it."""
+    side = "above" if row["direction"] == "increase" else "below"
+    if not math.isfinite(row["alpha_p_threshold"]):
+        return (f"stays in the period-1 basin for every alpha_p {side} alpha_0 scanned "
+                f"(to {scan_end:g}){paper_note}")
+    return (f"leaves the period-1 basin {side} alpha_p = {row['alpha_p_threshold']:.4f} "
+            f"(v_0 = {row['v0_threshold_m_s']:.3f} m/s, then {row['outcome_outside']}"
+            f"{paper_note})")
+
+
+def relaxed_text(impacts: int, horizon: int) -> str:
+    """relaxation.csv's count in words (-1 there: not back within the horizon)."""
+    return str(impacts) if impacts >= 0 else f"not within {horizon}"
 
 
 def at_paper_parameters(params: ModelParams) -> bool:
@@ -179,24 +196,23 @@ def run(config: ImpulseConfig, options: RunOptions) -> ExperimentResult:
     }
     up = thresholds[0]
     rel = frames["relaxation.csv"]
-    at_paper = at_paper_parameters(params)
-    summary = [
-        f"leaves the period-1 basin above alpha_p = {up['alpha_p_threshold']:.4f} "
-        f"(v_0 = {up['v0_threshold_m_s']:.3f} m/s, then {up['outcome_outside']}"
-        + (f"; paper: about {paper.ALPHA_P_THRESHOLD.text}" if at_paper else "")
-        + f"); below alpha_p = {thresholds[1]['alpha_p_threshold']:.4f}",
-    ]
+    at_paper = is_passive(config.model.controller()) and at_paper_parameters(params)
+    summary = [exit_line(up, config.threshold.alpha_p_max,
+                         f"; paper: about {paper.ALPHA_P_THRESHOLD.text}" if at_paper else "")
+               + "; " + exit_line(thresholds[1], 0.0, "")]
     if at_paper:
         summary.append(
             f"alpha_p = {paper.ALPHA_P_FIG3:g}: v_0 = "
             f"{perturbed_velocity(params, paper.ALPHA_P_FIG3):.3f} m/s "
             f"(paper: {paper.V0_AT_ALPHA_P_FIG3})")
     else:
-        summary.append("(not the paper's section 7 parameters: no paper value to compare)")
+        summary.append("(not the paper's passive model at section 7's parameters: no paper value "
+                       "to compare)")
     for model in MODELS:
         part = rel[rel.model == model]
         summary.append(f"{model}: impacts to relax " + ", ".join(
-            f"{r.alpha_p:g}: {r.relaxation_impacts}" for r in part.itertuples()))
+            f"{r.alpha_p:g}: {relaxed_text(r.relaxation_impacts, config.relaxation.max_impacts)}"
+            for r in part.itertuples()))
     figures = draw(frames)
     caption_figures(figures, params)
     return ExperimentResult(frames=frames, figures=figures, summary=summary)
@@ -277,11 +293,14 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
 
 
 # -- the data's side (--data impacts.csv): bounce_cli/experiments/data_side.py ----------------
-def run_data(config: ImpulseConfig, options: RunOptions) -> ExperimentResult:
+def run_data(config: ImpulseConfig, options: RunOptions, source=None) -> ExperimentResult:
+    """The data's side; ``source``: the impacts (default: the file ``config.data``)."""
     from .data_side import impulse_data_run
 
-    frames, lines = impulse_data_run(config, options)
-    return ExperimentResult(frames=frames, figures=draw_data(frames), summary=lines)
+    frames, lines = impulse_data_run(config, options, source)
+    figures = draw_data(frames)
+    caption_figures(figures, None, data_caption(config, source))
+    return ExperimentResult(frames=frames, figures=figures, summary=lines)
 
 
 def draw_data(frames: dict[str, pd.DataFrame]) -> dict:

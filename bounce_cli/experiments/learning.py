@@ -25,13 +25,13 @@ import pandas as pd
 from pydantic import Field
 
 from ..config import ConfigError, ExperimentConfig, ModelBlock, StrictModel
-from ..engine.data_stats import apex_sd_eq19
+from ..engine.data_stats import apex_sd_eq19, settled_mask
 from ..engine.linear import jacobian, racket_amplitude_for_ac, stability, stable_ac_range_g
 from ..engine.params import ModelError, ModelParams, phase_difference
 from ..engine.regression import ols_line
 from ..engine.stochastic import map_noise_covariance, paper_noise_covariance, stationary_covariance
 from ..impacts import circular_mean, read_impacts
-from ..plotting import new_figure
+from ..plotting import caption_figures, data_caption, new_figure
 from .base import Experiment, ExperimentResult, RunOptions
 
 TREND_QUANTITIES = {
@@ -45,7 +45,7 @@ TREND_QUANTITIES = {
 
 class LearningNoiseBlock(StrictModel):
     q_v: float = Field(0.04, gt=0.0, description="velocity noise strength of the model curve, m/s")
-    q_theta: float = Field(0.05, gt=0.0, description="phase noise strength of the model curve, rad")
+    q_theta: float = Field(0.05, ge=0.0, description="phase noise strength of the model curve, rad")
 
 
 class LearningConfig(ExperimentConfig):
@@ -53,6 +53,9 @@ class LearningConfig(ExperimentConfig):
     noise: LearningNoiseBlock = LearningNoiseBlock()
     ac_points: int = Field(81, ge=5, description="AC values on the model curve")
     min_bounces: int = Field(10, ge=3, description="fewest impacts a trial may have")
+    settle_after_perturbation: int = Field(
+        4, ge=0, description="with --data: impacts after a perturbed one left out of the "
+                             "per-trial statistics (as acf --data)")
     confidence: float = Field(0.95, gt=0.0, lt=1.0, description="level of the trend intervals")
     data: Optional[str] = Field(None, description="impacts table with ball_apex_m (--data)")
 
@@ -79,16 +82,19 @@ def model_curve(alpha: float, g: float, period: float, q_v: float, q_theta: floa
     return pd.DataFrame(rows)
 
 
-def trial_table(config: LearningConfig) -> tuple[pd.DataFrame, float]:
-    """Per-trial statistics of the impacts table, in the file's order of trials (trial_number
-    1, 2, ...), and the data's mean racket period (NaN without that column)."""
-    assert config.data is not None
-    impacts = read_impacts(config.data, needs=("racket_acc_g", "ball_apex_m"),
+def trial_table(config: LearningConfig, source=None) -> tuple[pd.DataFrame, float]:
+    """Per-trial statistics of the impacts table (``source``, default the file
+    ``config.data``), in the file's order of trials (trial_number 1, 2, ...), and the data's
+    mean racket period (NaN without that column)."""
+    if source is None:
+        assert config.data is not None
+        source = config.data
+    impacts = read_impacts(source, needs=("racket_acc_g", "ball_apex_m"),
                            command="learning --data", min_bounces=config.min_bounces)
     rows = []
     for number, (trial, g) in enumerate(impacts.by_trial(), start=1):
-        if "perturbed" in g.columns:
-            g = g[~g["perturbed"]]
+        if "perturbed" in g.columns:  # the stationary state: not the relaxations
+            g = g[settled_mask(g["perturbed"].to_numpy(), config.settle_after_perturbation)]
         theta = g["theta_rad"].to_numpy()
         dtheta = phase_difference(theta, circular_mean(theta))
         apex = g["ball_apex_m"].dropna()
@@ -123,15 +129,17 @@ def trend_table(trials: pd.DataFrame, confidence: float) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def run(config: LearningConfig, options: RunOptions) -> ExperimentResult:
+def run(config: LearningConfig, options: RunOptions, source=None) -> ExperimentResult:
+    """``source``: an impacts table in memory, ``(label, frame)`` (default: ``config.data``)."""
     m = config.model
     frames: dict[str, pd.DataFrame] = {}
     lines = []
     period = m.racket_period
-    if config.data is not None:
-        trials, data_period = trial_table(config)
+    if config.data is not None or source is not None:
+        trials, data_period = trial_table(config, source)
         if len(trials) < 3:
-            raise ConfigError(f"data: {config.data}: {len(trials)} trial(s); a trend over "
+            label = config.data if source is None else source[0]
+            raise ConfigError(f"data: {label}: {len(trials)} trial(s); a trend over "
                               "trials needs at least 3")
         if math.isfinite(data_period):
             period = data_period
@@ -151,7 +159,9 @@ def run(config: LearningConfig, options: RunOptions) -> ExperimentResult:
                  f"{config.noise.q_v:g} m/s, q_theta = {config.noise.q_theta:g} rad: SD of ball "
                  f"amplitude smallest ({best.apex_sd_m * 100:.2f} cm) at AC = {best.ac_g:.3f} g; "
                  f"stable AC range ({float(stable_ac_range_g(m.alpha)[0]):.3f}, 0) g (eq. 14)")
-    return ExperimentResult(frames=frames, figures=draw(frames), summary=lines)
+    figures = draw(frames)
+    caption_figures(figures, None, data_caption(config, source))
+    return ExperimentResult(frames=frames, figures=figures, summary=lines)
 
 
 def draw(frames: dict[str, pd.DataFrame]) -> dict:

@@ -168,6 +168,11 @@ def read_trials(path_text: str) -> pd.DataFrame:
 
 
 # -- fit ----------------------------------------------------------------------------------
+#: tau^2 spanning less than this fraction of its mean determines no slope worth reporting
+#: (the paper's Fig. 7 spans about a factor 2); the fit is still written, with a warning
+NARROW_TAU2 = 0.01
+
+
 def fit_frame(trials: pd.DataFrame, config: RegressionConfig) -> pd.DataFrame:
     """fit.csv: one row per condition ("all" without a condition column); simulated trials
     that lost the ball are left out."""
@@ -215,32 +220,47 @@ def _constant(group: pd.DataFrame, column: str, default: float, condition) -> fl
     return float(values[0])
 
 
-def run(config: RegressionConfig, options: RunOptions) -> ExperimentResult:
-    if config.data is not None and is_impacts_table(config.data):
+def run(config: RegressionConfig, options: RunOptions, source=None) -> ExperimentResult:
+    """``source``: an impacts table in memory, ``(label, frame)`` (default: ``config.data``)."""
+    data_label = config.data if source is None else source[0]  # None: simulated trials
+    if source is not None:
+        trials = trial_means_from_impacts(source, config.model.alpha)
+        described = f"{data_label} (impacts averaged per trial)"
+    elif config.data is not None and is_impacts_table(config.data):
         trials = trial_means_from_impacts(config.data, config.model.alpha)
-        source = f"data {config.data} (impacts averaged per trial)"
+        described = f"data {config.data} (impacts averaged per trial)"
     elif config.data is not None:
         trials = read_trials(config.data)
-        source = f"data {config.data}"
+        described = f"data {config.data}"
     else:
         trials = simulate_trials(config, options)
-        source = (f"{len(trials)} simulated trials ({int(trials['lost'].sum())} lost the ball "
-                  "and are not fitted)")
+        described = (f"{len(trials)} simulated trials ({int(trials['lost'].sum())} lost the "
+                     "ball and are not fitted)")
     trials = trials.assign(tau2_s2=trials["tau_s"] ** 2)
     fit = fit_frame(trials, config)
+    fitted = trials[~trials["lost"].astype(bool)] if "lost" in trials.columns else trials
+    groups = (fitted.groupby("condition") if "condition" in fitted.columns
+              else [("all", fitted)])
+    for condition, group in groups:
+        spread = float(np.ptp(group["tau2_s2"]) / group["tau2_s2"].mean())
+        if spread < NARROW_TAU2:
+            options.warn(
+                f"condition {condition!r}: the trials' squared racket periods span only "
+                f"{spread:.2%} of their mean, so eq. 15's slope is not determined (fit "
+                "trials at different racket periods, e.g. different target heights)")
     figures = draw({"trials.csv": trials, "fit.csv": fit})
-    if config.data is not None:
-        caption_figures(figures, None, f"data: {config.data}")
+    if data_label is not None:
+        caption_figures(figures, None, f"data: {data_label}")
     else:
         caption_figures(figures, None, f"simulated trials: alpha = {config.model.alpha:g}, "
                         f"g = {config.model.g:g} m/s^2; seed {config.seed}")
     # the paper's R^2 (section 5) are of its subjects' trials; beside a simulation of them only
-    fig7_like = config.data is None and (config.model.alpha, config.model.g) == (
+    fig7_like = data_label is None and (config.model.alpha, config.model.g) == (
         paper.FIG3_MODEL.alpha, paper.FIG3_MODEL.g)
     r2_paper = (f" (paper, its subjects: {paper.FIG7_R2['vision'].text} vision / "
                 f"{paper.FIG7_R2['no vision'].text} no vision)") if fig7_like else ""
     pct = f"{config.confidence:.0%}"
-    lines = [f"{source}; OLS of a_r on tau^2, {pct} confidence intervals"]
+    lines = [f"{described}; OLS of a_r on tau^2, {pct} confidence intervals"]
     for row in fit.itertuples():
         lines.append(
             f"({row.condition}) slope {row.slope:.4f} m/s^2 [{row.slope_ci_low:.4f}, "

@@ -15,9 +15,10 @@ import numpy as np
 import pandas as pd
 from pydantic import Field, model_validator
 
-from ..config import ExperimentConfig, StrictModel
+from ..config import ControllableModelBlock, ExperimentConfig, StrictModel
 from ..engine.recording import SessionSettings, simulate_session, truth_rows
 from ..impacts import EVENT_COLUMNS, REQUIRED_COLUMNS
+from ..plotting import caption_figures
 from .base import Experiment, ExperimentResult, RunOptions
 from .extract import centred_deg, draw_fig2
 
@@ -51,6 +52,7 @@ class PerturbationBlock(StrictModel):
 
 
 class RecordingConfig(ExperimentConfig):
+    model: ControllableModelBlock = ControllableModelBlock()
     seed: int = Field(13, ge=0)
     trials: int = Field(2, ge=1, le=1000)
     duration_s: float = Field(20.0, gt=1.0, le=3600.0)
@@ -70,6 +72,11 @@ class RecordingConfig(ExperimentConfig):
         if self.racket.amplitude_sd_m > 0.1 * self.model.racket_amplitude:
             raise ValueError("racket.amplitude_sd_m must be at most 10% of "
                              "model.racket_amplitude")
+        control = self.model.control
+        if control is not None and control.switch != "cycle":
+            raise ValueError("model.control.switch: simulate-recording moves the racket cycle "
+                             "by cycle: the controller sets the NEXT cycle's period (give "
+                             "switch: cycle)")
         if self.trials * self.duration_s * self.sample_rate_hz > 2e7:
             raise ValueError("trials x duration_s x sample_rate_hz exceeds 2e7 samples")
         return self
@@ -85,7 +92,7 @@ class RecordingConfig(ExperimentConfig):
             ball_marker_offset_m=self.ball_marker_offset_m,
             perturb_every=self.perturbations.every, perturb_first=self.perturbations.first,
             perturb_alphas=tuple(self.perturbations.alphas), min_hop_s=self.min_hop_s,
-            seed=self.seed)
+            seed=self.seed, controller=self.model.active_controller())
 
 
 def session_frames(config: RecordingConfig, options: RunOptions | None = None):
@@ -119,7 +126,10 @@ def run(config: RecordingConfig, options: RunOptions) -> ExperimentResult:
         f"{truth['v_m_s'].mean():.4f} m/s, mean theta = "
         f"{centred_deg(truth['theta_deg']).mean():.2f} deg"
     ]
-    return ExperimentResult(frames=frames, figures=draw(frames), summary=summary)
+    figures = draw(frames)
+    caption_figures(figures, config.params, f"{config.trials} trials x {config.duration_s:g} s, "
+                    f"{config.sample_rate_hz:g} Hz, seed {config.seed}")
+    return ExperimentResult(frames=frames, figures=figures, summary=summary)
 
 
 def draw(frames: dict[str, pd.DataFrame]) -> dict:

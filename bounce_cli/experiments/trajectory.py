@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 from pydantic import Field, model_validator
 
-from ..config import ExperimentConfig, StrictModel
+from ..config import ConfigError, ControllableModelBlock, ExperimentConfig, StrictModel
 from ..engine.flight import FlightSettings, simulate
 from ..engine.params import ModelParams, wrap_phase
 from ..plotting import caption_figures
@@ -55,6 +55,7 @@ class StickingBlock(StrictModel):
 
 
 class TrajectoryConfig(ExperimentConfig):
+    model: ControllableModelBlock = ControllableModelBlock()
     integrator: Literal["exact", "rk4"] = "exact"
     # a coarser fixed step misses short hops (at 0.02 s, 9 of 87 impacts of the sticking case)
     rk4_step_s: float = Field(_FLIGHT.rk4_step_s, gt=0.0, le=5e-3)
@@ -112,16 +113,61 @@ def case_frames(name: str, traj, params: ModelParams, sample_interval_s: float, 
     return track, impacts
 
 
+def controlled_case_frames(name: str, traj, clock, periods, params: ModelParams,
+                           sample_interval_s: float, theta0: float, v0: float):
+    """``case_frames`` of a run with racket period control: the racket's position from its
+    clock (the phase rate changes at impacts), each impact's time as simulated, and the
+    period of the flight ending at each impact (``racket_period_s``; k = 0: tau_bar)."""
+    grid = np.arange(traj.t0, traj.t_end, sample_interval_s)
+    events = [im.t_s for im in traj.impacts]
+    events += [t for seg in traj.segments for t in (seg.t_start, seg.t_end)]
+    t = np.unique(np.concatenate([grid, np.array(events), [traj.t_end]]))
+    t = t[(t >= traj.t0) & (t <= traj.t_end) & np.isfinite(t)]
+    x, v, stuck = traj.sample(t)
+    phase, omega = clock.phase(t)
+    a = params.racket_amplitude
+    racket_x, racket_v = a * np.sin(phase), a * omega * np.cos(phase)
+    x = np.where(stuck, racket_x, x)
+    v = np.where(stuck, racket_v, v)
+    track = pd.DataFrame({"case": name, "t_s": t, "ball_x_m": x, "ball_v_m_s": v,
+                          "racket_x_m": racket_x, "racket_v_m_s": racket_v,
+                          "state": np.where(stuck, "stuck", "flight")})
+    theta = np.array([theta0] + [im.theta_rad for im in traj.impacts])
+    impacts = pd.DataFrame({
+        "case": name, "k": np.arange(len(theta)),
+        "t_s": [traj.t0] + [im.t_s for im in traj.impacts],
+        "theta_deg": np.degrees(wrap_phase(theta)),
+        "v_m_s": [v0] + [im.v_after_m_s for im in traj.impacts],
+        "racket_acc_g": -a * np.sin(theta) * np.concatenate(
+            [[params.omega], clock.omega[1:len(theta)]]) ** 2 / params.g,
+        "racket_period_s": np.concatenate([[params.racket_period], periods]),
+    })
+    return track, impacts
+
+
 def run(config: TrajectoryConfig, options: RunOptions) -> ExperimentResult:
+    from ..engine.control import simulate_controlled_motion
+
     params = config.params
     fp = params.fixed_point()
     settings = config.settings()
+    controller = config.model.active_controller()  # None: the passive map
+    if controller is not None and config.integrator != "exact":
+        raise ConfigError("integrator: with model.control only the exact integrator is "
+                          "implemented")
     options.progress.start(len(config.cases), f"trajectory ({config.integrator})")
     tracks, impacts, summary = [], [], []
     for case in config.cases:
-        traj = simulate(case.theta0, case.v0_m_s, params, config.duration_s, settings)
-        track, imp = case_frames(case.name, traj, params, config.sample_interval_s,
-                                 case.theta0, case.v0_m_s)
+        if controller is None:
+            traj = simulate(case.theta0, case.v0_m_s, params, config.duration_s, settings)
+            track, imp = case_frames(case.name, traj, params, config.sample_interval_s,
+                                     case.theta0, case.v0_m_s)
+        else:
+            traj, clock, periods = simulate_controlled_motion(
+                case.theta0, case.v0_m_s, params, controller, config.duration_s, settings)
+            track, imp = controlled_case_frames(case.name, traj, clock, periods, params,
+                                                config.sample_interval_s, case.theta0,
+                                                case.v0_m_s)
         tracks.append(track)
         impacts.append(imp)
         stuck = traj.stuck_phases
@@ -141,7 +187,8 @@ def run(config: TrajectoryConfig, options: RunOptions) -> ExperimentResult:
         {"v_m_s": [fp.v_m_s], "theta_deg": [fp.theta_deg], "integrator": [config.integrator]}
     )
     figures = draw(frames)
-    caption_figures(figures, params)
+    caption_figures(figures, params, "" if controller is None else
+                    f"racket period control K = {controller.gain:g}, c = {controller.rate:g}")
     return ExperimentResult(frames=frames, figures=figures, summary=summary)
 
 

@@ -170,3 +170,35 @@ def test_paper_statements_only_at_the_papers_parameters(tmp_path, cli):
     png = basin.draw({n: pd.read_csv(tmp_path / "o" / n) for n in ("basin.csv", "markers.csv")})
     labels = png["basin.png"].legends[0].get_texts()
     assert not any("Fig. 3" in t.get_text() for t in labels)
+
+
+def test_binary_tables_hold_what_the_csv_holds_and_redraw(tmp_path, cli, user_error,
+                                                          monkeypatch):
+    """output.format npz / parquet: basin.npz / basin.parquet instead of basin.csv, the same
+    rows and values read back (artifacts.read_frame), and the figures redraw from them."""
+    from bounce_cli import artifacts
+
+    small = ["--set", "grid.theta0_deg.num=30", "--set", "grid.v0_m_s.num=20", "--quiet"]
+    assert cli("basin", *small, "--out", tmp_path / "csv").exit_code == 0
+    reference = pd.read_csv(tmp_path / "csv" / "basin.csv")
+    for fmt in ("npz", "parquet"):
+        out = tmp_path / fmt
+        result = cli("basin", *small, "--set", f"output.format={fmt}", "--out", out)
+        assert result.exit_code == 0, result.output
+        assert not (out / "basin.csv").exists() and (out / f"basin.{fmt}").is_file()
+        frames = artifacts.read_frames(out)
+        assert set(frames) == {f"basin.{fmt}", "fractions.csv", "markers.csv"}
+        table = frames[f"basin.{fmt}"]
+        assert list(table.columns) == list(reference.columns)
+        for column in reference.columns:
+            np.testing.assert_array_equal(np.asarray(table[column]),
+                                          reference[column].to_numpy(), err_msg=column)
+        assert set(basin.draw(frames)) == {"basin.png", "basin_iterations.png"}
+    npz_bytes = (tmp_path / "npz" / "basin.npz").stat().st_size
+    assert npz_bytes < 30 * 600 + 2000  # NPZ_BYTES_PER_ROW (27) a row, plus the headers
+    # without pyarrow: one line naming the key and the way out, before any computing
+    import importlib.util
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None)
+    result = cli("basin", *small, "--set", "output.format=parquet", "--out", tmp_path / "p2")
+    user_error(result, "output.format", "pyarrow", "npz")
+    assert not (tmp_path / "p2").exists()

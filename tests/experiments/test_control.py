@@ -177,7 +177,7 @@ def test_data_without_alpha_uses_the_sign_of_the_velocity(tmp_path):
 
 
 @pytest.mark.parametrize("change,needle", [
-    (dict(drop="racket_period_s"), "missing column(s) racket_period_s"),
+    (dict(drop="racket_period_s"), "missing column racket_period_s"),
     (dict(unperturbed=True), "no perturbed impact"),
     (dict(bad_value=True), "column v_m_s: not a number in data row 3"),
 ])

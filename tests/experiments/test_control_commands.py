@@ -93,7 +93,7 @@ def test_impulse_with_control_stays_in_the_basin_and_relaxes_faster():
     assert (linear.outcome == "period1").all()
 
 
-@pytest.mark.parametrize("command", ["stability", "regression", "acf", "trajectory"])
+@pytest.mark.parametrize("command", ["stability", "regression"])
 def test_commands_without_control_refuse_it(command, tmp_path):
     result = runner.invoke(app, [command, "--set", "model.control.gain=0.5",
                                  "--out", str(tmp_path / "o")])
@@ -109,3 +109,20 @@ def test_unstable_controller_warns_in_one_line(tmp_path):
     assert result.exit_code == 0, result.output
     warnings = [x for x in result.stderr.splitlines() if x.startswith("bounce: warning:")]
     assert len(warnings) == 1 and "model.control" in warnings[0]
+
+
+def test_fit_to_passive_data_says_no_control_is_detected(tmp_path):
+    """The passive lab's perturbations (results/impulse-data): K's interval holds 0, and the
+    summary says that c and the fitted radius then describe nothing about the ball."""
+    from pathlib import Path
+
+    from typer.testing import CliRunner
+
+    from bounce_cli.cli import app
+
+    data = Path(__file__).resolve().parents[2] / "results" / "impulse-data" / "impacts.csv"
+    result = CliRunner().invoke(app, ["control", "--data", str(data), "--out",
+                                      str(tmp_path / "c")])
+    assert result.exit_code == 0, result.output
+    text = " ".join(result.stderr.split())
+    assert "K's interval includes 0, no period control is detected" in text

@@ -421,3 +421,14 @@ def test_coarse_sampling_widens_the_fits_and_still_finds_every_bounce():
     assert found >= total - 2 * coarse.n_trials
     assert rms(errors["theta_deg"]) <= 1.0 and rms(errors["v_m_s"]) <= 0.03
     assert rms(errors["racket_acc_g"]) <= 0.1
+
+
+@pytest.mark.parametrize("content", [b"", b"trial,t_s\n1,0.0\n" * 20, bytes(range(256)) * 4])
+def test_damaged_or_foreign_c3d_is_one_line_error(tmp_path, content):
+    """The c3d reader asserts on its header and unpacks with struct: an empty, truncated or
+    renamed non-C3D file must still be one line naming the file, exit 2, nothing written."""
+    path = tmp_path / "take.c3d"
+    path.write_bytes(content)
+    result = runner.invoke(app, ["extract", "--data", str(path), "--out", str(tmp_path / "o")])
+    one_line_error(result, "take.c3d", "cannot read as C3D")
+    assert not (tmp_path / "o").exists()

@@ -132,3 +132,14 @@ def test_paper_values_only_at_the_papers_parameters(tmp_path, cli):
     assert other.exit_code == 0, other.output
     assert "paper:" not in other.stderr and "not the paper's" in other.stderr
     assert pd.read_csv(tmp_path / "o" / "threshold.csv").paper_alpha_p.isna().all()
+
+
+def test_summary_says_in_words_when_the_response_never_leaves_the_basin(tmp_path, cli):
+    """With strong period control the upward scan never leaves the basin: the summary says so
+    (no 'nan'), and no paper value is quoted for a controlled run."""
+    result = cli("impulse", "--set", "model.control.gain=0.7", "--set", "model.control.rate=0.8",
+                 "--set", "threshold.scan_step=0.05", "--out", tmp_path / "c")
+    assert result.exit_code == 0, result.output
+    assert "stays in the period-1 basin for every alpha_p above alpha_0 scanned (to 0.99)" in (
+        " ".join(result.stderr.split()))
+    assert "nan" not in result.stderr and "paper: about" not in result.stderr

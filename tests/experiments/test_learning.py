@@ -106,3 +106,21 @@ def test_learning_errors(learning_run, tmp_path, cli, user_error):
     user_error(cli("learning", "--data", short, "--out", tmp_path / "c"),
                       "trial day3", "4 impacts")
     assert not any((tmp_path / d).exists() and any((tmp_path / d).iterdir()) for d in "abc")
+
+
+def test_data_statistics_leave_out_the_relaxation_after_perturbations(tmp_path, cli):
+    """The per-trial SDs describe the stationary state: the perturbed impacts AND the
+    relaxation after each are left out (settle_after_perturbation, as acf --data). On the
+    passive lab's perturbation session (every 10th impact, |alpha_p - 0.5| >= 0.1), keeping
+    the relaxations inflates the SD of v by a factor 2-4."""
+    from pathlib import Path
+
+    data = Path(__file__).resolve().parents[2] / "results" / "impulse-data" / "impacts.csv"
+    sds = {}
+    for settle in (0, 4):
+        out = tmp_path / f"s{settle}"
+        result = cli("learning", "--data", data, "--set", f"settle_after_perturbation={settle}",
+                     "--out", out, "--quiet")
+        assert result.exit_code == 0, result.output
+        sds[settle] = pd.read_csv(out / "trials.csv")["v_sd_m_s"].to_numpy()
+    assert np.all(sds[4] < 0.6 * sds[0])

@@ -2,6 +2,7 @@
 
 import json
 
+import numpy as np
 import pandas as pd
 import pytest
 from scipy import stats
@@ -111,3 +112,18 @@ def test_figure_redraws_from_csvs(small_run):
     ax = fig.axes[0]
     assert "Fig. 7" in ax.get_title() and "tau^2" in ax.get_xlabel()
     assert len(ax.get_lines()) >= 3
+
+
+def test_trials_at_one_period_warn_that_the_slope_is_undetermined(tmp_path, cli):
+    """All trials at (nearly) the same racket period: tau^2 spans nothing, eq. 15's slope is
+    not determined; the fit is written with its (wide) interval and a warning says why."""
+    rng = np.random.default_rng(2)
+    tau = 0.92 + rng.normal(0, 1e-4, 6)
+    pd.DataFrame({"a_r_m": 0.30 + rng.normal(0, 0.01, 6), "tau_s": tau}).to_csv(
+        tmp_path / "t.csv", index=False)
+    result = cli("regression", "--data", tmp_path / "t.csv", "--out", tmp_path / "o")
+    assert result.exit_code == 0, result.output
+    assert "bounce: warning: condition 'all': the trials' squared racket periods span only" in (
+        result.stderr)
+    spread = cli("regression", "--out", tmp_path / "s", "--quiet")
+    assert "warning" not in spread.stderr
