@@ -28,7 +28,9 @@ from typer.core import TyperGroup
 try:  # typer >= 0.20 vendors click
     from typer._click.exceptions import ClickException, NoArgsIsHelpError
 except ImportError:  # pragma: no cover - older typer on click
-    from click.exceptions import (  # type: ignore[import-not-found,no-redef]
+    # (mypy: click may be absent, or installed beside typer's vendored copy, e.g. by the
+    # cluster extra's distributed; either way this branch is only for older typer)
+    from click.exceptions import (  # type: ignore[import-not-found,no-redef,assignment,unused-ignore]
         ClickException,
         NoArgsIsHelpError,
     )
@@ -50,9 +52,10 @@ from .engine import ModelError, ModelParams, iterate_orbit, stability, wrap_phas
 from .engine.classify import ClassifySettings
 from .experiments.base import RunOptions
 from .interrupts import Interrupted, report as report_interrupt
+from .parallel import ClusterError
 from .registry import EXPERIMENTS, Entry
 
-USER_ERRORS = (ConfigError, ModelError, OutputDirError)
+USER_ERRORS = (ConfigError, ModelError, OutputDirError, ClusterError)
 
 
 class BounceGroup(TyperGroup):
@@ -147,8 +150,20 @@ JobsOption = Annotated[
     Optional[int],
     typer.Option(
         "--jobs", "-j", min=1,
-        help="Worker processes for grid work (bounce basin; default: all cores).",
+        help="Worker processes for grid work (basin, sweep; default: all cores).",
     ),
+]
+ResumeOption = Annotated[
+    bool,
+    typer.Option("--resume", help="Continue an interrupted run in --out: the points it "
+                 "finished are kept, the rest computed (the config must be the same)."),
+]
+SchedulerOption = Annotated[
+    Optional[str],
+    typer.Option("--scheduler", metavar="ADDRESS",
+                 help="Run the tasks on the Dask cluster whose scheduler is at ADDRESS "
+                 "(e.g. tcp://host:8786) instead of local processes (needs bounce-cli's "
+                 "optional extra named cluster, Dask's distributed package)."),
 ]
 
 
@@ -280,11 +295,15 @@ def run_experiment(
     force: bool,
     print_config: bool,
     jobs: int | None = None,
+    resume: bool = False,
+    scheduler: str | None = None,
 ) -> None:
     """Load and validate the config, run the experiment, write its files atomically. On an
-    error or an interrupt nothing is written and an output folder the run made is removed."""
+    error or an interrupt nothing is written and an output folder the run made is removed;
+    a resumable experiment's finished points stay in ``<out>/points/`` (``--resume``)."""
     overrides = list(overrides or [])
     run_dir = None
+    checkpoints = None
     try:
         experiment = entry.load()
         path = resolve_config_path(config, entry.config)
@@ -310,7 +329,14 @@ def run_experiment(
             force=force,
         )
         progress = make_progress() if not quiet else None
-        options = RunOptions(jobs=jobs or os.cpu_count() or 1, warn=warn)
+        options = RunOptions(jobs=jobs or os.cpu_count() or 1, warn=warn, scheduler=scheduler)
+        if entry.resumable:
+            from .checkpoints import PointFolder
+
+            checkpoints = PointFolder(run_dir.out_dir, {"command": entry.name,
+                                                        "config": run_dir.resolved_config},
+                                      resume=resume, force=force)
+            options.checkpoints = checkpoints
         if progress is not None:
             options.progress = progress
         try:
@@ -323,7 +349,11 @@ def run_experiment(
         for name_, figure in result.figures.items():
             run_dir.add_figure(name_, figure)
         written = run_dir.commit()
+        if checkpoints is not None:
+            checkpoints.remove()
     except BaseException as exc:
+        if checkpoints is not None:
+            checkpoints.discard_if_empty()
         if run_dir is not None:
             run_dir.discard()
         if isinstance(exc, USER_ERRORS):
@@ -649,22 +679,28 @@ def add_experiment_command(entry: Entry) -> None:
         jobs: JobsOption = None,
         data: Optional[Path] = None,
         events: Optional[Path] = None,
+        resume: ResumeOption = False,
+        scheduler: SchedulerOption = None,
     ) -> None:
         overrides = list(overrides or [])
         for key, path in (("data", data), ("events", events)):
             if path is not None:
                 overrides.append(f"{key}={json.dumps(str(path))}")
         run_experiment(entry, config=config, overrides=overrides, out=out, quiet=quiet,
-                       force=force, print_config=print_config, jobs=jobs)
+                       force=force, print_config=print_config, jobs=jobs, resume=resume,
+                       scheduler=scheduler)
 
-    # the signature typer reads: annotations resolved, file options only where declared
+    # the signature typer reads: annotations resolved, file options only where declared,
+    # --resume and --scheduler only for the experiments that take them
     hints = typing.get_type_hints(command, include_extras=True)
     file_options = {"data": entry.data_help, "events": entry.events_help}
     for key, help_text in file_options.items():
         hints[key] = Annotated[Optional[Path], typer.Option(f"--{key}", help=help_text)]
+    declared = {**{k: v is not None for k, v in file_options.items()},
+                "resume": entry.resumable, "scheduler": entry.cluster}
     params = [p.replace(annotation=hints[p.name])
               for p in inspect.signature(command).parameters.values()
-              if file_options.get(p.name, "") is not None]
+              if declared.get(p.name, True)]
     command.__signature__ = inspect.Signature(params)  # type: ignore[attr-defined]
     command.__doc__ = entry.summary
     app.command(entry.name)(command)

@@ -9,10 +9,10 @@ them.
 
 * :class:`InProcess`: the calling process, one task after another.
 * :class:`LocalPool`: ``jobs`` worker processes on this machine.
-
-Another backend (a Dask cluster) is a class with the same three things: ``workers``, a
-``map`` that submits the tasks and yields their results in task order, and a context manager
-that releases what it holds (and cancels what is under way when left by an exception).
+* :class:`DaskCluster`: the workers of an existing Dask distributed cluster (the optional
+  ``cluster`` extra), with the same three things: ``workers``, a ``map`` that submits the
+  tasks and yields their results in task order, and a context manager that releases what it
+  holds (and cancels what is under way when left by an exception).
 
 Process hygiene of :class:`LocalPool` (what a Ctrl-C, ``kill`` or a batch scheduler needs):
 
@@ -222,8 +222,126 @@ class LocalPool:
         return f"a worker process {how} (out of memory?)"
 
 
-def executor(jobs: int) -> InProcess | LocalPool:
-    """The local executor for ``jobs`` workers: in this process for 1, else a pool."""
+class ClusterError(RuntimeError):
+    """The Dask cluster cannot be used: ``distributed`` missing, scheduler unreachable."""
+
+
+class DaskCluster:
+    """The tasks on an existing Dask distributed cluster (``dask scheduler`` / ``dask
+    worker``, dask-jobqueue, a ``LocalCluster``) reached at ``address``
+    (``tcp://host:8786``) or through a ``distributed.Client`` passed as ``client``.
+
+    ``workers`` is the cluster's number of worker threads when entered. ``map`` submits at
+    most AHEAD tasks per worker past the next result it yields (memory stays bounded on a
+    long sweep) and yields the results in task order; a task that raises is a
+    :class:`WorkerError` with its traceback. A task on a worker that dies is rerun by Dask
+    elsewhere (tasks are pure). Leaving the ``with`` block by an exception (an interrupt)
+    cancels every submitted task; the client this class opened is closed either way (the
+    cluster itself is the user's and stays up)."""
+
+    def __init__(self, address: str | None = None, *, client: Any = None,
+                 timeout_s: float = 10.0) -> None:
+        if (address is None) == (client is None):
+            raise ValueError("give a scheduler address or a client")
+        self.address = address
+        self.timeout_s = timeout_s
+        self._client = client
+        self._owns_client = client is None
+        self._futures: deque[Any] = deque()
+        self.workers = 1
+
+    def __enter__(self) -> "DaskCluster":
+        if self._client is None:
+            try:
+                from distributed import Client
+            except ImportError:
+                raise ClusterError(
+                    "--scheduler needs Dask's distributed package: "
+                    "pip install 'bounce-cli[cluster]'") from None
+            self._check_reachable()
+            try:
+                with deferred():  # a client is either made and kept (to close) or not made
+                    self._client = Client(self.address, timeout=self.timeout_s,
+                                          set_as_default=False)
+            except (OSError, TimeoutError, ValueError) as exc:
+                reason = " ".join(str(exc).split()) or type(exc).__name__
+                raise ClusterError(f"--scheduler {self.address}: cannot connect: "
+                                   f"{reason}") from None
+        threads = self._client.nthreads()
+        self.workers = max(1, sum(threads.values()))
+        return self
+
+    def _check_reachable(self) -> None:
+        """A quick TCP connect to a ``tcp://host:port`` address: a refused connection or an
+        unknown host is one clear error at once, not after the client's timeout."""
+        import socket
+        from urllib.parse import urlsplit
+
+        assert self.address is not None
+        try:
+            parts = urlsplit(self.address if "://" in self.address
+                             else f"tcp://{self.address}")
+            host, port = parts.hostname, parts.port
+        except ValueError:
+            host = port = None
+        if parts.scheme != "tcp" or not host or not port:
+            return  # another protocol (tls://, inproc://): the client says what is wrong
+        try:
+            socket.create_connection((host, port), timeout=self.timeout_s).close()
+        except OSError as exc:
+            reason = exc.strerror or str(exc) or type(exc).__name__
+            raise ClusterError(f"--scheduler {self.address}: cannot connect: "
+                               f"{reason}") from None
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        try:
+            if exc_type is not None and self._futures:
+                self._client.cancel(list(self._futures), force=True)
+        finally:
+            self._futures = deque()
+            if self._owns_client and self._client is not None:
+                self._client.close()
+                self._client = None
+
+    def map(self, fn: Callable[[Any], Any], tasks: Iterable[Any]) -> Iterator[Any]:
+        if self._client is None:
+            raise RuntimeError("use DaskCluster as a context manager")
+        from uuid import uuid4
+
+        run = uuid4().hex
+        pending: deque[Any] = deque()
+        self._futures = pending  # cancelled if the block is left by an exception
+        submitted = 0
+        tasks = iter(tasks)
+        exhausted = False
+        while True:
+            while not exhausted and len(pending) < AHEAD * self.workers:
+                try:
+                    task = next(tasks)
+                except StopIteration:
+                    exhausted = True
+                    break
+                future = self._client.submit(fn, task, key=f"bounce-{run}-{submitted}",
+                                             pure=False)
+                submitted += 1
+                pending.append(future)
+            if not pending:
+                return
+            future = pending.popleft()
+            try:
+                result = future.result()
+            except Exception as exc:  # the task raised on a worker (or was lost for good)
+                detail = "".join(traceback.format_exception(type(exc), exc,
+                                                            exc.__traceback__))
+                raise WorkerError(f"a task failed on the Dask cluster:\n{detail}") from None
+            yield result
+
+
+def executor(jobs: int, scheduler: str | None = None) -> InProcess | LocalPool | DaskCluster:
+    """The executor for ``jobs`` local workers (in this process for 1, else a pool), or the
+    Dask cluster at ``scheduler`` (its own workers; ``jobs`` is then ignored)."""
+    if scheduler is not None:
+        return DaskCluster(scheduler)
     return InProcess() if jobs <= 1 else LocalPool(jobs)
 
 

@@ -26,8 +26,10 @@ class Entry:
     (the text is the option's help); ``events_help`` likewise for ``--events FILE`` (config
     key ``events``). ``needs_fixed_point``: the run is about the period-1
     fixed point, so the CLI warns when it is unstable. ``reproduce``: part of
-    ``bounce reproduce`` and of the committed ``results/``. ``attribute``: the module's
-    attribute holding the :class:`Experiment` (one module may define several)."""
+    ``bounce reproduce`` and of the committed ``results/``. ``resumable``: the command takes
+    ``--resume`` (the run keeps finished tasks in ``RunOptions.checkpoints``); ``cluster``:
+    it takes ``--scheduler ADDRESS`` (its tasks can run on a Dask cluster). ``attribute``:
+    the module's attribute holding the :class:`Experiment` (one module may define several)."""
 
     name: str
     summary: str
@@ -36,6 +38,8 @@ class Entry:
     events_help: str | None = None
     needs_fixed_point: bool = True
     reproduce: bool = True
+    resumable: bool = False
+    cluster: bool = False
     module: str = ""
     config: str = ""
     attribute: str = "EXPERIMENT"
@@ -191,6 +195,14 @@ EXPERIMENTS: tuple[Entry, ...] = (
           "of a known controller, or --data).")),
         data_help="impacts.csv with perturbation events (trial, k, theta_rad, v_m_s, "
         "racket_period_s, perturbed; optional alpha): fit K and c to it (sets `data`).",
+    ),
+    Entry(
+        "sweep",
+        "Basin atlas over a grid of parameters: fractions, basin entropy, stability (Fig. 4 x 5).",
+        (("sweep.png", "Beyond the paper (section 3's basin over section 4's plane): at each "
+          "(alpha, AC) the basin's outcome fractions, the fixed point's spectral radius (eq. "
+          "10), the basin entropy and boundary basin entropy; dashed: spectral radius 1."),),
+        needs_fixed_point=False, resumable=True, cluster=True,
     ),
 )
 

@@ -27,8 +27,9 @@ summary line or CSV column states one only where the run is at the paper's param
 (:func:`bounce_cli.paper.at_parameters`); numerics (solvers, scans, inverse problems) live in
 :mod:`bounce_cli.engine` with their own tests.
 
-What it gets: the validated config, and :class:`RunOptions` (worker count, a progress sink,
-a warning sink), which never change the numbers it produces. Parallel work goes through
+What it gets: the validated config, and :class:`RunOptions` (worker count or Dask scheduler,
+a progress sink, a warning sink, a checkpoint store), which never change the numbers it
+produces. Parallel work goes through
 :mod:`bounce_cli.parallel` (a list of independent tasks handed to an executor's ``map``).
 """
 
@@ -61,6 +62,26 @@ class NullProgress:
         pass
 
 
+class Checkpoints(Protocol):
+    """Finished tasks of a long run kept across interruptions (``bounce sweep --resume``):
+    ``load()`` -> {task index: result} of an earlier, interrupted run of the same config;
+    ``save(index, result)`` keeps one result (a JSON-able dict) as soon as it is done."""
+
+    def load(self) -> dict[int, Any]: ...
+
+    def save(self, index: int, result: Any) -> None: ...
+
+
+class NoCheckpoints:
+    """Keeps nothing (library use, tests): every run starts from scratch."""
+
+    def load(self) -> dict[int, Any]:
+        return {}
+
+    def save(self, index: int, result: Any) -> None:
+        pass
+
+
 def no_warning(message: str) -> None:
     """The default warning sink: library use and tests hear nothing."""
 
@@ -70,11 +91,15 @@ class RunOptions:
     """Run-time choices that are not part of the config (they never change the results).
 
     ``warn(message)`` tells the user something before or during the run (the CLI prints
-    ``bounce: warning: <message>``); an experiment never prints itself."""
+    ``bounce: warning: <message>``); an experiment never prints itself. ``scheduler``: a
+    Dask scheduler address to run the tasks on instead of ``jobs`` local workers;
+    ``checkpoints``: where an experiment that supports resuming keeps finished tasks."""
 
     jobs: int = 1
     progress: Progress = field(default_factory=NullProgress)
     warn: Callable[[str], None] = no_warning
+    scheduler: str | None = None
+    checkpoints: Checkpoints = field(default_factory=NoCheckpoints)
 
 
 @dataclass
