@@ -214,7 +214,7 @@ class RunDirectory:
         if not same:
             raise OutputDirError(
                 f"--out {self.out_dir}: holds results of a different config "
-                f"(a {previous.get('command', '?')} run); "
+                f"(a run of bounce {previous.get('command', '?')}); "
                 "use --force to replace them or choose another --out"
             )
 

@@ -141,7 +141,8 @@ OutOption = Annotated[
 ]
 QuietOption = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or summary.")]
 ForceOption = Annotated[
-    bool, typer.Option("--force", help="Replace results of a different config in --out.")
+    bool, typer.Option("--force", help="Replace results of a different config in --out: the "
+                       "files the replaced run wrote are removed (never a file this run reads).")
 ]
 PrintConfigOption = Annotated[
     bool, typer.Option("--print-config", help="Print the resolved config as YAML and exit.")
