@@ -134,6 +134,16 @@ def read_manifest(out_dir: Path) -> dict[str, Any]:
     return data if isinstance(data, dict) else {}
 
 
+def same_bytes(a: Path, b: Path) -> bool:
+    """Whether two files hold the same bytes (False when ``b`` does not exist)."""
+    try:
+        if a.stat().st_size != b.stat().st_size:
+            return False
+        return a.read_bytes() == b.read_bytes()
+    except OSError:
+        return False
+
+
 def files_named_in(config: Any) -> set[Path]:
     """Every existing file a (resolved, JSON-like) config names in one of its string values,
     resolved: the files a run reads (``data``, ``events``, ``truth``, ...)."""
@@ -259,7 +269,23 @@ class RunDirectory:
             "wall_seconds": round(time.perf_counter() - self._t0, 3),
             "git_commit": git_commit(),
             "host": platform.node(),
+            "versions": versions(),  # this run's (run.json may keep the first run's: below)
         }
+
+    def manifest_text(self, results_unchanged: bool) -> str:
+        """``run.json``'s text. A rerun whose every result file is byte for byte the previous
+        run's, and whose record differs from the previous one only in package versions, keeps
+        the previous record: the results were made with those versions (and the newer ones
+        reproduce them, as ``timing.json`` records), and reproducing an unchanged result on an
+        upgraded machine changes no tracked file."""
+        manifest = self.manifest("completed")
+        previous = self.previous
+        if (results_unchanged and previous
+                and {k: v for k, v in previous.items() if k != "versions"}
+                == {k: v for k, v in manifest.items() if k != "versions"}
+                and isinstance(previous.get("versions"), dict)):
+            manifest = {**manifest, "versions": previous["versions"]}
+        return json.dumps(manifest, indent=2) + "\n"
 
     def commit(self) -> list[Path]:
         """Stage every collected file under a temporary name (the slow part: CSVs, PNGs),
@@ -275,9 +301,9 @@ class RunDirectory:
         try:
             for name, write in writers.items():
                 staged.append((stage(self.out_dir / name, write), self.out_dir / name))
-            for name, content in ((TIMING, self.timing()),
-                                  (MANIFEST, self.manifest("completed"))):
-                text = json.dumps(content, indent=2) + "\n"
+            unchanged = all(same_bytes(tmp, final) for tmp, final in staged)
+            for name, text in ((TIMING, json.dumps(self.timing(), indent=2) + "\n"),
+                               (MANIFEST, self.manifest_text(unchanged))):
                 write_json = functools.partial(Path.write_text, data=text)
                 staged.append((stage(self.out_dir / name, write_json), self.out_dir / name))
             with deferred():  # all of the new run's files, or none

@@ -224,3 +224,22 @@ def test_tables_read_back_to_the_frame_written(tmp_path, suffix):
                                                                       "undecided"])
     pd.testing.assert_frame_equal(back, frame, check_dtype=suffix != ".csv")
     assert artifacts.read_frames(tmp_path).keys() == {f"t{suffix}"}
+
+
+def test_a_rerun_with_other_package_versions_keeps_the_record_when_nothing_changed(tmp_path,
+                                                                                   cli):
+    """Reproducing unchanged results on a machine with newer packages changes no tracked file:
+    run.json keeps the versions that first made the (byte-identical) results; timing.json has
+    this run's. A result that changes takes the new versions."""
+    import json
+
+    out = tmp_path / "fp"
+    args = ("learning", "--set", "ac_points=5", "--out", out, "--quiet")
+    assert cli(*args).exit_code == 0
+    record = json.loads((out / "run.json").read_text())
+    record["versions"]["numpy"] = "0.0.1-older"
+    (out / "run.json").write_text(json.dumps(record, indent=2) + "\n")
+    before = (out / "run.json").read_bytes()
+    assert cli(*args).exit_code == 0
+    assert (out / "run.json").read_bytes() == before
+    assert json.loads((out / "timing.json").read_text())["versions"]["numpy"] != "0.0.1-older"
