@@ -3,7 +3,7 @@
 dispatch here when their config has ``data`` set to an impacts table, and draw the figures
 below from the frames these functions return.
 
-The model at the data's parameters (DESIGN.md): alpha and g from the config's ``model`` block
+The model at the data's parameters: alpha and g from the config's ``model`` block
 (alpha is not observable from a trial), racket period and amplitude from the data's cycles
 (means over all impacts of the file).
 """
