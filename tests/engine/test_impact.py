@@ -1,4 +1,4 @@
-"""The first-impact solver (DESIGN.md: the next impact is the FIRST root of eq. 6)."""
+"""The first-impact solver (the next impact is the FIRST root of eq. 6)."""
 
 import math
 
