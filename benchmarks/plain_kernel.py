@@ -2,7 +2,7 @@
 
 This is what a careful user would write in an afternoon (a script, not part of ``bounce``): the
 Fig. 4 classification of section 3 with the straightforward vectorised safe-step iteration
-(DESIGN.md) and nothing else -- no tiles, no worker processes, no third-order first step, no
+(from quadratic lower bounds of the gap) and nothing else -- no tiles, no worker processes, no third-order first step, no
 product form of sin(theta) - sin(theta + s), no Newton polish, no files. All points of the
 grid advance together, one vectorised first-impact solve per impact on the points still
 undecided; inside a solve every unconverged point takes the safe step of the quadratic bound
