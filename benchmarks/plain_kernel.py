@@ -2,10 +2,11 @@
 
 This is what a careful user would write in an afternoon (a script, not part of ``bounce``): the
 Fig. 4 classification of section 3 with the straightforward vectorised safe-step iteration
-(from quadratic lower bounds of the gap) and nothing else -- no tiles, no worker processes, no third-order first step, no
-product form of sin(theta) - sin(theta + s), no Newton polish, no files. All points of the
-grid advance together, one vectorised first-impact solve per impact on the points still
-undecided; inside a solve every unconverged point takes the safe step of the quadratic bound
+(from quadratic lower bounds of the gap) and nothing else -- no tiles, no worker processes,
+no third-order first step, no product form of sin(theta) - sin(theta + s), no Newton
+polish, no files. All points of the grid advance together, one vectorised first-impact
+solve per impact on the points still undecided; inside a solve every unconverged point
+takes the safe step of the quadratic bound
 
     G(s + h) >= G + G' h - M h^2 / 2,  M = g / w^2 + a  (|G''| <= M),
 
