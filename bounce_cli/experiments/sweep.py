@@ -45,22 +45,11 @@ from .basin import GridAxis
 Parameter = Literal["alpha", "g", "racket_amplitude", "racket_period", "ac_g"]
 
 
-class SweepAxis(StrictModel):
+class SweepAxis(GridAxis):
     """numpy.linspace(start, stop, num) of one parameter (``ac_g``: AC in g, <= 0)."""
 
     parameter: Parameter
-    start: float
-    stop: float
     num: int = Field(ge=1, le=10_000)
-
-    @model_validator(mode="after")
-    def _increasing(self):
-        if self.num > 1 and not self.stop > self.start:
-            raise ValueError(f"stop ({self.stop:g}) must be greater than start ({self.start:g})")
-        return self
-
-    def values(self) -> np.ndarray:
-        return np.linspace(self.start, self.stop, self.num)
 
 
 class SweepBlock(StrictModel):
