@@ -37,7 +37,7 @@ import numpy as np
 
 from .impact import can_fly, first_impact_phase
 from .maps import velocity_after_impact
-from .params import ModelParams, phase_difference
+from .params import FixedPoint, ModelParams, phase_difference
 
 PERIOD1, STICKING, BELOW_RACKET, UNDECIDED = 0, 1, 2, 3
 #: outcome names indexed by their integer code
@@ -77,16 +77,22 @@ class Classification:
 
 
 def classify_batch(theta0, v0, params: ModelParams,
-                   settings: ClassifySettings = ClassifySettings()) -> Classification:
+                   settings: ClassifySettings = ClassifySettings(), *,
+                   require_fixed_point: bool = True) -> Classification:
     """Classify initial conditions (arrays broadcast) in one vectorised batch.
 
     Returns a ``Classification`` with the broadcast shape. See the module docstring for the
-    outcomes and the meaning of the iteration count.
+    outcomes and the meaning of the iteration count. Without a period-1 fixed point (eq. 8)
+    this raises NoFixedPointError, unless ``require_fixed_point`` is False: then no point is
+    ``period1`` and the others are decided by the same iteration (parameter sweeps).
     """
     theta0, v0 = np.broadcast_arrays(np.asarray(theta0, dtype=float), np.asarray(v0, dtype=float))
     shape = theta0.shape
     theta0, v0 = theta0.ravel(), v0.ravel()
-    fp = params.fixed_point()
+    if require_fixed_point or params.cos_theta_fixed() <= 1.0:
+        fp = params.fixed_point()
+    else:  # a NaN target: no state is within any tolerance of it
+        fp = FixedPoint(v_m_s=math.nan, theta_rad=math.nan)
     tol = settings.tolerance
     min_hop = settings.min_hop_s
     w = params.omega

@@ -27,7 +27,7 @@ import numpy as np
 from .basin_measures import basin_entropy, uncertainty_exponent
 from .classify import OUTCOMES, Classification, ClassifySettings, classify_batch
 from .linear import racket_acceleration_at_impact_g, racket_amplitude_for_ac, stability
-from .params import FixedPoint, ModelError, ModelParams
+from .params import ModelError, ModelParams
 
 #: parameters a sweep axis can set: CSV column (unit in the name) and axis label
 SWEEP_PARAMETERS: dict[str, tuple[str, str]] = {
@@ -63,23 +63,13 @@ def parameter_point(base: ModelParams, values: dict[str, float]) -> ModelParams:
     return ModelParams(**fields)
 
 
-class _NoPeriod1Target(ModelParams):
-    """Parameters whose period-1 target is NaN: no state is within any tolerance of it."""
-
-    def fixed_point(self) -> FixedPoint:
-        return FixedPoint(v_m_s=math.nan, theta_rad=math.nan)
-
-
 def classify_points(theta0, v0, params: ModelParams,
                     settings: ClassifySettings = ClassifySettings()) -> Classification:
     """Section 3's classification (``classify_batch``) at any parameters: where the period-1
     fixed point does not exist (eq. 8), no point is ``period1`` and every other outcome is
     decided by the same iteration (sticking, below the racket, undecided after
     ``max_iterations`` impacts)."""
-    if params.cos_theta_fixed() <= 1.0:
-        return classify_batch(theta0, v0, params, settings)
-    target = _NoPeriod1Target(*(getattr(params, f) for f in MODEL_FIELDS))
-    return classify_batch(theta0, v0, target, settings)
+    return classify_batch(theta0, v0, params, settings, require_fixed_point=False)
 
 
 @dataclass(frozen=True)
