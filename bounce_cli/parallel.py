@@ -30,6 +30,7 @@ Process hygiene of :class:`LocalPool` (what a Ctrl-C, ``kill`` or a batch schedu
 
 from __future__ import annotations
 
+import concurrent.futures
 import os
 import pickle
 import subprocess
@@ -76,6 +77,53 @@ class InProcess:
 
     def __exit__(self, *exc) -> None:
         pass
+
+
+class Threads:
+    """``jobs`` threads of this process, for tasks whose work releases the GIL (the compiled
+    basin kernel, ``engine.compiled``): no process start, nothing pickled. Tasks are
+    submitted lazily, at most ``AHEAD`` per thread past the next result to yield. Left by an
+    exception (an interrupt, a failing task), the tasks not yet started are cancelled and
+    the ones under way (a thread cannot be stopped) are waited for: at most one task each."""
+
+    def __init__(self, jobs: int) -> None:
+        if jobs < 1:
+            raise ValueError("jobs must be >= 1")
+        self.workers = jobs
+        self._pool: concurrent.futures.ThreadPoolExecutor | None = None
+
+    def __enter__(self) -> "Threads":
+        self._pool = concurrent.futures.ThreadPoolExecutor(self.workers,
+                                                           thread_name_prefix="bounce")
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=exc_type is not None)
+            self._pool = None
+
+    def map(self, fn: Callable[[Any], Any], tasks: Iterable[Any]) -> Iterator[Any]:
+        """Yield ``fn(task)`` in task order; a failing task's exception is raised here."""
+        if self._pool is None:
+            raise RuntimeError("Threads.map outside its with block")
+        pending = iter(tasks)
+        futures: deque[concurrent.futures.Future] = deque()
+        try:
+            while True:
+                while len(futures) < AHEAD * self.workers:
+                    task = next(pending, _DONE)
+                    if task is _DONE:
+                        break
+                    futures.append(self._pool.submit(fn, task))
+                if not futures:
+                    return
+                yield futures.popleft().result()
+        finally:
+            for future in futures:
+                future.cancel()
+
+
+_DONE = object()
 
 
 class _Worker:
@@ -337,12 +385,16 @@ class DaskCluster:
             yield result
 
 
-def executor(jobs: int, scheduler: str | None = None) -> InProcess | LocalPool | DaskCluster:
-    """The executor for ``jobs`` local workers (in this process for 1, else a pool), or the
-    Dask cluster at ``scheduler`` (its own workers; ``jobs`` is then ignored)."""
+def executor(jobs: int, scheduler: str | None = None, *,
+             threads: bool = False) -> InProcess | Threads | LocalPool | DaskCluster:
+    """The executor for ``jobs`` local workers (in this process for 1, else a pool of
+    processes, or of threads with ``threads`` for work that releases the GIL), or the Dask
+    cluster at ``scheduler`` (its own workers; ``jobs`` is then ignored)."""
     if scheduler is not None:
         return DaskCluster(scheduler)
-    return InProcess() if jobs <= 1 else LocalPool(jobs)
+    if jobs <= 1:
+        return InProcess()
+    return Threads(jobs) if threads else LocalPool(jobs)
 
 
 # -- the worker process -----------------------------------------------------------------------

@@ -33,6 +33,11 @@ def bounce(*args: str) -> list[str]:
     return [sys.executable, "-m", "bounce_cli", *args]
 
 
+#: the numpy kernel, whose --jobs 2 is a pool of worker processes (the compiled kernel runs in
+#: threads of the main process: ``test_interrupt_while_threads_classify``)
+PROCESS_POOL = {**os.environ, "BOUNCE_KERNEL": "numpy"}
+
+
 def stat_fields(pid: int) -> list[str] | None:
     """/proc/<pid>/stat fields after the command name (state is [0], ppid [1],
     start time [19]); None when there is no such process."""
@@ -172,6 +177,7 @@ def test_interrupt_stops_cleanly(tmp_path, previous_run, moment, signum):
         bounce("basin", *BIG_GRID, "--jobs", "2", "--force", "--out", str(out)),
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         start_new_session=True,  # its own process group, as a shell runs a command
+        env=PROCESS_POOL,
     )
     watch = ProcessWatch(proc.pid)
     try:
@@ -207,7 +213,8 @@ def test_sigkill_of_the_main_process_takes_the_workers_down(tmp_path):
     """No clean-up can run after SIGKILL: the workers must still not outlive the run."""
     proc = subprocess.Popen(
         bounce("basin", *BIG_GRID, "--jobs", "2", "--out", str(tmp_path / "basin")),
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True,
+        env=PROCESS_POOL)
     watch = ProcessWatch(proc.pid)
     wait_for(lambda: len(watch.workers()) == 2, 20, "two workers")
     proc.kill()
@@ -215,3 +222,46 @@ def test_sigkill_of_the_main_process_takes_the_workers_down(tmp_path):
     time.sleep(0.3)
     watch.stop()
     assert watch.alive() == []
+
+
+def thread_count(pid: int) -> int:
+    try:
+        return len(os.listdir(f"/proc/{pid}/task"))
+    except OSError:
+        return 0
+
+
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_interrupt_while_threads_classify(tmp_path, previous_run, signum):
+    """The compiled kernel classifies in two threads of the main process (which cannot be
+    stopped mid-tile): an interrupt still ends the run within two seconds, with the one line,
+    the previous results intact and nothing staged left behind."""
+    pytest.importorskip("numba")
+    existing = tmp_path / "basin"
+    subprocess.run(["cp", "-a", str(previous_run), str(existing)], check=True)
+    before = snapshot(existing)
+    grid = ["--set", "grid.theta0_deg.num=2000", "--set", "grid.v0_m_s.num=1500"]
+    proc = subprocess.Popen(
+        bounce("basin", *grid, "--jobs", "2", "--force", "--out", str(existing)),
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        env={**os.environ, "BOUNCE_KERNEL": "auto"})
+    try:  # the main thread and two workers (numba starts none of its own without parallel)
+        wait_for(lambda: thread_count(proc.pid) >= 3, 30, "the classifying threads")
+        time.sleep(0.3)
+    except AssertionError:
+        os.killpg(proc.pid, signal.SIGKILL)
+        raise
+    assert proc.poll() is None, "finished before the interrupt: the moment was missed"
+    sent = time.monotonic()
+    send(proc, signum)
+    try:
+        _, err = proc.communicate(timeout=10)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        raise AssertionError(f"still running 10 s after {signum!r}") from None
+    assert proc.returncode == 128 + signum, err
+    assert time.monotonic() - sent < 2.0
+    assert [line for line in err.splitlines() if line.strip()
+            and not line.startswith("basin: classifying: ")] == ["bounce: interrupted"], err
+    assert snapshot(existing) == before, "the previous results changed"
+    assert not [p for p in tmp_path.rglob("*") if p.name.endswith(".tmp")], "temporary files"

@@ -36,8 +36,9 @@ def test_results_in_task_order_for_every_executor():
     expected = [x * x for x in range(12)]
     assert list(parallel.InProcess().map(slow_square, range(12))) == expected
     for jobs in (1, 2, 3):
-        with parallel.executor(jobs) as executor:
-            assert list(executor.map(slow_square, iter(range(12)))) == expected
+        for threads in (False, True):
+            with parallel.executor(jobs, threads=threads) as executor:
+                assert list(executor.map(slow_square, iter(range(12)))) == expected
 
 
 def test_executor_choice():
@@ -46,6 +47,9 @@ def test_executor_choice():
     assert isinstance(pool, parallel.LocalPool) and pool.workers == 2
     with pytest.raises(ValueError):
         parallel.LocalPool(0)
+    threads = parallel.executor(2, threads=True)
+    assert isinstance(threads, parallel.Threads) and threads.workers == 2
+    assert isinstance(parallel.executor(1, threads=True), parallel.InProcess)
 
 
 def test_workers_are_separate_processes_and_gone_after_the_block():
@@ -74,16 +78,32 @@ def test_a_dead_worker_is_an_error_not_a_hang():
     assert time.monotonic() - start < 10
 
 
-def test_the_engine_classifies_through_any_executor_identically(paper_params):
+@pytest.mark.parametrize("pool", [parallel.LocalPool, parallel.Threads])
+def test_the_engine_classifies_through_any_executor_identically(paper_params, pool):
     np = pytest.importorskip("numpy")
     from bounce_cli.engine import classify_grid
 
     theta, v = np.meshgrid(np.linspace(0, 2 * np.pi, 30), np.linspace(0, 10, 20))
     reference = classify_grid(theta, v, paper_params)  # the built-in map
-    with parallel.LocalPool(2) as pool:
-        pooled = classify_grid(theta, v, paper_params, map=pool.map, workers=2, tile_points=64)
+    with pool(2) as executor:
+        pooled = classify_grid(theta, v, paper_params, map=executor.map, workers=2,
+                               tile_points=64)
     np.testing.assert_array_equal(pooled.outcome, reference.outcome)
     np.testing.assert_array_equal(pooled.iterations, reference.iterations)
+
+
+def test_threads_raise_a_failing_tasks_error_and_cancel_the_rest():
+    started = []
+
+    def record_then_fail(x):
+        started.append(x)
+        return fail_on_three(x)
+
+    with pytest.raises(ValueError, match="three is not allowed"):
+        with parallel.Threads(2) as executor:
+            list(executor.map(record_then_fail, range(1000)))
+    # tasks are submitted lazily (AHEAD per thread) and the unstarted ones cancelled
+    assert len(started) <= 3 + 2 * parallel.AHEAD + 2 < 1000
 
 
 def slow_first(x):
@@ -101,8 +121,10 @@ def test_results_held_for_a_slow_first_task_are_bounded():
             read.append(x)
             yield x
 
-    with parallel.LocalPool(2) as pool:
-        results = pool.map(slow_first, tasks())
-        assert next(results) == 0
-        assert len(read) <= 2 * parallel.AHEAD + 1 < 100
-        assert list(results) == list(range(1, 100))
+    for pool in (parallel.LocalPool(2), parallel.Threads(2)):
+        read.clear()
+        with pool:
+            results = pool.map(slow_first, tasks())
+            assert next(results) == 0
+            assert len(read) <= 2 * parallel.AHEAD + 1 < 100
+            assert list(results) == list(range(1, 100))

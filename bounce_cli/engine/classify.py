@@ -29,13 +29,15 @@ tile size and number of worker processes.
 from __future__ import annotations
 
 import builtins
+import importlib.util
 import math
+import os
 from dataclasses import dataclass
-from typing import Any, Callable, Iterable, Iterator
+from typing import Any, Callable, Iterable, Iterator, Literal
 
 import numpy as np
 
-from .impact import can_fly, first_impact_phase
+from .impact import MAX_SAFE_STEPS, can_fly, first_impact_phase
 from .maps import velocity_after_impact
 from .params import FixedPoint, ModelParams, phase_difference
 
@@ -76,15 +78,28 @@ class Classification:
         return np.asarray(OUTCOMES, dtype=object)[self.outcome]
 
 
+def compiled_kernel_available() -> bool:
+    """True when the compiled kernel (``engine.compiled``, numba) can be used: numba is
+    installed and the environment variable ``BOUNCE_KERNEL`` is not ``numpy``."""
+    if os.environ.get("BOUNCE_KERNEL", "auto").strip().lower() == "numpy":
+        return False
+    return importlib.util.find_spec("numba") is not None
+
+
 def classify_batch(theta0, v0, params: ModelParams,
                    settings: ClassifySettings = ClassifySettings(), *,
-                   require_fixed_point: bool = True) -> Classification:
+                   require_fixed_point: bool = True,
+                   kernel: Literal["auto", "numpy", "compiled"] = "auto") -> Classification:
     """Classify initial conditions (arrays broadcast) in one vectorised batch.
 
     Returns a ``Classification`` with the broadcast shape. See the module docstring for the
     outcomes and the meaning of the iteration count. Without a period-1 fixed point (eq. 8)
     this raises NoFixedPointError, unless ``require_fixed_point`` is False: then no point is
     ``period1`` and the others are decided by the same iteration (parameter sweeps).
+
+    ``kernel``: "numpy" is the code below; "compiled" the same arithmetic compiled with numba
+    (``engine.compiled``: identical outcomes and iteration counts, about 3x faster per core);
+    "auto" the compiled one when ``compiled_kernel_available()``.
     """
     theta0, v0 = np.broadcast_arrays(np.asarray(theta0, dtype=float), np.asarray(v0, dtype=float))
     shape = theta0.shape
@@ -93,6 +108,13 @@ def classify_batch(theta0, v0, params: ModelParams,
         fp = params.fixed_point()
     else:  # a NaN target: no state is within any tolerance of it
         fp = FixedPoint(v_m_s=math.nan, theta_rad=math.nan)
+    if kernel == "compiled" or (kernel == "auto" and compiled_kernel_available()):
+        from .compiled import classify_arrays
+
+        codes, counts = classify_arrays(theta0, v0, params, fp, settings.max_iterations,
+                                        settings.tolerance, settings.min_hop_s,
+                                        MAX_SAFE_STEPS)
+        return Classification(codes.reshape(shape), counts.reshape(shape))
     tol = settings.tolerance
     min_hop = settings.min_hop_s
     w = params.omega

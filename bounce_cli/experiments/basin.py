@@ -25,7 +25,13 @@ from ..config import (
     ExperimentConfig,
     StrictModel,
 )
-from ..engine.classify import OUTCOMES, ClassifySettings, classify_batch, classify_grid
+from ..engine.classify import (
+    OUTCOMES,
+    ClassifySettings,
+    classify_batch,
+    classify_grid,
+    compiled_kernel_available,
+)
 from ..engine.control import is_passive
 from ..engine.params import ModelParams
 from ..plotting import caption_figures
@@ -48,7 +54,8 @@ OUTCOME_LABELS = {
 LEGEND_BELOW: dict[str, Any] = dict(loc="outside lower center", ncol=3, fontsize=8, frameon=False)
 
 
-#: below this many grid points the basin is classified in this process whatever --jobs says:
+#: below this many grid points the basin is classified in this process whatever --jobs says
+#: (numpy kernel only: the compiled kernel runs in threads, which cost nothing to start):
 #: starting two worker processes costs about 0.15 s (each imports numpy and the classifier
 #: only; 0.8 s when they imported scipy too), and one core classifies about 200,000 points/s
 #: of the paper's grid; measured on the shared 2-core machine: 400 x 400 in 0.78 s
@@ -140,8 +147,10 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
     options.progress.start(n_points, "basin: classifying")
     controller = config.model.controller()
     if controller is None:
-        jobs = options.jobs if n_points >= POOL_MIN_POINTS else 1
-        with parallel.executor(jobs) as executor:
+        # the compiled kernel releases the GIL: threads, which cost nothing to start
+        threads = compiled_kernel_available()
+        jobs = options.jobs if threads or n_points >= POOL_MIN_POINTS else 1
+        with parallel.executor(jobs, threads=threads) as executor:
             result = classify_grid(
                 theta_grid_rad.ravel(), v_grid.ravel(), params, settings,
                 map=executor.map, workers=executor.workers,

@@ -1,0 +1,126 @@
+"""The compiled basin kernel (engine.compiled, numba) against the numpy code it mirrors: the
+same outcome and impact count for every point, the same first-impact phase to the last bit,
+on grids, on random states at random parameters and on the edge cases; and the tool without
+it (BOUNCE_KERNEL=numpy, numba missing)."""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+
+import numpy as np
+import pytest
+
+from bounce_cli.engine import classify as classify_module
+from bounce_cli.engine.classify import ClassifySettings, classify_batch, classify_grid
+from bounce_cli.engine.impact import first_impact_phase
+from bounce_cli.engine.params import ModelParams
+
+pytest.importorskip("numba")
+from bounce_cli.engine import compiled  # noqa: E402
+
+#: parameter sets: Fig. 4's; a nearly rigid bounce (alpha 0.95) and a dead one (alpha 0, grazing
+#: possible); a large amplitude (period doubling, chaos); a slow racket, a fast one
+PARAMETERS = [
+    ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.30, racket_period=0.92),
+    ModelParams(alpha=0.95, g=9.81, racket_amplitude=0.05, racket_period=0.5),
+    ModelParams(alpha=0.0, g=9.81, racket_amplitude=0.20, racket_period=0.6),
+    ModelParams(alpha=0.8, g=9.81, racket_amplitude=0.60, racket_period=0.92),
+    ModelParams(alpha=0.3, g=5.8, racket_amplitude=0.10, racket_period=1.5),
+    ModelParams(alpha=0.6, g=9.81, racket_amplitude=0.02, racket_period=0.2),
+]
+
+
+def assert_same(a, b):
+    np.testing.assert_array_equal(a.outcome, b.outcome)
+    np.testing.assert_array_equal(a.iterations, b.iterations)
+
+
+def test_fig4_grid_same_outcomes_and_impact_counts():
+    params = PARAMETERS[0]
+    theta, v = np.meshgrid(np.deg2rad(np.linspace(0, 360, 150)), np.linspace(0, 10, 150))
+    numpy_result = classify_batch(theta, v, params, kernel="numpy")
+    compiled_result = classify_batch(theta, v, params, kernel="compiled")
+    assert_same(compiled_result, numpy_result)
+    # every outcome of section 3 occurs on this grid, so every branch was compared
+    assert set(np.unique(numpy_result.outcome)) == {0, 1, 2}
+
+
+@pytest.mark.parametrize("params", PARAMETERS)
+def test_random_states_same_first_impact_phase_to_the_last_bit(params):
+    rng = np.random.default_rng(7)
+    theta = rng.uniform(-20.0, 20.0, 4000)  # unwrapped phases too
+    racket_v = params.racket_amplitude * params.omega
+    v = rng.uniform(-racket_v, 3.0 * racket_v + params.g * params.racket_period, 4000)
+    expected = first_impact_phase(theta, v, params.racket_amplitude, params.omega, params.g)
+    got = compiled.first_impact_phase(theta, v, params, max_steps=2000)
+    np.testing.assert_array_equal(got, expected)  # NaN where the ball cannot fly, in both
+    assert np.isnan(expected).any() and np.isfinite(expected).any()
+
+
+@pytest.mark.parametrize("params", PARAMETERS)
+def test_random_initial_conditions_same_classification(params):
+    rng = np.random.default_rng(11)
+    theta = rng.uniform(0.0, 2.0 * np.pi, 3000)
+    v = rng.uniform(0.0, 2.0 * params.g * params.racket_period, 3000)
+    settings = ClassifySettings(max_iterations=60, tolerance=1e-3, min_hop_s=1e-3)
+    fixed = params.cos_theta_fixed() <= 1.0
+    numpy_result = classify_batch(theta, v, params, settings, require_fixed_point=fixed,
+                                  kernel="numpy")
+    compiled_result = classify_batch(theta, v, params, settings, require_fixed_point=fixed,
+                                     kernel="compiled")
+    assert_same(compiled_result, numpy_result)
+
+
+def test_edge_cases_grazing_launch_no_flight_unconverged_and_no_fixed_point():
+    params = PARAMETERS[2]
+    a, w, g = params.racket_amplitude, params.omega, params.g
+    theta_graze = math.asin(g / (w * w * a)) + 0.3  # racket decelerates faster than gravity
+    theta = np.array([theta_graze, 0.0, 1.0, np.pi, 2.0 * np.pi, -0.0, 7.0])
+    v = a * w * np.cos(theta)  # exactly the racket's velocity: grazing / cannot fly
+    v[-1] += 1.0
+    for max_steps in (1, 2, 3, 2000):  # unconverged solves are NaN in both
+        expected = first_impact_phase(theta, v, a, w, g, max_steps=max_steps)
+        got = compiled.first_impact_phase(theta, v, params, max_steps=max_steps)
+        np.testing.assert_array_equal(got, expected)
+    # no period-1 orbit (amplitude below eq. 8's minimum): NaN target in both kernels
+    small = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.01, racket_period=0.92)
+    assert small.cos_theta_fixed() > 1.0
+    th, vv = np.meshgrid(np.linspace(0, 2 * np.pi, 40), np.linspace(0, 6, 40))
+    assert_same(classify_batch(th, vv, small, require_fixed_point=False, kernel="compiled"),
+                classify_batch(th, vv, small, require_fixed_point=False, kernel="numpy"))
+
+
+def test_undecided_points_after_max_iterations_match():
+    params = PARAMETERS[3]  # chaotic: many points never settle
+    theta, v = np.meshgrid(np.linspace(0, 2 * np.pi, 30), np.linspace(0, 8, 30))
+    settings = ClassifySettings(max_iterations=5, tolerance=1e-3, min_hop_s=1e-3)
+    numpy_result = classify_batch(theta, v, params, settings, require_fixed_point=False,
+                                  kernel="numpy")
+    assert (numpy_result.outcome == 3).any() and (numpy_result.iterations == 5).any()
+    assert_same(classify_batch(theta, v, params, settings, require_fixed_point=False,
+                               kernel="compiled"), numpy_result)
+
+
+def test_auto_uses_the_compiled_kernel_unless_turned_off(monkeypatch):
+    calls = []
+    original = compiled.classify_arrays
+    monkeypatch.setattr(compiled, "classify_arrays",
+                        lambda *args: calls.append(1) or original(*args))
+    theta, v = np.array([0.5, 1.0]), np.array([5.0, 6.0])
+    classify_batch(theta, v, PARAMETERS[0])
+    assert calls == [1]
+    monkeypatch.setenv("BOUNCE_KERNEL", "numpy")
+    assert not classify_module.compiled_kernel_available()
+    classify_batch(theta, v, PARAMETERS[0])
+    assert calls == [1]
+
+
+def test_without_numba_the_numpy_kernel_runs(monkeypatch):
+    real_find_spec = importlib.util.find_spec
+    monkeypatch.setattr(importlib.util, "find_spec",
+                        lambda name, *a: None if name == "numba" else real_find_spec(name, *a))
+    assert not classify_module.compiled_kernel_available()
+    theta, v = np.meshgrid(np.linspace(0, 2 * np.pi, 12), np.linspace(0, 10, 12))
+    assert_same(classify_grid(theta, v, PARAMETERS[0]),
+                classify_batch(theta, v, PARAMETERS[0], kernel="compiled"))
