@@ -1,7 +1,9 @@
 """Benchmark of the Fig. 4 basin (a script, not a test).
 
 Times ``classify_grid`` on an N x N grid of the paper's Fig. 4 (theta0 0..360 deg, v0 0..10
-m/s, the paper's parameters and stopping conditions) with one job and with all cores, and the
+m/s, the paper's parameters and stopping conditions) with one job and with all cores, with the
+compiled kernel (``engine.compiled``, numba, in threads; when installed) and the numpy one (in
+worker processes), checking that both give identical outcomes and impact counts, and the
 paper's method -- a per-point Python loop around ``scipy.optimize.brentq`` for every impact
 (``engine.reference.classify_point_brentq``, bracketed by a first-root scan) -- on a random
 subsample of the grid, extrapolated to the whole grid. Prints points per second and ratios.
@@ -13,11 +15,12 @@ subprocess: start-up, classification, basin.csv, figures -- with one job and wit
 against the plain single-thread vectorised numpy kernel of the same map alone
 (``benchmarks/plain_kernel.py``), each ``--repeat`` times, and reports the minimum of each (the
 machine may be shared: the minimum is the run least disturbed). ``--scaling 250,500,1000``
-does the same end-to-end timing at several grid sizes.
+does the same end-to-end timing at several grid sizes; ``--numpy-kernel`` adds the command
+with ``BOUNCE_KERNEL=numpy`` (what a user without numba gets).
 
     python benchmarks/basin.py                       # 1000 x 1000, 1000-point subsample
     python benchmarks/basin.py --size 200 --subsample 200
-    python benchmarks/basin.py --skip-grid --end-to-end --repeat 5
+    python benchmarks/basin.py --skip-grid --end-to-end --repeat 5 --numpy-kernel
     python benchmarks/basin.py --skip-grid --scaling 250,500,1000,2000 --repeat 3
     python benchmarks/basin.py --skip-grid --memory-size 4000 --memory-format npz
 """
@@ -40,7 +43,12 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from bounce_cli import parallel  # noqa: E402
-from bounce_cli.engine.classify import OUTCOMES, ClassifySettings, classify_grid  # noqa: E402
+from bounce_cli.engine.classify import (  # noqa: E402
+    OUTCOMES,
+    ClassifySettings,
+    classify_grid,
+    compiled_kernel_available,
+)
 from bounce_cli.engine.params import ModelParams  # noqa: E402
 from bounce_cli.engine.reference import classify_point_brentq  # noqa: E402
 
@@ -56,9 +64,15 @@ def grid(n: int):
     return theta.ravel(), v.ravel()
 
 
-def time_grid(theta, v, jobs: int):
+def time_grid(theta, v, jobs: int, kernel: str):
+    """classify_grid as ``bounce basin`` runs it: the compiled kernel in threads, the numpy
+    one in worker processes (BOUNCE_KERNEL=numpy)."""
+    compiled = kernel == "compiled"
+    os.environ["BOUNCE_KERNEL"] = "auto" if compiled else "numpy"
+    if compiled:  # load numba and the cached kernel first: start-up, timed end to end below
+        classify_grid(theta[:4], v[:4], PARAMS, SETTINGS)
     t0 = time.perf_counter()  # pool start included, as a user pays it
-    with parallel.executor(jobs) as executor:
+    with parallel.executor(jobs, threads=compiled) as executor:
         res = classify_grid(theta, v, PARAMS, SETTINGS, map=executor.map,
                             workers=executor.workers)
     return time.perf_counter() - t0, res
@@ -95,13 +109,15 @@ def memory_run(m: int, jobs: int, fmt: str) -> None:
           f"basin.{fmt} {size / 1e6:.0f} MB")
 
 
-def time_command(m: int, jobs: int, repeat: int) -> list[float]:
-    """Wall times of ``bounce basin`` m x m (a fresh process each time: start-up included)."""
+def time_command(m: int, jobs: int, repeat: int, kernel: str = "auto") -> list[float]:
+    """Wall times of ``bounce basin`` m x m (a fresh process each time: start-up included);
+    ``kernel`` is BOUNCE_KERNEL (auto: the compiled kernel when numba is installed)."""
     times = []
+    env = {**os.environ, "BOUNCE_KERNEL": kernel}
     with tempfile.TemporaryDirectory() as out:
         for _ in range(repeat):
             t0 = time.perf_counter()
-            subprocess.run(basin_command(m, jobs, out), cwd=ROOT, check=True)
+            subprocess.run(basin_command(m, jobs, out), cwd=ROOT, check=True, env=env)
             times.append(time.perf_counter() - t0)
     return times
 
@@ -120,24 +136,27 @@ def runs(times: list[float]) -> str:
     return f"min {min(times):.2f} s of {len(times)} ({', '.join(f'{t:.2f}' for t in times)})"
 
 
-def end_to_end(sizes: list[int], jobs: int, repeat: int) -> None:
-    """``bounce basin`` end to end with 1 and ``jobs`` jobs against the plain kernel alone,
-    runs interleaved (so that a busy spell of a shared machine hits all three alike)."""
+def end_to_end(sizes: list[int], jobs: int, repeat: int, numpy_kernel: bool) -> None:
+    """``bounce basin`` end to end with 1 and ``jobs`` jobs (and, with ``numpy_kernel``, with
+    BOUNCE_KERNEL=numpy) against the plain kernel alone, runs interleaved (so that a busy
+    spell of a shared machine hits all of them alike)."""
+    kernel = "compiled (numba)" if compiled_kernel_available() else "numpy (numba missing)"
     for m in sizes:
         plain: list[float] = []
-        one: list[float] = []
-        many: list[float] = []
+        runs_by: dict[str, list[float]] = {}
+        variants = [(f"--jobs 1, {kernel} kernel", 1, "auto")]
+        if jobs > 1:
+            variants.append((f"--jobs {jobs}, {kernel} kernel", jobs, "auto"))
+        if numpy_kernel:
+            variants.append((f"--jobs {jobs}, BOUNCE_KERNEL=numpy", jobs, "numpy"))
         for _ in range(repeat):
             plain += time_plain(m, 1)
-            one += time_command(m, 1, 1)
-            if jobs > 1:
-                many += time_command(m, jobs, 1)
+            for label, j, k in variants:
+                runs_by.setdefault(label, []).extend(time_command(m, j, 1, k))
         print(f"{m} x {m}: plain numpy kernel alone {runs(plain)}")
-        print(f"{m} x {m}: bounce basin end to end --jobs 1 {runs(one)}: "
-              f"{min(plain) / min(one):.2f}x the plain kernel's speed")
-        if jobs > 1:
-            print(f"{m} x {m}: bounce basin end to end --jobs {jobs} {runs(many)}: "
-                  f"{min(plain) / min(many):.2f}x the plain kernel's speed")
+        for label, times in runs_by.items():
+            print(f"{m} x {m}: bounce basin end to end {label}: {runs(times)}: "
+                  f"{min(plain) / min(times):.2f}x the plain kernel's speed")
 
 
 def main() -> None:
@@ -154,6 +173,8 @@ def main() -> None:
                     help="time bounce basin N x N end to end against the plain kernel")
     ap.add_argument("--scaling", default="", help="comma-separated sizes for --end-to-end")
     ap.add_argument("--repeat", type=int, default=3, help="repeats of each end-to-end timing")
+    ap.add_argument("--numpy-kernel", action="store_true",
+                    help="also time bounce basin end to end with BOUNCE_KERNEL=numpy")
     args = ap.parse_args()
 
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
@@ -162,30 +183,39 @@ def main() -> None:
     if not args.skip_grid:
         theta, v = grid(args.size)
         n = theta.size
-        t1, res = time_grid(theta, v, 1)
-        print(f"grid {args.size} x {args.size} = {n:,} points, --jobs 1: {t1:.2f} s, "
-              f"{n / t1:,.0f} points/s")
-        fractions = np.bincount(res.outcome, minlength=4) / n
-        print("  fractions: " + ", ".join(f"{o} {f:.4f}" for o, f in zip(OUTCOMES, fractions))
-              + f"; max impacts {res.iterations.max()}")
-        if args.jobs > 1:
-            tj, resj = time_grid(theta, v, args.jobs)
-            same = np.array_equal(res.outcome, resj.outcome) and np.array_equal(
-                res.iterations, resj.iterations)
-            print(f"grid --jobs {args.jobs}: {tj:.2f} s, {n / tj:,.0f} points/s, "
-                  f"speed-up {t1 / tj:.2f}x, identical results: {same}")
+        kernels = ["compiled", "numpy"] if compiled_kernel_available() else ["numpy"]
+        first = None
+        for kernel in kernels:
+            t1, res = time_grid(theta, v, 1, kernel)
+            print(f"grid {args.size} x {args.size} = {n:,} points, {kernel} kernel, --jobs 1: "
+                  f"{t1:.2f} s, {n / t1:,.0f} points/s")
+            if first is None:
+                first = (t1, res)
+                fractions = np.bincount(res.outcome, minlength=4) / n
+                print("  fractions: " + ", ".join(
+                    f"{o} {f:.4f}" for o, f in zip(OUTCOMES, fractions))
+                    + f"; max impacts {res.iterations.max()}")
+            else:
+                same = np.array_equal(res.outcome, first[1].outcome) and np.array_equal(
+                    res.iterations, first[1].iterations)
+                print(f"  identical outcomes and impact counts to the compiled kernel: {same}")
+            if args.jobs > 1:
+                tj, resj = time_grid(theta, v, args.jobs, kernel)
+                same = np.array_equal(res.outcome, resj.outcome) and np.array_equal(
+                    res.iterations, resj.iterations)
+                print(f"  --jobs {args.jobs}: {tj:.2f} s, {n / tj:,.0f} points/s, "
+                      f"speed-up {t1 / tj:.2f}x, identical results: {same}")
+        t1, res = first
         tr, m, agree = time_reference(theta, v, args.subsample, args.seed, res)
         per_point = tr / m
         print(f"paper's method (per-point brentq loop): {m} points in {tr:.2f} s, "
               f"{1 / per_point:,.0f} points/s, extrapolated to the grid: {per_point * n:,.0f} s "
               f"({per_point * n / 3600:.2f} h); agrees with the fast classifier on {agree}/{m}")
-        print(f"ratio, vectorised --jobs 1 vs brentq loop: {per_point * n / t1:,.0f}x")
-        if args.jobs > 1:
-            print(f"ratio, vectorised --jobs {args.jobs} vs brentq loop: "
-                  f"{per_point * n / tj:,.0f}x")
+        print(f"ratio, {kernels[0]} kernel --jobs 1 vs brentq loop: "
+              f"{per_point * n / t1:,.0f}x")
     if args.end_to_end or args.scaling:
         sizes = [int(x) for x in args.scaling.split(",")] if args.scaling else [args.size]
-        end_to_end(sizes, args.jobs, args.repeat)
+        end_to_end(sizes, args.jobs, args.repeat, args.numpy_kernel)
     if args.memory_size:
         memory_run(args.memory_size, args.jobs, args.memory_format)
 

@@ -26,7 +26,7 @@ from pydantic import Field, model_validator
 
 from .. import parallel
 from ..config import ClassifyBlock, ConfigError, ExperimentConfig, StrictModel
-from ..engine.classify import OUTCOMES
+from ..engine.classify import OUTCOMES, compiled_kernel_available
 from ..engine.linear import flip_boundary_g
 from ..engine.params import ModelError, ModelParams
 from ..engine.sweep import (
@@ -170,7 +170,9 @@ def run(config: SweepConfig, options: RunOptions) -> ExperimentResult:
     options.progress.advance(len(done))
     if todo:
         jobs = min(options.jobs, len(todo))
-        with parallel.executor(jobs, options.scheduler) as executor:
+        # the compiled kernel releases the GIL: threads here, no worker start-up
+        threads = compiled_kernel_available()
+        with parallel.executor(jobs, options.scheduler, threads=threads) as executor:
             for result in executor.map(evaluate_point, todo):
                 options.checkpoints.save(result["index"], result)
                 done[result["index"]] = result
