@@ -385,6 +385,23 @@ class DaskCluster:
             yield result
 
 
+def meanwhile(work: Callable[[], Any], other: Callable[[], Any]) -> Any:
+    """``work()`` in a thread of its own while this thread runs ``other()``; returns what
+    ``work`` returned (or raises what it raised). For work that spends its time outside the
+    GIL (the compiled kernel in ``Threads``): ``other`` then costs no wall time on a machine
+    with a core to spare. An interrupt in this thread goes on at once; the caller's executor,
+    left by it, cancels what ``work`` has not started."""
+    pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix="bounce-driver")
+    future = pool.submit(work)
+    try:
+        other()
+        return future.result()
+    finally:
+        # not waiting when left by an exception: the caller's executor, left next, cancels
+        # the tasks ``work`` is waiting for, and ``work`` ends with them
+        pool.shutdown(wait=future.done(), cancel_futures=True)
+
+
 def executor(jobs: int, scheduler: str | None = None, *,
              threads: bool = False) -> InProcess | Threads | LocalPool | DaskCluster:
     """The executor for ``jobs`` local workers (in this process for 1, else a pool of

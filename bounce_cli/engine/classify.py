@@ -86,6 +86,15 @@ def compiled_kernel_available() -> bool:
     return importlib.util.find_spec("numba") is not None
 
 
+def load_compiled_kernel() -> None:
+    """Import numba and load the compiled kernel (from numba's cache: about 0.35 s; the
+    first time ever, compile it: a few seconds), so that later calls start at once."""
+    if compiled_kernel_available():
+        from .compiled import load
+
+        load()
+
+
 def classify_batch(theta0, v0, params: ModelParams,
                    settings: ClassifySettings = ClassifySettings(), *,
                    require_fixed_point: bool = True,

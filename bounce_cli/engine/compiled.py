@@ -211,3 +211,10 @@ def first_impact_phase(theta, v, params: ModelParams, *, max_steps: int) -> np.n
     _first_impact(vv, np.cos(th), np.sin(th), m, _constants(params, fp, 0.0, 0.0), max_steps,
                   hop, np.empty(m, np.int64), S, D0, C, SN, V, SH, CH)
     return hop
+
+
+def load() -> None:
+    """Load (or compile) the kernel now: one call on one point."""
+    params = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.3, racket_period=0.92)
+    classify_arrays(np.array([1.0]), np.array([5.0]), params, params.fixed_point(), 1, 1e-3,
+                    1e-3, 10)

@@ -9,12 +9,12 @@ velocities not above the racket's are "below the racket". The numerics live in
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 import math
-from typing import Any, Literal
+from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
-import pandas as pd
 from pydantic import Field, model_validator
 
 from .. import paper, parallel
@@ -31,11 +31,14 @@ from ..engine.classify import (
     classify_batch,
     classify_grid,
     compiled_kernel_available,
+    load_compiled_kernel,
 )
 from ..engine.control import is_passive
 from ..engine.params import ModelParams
-from ..plotting import caption_figures
 from .base import Experiment, ExperimentResult, RunOptions
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 #: colours of the outcomes in basin.png (the paper: white, grey, black; undecided: red)
 OUTCOME_COLOURS = {
@@ -151,17 +154,28 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
         threads = compiled_kernel_available()
         jobs = options.jobs if threads or n_points >= POOL_MIN_POINTS else 1
         with parallel.executor(jobs, threads=threads) as executor:
-            result = classify_grid(
-                theta_grid_rad.ravel(), v_grid.ravel(), params, settings,
+            classify = functools.partial(
+                classify_grid, theta_grid_rad.ravel(), v_grid.ravel(), params, settings,
                 map=executor.map, workers=executor.workers,
                 on_tile_done=options.progress.advance,
             )
+            if threads:
+                # numba's start-up first (it would contend with the imports for the GIL),
+                # then the imports of the output's libraries while the kernel computes
+                load_compiled_kernel()
+                result = parallel.meanwhile(classify, import_output_libraries)
+            else:
+                result = classify()
     else:  # racket period control (engine.control): in this process
         from ..engine.control import classify_controlled_grid
 
         result = classify_controlled_grid(theta_grid_rad.ravel(), v_grid.ravel(), params,
                                           controller, settings,
                                           on_tile_done=options.progress.advance)
+    import pandas as pd
+
+    from ..plotting import caption_figures
+
     basin = pd.DataFrame(
         {
             "theta0_rad": theta_grid_rad.ravel(),
@@ -196,6 +210,16 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
     return ExperimentResult(frames=frames, figures=figures, summary=summary)
 
 
+def import_output_libraries() -> None:
+    """Import what the tables and figures need (pandas, matplotlib and its Agg backend,
+    about 0.5 s): done while the compiled kernel classifies in threads that do not hold
+    the GIL, so that the import costs no wall time on a machine with a core to spare."""
+    import matplotlib.backends.backend_agg  # noqa: F401
+    import pandas  # noqa: F401
+
+    import bounce_cli.plotting  # noqa: F401
+
+
 def format_bytes(n: float) -> str:
     """1234567 -> '1.2 MB' (decimal units, as disk sizes are quoted)."""
     if n < 1000:
@@ -224,6 +248,8 @@ def marker_frame(params: ModelParams, settings: ClassifySettings, *,
     theta0 = math.asin(paper.FIG3_BALL_HEIGHT_M / params.racket_amplitude) if fig3 else 0.0
     theta = np.array([fp.theta_rad] + [theta0] * len(starts))
     v = np.array([fp.v_m_s, *starts.values()])
+    import pandas as pd
+
     if controller is None:
         res = classify_batch(theta, v, params, settings)
     else:
@@ -308,6 +334,7 @@ def basin_table(frames: dict[str, pd.DataFrame]) -> pd.DataFrame:
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     """basin.png and basin_iterations.png, from basin.csv (or basin.npz / basin.parquet) and
     markers.csv only."""
+    import pandas as pd
     from matplotlib.colors import BoundaryNorm, ListedColormap
     from matplotlib.patches import Patch
 
