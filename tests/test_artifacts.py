@@ -79,6 +79,97 @@ def test_failure_while_writing_leaves_previous_files_untouched(tmp_path):
     assert after == before  # no temporary files left, nothing replaced
 
 
+def big_table(rows: int) -> pd.DataFrame:
+    rng = np.random.default_rng(0)
+    return pd.DataFrame({"x": rng.normal(size=rows), "k": rng.integers(0, 30, rows),
+                         "o": pd.Categorical.from_codes(rng.integers(0, 3, rows),
+                                                        categories=["a", "b", "c"])})
+
+
+@pytest.fixture
+def small_background_threshold(monkeypatch):
+    monkeypatch.setattr(artifacts, "BACKGROUND_TABLE_ROWS", 1000)
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="POSIX fork")
+def test_large_tables_written_by_a_child_are_the_same_bytes(tmp_path,
+                                                            small_background_threshold):
+    frame = big_table(5000)
+    run = make_run(tmp_path / "r", {"a": 1})
+    run.add_csv("big.csv", frame)
+    run.add_csv("small.csv", frame.head(10))
+    fig, ax = plt.subplots()
+    ax.plot([0, 1])
+    run.add_figure("fig.png", fig)
+    forks = []
+    real = artifacts._ChildWriter.start
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(artifacts._ChildWriter, "start",
+                  lambda self: forks.append([t.name for t, *_ in self.jobs]) or real(self))
+        run.commit()
+    assert len(forks) == 1 and forks[0][0].startswith(".big.csv.")  # only the big one
+    frame.to_csv(tmp_path / "pandas.csv", index=False)
+    assert (tmp_path / "r" / "big.csv").read_bytes() == (tmp_path / "pandas.csv").read_bytes()
+    assert not list((tmp_path / "r").glob(".*tmp"))
+
+
+class FailingInTheChild(pd.DataFrame):
+    def to_csv(self, *args, **kwargs):
+        raise OSError(28, "No space left on device")
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="POSIX fork")
+def test_an_error_in_the_child_is_raised_as_itself_and_nothing_is_left(
+        tmp_path, small_background_threshold, monkeypatch):
+    out = tmp_path / "r"
+    first = make_run(out, {"a": 1})
+    first.add_csv("big.csv", pd.DataFrame({"x": [1]}))
+    first.commit()
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    # a table the fast writer hands to pandas (quoting needed), whose writer then fails
+    table = FailingInTheChild({"x": ["a,b"] * 2000, "y": range(2000)})
+    second = make_run(out, {"a": 1})
+    second.add_csv("big.csv", table)
+    fig, ax = plt.subplots()
+    second.add_figure("fig.png", fig)
+    with pytest.raises(OSError, match="No space left on device") as info:
+        second.commit()
+    assert info.value.errno == 28
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="POSIX fork")
+def test_a_failure_in_this_process_kills_the_child(tmp_path, small_background_threshold):
+    import os
+    import time
+
+    pids = []
+    real = artifacts._ChildWriter.start
+
+    def start(self):
+        real(self)
+        pids.append(self.pid)
+
+    def slow(tmp):
+        time.sleep(30)
+
+    run = make_run(tmp_path / "r", {"a": 1})
+    run.add_csv("big.csv", big_table(2000))
+    fig, ax = plt.subplots()
+    run.add_figure("fig.png", fig)
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(artifacts._ChildWriter, "start", start)
+        m.setattr(artifacts, "write_frame", lambda frame, path, kind=None: slow(path))
+        m.setattr(fig, "savefig", lambda *a, **k: (_ for _ in ()).throw(KeyboardInterrupt))
+        started = time.monotonic()
+        with pytest.raises(KeyboardInterrupt):
+            run.commit()
+    assert time.monotonic() - started < 10
+    with pytest.raises(ProcessLookupError):
+        os.kill(pids[0], 0)  # killed and reaped
+    assert not list((tmp_path / "r").glob(".*tmp"))
+
+
 def test_atomic_write_never_leaves_half_file(tmp_path):
     target = tmp_path / "x.txt"
     target.write_text("old")

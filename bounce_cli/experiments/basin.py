@@ -280,15 +280,14 @@ class _Grid:
 
     def __init__(self, basin: pd.DataFrame) -> None:
         theta, v = basin["theta0_deg"].to_numpy(), basin["v0_m_s"].to_numpy()
-        th, vs = np.unique(theta), np.unique(v)
-        self.shape = (vs.size, th.size)
-        self.index = None
-        canonical = len(basin) == th.size * vs.size and (
-            (theta.reshape(self.shape) == th).all()
-            and (v.reshape(self.shape) == vs[:, None]).all()
-        )
-        if not canonical:
+        found = _canonical_axes(theta, v)
+        if found is not None:  # without sorting 10^6 values twice (0.1 s)
+            th, vs = found
+            self.index = None
+        else:
+            th, vs = np.unique(theta), np.unique(v)
             self.index = (np.searchsorted(vs, v), np.searchsorted(th, theta))
+        self.shape = (vs.size, th.size)
         dth, dv = _cell_width(th), _cell_width(vs)
         self.extent = (th[0] - dth / 2, th[-1] + dth / 2, vs[0] - dv / 2, vs[-1] + dv / 2)
         self.stride = tuple(-(-n // MAX_IMAGE_CELLS) for n in self.shape)
@@ -301,6 +300,23 @@ class _Grid:
             out = np.full(self.shape, fill, dtype=values.dtype)
             out[self.index] = values
         return out[:: self.stride[0], :: self.stride[1]]
+
+
+def _canonical_axes(theta: np.ndarray, v: np.ndarray):
+    """(theta values, v values) when the rows are in ``run``'s order -- v0 outer, theta0
+    inner, both strictly increasing, every combination once -- else None."""
+    if theta.size == 0:
+        return None
+    changes = np.flatnonzero(v != v[0])
+    n_theta = int(changes[0]) if changes.size else v.size
+    if v.size % n_theta:
+        return None
+    th, vs = theta[:n_theta], v[::n_theta]
+    shape = (vs.size, n_theta)
+    if (np.all(np.diff(th) > 0) and np.all(np.diff(vs) > 0)
+            and (theta.reshape(shape) == th).all() and (v.reshape(shape) == vs[:, None]).all()):
+        return th, vs
+    return None
 
 
 def _cell_width(values: np.ndarray) -> float:

@@ -202,3 +202,15 @@ def test_binary_tables_hold_what_the_csv_holds_and_redraw(tmp_path, cli, user_er
     result = cli("basin", *small, "--set", "output.format=parquet", "--out", tmp_path / "p2")
     user_error(result, "output.format", "pyarrow", "npz")
     assert not (tmp_path / "p2").exists()
+
+
+def test_canonical_axes_found_without_sorting_or_refused():
+    theta, v = np.meshgrid([0.0, 90.0, 180.0], [1.0, 2.0])
+    th, vs = basin._canonical_axes(theta.ravel(), v.ravel())
+    np.testing.assert_array_equal(th, [0.0, 90.0, 180.0])
+    np.testing.assert_array_equal(vs, [1.0, 2.0])
+    for t, w in (([5.0], [1.0]), ([5.0, 5.0], [1.0, 2.0]), ([1.0, 2.0], [3.0, 3.0])):
+        found = basin._canonical_axes(np.array(t), np.array(w))  # 1 x 1, N x 1, 1 x N
+        assert found is not None
+    assert basin._canonical_axes(theta.ravel()[::-1], v.ravel()[::-1]) is None  # decreasing
+    assert basin._canonical_axes(np.array([0.0, 1.0, 0.0]), np.array([1.0, 1.0, 2.0])) is None
