@@ -160,6 +160,8 @@ class RecordingPool(parallel.LocalPool):
 
 
 def test_small_grids_run_in_process_large_ones_on_the_pool(monkeypatch):
+    """The numpy kernel's worker processes cost a start-up that small grids do not repay."""
+    monkeypatch.setenv("BOUNCE_KERNEL", "numpy")
     monkeypatch.setattr(parallel, "LocalPool", RecordingPool)
     assert 400 * 400 < basin.POOL_MIN_POINTS  # the bundled grid runs in-process
     cfg = small_basin_config(30, 20)
@@ -170,6 +172,24 @@ def test_small_grids_run_in_process_large_ones_on_the_pool(monkeypatch):
     assert RecordingPool.started == 1
     for name in ("basin.csv", "fractions.csv", "markers.csv"):
         pd.testing.assert_frame_equal(pooled.frames[name], in_process.frames[name])
+
+
+def test_the_compiled_kernel_classifies_in_threads_at_any_size(monkeypatch):
+    pytest.importorskip("numba")
+    monkeypatch.setenv("BOUNCE_KERNEL", "auto")
+    started = []
+    real = parallel.Threads.__enter__
+    monkeypatch.setattr(parallel.Threads, "__enter__",
+                        lambda self: started.append(self.workers) or real(self))
+    monkeypatch.setattr(parallel, "LocalPool", RecordingPool)
+    monkeypatch.setattr(RecordingPool, "started", 0)
+    cfg = small_basin_config(30, 20)
+    threaded = basin.run(cfg, RunOptions(jobs=2))
+    assert started == [2] and RecordingPool.started == 0
+    monkeypatch.setenv("BOUNCE_KERNEL", "numpy")
+    numpy_run = basin.run(cfg, RunOptions(jobs=1))
+    for name in ("basin.csv", "fractions.csv", "markers.csv"):
+        pd.testing.assert_frame_equal(threaded.frames[name], numpy_run.frames[name])
 
 
 def test_rerunning_a_bundled_config_changes_no_committed_byte(tmp_path):
