@@ -499,34 +499,42 @@ def frame_format(name: str) -> str:
 
 def write_csv(frame: pd.DataFrame, path: Path) -> None:
     """``frame.to_csv(path, index=False)``, byte for byte, about ten times faster for large
-    tables of numbers, categories and plain strings: every column is factorised, its distinct
-    values formatted once the way pandas formats them (``astype(str)``: repr-exact floats,
-    NaN as an empty cell); neighbouring columns whose combinations of values are few (a
-    grid's coordinates, an outcome and its count) are joined once per combination
-    (``_merge_columns``); the rows are joined in chunks of ``CSV_CHUNK_ROWS``. Anything else
-    (quoting, nullable or date types, an empty table or one column) goes to pandas."""
-    columns = _fast_columns(frame)
-    if columns is None:
+    tables of numbers, categories and plain strings. In chunks of ``CSV_CHUNK_ROWS`` rows
+    (bounded memory): every column is factorised, its distinct values formatted once the way
+    pandas formats them (``astype(str)``: repr-exact floats, NaN as an empty cell);
+    neighbouring columns whose combinations of values are few (a grid's coordinates, an
+    outcome and its count) are joined once per combination (``_merge_columns``); the rows are
+    joined. Anything else (quoting, nullable or date types, an empty table or one column, in
+    any chunk) goes to pandas."""
+    if _fast_columns(frame.iloc[:0]) is None:
         frame.to_csv(path, index=False)
         return
-    parts = _merge_columns(columns, len(frame))
     with open(path, "w", encoding="utf-8", newline="") as handle:
         handle.write(",".join(frame.columns) + os.linesep)
         for start in range(0, len(frame), CSV_CHUNK_ROWS):
-            cells = [texts[codes[start:start + CSV_CHUNK_ROWS]].tolist()
-                     for codes, texts in parts]
+            chunk = frame.iloc[start:start + CSV_CHUNK_ROWS]
+            columns = _fast_columns(chunk)
+            if columns is None:  # a cell pandas must write (quoting): all of it by pandas
+                break
+            cells = [texts[codes].tolist()
+                     for codes, texts in _merge_columns(columns, len(chunk))]
             handle.write(os.linesep.join(map(",".join, zip(*cells))) + os.linesep)
+        else:
+            return
+    frame.to_csv(path, index=False)
 
 
 def _csv_header(frame: pd.DataFrame) -> str | None:
     """The header line if every column can take the fast path, else None."""
-    return None if _fast_columns(frame) is None else ",".join(frame.columns)
+    if len(frame) == 0 or _fast_columns(frame) is None:
+        return None
+    return ",".join(frame.columns)
 
 
 def _fast_columns(frame: pd.DataFrame) -> list[tuple[np.ndarray, np.ndarray]] | None:
     """Each column's (codes, texts) (see ``_distinct_texts``), or None if a column (or the
-    header) is not on the fast path."""
-    if len(frame) == 0 or frame.shape[1] < 2:  # pandas writes a lone empty cell as ""
+    header) is not on the fast path. An empty slice checks the header and the dtypes."""
+    if frame.shape[1] < 2:  # pandas writes a lone empty cell as ""
         return None
     names = list(frame.columns)
     if not all(isinstance(n, str) and n and not _CSV_SPECIAL.search(n) for n in names):
@@ -539,7 +547,9 @@ def _fast_columns(frame: pd.DataFrame) -> list[tuple[np.ndarray, np.ndarray]] | 
         if found is None:
             return None
         codes, texts = found
-        columns.append((codes % len(texts), texts))  # code -1 (missing): the last text, ""
+        if len(texts):  # code -1 (missing): the last text, ""
+            codes = codes % len(texts)
+        columns.append((codes, texts))
     return columns
 
 

@@ -334,3 +334,13 @@ def test_a_rerun_with_other_package_versions_keeps_the_record_when_nothing_chang
     assert cli(*args).exit_code == 0
     assert (out / "run.json").read_bytes() == before
     assert json.loads((out / "timing.json").read_text())["versions"]["numpy"] != "0.0.1-older"
+
+
+def test_a_cell_needing_quotes_in_a_later_chunk_hands_the_table_to_pandas(tmp_path,
+                                                                         monkeypatch):
+    monkeypatch.setattr(artifacts, "CSV_CHUNK_ROWS", 100)
+    frame = pd.DataFrame({"a": ["x"] * 250, "b": range(250)})
+    frame.loc[220, "a"] = 'q,"r"'
+    artifacts.write_csv(frame, tmp_path / "fast.csv")
+    frame.to_csv(tmp_path / "pandas.csv", index=False)
+    assert (tmp_path / "fast.csv").read_bytes() == (tmp_path / "pandas.csv").read_bytes()

@@ -174,9 +174,15 @@ def test_small_grids_run_in_process_large_ones_on_the_pool(monkeypatch):
         pd.testing.assert_frame_equal(pooled.frames[name], in_process.frames[name])
 
 
-def test_the_compiled_kernel_classifies_in_threads_at_any_size(monkeypatch):
+def test_the_compiled_kernel_classifies_large_grids_in_threads(monkeypatch):
     pytest.importorskip("numba")
     monkeypatch.setenv("BOUNCE_KERNEL", "auto")
+    from bounce_cli.engine import compiled
+
+    calls = []
+    original = compiled.classify_arrays
+    monkeypatch.setattr(compiled, "classify_arrays",
+                        lambda *args: calls.append(1) or original(*args))
     started = []
     real = parallel.Threads.__enter__
     monkeypatch.setattr(parallel.Threads, "__enter__",
@@ -184,8 +190,13 @@ def test_the_compiled_kernel_classifies_in_threads_at_any_size(monkeypatch):
     monkeypatch.setattr(parallel, "LocalPool", RecordingPool)
     monkeypatch.setattr(RecordingPool, "started", 0)
     cfg = small_basin_config(30, 20)
+    small = basin.run(cfg, RunOptions(jobs=2))  # below COMPILED_MIN_POINTS: numpy, in-process
+    assert started == [] and calls == [] and RecordingPool.started == 0
+    monkeypatch.setattr(basin, "COMPILED_MIN_POINTS", 100)
     threaded = basin.run(cfg, RunOptions(jobs=2))
-    assert started == [2] and RecordingPool.started == 0
+    assert started == [2] and calls and RecordingPool.started == 0
+    for name in ("basin.csv", "fractions.csv", "markers.csv"):
+        pd.testing.assert_frame_equal(threaded.frames[name], small.frames[name])
     monkeypatch.setenv("BOUNCE_KERNEL", "numpy")
     numpy_run = basin.run(cfg, RunOptions(jobs=1))
     for name in ("basin.csv", "fractions.csv", "markers.csv"):

@@ -167,10 +167,10 @@ def classify_batch(theta0, v0, params: ModelParams,
 
 
 def classify_tile(args):
-    """One task of ``classify_grid``: (theta0, v0, params, settings) -> (outcome,
+    """One task of ``classify_grid``: (theta0, v0, params, settings, kernel) -> (outcome,
     iterations) arrays; a module-level function, so that worker processes can receive it."""
-    theta0, v0, params, settings = args
-    result = classify_batch(theta0, v0, params, settings)
+    theta0, v0, params, settings, kernel = args
+    result = classify_batch(theta0, v0, params, settings, kernel=kernel)
     return result.outcome, result.iterations
 
 
@@ -184,6 +184,7 @@ def classify_grid(
     workers: int = 1,
     tile_points: int = DEFAULT_TILE_POINTS,
     on_tile_done: Callable[[int], None] | None = None,
+    kernel: Literal["auto", "numpy", "compiled"] = "auto",
 ) -> Classification:
     """``classify_batch`` for large arrays: cut into tiles of at most ``tile_points`` points,
     each classified by ``map(classify_tile, tiles)`` (any ``map``-like callable that yields
@@ -194,8 +195,8 @@ def classify_grid(
     arrays), so every tile gets the same mix of cheap and expensive initial conditions and
     the workers stay balanced; the number of tiles is a multiple of ``workers``.
     ``on_tile_done(n_points)`` is called once per finished tile with the number of points in
-    it (for a progress bar). Results are identical for any ``map``, ``workers`` and
-    ``tile_points``.
+    it (for a progress bar). ``kernel`` as for ``classify_batch``. Results are identical for
+    any ``map``, ``workers``, ``tile_points`` and ``kernel``.
     """
     theta0, v0 = np.broadcast_arrays(np.asarray(theta0, dtype=float), np.asarray(v0, dtype=float))
     shape = theta0.shape
@@ -204,7 +205,7 @@ def classify_grid(
     outcome = np.empty(theta0.shape, dtype=np.int8)
     iterations = np.empty(theta0.shape, dtype=np.int16)
     # copies: contiguous arrays for a worker (and small pickles); made as tiles are sent
-    tasks = ((theta0[t].copy(), v0[t].copy(), params, settings) for t in tiles)
+    tasks = ((theta0[t].copy(), v0[t].copy(), params, settings, kernel) for t in tiles)
     for tile, (tile_outcome, tile_iterations) in zip(tiles, map(classify_tile, tasks)):
         outcome[tile], iterations[tile] = tile_outcome, tile_iterations
         if on_tile_done is not None:

@@ -66,6 +66,11 @@ LEGEND_BELOW: dict[str, Any] = dict(loc="outside lower center", ncol=3, fontsize
 #: end to end 6.5 s vs 4.3 s
 POOL_MIN_POINTS = 400_000
 
+#: below this many grid points the numpy kernel classifies even where the compiled one is
+#: installed: loading numba and the cached kernel costs about 0.35 s, which the compiled
+#: kernel (1.7 us a point against 5.3 us, one core) repays from about 100,000 points
+COMPILED_MIN_POINTS = 100_000
+
 #: basin.csv bytes per row (the paper's grid: 10.7 MB for 160,000 rows) and the size above
 #: which the run warns before computing
 CSV_BYTES_PER_ROW = 67
@@ -151,21 +156,20 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
     controller = config.model.controller()
     if controller is None:
         # the compiled kernel releases the GIL: threads, which cost nothing to start
-        threads = compiled_kernel_available()
+        threads = compiled_kernel_available() and n_points >= COMPILED_MIN_POINTS
         jobs = options.jobs if threads or n_points >= POOL_MIN_POINTS else 1
         with parallel.executor(jobs, threads=threads) as executor:
             classify = functools.partial(
                 classify_grid, theta_grid_rad.ravel(), v_grid.ravel(), params, settings,
                 map=executor.map, workers=executor.workers,
                 on_tile_done=options.progress.advance,
+                kernel="auto" if threads else "numpy",
             )
-            if threads:
-                # numba's start-up first (it would contend with the imports for the GIL),
-                # then the imports of the output's libraries while the kernel computes
+            if threads:  # numba's start-up first: it would contend with the imports
                 load_compiled_kernel()
-                result = parallel.meanwhile(classify, import_output_libraries)
-            else:
-                result = classify()
+            # the output's libraries are imported while the grid is classified (in threads
+            # or worker processes, or in numpy's loops, which release the GIL)
+            result = parallel.meanwhile(classify, import_output_libraries)
     else:  # racket period control (engine.control): in this process
         from ..engine.control import classify_controlled_grid
 
@@ -250,8 +254,8 @@ def marker_frame(params: ModelParams, settings: ClassifySettings, *,
     v = np.array([fp.v_m_s, *starts.values()])
     import pandas as pd
 
-    if controller is None:
-        res = classify_batch(theta, v, params, settings)
+    if controller is None:  # three points: numpy (no need to load the compiled kernel)
+        res = classify_batch(theta, v, params, settings, kernel="numpy")
     else:
         from ..engine.control import classify_controlled
 
