@@ -51,6 +51,7 @@ from bounce_cli.engine.classify import (  # noqa: E402
 )
 from bounce_cli.engine.params import ModelParams  # noqa: E402
 from bounce_cli.engine.reference import classify_point_brentq  # noqa: E402
+from bounce_cli.experiments.basin import COMPILED_MIN_POINTS  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "benchmarks"))
 from plain_kernel import classify_plain  # noqa: E402
@@ -140,8 +141,13 @@ def end_to_end(sizes: list[int], jobs: int, repeat: int, numpy_kernel: bool) -> 
     """``bounce basin`` end to end with 1 and ``jobs`` jobs (and, with ``numpy_kernel``, with
     BOUNCE_KERNEL=numpy) against the plain kernel alone, runs interleaved (so that a busy
     spell of a shared machine hits all of them alike)."""
-    kernel = "compiled (numba)" if compiled_kernel_available() else "numpy (numba missing)"
     for m in sizes:
+        if not compiled_kernel_available():
+            kernel = "numpy (numba missing)"
+        elif m * m < COMPILED_MIN_POINTS:
+            kernel = f"numpy (below {COMPILED_MIN_POINTS:,} points)"
+        else:
+            kernel = "compiled (numba)"
         plain: list[float] = []
         runs_by: dict[str, list[float]] = {}
         variants = [(f"--jobs 1, {kernel} kernel", 1, "auto")]
