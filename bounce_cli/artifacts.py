@@ -26,6 +26,7 @@ import os
 import platform
 import re
 import subprocess
+import sys
 import tempfile
 import time
 from importlib import metadata
@@ -86,7 +87,7 @@ FIGURE_DPI = 150
 PNG_OPTIONS = {"compress_level": 1}
 
 #: a run with a table of at least this many rows writes its files in child processes too
-#: (``RunDirectory._background_groups``, POSIX fork): the 1000 x 1000 basin's files (basin.csv
+#: (``RunDirectory._background_groups``, Linux fork): the 1000 x 1000 basin's files (basin.csv
 #: 0.5 s, two PNGs 0.3 s each) take 0.5 s on 2 cores instead of 1.1 s one after another
 BACKGROUND_TABLE_ROWS = 200_000
 
@@ -388,12 +389,13 @@ class RunDirectory:
 
     def _background_groups(self) -> list[list[str]]:
         """The files written by child processes while this one writes the rest: none, unless
-        a table has ``BACKGROUND_TABLE_ROWS`` rows or more (POSIX only); then the large tables
+        a table has ``BACKGROUND_TABLE_ROWS`` rows or more (Linux only: fork is unsafe on
+        macOS with some system libraries, absent on Windows); then the large tables
         in one child and, with two figures or more, the later half of the figures in another
         (the 1000 x 1000 basin: basin.csv 0.5 s, each PNG about 0.3 s)."""
         tables = [name for name, frame in self._frames.items()
                   if len(frame) >= BACKGROUND_TABLE_ROWS]
-        if not tables or not hasattr(os, "fork"):
+        if not tables or not sys.platform.startswith("linux"):  # fork is safe there
             return []
         figures = list(self._figures)
         return [tables] + ([figures[len(figures) // 2:]] if len(figures) >= 2 else [])

@@ -1,6 +1,7 @@
 """Run directories: atomic writes, refusal to overwrite another config's results, run.json."""
 
 import json
+import sys
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -91,7 +92,7 @@ def small_background_threshold(monkeypatch):
     monkeypatch.setattr(artifacts, "BACKGROUND_TABLE_ROWS", 1000)
 
 
-@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="POSIX fork")
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="written in children on Linux")
 def test_large_tables_written_by_a_child_are_the_same_bytes(tmp_path,
                                                             small_background_threshold):
     frame = big_table(5000)
@@ -118,7 +119,7 @@ class FailingInTheChild(pd.DataFrame):
         raise OSError(28, "No space left on device")
 
 
-@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="POSIX fork")
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="written in children on Linux")
 def test_an_error_in_the_child_is_raised_as_itself_and_nothing_is_left(
         tmp_path, small_background_threshold, monkeypatch):
     out = tmp_path / "r"
@@ -138,7 +139,7 @@ def test_an_error_in_the_child_is_raised_as_itself_and_nothing_is_left(
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
 
 
-@pytest.mark.skipif(not hasattr(__import__("os"), "fork"), reason="POSIX fork")
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="written in children on Linux")
 def test_a_failure_in_this_process_kills_the_child(tmp_path, small_background_threshold):
     import os
     import time

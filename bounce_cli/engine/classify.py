@@ -29,6 +29,7 @@ tile size and number of worker processes.
 from __future__ import annotations
 
 import builtins
+import functools
 import importlib.util
 import math
 import os
@@ -79,11 +80,22 @@ class Classification:
 
 
 def compiled_kernel_available() -> bool:
-    """True when the compiled kernel (``engine.compiled``, numba) can be used: numba is
-    installed and the environment variable ``BOUNCE_KERNEL`` is not ``numpy``."""
+    """True when the compiled kernel (``engine.compiled``, numba) can be used: the
+    environment variable ``BOUNCE_KERNEL`` is not ``numpy``, numba is installed and the
+    kernel's module imports (numba may refuse, e.g. with no writable cache directory: then
+    the numpy kernel runs, with the same results)."""
     if os.environ.get("BOUNCE_KERNEL", "auto").strip().lower() == "numpy":
         return False
-    return importlib.util.find_spec("numba") is not None
+    return importlib.util.find_spec("numba") is not None and _compiled_module_imports()
+
+
+@functools.lru_cache(maxsize=None)
+def _compiled_module_imports() -> bool:
+    try:
+        from . import compiled  # noqa: F401
+    except Exception:
+        return False
+    return True
 
 
 def load_compiled_kernel() -> None:

@@ -124,3 +124,25 @@ def test_without_numba_the_numpy_kernel_runs(monkeypatch):
     theta, v = np.meshgrid(np.linspace(0, 2 * np.pi, 12), np.linspace(0, 10, 12))
     assert_same(classify_grid(theta, v, PARAMETERS[0]),
                 classify_batch(theta, v, PARAMETERS[0], kernel="compiled"))
+
+
+def test_a_compiled_module_that_does_not_import_falls_back_to_numpy(monkeypatch):
+    """numba may refuse the kernel's module (no writable cache directory, say): the numpy
+    kernel then runs, with the same results."""
+    import builtins
+
+    classify_module._compiled_module_imports.cache_clear()
+    real_import = builtins.__import__
+
+    def refusing(name, globals=None, locals=None, fromlist=(), level=0):
+        if level == 1 and fromlist and "compiled" in fromlist:
+            raise RuntimeError("cannot cache function: no locator available")
+        return real_import(name, globals, locals, fromlist, level)
+
+    monkeypatch.setattr(builtins, "__import__", refusing)
+    try:
+        assert not classify_module.compiled_kernel_available()
+    finally:
+        monkeypatch.undo()
+        classify_module._compiled_module_imports.cache_clear()
+    assert classify_module.compiled_kernel_available()
