@@ -279,6 +279,61 @@ def test_fast_csv_writer_writes_what_pandas_writes(tmp_path, monkeypatch):
     np.testing.assert_array_equal(np.signbit(back["x_m"]), np.signbit(frame["x_m"]))
 
 
+def grid_frame(n_theta, n_v):
+    """A grid's table in the order basin and sweep write it (v outer, theta inner)."""
+    theta, v = np.meshgrid(np.linspace(0, 360, n_theta), np.linspace(-1, 10, n_v))
+    rng = np.random.default_rng(2)
+    n = theta.size
+    return pd.DataFrame({
+        "theta0_rad": np.deg2rad(theta.ravel()),
+        "theta0_deg": theta.ravel(),
+        "v0_m_s": v.ravel(),
+        "outcome": pd.Categorical.from_codes(rng.integers(0, 3, n).astype(np.int8),
+                                             categories=["period1", "sticking", "undecided"]),
+        "iterations": rng.integers(0, 100, n).astype(np.int16),
+    })
+
+
+@pytest.mark.parametrize("n_theta, n_v", [(70, 40), (1, 500), (500, 1), (3, 3)])
+def test_a_grid_table_is_written_as_pandas_writes_it(tmp_path, monkeypatch, n_theta, n_v):
+    """Chunks that start inside a block of the inner axis, a short last chunk, several
+    joined blocks per chunk, an axis of one value."""
+    monkeypatch.setattr(artifacts, "CSV_CHUNK_ROWS", 1000)
+    monkeypatch.setattr(artifacts, "CSV_BLOCK_ROWS", 64)
+    frame = grid_frame(n_theta, n_v)
+    artifacts.write_csv(frame, tmp_path / "fast.csv")
+    frame.to_csv(tmp_path / "pandas.csv", index=False)
+    assert (tmp_path / "fast.csv").read_bytes() == (tmp_path / "pandas.csv").read_bytes()
+
+
+@pytest.mark.parametrize("values", [
+    np.repeat([3.5, 1.0, 3.5, -0.0, 0.0], 50),  # runs; a value back again; -0.0 beside 0.0
+    np.tile(np.arange(7.0), 30),  # a repeated block
+    np.tile(np.arange(7.0), 30)[:-3],  # ... cut short
+    np.append(np.tile(np.arange(7.0), 30), 1.0),  # ... with one more row
+    np.tile([5.0, 4.0, 5.0, 6.0], 50),  # a block holding its first value twice
+    np.random.default_rng(3).integers(0, 40, 500).astype(float),  # neither
+], ids=["runs", "block", "short", "longer", "twice", "random"])
+def test_grid_factorisation_is_pandas_factorize(values):
+    bits = values.view(np.int64)
+    codes, keys = artifacts._factorize(bits)
+    expected_codes, expected_keys = pd.factorize(bits)
+    np.testing.assert_array_equal(codes, expected_codes)
+    np.testing.assert_array_equal(keys, expected_keys)
+
+
+def test_integers_at_the_ends_of_their_type_are_written_as_pandas_writes_them(tmp_path):
+    frame = pd.DataFrame({
+        "i8": np.array([-128, 127, 0, -128] * 30, dtype=np.int8),
+        "u64": np.array([2**64 - 1, 2**64 - 3, 2**64 - 1, 0] * 30, dtype=np.uint64),
+        "i64": np.array([-2**63, -2**63 + 5, 2**63 - 1, 7] * 30, dtype=np.int64),
+        "near": np.array([-2**63, -2**63 + 9, -2**63 + 2, -2**63] * 30, dtype=np.int64),
+    })
+    artifacts.write_csv(frame, tmp_path / "fast.csv")
+    frame.to_csv(tmp_path / "pandas.csv", index=False)
+    assert (tmp_path / "fast.csv").read_bytes() == (tmp_path / "pandas.csv").read_bytes()
+
+
 @pytest.mark.parametrize("column, fast", [
     (["a,b", "c"], False), (['say "hi"', "x"], False), (["", "x"], False), ([1.5, "x"], False),
     ([None, "x"], True), ([np.nan, "x"], True),
