@@ -156,7 +156,7 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
     controller = config.model.controller()
     if controller is None:
         # the compiled kernel releases the GIL: threads, which cost nothing to start
-        threads = compiled_kernel_available() and n_points >= COMPILED_MIN_POINTS
+        threads = n_points >= COMPILED_MIN_POINTS and compiled_kernel_available()
         jobs = options.jobs if threads or n_points >= POOL_MIN_POINTS else 1
         with parallel.executor(jobs, threads=threads) as executor:
             classify = functools.partial(
