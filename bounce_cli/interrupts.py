@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import gc
+import os
 import signal
 import sys
 from typing import Any, Iterator
@@ -96,7 +97,18 @@ def main() -> None:
 
         app(prog_name="bounce")
     except Interrupted as exc:
-        sys.exit(report(exc))
+        code = report(exc)
+        # what the run must undo was undone on the way here (staged files removed, worker
+        # processes and writers killed and reaped, threads' tiles cancelled or waited for);
+        # the interpreter's teardown after an interrupt can meet a library interrupted half
+        # way through its import, which once aborted the process (SIGABRT instead of 143):
+        # leave without it
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(code)
     finally:
         # the interpreter's last garbage collections at exit traverse every object numba,
         # pandas and matplotlib made: 0.36 s of a basin run; frozen, they are skipped (the
