@@ -38,6 +38,19 @@ def bounce(*args: str) -> list[str]:
 PROCESS_POOL = {**os.environ, "BOUNCE_KERNEL": "numpy"}
 
 
+#: the worker processes' command line names this module
+WORKER_MODULE = "bounce_cli.parallel"
+
+
+def command_line(pid: int) -> str:
+    """The process's command line ("" when it has gone)."""
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(
+            errors="replace")
+    except OSError:
+        return ""
+
+
 def stat_fields(pid: int) -> list[str] | None:
     """/proc/<pid>/stat fields after the command name (state is [0], ppid [1],
     start time [19]); None when there is no such process."""
@@ -64,30 +77,21 @@ class ProcessWatch:
             for entry in os.listdir("/proc"):
                 if not entry.isdigit():
                     continue
-                fields = stat_fields(int(entry))
-                if fields and int(fields[1]) in family and int(entry) not in self.seen:
-                    try:
-                        cmd = Path(f"/proc/{entry}/cmdline").read_bytes().replace(b"\0", b" ")
-                    except OSError:
-                        cmd = b""
-                    self.seen[int(entry)] = (fields[19], cmd.decode(errors="replace"))
+                pid = int(entry)
+                fields = stat_fields(pid)
+                if fields and int(fields[1]) in family and pid not in self.seen:
+                    self.seen[pid] = (fields[19], command_line(pid))
+            # a child seen between its fork and its exec showed its parent's command line:
+            # read it again while it lives (a worker may have ended before workers() asks)
+            for pid, (start, cmd) in list(self.seen.items()):
+                if WORKER_MODULE not in cmd and (fields := stat_fields(pid)) \
+                        and fields[19] == start:
+                    self.seen[pid] = (start, command_line(pid) or cmd)
             time.sleep(0.01)
 
     def workers(self) -> list[int]:
-        """Recorded processes running the worker module (read now: a child seen between its
-        fork and its exec still showed its parent's command line)."""
-        found = []
-        for pid, (start, cmd) in list(self.seen.items()):
-            fields = stat_fields(pid)
-            if "bounce_cli.parallel" not in cmd and fields and fields[19] == start:
-                try:
-                    cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode()
-                    self.seen[pid] = (start, cmd)
-                except OSError:
-                    pass
-            if "bounce_cli.parallel" in cmd:
-                found.append(pid)
-        return found
+        """Recorded processes that ran the worker module."""
+        return [pid for pid, (_, cmd) in list(self.seen.items()) if WORKER_MODULE in cmd]
 
     def stop(self) -> None:
         self._stop.set()

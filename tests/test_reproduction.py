@@ -29,6 +29,13 @@ RESULTS = Path(__file__).resolve().parent.parent / "results"
 RTOL, ATOL = 1e-6, 1e-9
 MAX_FLIPPED_FRACTION = {("basin", "basin.csv", "outcome"): 1e-4,
                         ("basin", "basin.csv", "iterations"): 1e-4}
+#: bounce control's "fastest" gains minimise the spectral radius where the three eigenvalues
+#: nearly coincide (0.14527 and 0.14527 +- 2e-6 i): a cluster of three moves by about
+#: eps^(1/3) |lambda| ~ 6e-6 * 0.145 ~ 1e-6 when the matrix moves by one rounding eps, so the
+#: last bits of the optimiser's gains (numpy/libm versions) split it differently (seen:
+#: imaginary parts 2.20e-6 vs 2.22e-6); the spectral radius itself keeps rtol 1e-6
+EIGEN_COLUMNS = [f"lambda{i}_{part}" for i in (1, 2, 3) for part in ("re", "im")]
+ATOL_FOR = {("control", "eigen.csv", column): 1e-6 for column in EIGEN_COLUMNS}
 
 
 def committed_frames(name: str) -> dict[str, pd.DataFrame]:
@@ -45,7 +52,8 @@ def assert_frames_match(fresh: pd.DataFrame, committed: pd.DataFrame, where: tup
             pd.api.types.is_bool_dtype(b)
         ):
             x, y = a.to_numpy(float), b.to_numpy(float)
-            close = np.isclose(x, y, rtol=RTOL, atol=ATOL, equal_nan=True)
+            close = np.isclose(x, y, rtol=RTOL, atol=ATOL_FOR.get((*where, column), ATOL),
+                               equal_nan=True)
         else:
             text = [col.astype(object).where(col.notna(), "<missing>").astype(str)
                     for col in (a, b)]

@@ -204,10 +204,19 @@ def radius_frames(params: ModelParams, config: ControlConfig) -> dict[str, pd.Da
             "eigen.csv": eigen, "regions.csv": regions}
 
 
+#: relative margin below which a spectral radius counts as below a level (``_region``)
+BOUNDARY_ROUNDING = 1e-12
+
+
 def _region(name: str, below: float, grid: str, K, c, radius) -> dict:
     """Where the spectral radius is below ``below`` on a grid: area in the (K, c) plane (cells
-    times cell area), extent, and whether it touches the grid's edge (then it is cut)."""
-    inside = radius < below
+    times cell area), extent, and whether it touches the grid's edge (then it is cut).
+
+    A point whose radius equals ``below`` to within rounding is on the boundary, not inside:
+    at K = 1 (and at c = 0) an eigenvalue is on the unit circle exactly, and the computed
+    radius is 1 +- a few ulp, so ``radius < 1`` alone would count such grid points by the
+    last bits of the machine's arithmetic."""
+    inside = radius < below * (1.0 - BOUNDARY_ROUNDING)
     cell = (K[0, 1] - K[0, 0]) * (c[1, 0] - c[0, 0])
     edge = inside[0].any() or inside[-1].any() or inside[:, 0].any() or inside[:, -1].any()
 

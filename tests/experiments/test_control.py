@@ -79,6 +79,29 @@ def test_eigen_rows(result, paper_params):
     assert max(moduli) - min(moduli) < 1e-3
 
 
+def test_stable_region_leaves_out_the_neutral_edge(result, paper_params):
+    """At K = 1 an eigenvalue lies on the unit circle (for every c up to about 1.8 here;
+    at c = 0 for every K):
+    those grid points are on the boundary whatever their last bits say (1 - 1 ulp, 1 + 1 ulp)."""
+    grid = result.frames["radius_map.csv"]
+    at_one = grid[np.isclose(grid.gain_K, 1.0)]
+    assert (at_one.spectral_radius > 1 - 1e-12).all()
+    assert (np.abs(at_one.spectral_radius - 1) < 1e-12).sum() >= len(at_one) // 2
+    stable = result.frames["regions.csv"].set_index("region").loc["stable"]
+    assert stable.gain_max_K < 1.0
+    # the area counts exactly the points clearly below 1
+    K = np.unique(grid.gain_K)
+    c = np.unique(grid.rate_c)
+    cell = (K[1] - K[0]) * (c[1] - c[0])
+    clearly = int((grid.spectral_radius < 1 - 1e-9).sum())
+    assert stable.area_K_c == pytest.approx(clearly * cell, rel=1e-12)
+    # rounding on either side of the boundary does not change the answer
+    Kg, cg = np.meshgrid([0.5, 1.0], [0.5, 1.0])
+    for ulp in (-1, 0, 1):
+        radius = np.array([[0.5, 1.0 + ulp * 2.2e-16]] * 2)
+        assert exp._region("stable", 1.0, "map", Kg, cg, radius)["gain_max_K"] == 0.5
+
+
 def test_passive_threshold_is_bounce_impulse_committed_one(result):
     """Same scan and bisection with K = 0 as `bounce impulse` (committed baseline; a coarser
     scan here, so to the bisection tolerance)."""
