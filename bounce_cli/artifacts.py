@@ -18,6 +18,7 @@ beside it (ignored by git in ``results/``).
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import functools
 import hashlib
@@ -51,17 +52,20 @@ class OutputDirError(ValueError):
     """The output directory cannot be used (holds another config's results, not writable)."""
 
 
-def stage(path: Path, write: Callable[[Path], object]) -> Path:
-    """Call ``write(tmp)`` on a new temporary file beside ``path``; return ``tmp``.
-
-    On failure the temporary file is removed and the error propagates."""
-    tmp = reserve(path)
+@contextlib.contextmanager
+def staging(path: Path) -> Iterator[Path]:
+    """A new temporary file beside ``path`` (``reserve``), removed if the block fails or is
+    interrupted. Signals are held while it is created: one arriving between its creation and
+    the clean-up's knowing of it would leave it behind."""
+    held: list[Path] = []
     try:
-        write(tmp)
+        with deferred():
+            held.append(reserve(path))
+        yield held[0]
     except BaseException:
-        tmp.unlink(missing_ok=True)
+        for tmp in held:
+            tmp.unlink(missing_ok=True)
         raise
-    return tmp
 
 
 def reserve(path: Path) -> Path:
@@ -192,12 +196,9 @@ def current_umask() -> int:
 
 def atomic_write(path: Path, write: Callable[[Path], object]) -> None:
     """Write ``path`` through a temporary file and ``os.replace``: never half-written."""
-    tmp = stage(path, write)
-    try:
+    with staging(path) as tmp:
+        write(tmp)
         os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 def write_text_atomic(path: Path, text: str) -> None:
@@ -321,8 +322,8 @@ class RunDirectory:
             for folder in reversed(missing):
                 folder.mkdir()
                 self.created.append(folder)
-            probe = stage(self.out_dir / ".write-test", lambda tmp: None)
-            probe.unlink()
+            with staging(self.out_dir / ".write-test") as probe:
+                probe.unlink()
         except BaseException as exc:
             self.discard()
             if not isinstance(exc, OSError):
@@ -430,28 +431,32 @@ class RunDirectory:
                                               pil_kwargs=PNG_OPTIONS)
         staged: list[tuple[Path, Path]] = []
         children: list[_ChildWriter] = []
+
+        def reserved(name: str) -> Path:
+            # the temporary file is created and recorded for the clean-up in one step: a
+            # signal between the two (a test sends one the moment the first file appears)
+            # would leave it behind
+            with deferred():
+                staged.append((reserve(self.out_dir / name), self.out_dir / name))
+            return staged[-1][0]
+
         try:
-            unchanged = True
             for group in self._background_groups():
-                jobs = []
-                for name in group:
-                    final = self.out_dir / name
-                    staged.append((reserve(final), final))
-                    jobs.append((staged[-1][0], writers.pop(name), final))
+                jobs = [(reserved(name), writers.pop(name), self.out_dir / name)
+                        for name in group]
                 children.append(_ChildWriter(jobs))
                 children[-1].start()
-            here = []
+            unchanged = True
             for name, write in writers.items():
-                here.append((stage(self.out_dir / name, write), self.out_dir / name))
-                staged.append(here[-1])
-            unchanged = all(same_bytes(tmp, final) for tmp, final in here)
+                tmp = reserved(name)
+                write(tmp)
+                unchanged = unchanged and same_bytes(tmp, self.out_dir / name)
             while children:
                 unchanged &= children[0].wait()  # the child compared its files
                 children.pop(0)
             for name, text in ((TIMING, json.dumps(self.timing(), indent=2) + "\n"),
                                (MANIFEST, self.manifest_text(unchanged))):
-                write_json = functools.partial(Path.write_text, data=text)
-                staged.append((stage(self.out_dir / name, write_json), self.out_dir / name))
+                reserved(name).write_text(text)
             with deferred():  # all of the new run's files, or none
                 for tmp, final in staged:
                     os.replace(tmp, final)

@@ -171,6 +171,55 @@ def test_a_failure_in_this_process_kills_the_child(tmp_path, small_background_th
     assert not list((tmp_path / "r").glob(".*tmp"))
 
 
+@pytest.fixture
+def signal_on_each_new_file(monkeypatch):
+    """Once armed, a signal arrives the instant each staging file has been created (before
+    its creator returns): what the interrupt test's "writing" moment aims at. The handler is
+    called as Python calls it, in the main thread between two bytecodes."""
+    import signal
+
+    from bounce_cli import interrupts
+
+    monkeypatch.setattr(interrupts, "_state", {"deferring": 0, "pending": None, "raised": False})
+    real = artifacts.reserve
+    created: list = []
+
+    def reserve_then_signal(path):
+        created.append(real(path))
+        interrupts._state["raised"] = False  # every file gets its own signal
+        interrupts._handler(signal.SIGTERM, None)
+        return created[-1]
+
+    def arm():
+        monkeypatch.setattr(artifacts, "reserve", reserve_then_signal)
+        return created
+
+    return arm
+
+
+@pytest.mark.parametrize("background", [False, True], ids=["here", "in a child"])
+def test_a_signal_as_a_staging_file_appears_leaves_nothing(tmp_path, monkeypatch, background,
+                                                          signal_on_each_new_file):
+    from bounce_cli.interrupts import Interrupted
+
+    if background and not sys.platform.startswith("linux"):
+        pytest.skip("written in children on Linux")
+    monkeypatch.setattr(artifacts, "BACKGROUND_TABLE_ROWS", 1000 if background else 10**9)
+    out = tmp_path / "r"
+    out.mkdir()
+    (out / "keep.txt").write_text("previous")
+    run = make_run(out, {"a": 1})
+    run.add_csv("big.csv", big_table(2000))
+    created = signal_on_each_new_file()
+    with pytest.raises(Interrupted):
+        run.commit()
+    assert len(created) == 1  # stopped at the first file
+    assert sorted(p.name for p in out.iterdir()) == ["keep.txt"]
+    with pytest.raises(Interrupted):
+        atomic_write(out / "x.txt", lambda tmp: tmp.write_text("new"))
+    assert sorted(p.name for p in out.iterdir()) == ["keep.txt"]
+
+
 def test_atomic_write_never_leaves_half_file(tmp_path):
     target = tmp_path / "x.txt"
     target.write_text("old")
