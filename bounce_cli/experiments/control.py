@@ -622,7 +622,8 @@ def draw_acf(frames):
 def _radius_image(ax, frame: pd.DataFrame, target: float, levels_extra=(0.5,)):
     gains, rates = np.unique(frame.gain_K), np.unique(frame.rate_c)
     radius = frame.pivot(index="rate_c", columns="gain_K", values="spectral_radius").to_numpy()
-    im = ax.pcolormesh(gains, rates, np.ma.masked_where(radius >= 1.0, radius), cmap="viridis",
+    unstable = radius >= 1.0 - BOUNDARY_ROUNDING  # grey, as _region counts (neutral: K = 1)
+    im = ax.pcolormesh(gains, rates, np.ma.masked_where(unstable, radius), cmap="viridis",
                        vmin=0.0, vmax=1.0, shading="nearest")
     ax.set_facecolor("0.85")
     ax.contour(gains, rates, radius, levels=[target], colors="w", linewidths=1.4)
@@ -666,7 +667,7 @@ def draw_stability(frames):
     axes[0, 1].set_title(f"Around the fastest: white {target:g}, dotted 0.25, 0.3")
     axes[0, 1].legend(fontsize=7, loc="lower left")
     fig.colorbar(im, ax=axes[0, :], label="spectral radius of the 3x3 Jacobian "
-                 "(grey: >= 1, unstable)", shrink=0.9)
+                 "(grey: >= 1, not stable)", shrink=0.9)
 
     ax = axes[1, 0]
     rate = line.rate_c.iloc[0]
