@@ -331,6 +331,21 @@ def hop_cycles(v, params: ModelParams) -> int:
     return int(round(float(v) * params.omega / (math.pi * params.g)))
 
 
+def continues_period1(v1: float, params1: ModelParams, v2_pair, params2: ModelParams) -> bool:
+    """Whether the period-2 orbit with velocities ``v2_pair`` (two successive impacts, at
+    ``params2``) can have been born in a flip of the period-1 orbit with velocity ``v1`` (at
+    ``params1``, close by): it hops the same racket cycles on average (the two flights of a
+    period-2 orbit last 2n racket periods together, as two of the period-1 orbit's) and its
+    velocities lie either side of the period-1 one (the flip's eigenvector, eigenvalue -1,
+    alternates the sign of the deviation). A period-2 orbit of another family, reached by a
+    jump between coexisting orbits, fails one or both."""
+    v2 = np.asarray(v2_pair, dtype=float)
+    if not (np.all(np.isfinite(v2)) and np.isfinite(v1)):
+        return False
+    same_cycles = hop_cycles(float(v2.mean()), params2) == hop_cycles(v1, params1)
+    return bool(same_cycles and v2.min() <= v1 <= v2.max())
+
+
 @dataclass(frozen=True)
 class FlipLocation:
     """The swept-parameter interval between ``period1_end`` (period 1 detected) and
@@ -373,10 +388,11 @@ def locate_period_doublings(
     on_impact: Callable[[int], None] | None = None,
 ) -> list[FlipLocation | None]:
     """Narrow each bracket by multisection, all brackets in one batch: first both ends are
-    iterated again with ``settings`` (a bracket whose ends no longer show periods 1 and 2 was
-    a jump to a coexisting orbit, not a flip: None); then each round iterates ``probes``
-    values inside every interval at once and keeps the sub-interval between the last value
-    of the run of period 1 and the next value.
+    iterated again with ``settings``; a bracket whose ends no longer show periods 1 and 2, or
+    whose period-2 orbit does not continue the period-1 one (``continues_period1``), was a
+    jump to a coexisting orbit, not a flip: None. Then each round iterates ``probes`` values
+    inside every interval at once and keeps the sub-interval between the last value of the
+    run of period 1 and the next value; the final ends are checked again the same way.
 
     A finite transient biases the result toward the period-1 side: just below the flip the
     period-1 orbit attracts like (1 - eps)^k with eps proportional to the distance, so an orbit
@@ -395,10 +411,27 @@ def locate_period_doublings(
                                on_impact)
         return attractor_names(orbits, settings)[1], orbits
 
-    ends, orbits = run(np.concatenate([low, high]), np.tile(theta0, 2), np.tile(v0, 2))
-    confirmed = (ends[:n] == 1) & (ends[n:] == 2)
-    cycles = [hop_cycles(orbits.v[k, -1], parameter_point(base, parameter, low[k]))
-              if confirmed[k] else 0 for k in range(n)]
+    def confirm(which: np.ndarray, settled: bool) -> tuple[np.ndarray, list[int]]:
+        """Which brackets of ``which`` show a flip at their ends (low: period 1, high: a
+        period 2 continuing it; with ``settled`` False, right at the flip, the high end may
+        also not have settled), and the period-1 orbit's racket cycles per hop."""
+        ends, orbits = run(np.concatenate([low[which], high[which]]), np.tile(theta0[which], 2),
+                           np.tile(v0[which], 2))
+        m = which.size
+        ok, cycles = np.zeros(m, dtype=bool), [0] * m
+        for i, k in enumerate(which):
+            if ends[i] != 1:
+                continue
+            at_low = parameter_point(base, parameter, low[k])
+            cycles[i] = hop_cycles(orbits.v[i, -1], at_low)
+            if ends[m + i] == 2:
+                ok[i] = continues_period1(orbits.v[i, -1], at_low, orbits.v[m + i, -2:],
+                                          parameter_point(base, parameter, high[k]))
+            else:
+                ok[i] = not settled and ends[m + i] == 0
+        return ok, cycles
+
+    confirmed, cycles = confirm(np.arange(n), settled=True)
     active = np.flatnonzero(confirmed)
     for _ in range(rounds if active.size else 0):
         inner = np.linspace(low[active], high[active], probes + 2)[1:-1]  # (probes, active)
@@ -409,6 +442,8 @@ def locate_period_doublings(
             values = np.concatenate([[low[k]], inner[:, row], [high[k]]])
             first_other = int(np.argmax(seq != 1))  # seq[-1] = 2: there is one
             low[k], high[k] = values[first_other - 1], values[first_other]
+    if active.size:  # the narrowed ends: a jump can hide inside a flip's bracket too
+        confirmed[active] = confirm(active, settled=False)[0]
     return [FlipLocation(float(low[k]), float(high[k]), cycles[k]) if confirmed[k] else None
             for k in range(n)]
 

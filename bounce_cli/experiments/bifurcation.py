@@ -297,7 +297,8 @@ def locate_flips(config: BifurcationConfig, periods: np.ndarray, values: np.ndar
             ends.reverse()
         brackets.append(FlipBracket(ends[0], ends[1], math.radians(theta0_deg[ic]), v0[ic]))
     options.progress.start(
-        (config.flip.rounds + 1) * (settings.transient_impacts + settings.measured_impacts),
+        # the ends, each round, the narrowed ends
+        (config.flip.rounds + 2) * (settings.transient_impacts + settings.measured_impacts),
         "bifurcation: locating the flips")
     located: dict[int, FlipLocation] = {}
     for loc in locate_period_doublings(config.params, config.sweep.parameter, brackets,

@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 from bounce_cli.cli import app
 from bounce_cli.engine.impact import next_impact_phase
 from bounce_cli.engine.linear import flip_boundary_g, racket_acceleration_at_impact_g, stability
-from bounce_cli.engine.params import ModelParams
+from bounce_cli.engine.params import ModelError, ModelParams
 from bounce_cli.engine.bifurcation import (
     ParameterArrays,
     SweepSettings,
@@ -234,6 +234,44 @@ def test_period_doubling_in_the_racket_period_at_another_alpha():
     loc = locate_period_doubling(base, "racket_period", 1.03 * flip, 0.97 * flip,
                                  theta0=start.theta_rad, v0=1.05 * start.v_m_s, settings=settings)
     assert abs(loc.value / flip - 1.0) < 1e-3
+
+
+def test_a_jump_between_coexisting_orbits_is_not_a_flip():
+    """alpha 0.7, tau 0.8 s, a_r swept: from (90 deg, 7 m/s) the orbit is on the period-2
+    orbit of the one-cycle family (v 3.5 / 4.4 m/s) at a_r = 0.1900 m and on the new period-1
+    orbit hopping two racket cycles (7.85 m/s, born at 0.1763 m) at 0.1905 m: periods 2 and 1
+    at the ends, but no flip (eq. 14 puts that orbit's flip at 0.2408 m). A period-2 orbit born
+    in a flip continues the period-1 orbit: the same racket cycles per hop, its two velocities
+    either side of the period-1 one. (A new-user review found this reported as the flip, -21 %.)
+    The real flip of that orbit is still found."""
+    base = ModelParams(0.7, 9.81, 0.3, 0.8)
+    settings = SweepSettings(transient_impacts=5000, measured_impacts=64, recorded_impacts=64)
+    with pytest.raises(ModelError, match="cannot bracket the flip"):
+        locate_period_doubling(base, "racket_amplitude", 0.1905, 0.1900, theta0=math.pi / 2,
+                               v0=7.0, settings=settings)
+    flip = period1_thresholds(base, "racket_amplitude", 2).flip
+    # started 2 % above that orbit's fixed point (eqs. 7, 8 with two cycles per hop: v = 2 pi
+    # g / w, cos theta = (1 - alpha)/(1 + alpha) v w / (a_r w^2)) at the period-1 end
+    w = base.omega
+    theta = math.acos((1 - 0.7) / (1 + 0.7) * TWO_PI * 9.81 / w / (0.97 * flip * w))
+    loc = locate_period_doubling(base, "racket_amplitude", 0.97 * flip, 1.03 * flip,
+                                 theta0=theta, v0=1.02 * TWO_PI * 9.81 / w, settings=settings)
+    assert loc.cycles == 2
+    assert abs(loc.value / flip - 1.0) < 1e-3
+
+
+def test_the_cli_reports_only_real_flips(tmp_path):
+    """The review's sweep: the one-cycle flip within 1e-3 of eq. 14; the two-cycle orbit's
+    flip either located within 1e-3 or not at all -- never the coexisting-orbit jump."""
+    result = runner.invoke(app, [
+        "bifurcation", "--set", "model.alpha=0.7", "--set", "model.racket_period=0.8",
+        "--set", "sweep.parameter=racket_amplitude", "--set", "sweep.start=0.05",
+        "--set", "sweep.stop=0.25", "--set", "sweep.num=150", "--out", str(tmp_path), "--quiet"])
+    assert result.exit_code == 0, result.output
+    flips = pd.read_csv(tmp_path / "thresholds.csv").query("threshold == 'flip'")
+    located = flips.dropna(subset=["relative_difference"])
+    assert 1 in set(located.cycles)
+    assert (located.relative_difference.abs() < 1e-3).all(), located
 
 
 def test_the_flip_is_supercritical():
