@@ -136,8 +136,20 @@ SetOption = Annotated[
         metavar="KEY=VALUE",
     ),
 ]
+def output_folder(text: str) -> Path:
+    """--out: a folder path; an empty one (an unset shell variable, ``--out "$DIR"``) would
+    mean the current folder, so it is refused ("." says so on purpose)."""
+    if isinstance(text, Path):
+        return text
+    if not text.strip():
+        raise typer.BadParameter("an empty path (an unset shell variable?); give a folder, "
+                                 "or . for the current one")
+    return Path(text)
+
+
 OutOption = Annotated[
-    Optional[Path], typer.Option("--out", "-o", help="Output directory (default results/<name>).")
+    Optional[Path], typer.Option("--out", "-o", parser=output_folder, metavar="PATH",
+                                 help="Output directory (default results/<name>).")
 ]
 QuietOption = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or summary.")]
 ForceOption = Annotated[
@@ -363,13 +375,12 @@ def run_experiment(
             fail(f"writing {exc.filename or 'results'}: {exc.strerror or exc}")
         raise
     if not quiet:
-        for line in result.summary:
-            stderr.print(line, highlight=False)
-        stderr.print(
-            f"wrote {len(written)} files to {run_dir.out_dir}/: "
-            + ", ".join(p.name for p in written),
-            highlight=False,
-        )
+        # as written (no markup: a summary may hold "[a, b]"); wrapped on a terminal only, so
+        # that a log file keeps one line per result (grep finds the numbers)
+        lines = [*result.summary, f"wrote {len(written)} files to {run_dir.out_dir}/: "
+                 + ", ".join(p.name for p in written)]
+        for line in lines:
+            stderr.print(line, highlight=False, markup=False, soft_wrap=not stderr.is_terminal)
 
 
 # -- engine commands ------------------------------------------------------------------------
@@ -584,9 +595,8 @@ def orbit_notes(orbit, params: ModelParams, min_hop_s: float) -> list[str]:
 
 @app.command("reproduce")
 def reproduce_command(
-    out: Annotated[Path, typer.Option("--out", "-o", help="Results root directory.")] = Path(
-        "results"
-    ),
+    out: Annotated[Path, typer.Option("--out", "-o", parser=output_folder, metavar="PATH",
+                                      help="Results root directory.")] = Path("results"),
     jobs: JobsOption = None,
     quiet: QuietOption = False,
     force: ForceOption = False,

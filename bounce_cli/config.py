@@ -273,12 +273,14 @@ def format_validation_error(
     exc: ValidationError, source: str, overridden: frozenset[str] = frozenset()
 ) -> str:
     """First validation problem as one line: ``source: dotted.key: reason`` (source is
-    ``--set`` when the key was set by an override)."""
+    ``--set`` when the key was set by an override, or when a rule between keys names one)."""
     err = exc.errors()[0]
     loc = ".".join(str(part) for part in err["loc"]) or "(top level)"
     if any(loc == key or loc.startswith(key + ".") or key.startswith(loc + ".")
            for key in overridden):
         source = "--set"
+    elif not err["loc"] and any(key in str(err.get("msg", "")) for key in overridden):
+        source = "--set"  # a rule between keys (a model validator) names a key set by --set
     if err["type"] == "extra_forbidden":
         reason = "unknown key"
     elif err["type"] == "missing":
@@ -289,6 +291,8 @@ def format_validation_error(
             reason += f" (got {show_value(err['input'])})"
     more = len(exc.errors()) - 1
     tail = f" (and {more} more problem{'s' if more > 1 else ''})" if more else ""
+    if not err["loc"] and source == "--set":
+        return f"--set: {reason}{tail}"  # the reason names the keys
     return f"{source}: {loc}: {reason}{tail}"
 
 

@@ -173,6 +173,10 @@ class _Worker:
 
 #: how many tasks per worker LocalPool.map runs ahead of the next result it yields
 AHEAD = 4
+#: the Dask client's timeout to connect to a scheduler, s
+CONNECT_TIMEOUT_S = 10.0
+#: seconds beyond the Dask client's own timeout that bounce waits for a scheduler's answer
+CONNECT_GRACE_S = 5.0
 
 
 class LocalPool:
@@ -288,11 +292,11 @@ class DaskCluster:
     cluster itself is the user's and stays up)."""
 
     def __init__(self, address: str | None = None, *, client: Any = None,
-                 timeout_s: float = 10.0) -> None:
+                 timeout_s: float | None = None) -> None:
         if (address is None) == (client is None):
             raise ValueError("give a scheduler address or a client")
         self.address = address
-        self.timeout_s = timeout_s
+        self.timeout_s = CONNECT_TIMEOUT_S if timeout_s is None else timeout_s
         self._client = client
         self._owns_client = client is None
         self._futures: deque[Any] = deque()
@@ -307,17 +311,63 @@ class DaskCluster:
                     "--scheduler needs Dask's distributed package: "
                     "pip install 'bounce-cli[cluster]'") from None
             self._check_reachable()
-            try:
-                with deferred():  # a client is either made and kept (to close) or not made
-                    self._client = Client(self.address, timeout=self.timeout_s,
-                                          set_as_default=False)
-            except (OSError, TimeoutError, ValueError) as exc:
-                reason = " ".join(str(exc).split()) or type(exc).__name__
-                raise ClusterError(f"--scheduler {self.address}: cannot connect: "
-                                   f"{reason}") from None
+            self._client = self._connect(Client)
         threads = self._client.nthreads()
         self.workers = max(1, sum(threads.values()))
         return self
+
+    def _connect(self, client_class: Any) -> Any:
+        """A client of the scheduler, made in a helper thread that this one waits for at most
+        ``timeout_s`` + CONNECT_GRACE_S, interruptibly: a port that accepts connections but is
+        not a Dask scheduler can keep ``Client`` waiting far beyond its timeout (a silent
+        service) or make it fail in odd ways (an HTTP server's reply read as a frame length:
+        a MemoryError). Either is one ClusterError; a client made after it was given up is
+        closed by the helper thread."""
+        import threading
+
+        made: dict[str, Any] = {}
+        done = threading.Event()
+
+        def connect() -> None:
+            try:
+                client = client_class(self.address, timeout=self.timeout_s,
+                                      set_as_default=False)
+            except BaseException as exc:  # handed to the waiting thread
+                made["error"] = exc
+            else:
+                with lock:
+                    if made.get("abandoned"):
+                        client.close()
+                    else:
+                        made["client"] = client
+            finally:
+                done.set()
+
+        lock = threading.Lock()
+        threading.Thread(target=connect, name="bounce-dask-connect", daemon=True).start()
+        try:
+            finished = done.wait(self.timeout_s + CONNECT_GRACE_S)  # a signal interrupts it
+        except BaseException:
+            with lock:
+                made["abandoned"] = True
+                client = made.pop("client", None)
+            if client is not None:
+                client.close()
+            raise
+        with lock:
+            if "client" in made:
+                return made["client"]
+            made["abandoned"] = True
+        error = made.get("error")
+        if not finished:
+            reason = (f"no answer as a Dask scheduler within "
+                      f"{self.timeout_s + CONNECT_GRACE_S:g} s")
+        elif isinstance(error, (OSError, TimeoutError, ValueError)):
+            reason = " ".join(str(error).split()) or type(error).__name__
+        else:
+            reason = (f"a service answers there, but not as a Dask scheduler "
+                      f"({type(error).__name__} while reading its reply)")
+        raise ClusterError(f"--scheduler {self.address}: cannot connect: {reason}") from None
 
     def _check_reachable(self) -> None:
         """A quick TCP connect to a ``tcp://host:port`` address: a refused connection or an

@@ -209,3 +209,32 @@ def test_print_config_prints_the_resolved_config_and_runs_nothing(name, tmp_path
     again = cli(name, "--print-config", "--config", tmp_path / "printed.yaml")
     assert again.exit_code == 0 and again.stdout == result.stdout
     assert list(tmp_path.iterdir()) == [tmp_path / "printed.yaml"]  # no results folder
+
+
+@pytest.mark.parametrize("command", ["stability", "reproduce"])
+@pytest.mark.parametrize("empty", ["", "  "])
+def test_an_empty_out_is_refused_not_the_current_folder(command, empty, tmp_path, monkeypatch,
+                                                        cli, user_error):
+    """``--out "$DIR"`` with DIR unset: Path("") is ".", so the run would write into the
+    current folder; refused (``--out .`` says that on purpose)."""
+    monkeypatch.chdir(tmp_path)
+    result = cli(command, "--quiet", "--out", empty)
+    user_error(result, "--out", "an empty path")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_rule_between_keys_broken_by_set_blames_set_not_the_file(cli, user_error, tmp_path):
+    """A model validator's error has no key of its own: when its message names a key given
+    with --set, the line says --set (the bundled file is fine), without "(top level)"."""
+    result = cli("sweep", "--quiet", "--out", tmp_path / "o", "--set", "basin.v0_m_s.num=2")
+    user_error(result, "--set: basin.v0_m_s.num must be at least measures.entropy_box")
+    assert "sweep.yaml" not in result.output and "top level" not in result.output
+
+
+def test_the_summary_is_not_wrapped_when_not_on_a_terminal(cli, tmp_path):
+    """A log file (stderr redirected) keeps one line per result, however long."""
+    out = tmp_path / ("a-long-folder-name-" * 4)
+    result = cli("stability", "--out", out)
+    assert result.exit_code == 0, result.output
+    wrote = [line for line in result.output.splitlines() if line.startswith("wrote ")]
+    assert len(wrote) == 1 and len(wrote[0]) > 120 and wrote[0].endswith("run.json")

@@ -183,6 +183,93 @@ def test_an_unreachable_scheduler_is_one_line(cli, user_error, tmp_path):
     assert not (tmp_path / "o").exists()
 
 
+class NotAScheduler:
+    """A TCP service on a free local port that is not a Dask scheduler: ``silent`` accepts
+    connections and never answers; ``http`` answers every request with an HTTP 400."""
+
+    def __init__(self, kind: str) -> None:
+        import socket
+        import threading
+
+        self.kind = kind
+        self.server = socket.socket()
+        self.server.bind(("127.0.0.1", 0))
+        self.server.listen(8)
+        self.address = f"tcp://127.0.0.1:{self.server.getsockname()[1]}"
+        self.held: list = []
+        threading.Thread(target=self._serve, daemon=True).start()
+
+    def _serve(self) -> None:
+        while True:
+            try:
+                conn, _ = self.server.accept()
+            except OSError:
+                return
+            self.held.append(conn)
+            if self.kind == "http":
+                try:
+                    conn.recv(65536)
+                    conn.sendall(b"HTTP/1.0 400 Bad Request\r\nContent-Length: 0\r\n\r\n")
+                except OSError:
+                    pass
+
+    def close(self) -> None:
+        self.server.close()
+        for conn in self.held:
+            conn.close()
+
+
+@pytest.fixture
+def not_a_scheduler(request):
+    service = NotAScheduler(request.param)
+    yield service
+    service.close()
+
+
+@pytest.mark.parametrize("not_a_scheduler, needle", [
+    ("silent", "no answer as a Dask scheduler within 1.5 s"),
+    ("http", "a service answers there, but not as a Dask scheduler"),
+], indirect=["not_a_scheduler"], ids=["silent", "http"])
+def test_a_service_that_is_not_a_scheduler_is_one_line(cli, user_error, tmp_path, monkeypatch,
+                                                       not_a_scheduler, needle):
+    """A port that accepts connections but is not Dask: a silent one kept the client waiting
+    for minutes (its timeout did not apply) with signals held; an HTTP server's reply, read
+    as a frame length, asked numpy for 3 EiB (a traceback)."""
+    pytest.importorskip("distributed")
+    from bounce_cli import parallel
+
+    monkeypatch.setattr(parallel, "CONNECT_TIMEOUT_S", 1.0)
+    monkeypatch.setattr(parallel, "CONNECT_GRACE_S", 0.5)
+    started = time.monotonic()
+    result = cli("sweep", "--quiet", "--out", tmp_path / "o", *SMALL,
+                 "--scheduler", not_a_scheduler.address)
+    user_error(result, f"--scheduler {not_a_scheduler.address}", "cannot connect", needle)
+    assert time.monotonic() - started < 10
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("not_a_scheduler", ["silent"], indirect=True)
+def test_ctrl_c_while_waiting_for_a_silent_scheduler(tmp_path, not_a_scheduler):
+    pytest.importorskip("distributed")
+    out = tmp_path / "o"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "bounce_cli", "sweep", "--quiet", "--out", str(out), *SMALL,
+         "--scheduler", not_a_scheduler.address],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    deadline = time.monotonic() + 30
+    while len(not_a_scheduler.held) < 2 and time.monotonic() < deadline:  # probe, then client
+        time.sleep(0.05)
+    assert len(not_a_scheduler.held) >= 2, "the client never connected"
+    time.sleep(0.3)
+    sent = time.monotonic()
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=10)
+    assert time.monotonic() - sent < 2.0
+    assert proc.returncode == 130, err
+    assert err.strip() == "bounce: interrupted"
+    assert not out.exists()
+
+
 def test_only_sweep_takes_resume_and_scheduler(cli):
     assert "--resume" in cli("sweep", "--help").stdout
     assert "--scheduler" in cli("sweep", "--help").stdout
