@@ -101,13 +101,15 @@ def local_derivatives(t, x, t0: float, half_window: float, degree: int):
     return float(c[0]), float(c[1] / half_window), float(2.0 * c[2] / half_window**2)
 
 
-def _poly_root_near(coef, half_window: float, t0: float, target: float = 0.0):
-    """Real root of the local polynomial (minus target) in [-1, 1] nearest s = 0, as a time."""
+def _poly_root_near(coef, half_window: float, t0: float, target: float = 0.0,
+                    reach: float = 1.0):
+    """Real root of the local polynomial (minus target) in [-reach, reach] (in units of the
+    half window; 1: the window) nearest s = 0, as a time."""
     c = np.array(coef, dtype=float)
     c[0] -= target
     roots = np.polynomial.polynomial.polyroots(c)
     real = roots[np.abs(roots.imag) < 1e-9].real
-    real = real[np.abs(real) <= 1.0]
+    real = real[np.abs(real) <= reach]
     if real.size == 0:
         return math.nan
     return float(t0 + half_window * real[np.argmin(np.abs(real))])
@@ -199,6 +201,34 @@ def _refined_extrema(t, x, measured, index, kind: int, s: ExtractionSettings):
     return out
 
 
+def _motion_onset(t, x, t0: float, half_window: float, t_peak: float,
+                  amplitude: float) -> float | None:
+    """For a racket that stood still and then started moving up (a resting start), the time
+    of its last still sample (within 4 robust SDs of its resting position) before ``t_peak``;
+    None when it was moving at the upward crossing ``t0``. Still: it moved less than a quarter
+    as far in the half window before ``t0`` as in the one after, or less than 2 % of its
+    ``amplitude`` in both (a still racket dithering about its mid-position crosses it by
+    noise alone, before it starts moving)."""
+    finite = np.isfinite(x)
+    before = x[(t >= t0 - half_window) & (t < t0) & finite]
+    after = x[(t > t0) & (t <= t0 + half_window) & finite]
+    if before.size < 2 or after.size < 2:
+        return None
+    starts_here = np.ptp(before) < 0.25 * np.ptp(after)
+    still_here = max(np.ptp(before), np.ptp(after)) < 0.02 * amplitude
+    if not (starts_here or still_here):
+        return None
+    rest = float(np.median(before))
+    band = 4.0 * 1.4826 * float(np.median(np.abs(before - rest)))
+    ahead = (t >= t0 - half_window) & (t < t_peak) & finite
+    still = np.flatnonzero(ahead & (np.abs(x - rest) <= band))
+    if still.size == 0:
+        return None
+    onset = float(t[still[-1]])
+    moving = x[(t > onset) & (t <= onset + half_window) & finite]
+    return onset if moving.size >= 2 and np.ptp(moving) > 4.0 * np.ptp(before) else None
+
+
 def racket_cycles(t, racket, measured, s: ExtractionSettings) -> RacketCycles:
     """The racket's cycles (see the module docstring). ``racket``: gap-bridged positions;
     ``measured``: which samples were measured (local fits use only those)."""
@@ -247,10 +277,21 @@ def racket_cycles(t, racket, measured, s: ExtractionSettings) -> RacketCycles:
         if up.size == 0:
             continue
         i = a + up[-1]  # the last one before the peak (a still racket before it may dither)
-        coef = local_polynomial(t, raw, t[i], s.position_half_window_s, s.position_degree)
-        if coef is None:
-            continue
-        tc = _poly_root_near(coef, s.position_half_window_s, t[i], mid)
+        h = s.position_half_window_s
+        onset = _motion_onset(t, raw, t[i], h, et[j + 1],
+                              float(ex[j + 1]) - mid)  # the peak after the crossing
+        if onset is None:
+            coef = local_polynomial(t, raw, t[i], h, s.position_degree)
+            tc = math.nan if coef is None else _poly_root_near(coef, h, t[i], mid)
+        else:
+            # a racket that stood still until it started moving (a resting start): a fit
+            # across that kink is biased (a cubic over +-20 ms: 5 ms early); fit the moving
+            # side, from the last still sample, and look for the crossing up to a sample
+            # before it
+            coef = local_polynomial(t, raw, onset + h, h, s.position_degree)
+            step = float(np.median(np.diff(t[max(i - 3, 0):i + 4])))
+            tc = (math.nan if coef is None
+                  else _poly_root_near(coef, h, onset + h, mid, reach=1.0 + step / h))
         if math.isfinite(tc):
             crossings.append((tc, j))
     starts, periods, amplitudes, mids = [], [], [], []
