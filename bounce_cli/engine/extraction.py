@@ -47,8 +47,16 @@ TWO_PI = 2.0 * math.pi
 #: not used (e.g. a crossing of a still, drifting racket before the movement starts)
 MAX_PERIOD_DEVIATION = 0.4
 #: ball-racket closing speed (m/s) allowed for when deciding whether a velocity jump happened
-#: near the racket: ``contact_distance_m`` + this x the sampling interval
+#: near the racket: ``contact_distance_m`` + this x the velocities' span
 CLOSING_SPEED_M_S = 10.0
+#: contact detection: the ball's velocities either side of a sample are differences over this
+#: time (s; at least one sample): 10 ms, two samples at 200 Hz
+JUMP_SPAN_S = 0.01
+#: contact detection: a jump counts when above this many robust SDs of all the jumps
+JUMP_NOISE_FACTOR = 4.0
+#: time kept away from each contact by the flight fits and the resting test (s; at least
+#: ``guard_samples``; 10 ms: 2 samples at 200 Hz)
+CONTACT_GUARD_S = 0.01
 
 
 @dataclass(frozen=True)
@@ -359,21 +367,38 @@ def fit_flight(t, x, t_ref: float, g: float, min_samples: int) -> FlightFit | No
 # -- contacts -----------------------------------------------------------------------------------
 def detect_contacts(t, ball, racket, s: ExtractionSettings) -> np.ndarray:
     """Sample indices of contacts: the ball's velocity jumps upward (net of gravity) by more
-    than ``min_velocity_jump_m_s`` within ``contact_distance_m`` (plus ``CLOSING_SPEED_M_S``
-    times the sampling interval) of the racket; a jump straddling two samples counts once (the
-    larger)."""
-    v_half = np.diff(ball) / np.diff(t)
+    than a threshold within ``contact_distance_m`` (plus ``CLOSING_SPEED_M_S`` times the
+    velocities' span) of the racket; a jump straddling two samples counts once (the larger).
+
+    The velocities either side of a sample are differences over JUMP_SPAN_S (at least one
+    sample): over one sample, 0.5 mm of noise at 1 kHz is a jump of 1.2 m/s (SD), and spurious
+    contacts split the flights. The threshold is ``min_velocity_jump_m_s`` or
+    JUMP_NOISE_FACTOR robust SDs of the jumps (which are noise but at the contacts),
+    whichever is larger."""
+    n = t.size
     jump = np.full(t.shape, np.nan)
-    jump[1:-1] = v_half[1:] - v_half[:-1] + s.g * 0.5 * (t[2:] - t[:-2])
-    # the sample nearest a contact may be up to one interval away from it, while ball and
-    # racket approach each other at several m/s: the threshold grows with the interval
-    spacing = np.gradient(t)
-    near = (ball - s.ball_offset_m - racket) < s.contact_distance_m + CLOSING_SPEED_M_S * spacing
+    step = float(np.median(np.diff(t))) if n > 1 else 1.0
+    m = max(1, int(round(JUMP_SPAN_S / step)))
+    if n > 2 * m:
+        i = np.arange(m, n - m)
+        v_after = (ball[i + m] - ball[i]) / (t[i + m] - t[i])
+        v_before = (ball[i] - ball[i - m]) / (t[i] - t[i - m])
+        jump[i] = v_after - v_before + s.g * 0.5 * (t[i + m] - t[i - m])
+    finite = jump[np.isfinite(jump)]
+    threshold = s.min_velocity_jump_m_s
+    if finite.size:
+        spread = 1.4826 * float(np.median(np.abs(finite - np.median(finite))))
+        threshold = max(threshold, JUMP_NOISE_FACTOR * spread)
+    # the sample nearest a contact may be up to the span away from it, while ball and racket
+    # approach each other at several m/s: the distance allowed grows with the span
+    span = np.zeros(t.shape)
+    span[m:n - m] = 0.5 * (t[2 * m:] - t[:n - 2 * m]) if n > 2 * m else 0.0
+    near = (ball - s.ball_offset_m - racket) < s.contact_distance_m + CLOSING_SPEED_M_S * span
     with np.errstate(invalid="ignore"):
-        candidate = np.flatnonzero((jump > s.min_velocity_jump_m_s) & near)
+        candidate = np.flatnonzero((jump > threshold) & near)
     contacts: list[int] = []
     for i in candidate.tolist():
-        if contacts and i - contacts[-1] <= 2:
+        if contacts and i - contacts[-1] <= 2 * m:
             if jump[i] > jump[contacts[-1]]:
                 contacts[-1] = i
             continue
@@ -427,6 +452,14 @@ def _segment_fits(t, ball, long_gap, racket, lo: int, hi: int, t_after: float,
     return after, before, rest_s, has_gap
 
 
+def guard_samples(s: ExtractionSettings, dt: float) -> int:
+    """Samples kept away from each contact by the flight fits and the resting test:
+    ``guard_samples``, and at least CONTACT_GUARD_S (right after a contact the ball is still
+    within ``contact_tolerance_m`` of the racket for a few ms: at 1 kHz, with noise, it
+    looked like resting and the flight was lost)."""
+    return max(s.guard_samples, int(math.ceil(CONTACT_GUARD_S / dt - 1e-9)))
+
+
 def widened_windows(s: ExtractionSettings, dt: float) -> ExtractionSettings:
     """The settings with each local-fit half window widened, where the sampling is coarse, to
     hold at least degree + 3 samples."""
@@ -447,6 +480,7 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
     the impact times; ``event_alpha`` (optional) the coefficient of restitution per event."""
     t = np.asarray(t, dtype=float)
     s = widened_windows(s, float(np.median(np.diff(t))))
+    s = replace(s, guard_samples=guard_samples(s, float(np.median(np.diff(t)))))
     g = s.g
     racket_raw = np.asarray(racket, dtype=float)
     racket_f, racket_long = bridge_short_gaps(t, racket_raw, s.max_gap_s)
