@@ -177,8 +177,12 @@ def read_recording(path: Path, columns, units, c3d_block) -> list[Trial]:
     """A CSV or (by its suffix) C3D recording."""
     path = Path(path)
     if path.suffix.lower() == ".c3d":
-        return read_c3d_recording(path, c3d_block)
-    return read_csv_recording(path, columns, units)
+        trials = read_c3d_recording(path, c3d_block)
+    else:
+        trials = read_csv_recording(path, columns, units)
+    if not trials:
+        raise ConfigError(f"{path}: no samples (a header and no rows?)")
+    return trials
 
 
 def read_events(path: Path, event_columns, units, trials: list[Trial]) -> dict[str, Events]:

@@ -241,6 +241,8 @@ def racket_cycles(t, racket, measured, s: ExtractionSettings) -> RacketCycles:
     """The racket's cycles (see the module docstring). ``racket``: gap-bridged positions;
     ``measured``: which samples were measured (local fits use only those)."""
     finite = np.isfinite(racket)
+    if np.count_nonzero(finite) < 2:
+        raise ModelError("no racket positions (every sample missing)")
     work = np.interp(t, t[finite], racket[finite])  # long gaps: only for coarse detection
     lo, hi = np.percentile(work, [1.0, 99.0])
     prominence = 0.2 * (hi - lo)  # an extremum at the recording's edge has a low prominence
@@ -268,26 +270,33 @@ def racket_cycles(t, racket, measured, s: ExtractionSettings) -> RacketCycles:
     # upward crossings: between each trough and the following peak (or, for a first peak,
     # the start of the recording)
     crossings = []
-    for j in range(-1, len(et) - 1):
+    half_cycle = float(np.median(np.diff(et))) if len(et) > 1 else 0.0
+    for j in range(-1, len(et)):
         if j == -1:
             if not (len(et) > 1 and ek[0] == 1):
                 continue
             # no trough before the first peak: search at most a typical half cycle before it
-            t_before = max(t[0], et[0] - float(np.median(np.diff(et))))
+            t_before, t_peak = max(t[0], et[0] - half_cycle), et[0]
+        elif j == len(et) - 1:
+            if not (len(et) > 1 and ek[j] == -1):
+                continue
+            # no peak after the last trough (the recording ends first): the crossing may
+            # still be recorded, and it closes the cycle before it
+            t_before, t_peak = et[j], min(t[-1], et[j] + half_cycle)
         elif ek[j] == -1 and ek[j + 1] == 1:
-            t_before = et[j]
+            t_before, t_peak = et[j], et[j + 1]
         else:
             continue
-        mid = float(cycles.mid_position(0.5 * (t_before + et[j + 1]))[0])
-        a, b = np.searchsorted(t, [t_before, et[j + 1]])
+        mid = float(cycles.mid_position(0.5 * (t_before + t_peak))[0])
+        a, b = np.searchsorted(t, [t_before, t_peak])
         y = work[a:b] - mid
         up = np.flatnonzero((y[:-1] < 0.0) & (y[1:] >= 0.0))
         if up.size == 0:
             continue
         i = a + up[-1]  # the last one before the peak (a still racket before it may dither)
         h = s.position_half_window_s
-        onset = _motion_onset(t, raw, t[i], h, et[j + 1],
-                              float(ex[j + 1]) - mid)  # the peak after the crossing
+        peak_x = float(ex[j + 1]) if j + 1 < len(et) else float(np.max(work[a:b + 1]))
+        onset = _motion_onset(t, raw, t[i], h, t_peak, peak_x - mid)
         if onset is None:
             coef = local_polynomial(t, raw, t[i], h, s.position_degree)
             tc = math.nan if coef is None else _poly_root_near(coef, h, t[i], mid)

@@ -239,6 +239,23 @@ def test_noise_at_high_sampling_rates_makes_no_spurious_contacts(params, rate, n
             reason == "outside a complete racket cycle" for _, reason in result.excluded)
 
 
+def test_a_recording_ending_before_the_last_peak_keeps_the_cycle_before():
+    """40 s at 1 kHz: the racket's last upward crossing (39.79 s) comes less than a quarter
+    cycle before the end, so no peak follows it; it still closes the cycle before it, whose
+    impact was lost as "outside a complete racket cycle" (a new-user review). Only the impact
+    after it, in the incomplete cycle, has no phase."""
+    forty = SessionSettings(n_trials=2, duration_s=40.0, sample_rate_hz=1000.0,
+                            velocity_noise_m_s=0.04, perturb_every=8, perturb_alphas=(0.4, 0.6))
+    trials = session(forty)
+    errors, found, total = errors_against_truth(trials)
+    assert found == total - len(trials)
+    for _truth, (t, racket, ball) in trials:
+        result = extract_trial(t, racket, ball, s=ExtractionSettings())
+        last_start = result.cycles.crossings[-1]
+        assert t[-1] - (last_start + result.cycles.periods[-1]) < 0.25 * 0.92
+        assert [reason for _, reason in result.excluded] == ["outside a complete racket cycle"]
+
+
 def test_marker_offset_is_measured_and_only_shifts_the_apex():
     offset = SessionSettings(sample_rate_hz=200.0, position_noise_m=0.0005,
                              ball_marker_offset_m=0.03, seed=4, **BASE)
@@ -414,6 +431,10 @@ def test_bad_recordings_are_one_line_errors_and_write_nothing(simulated, tmp_pat
     text = rec.copy().astype({"racket_x_m": object})
     text.loc[7, "racket_x_m"] = "n/a?"
     cases["text"] = (text, ["racket_x_m", "row 9"])
+    cases["header_only"] = (rec.head(0), ["no samples"])
+    no_racket = rec.copy()
+    no_racket.loc[no_racket.trial == 2, "racket_x_m"] = np.nan
+    cases["no_racket"] = (no_racket, ["trial 2", "no racket positions"])
     for name, (frame, needles) in cases.items():
         path = tmp_path / f"{name}.csv"
         frame.to_csv(path, index=False)
