@@ -627,7 +627,11 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
         if reason[j]:
             continue
         if cycle[j] < 0:
-            reason[j] = "outside a complete racket cycle"
+            # a cycle with a long racket gap is not a cycle: say so when that is why
+            period = float(np.median(cycles.periods)) if cycles.periods.size else 0.0
+            lo, hi = np.searchsorted(t, [t_k[j] - period, t_k[j] + period])
+            reason[j] = ("gap: racket data missing in the impact's racket cycle"
+                         if np.any(racket_long[lo:hi]) else "outside a complete racket cycle")
             continue
         acc[j] = local_derivatives(t, racket_fit, t_k[j], s.acc_half_window_s,
                                    s.acc_degree)[2] / g

@@ -274,6 +274,12 @@ def run(config: ExtractConfig, options: RunOptions) -> ExperimentResult:
               "fig2_samples.csv": figure_samples(trials, impacts, config.figure)}
     if truth is not None:
         frames["accuracy.csv"] = accuracy_frame(impacts, truth)
+        matched = frames["accuracy.csv"].set_index("quantity").loc["theta_deg", "n"]
+        if len(truth) and len(impacts) and matched == 0:
+            raise ConfigError(
+                f"truth {config.truth}: none of its {len(truth)} impacts matches one of the "
+                f"{len(impacts)} extracted (by trial and time: is it this recording's truth, "
+                "on the same time base?)")
     reasons = Counter(r.split(":")[0] for r in excluded["reason"])
     summary.append(
         f"{len(trials)} trial(s): {len(impacts)} impacts, mean v = {impacts['v_m_s'].mean():.4f}"

@@ -498,3 +498,29 @@ def test_damaged_or_foreign_c3d_is_one_line_error(tmp_path, content):
     result = runner.invoke(app, ["extract", "--data", str(path), "--out", str(tmp_path / "o")])
     one_line_error(result, "take.c3d", "cannot read as C3D")
     assert not (tmp_path / "o").exists()
+
+
+def test_a_truth_on_another_time_base_is_an_error_not_nan_accuracy(simulated, tmp_path):
+    """The recording shifted by 100 s against its truth: no impact matches; the accuracy would
+    be NaN with n = 0 (a new-user review saw exit 0): one line instead, nothing written."""
+    rec = pd.read_csv(simulated / "recording.csv")
+    rec["t_s"] += 100.0
+    rec.to_csv(tmp_path / "shifted.csv", index=False)
+    result, out = extract_cli(tmp_path, "--data", str(tmp_path / "shifted.csv"),
+                              "--set", f"truth={simulated / 'truth.csv'}")
+    one_line_error(result, "truth", "none of its", "time base")
+    assert not out.exists()
+
+
+def test_an_impact_lost_to_a_racket_gap_says_gap(simulated, tmp_path):
+    """A 60 ms hole in the racket column alone (longer than max_gap_s) removes its cycle: the
+    impact in it was listed as "outside a complete racket cycle" (a new-user review)."""
+    rec = pd.read_csv(simulated / "recording.csv")
+    hole = (rec.trial == 1) & (rec.t_s > 5.50) & (rec.t_s < 5.56)
+    rec.loc[hole, "racket_x_m"] = np.nan
+    rec.to_csv(tmp_path / "hole.csv", index=False)
+    result, out = extract_cli(tmp_path, "--data", str(tmp_path / "hole.csv"))
+    assert result.exit_code == 0, result.output
+    excluded = pd.read_csv(out / "excluded.csv")
+    middle = excluded[(excluded.trial == 1) & excluded.t_s.between(4.0, 7.0)]
+    assert len(middle) == 1 and middle.reason.iloc[0].startswith("gap: racket data missing")
