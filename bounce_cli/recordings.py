@@ -21,6 +21,7 @@ import struct
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -51,10 +52,20 @@ class Events:
     alpha: np.ndarray | None
 
 
-def read_table(path: Path) -> pd.DataFrame:
-    """A CSV file as a DataFrame; a missing or unreadable file is a one-line ConfigError."""
+def read_table(path: Path, csv_format: Any = None) -> pd.DataFrame:
+    """A CSV file as a DataFrame; a missing or unreadable file is a one-line ConfigError.
+    ``csv_format`` (the config's ``csv`` block): separator (blank: runs of whitespace),
+    decimal mark, rows to skip after the header; ``attrs["first_row"]`` is the file's line
+    number of the first data row (for messages)."""
+    separator = "," if csv_format is None else csv_format.separator
+    decimal = "." if csv_format is None else csv_format.decimal
+    skip = 0 if csv_format is None else csv_format.skip_rows
     try:
-        return pd.read_csv(path)
+        frame = pd.read_csv(path, sep=r"\s+" if not separator.strip() else separator,
+                            decimal=decimal, skiprows=range(1, 1 + skip) if skip else None,
+                            engine="c" if len(separator) == 1 else "python")
+        frame.attrs["first_row"] = 2 + skip
+        return frame
     except FileNotFoundError:
         raise ConfigError(f"{path}: file not found") from None
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
@@ -67,13 +78,18 @@ def read_table(path: Path) -> pd.DataFrame:
 def _column(frame: pd.DataFrame, path: Path, name: str, key: str) -> np.ndarray:
     if name not in frame.columns:
         have = ", ".join(map(str, frame.columns[:12]))
-        raise ConfigError(f"{path}: no column {name!r} (set {key}; the file has: {have})")
+        other = next((sep for sep in (";", "\t", "|", " ") if any(
+            sep in str(c) and name in str(c).split(sep) for c in frame.columns)), None)
+        hint = ("; another separator? set csv.separator" if other is not None
+                else f"; set {key}")
+        raise ConfigError(f"{path}: no column {name!r} (the file has: {have}{hint})")
     values = pd.to_numeric(frame[name], errors="coerce")
     bad = values.isna() & frame[name].notna()
     if bad.any():
         row = int(np.flatnonzero(bad.to_numpy())[0])
-        raise ConfigError(f"{path}: column {name!r}, row {row + 2}: not a number "
-                          f"({frame[name].iloc[row]!r})")
+        hint = " (a row of units? set csv.skip_rows)" if row == 0 else ""
+        raise ConfigError(f"{path}: column {name!r}, row {row + frame.attrs.get('first_row', 2)}"
+                          f": not a number ({frame[name].iloc[row]!r}){hint}")
     return values.to_numpy(float)
 
 
@@ -108,10 +124,10 @@ def check_trial(path: Path, label, t: np.ndarray, time_column: str) -> None:
                           f"{i + 2} ({t[i]:g} -> {t[i + 1]:g})")
 
 
-def read_csv_recording(path: Path, columns, units) -> list[Trial]:
+def read_csv_recording(path: Path, columns, units, csv_format=None) -> list[Trial]:
     """Trials of a CSV recording (``columns``: trial, time, racket, ball names;
-    ``units``: length and time units)."""
-    frame = read_table(path)
+    ``units``: length and time units; ``csv_format``: see ``read_table``)."""
+    frame = read_table(path, csv_format)
     length, time = LENGTH_UNITS[units.length], TIME_UNITS[units.time]
     t_all = _column(frame, path, columns.time, "columns.time") * time
     racket_all = _column(frame, path, columns.racket, "columns.racket") * length
@@ -173,22 +189,23 @@ def read_c3d_recording(path: Path, c3d_block) -> list[Trial]:
     return [Trial(path.stem, t, racket, ball)]
 
 
-def read_recording(path: Path, columns, units, c3d_block) -> list[Trial]:
+def read_recording(path: Path, columns, units, c3d_block, csv_format=None) -> list[Trial]:
     """A CSV or (by its suffix) C3D recording."""
     path = Path(path)
     if path.suffix.lower() == ".c3d":
         trials = read_c3d_recording(path, c3d_block)
     else:
-        trials = read_csv_recording(path, columns, units)
+        trials = read_csv_recording(path, columns, units, csv_format)
     if not trials:
         raise ConfigError(f"{path}: no samples (a header and no rows?)")
     return trials
 
 
-def read_events(path: Path, event_columns, units, trials: list[Trial]) -> dict[str, Events]:
+def read_events(path: Path, event_columns, units, trials: list[Trial],
+                csv_format=None) -> dict[str, Events]:
     """Logged impacts per trial label (every trial of the recording gets an entry)."""
     path = Path(path)
-    frame = read_table(path)
+    frame = read_table(path, csv_format)
     time = TIME_UNITS[units.time]
     t_all = _column(frame, path, event_columns.time, "event_columns.time") * time
     alpha_all = None

@@ -22,7 +22,7 @@ from typing import Literal, Optional, Union
 
 import numpy as np
 import pandas as pd
-from pydantic import Field
+from pydantic import Field, field_validator, model_validator
 
 from ..config import ConfigError, ExperimentConfig, StrictModel
 from ..engine import ModelError
@@ -55,6 +55,32 @@ class EventColumnsBlock(StrictModel):
     trial: Optional[str] = "trial"
     time: str = "t_s"
     alpha: Optional[str] = "alpha"
+
+
+#: names a separator or decimal mark may be given by (a bare "," or ";" is not a YAML value
+#: on the command line: ``--set csv.separator=semicolon``)
+CSV_MARKS = {"comma": ",", "semicolon": ";", "tab": "\t", "\\t": "\t", "space": " ",
+             "whitespace": " ", "point": ".", "period": ".", "dot": "."}
+
+
+class CsvBlock(StrictModel):
+    """How the CSV files are written: field separator, decimal mark, rows to skip after the
+    header (a row of units). Marks by character or by name (``CSV_MARKS``)."""
+
+    separator: str = Field(",", min_length=1)
+    decimal: Literal[".", ","] = "."
+    skip_rows: int = Field(0, ge=0)
+
+    @field_validator("separator", "decimal", mode="before")
+    @classmethod
+    def _named(cls, value):
+        return CSV_MARKS.get(value.strip().lower(), value) if isinstance(value, str) else value
+
+    @model_validator(mode="after")
+    def _distinct(self):
+        if self.separator == self.decimal:
+            raise ValueError(f"csv.separator and csv.decimal are both {self.decimal!r}")
+        return self
 
 
 class UnitsBlock(StrictModel):
@@ -115,6 +141,7 @@ class ExtractConfig(ExperimentConfig):
                                  "writes accuracy.csv")
     columns: ColumnsBlock = ColumnsBlock()
     event_columns: EventColumnsBlock = EventColumnsBlock()
+    csv: CsvBlock = CsvBlock()
     units: UnitsBlock = UnitsBlock()
     c3d: C3DBlock = C3DBlock()
     extraction: ExtractionBlock = ExtractionBlock()
@@ -261,12 +288,14 @@ def run(config: ExtractConfig, options: RunOptions) -> ExperimentResult:
         summary.append(f"no data given: extracted {source} (bounce simulate-recording's "
                        "recording.csv) and compared it with its truth")
     else:
-        trials = read_recording(Path(config.data), config.columns, config.units, config.c3d)
+        trials = read_recording(Path(config.data), config.columns, config.units, config.c3d,
+                                config.csv)
         source = config.data
         truth = read_truth(config.truth) if config.truth is not None else None
     events = None
     if config.events is not None:
-        events = read_events(Path(config.events), config.event_columns, config.units, trials)
+        events = read_events(Path(config.events), config.event_columns, config.units, trials,
+                             config.csv)
     options.progress.start(len(trials), "extract")
     impacts, excluded, cycles, offsets = extract_all(trials, events, settings, source)
     options.progress.advance(len(trials))

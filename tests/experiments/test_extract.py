@@ -524,3 +524,32 @@ def test_an_impact_lost_to_a_racket_gap_says_gap(simulated, tmp_path):
     excluded = pd.read_csv(out / "excluded.csv")
     middle = excluded[(excluded.trial == 1) & excluded.t_s.between(4.0, 7.0)]
     assert len(middle) == 1 and middle.reason.iloc[0].startswith("gap: racket data missing")
+
+
+@pytest.mark.parametrize("write, settings", [
+    (dict(sep=";", decimal=","), ["csv.separator=semicolon", "csv.decimal=comma"]),
+    (dict(sep="\t"), ["csv.separator=tab"]),
+    (dict(sep=" "), ["csv.separator=space"]),
+    (dict(units_row=True), ["csv.skip_rows=1"]),
+], ids=["semicolon-decimal-comma", "tab", "spaces", "units-row"])
+def test_other_csv_dialects_give_the_same_impacts(simulated, tmp_path, write, settings):
+    """A European spreadsheet's export (; and a decimal comma), tabs, spaces, a row of units
+    under the header: the same impacts as the plain file (new-user review: no way to read
+    them)."""
+    rec = pd.read_csv(simulated / "recording.csv")
+    path = tmp_path / "dialect.csv"
+    if write.pop("units_row", False):
+        with open(path, "w") as handle:
+            handle.write(",".join(rec.columns) + "\n-,s,m,m\n")
+            rec.to_csv(handle, header=False, index=False)
+    else:
+        rec.to_csv(path, index=False, **write)
+    plain, plain_out = extract_cli(tmp_path / "plain", "--data", str(simulated / "recording.csv"))
+    result, out = extract_cli(tmp_path, "--data", str(path),
+                              *[a for s in settings for a in ("--set", s)])
+    assert plain.exit_code == 0 and result.exit_code == 0, result.output
+    pd.testing.assert_frame_equal(pd.read_csv(out / "impacts.csv"),
+                                  pd.read_csv(plain_out / "impacts.csv"))
+    # without the settings: one line that says which key to set
+    bare, _ = extract_cli(tmp_path / "bare", "--data", str(path))
+    one_line_error(bare, "csv.")
