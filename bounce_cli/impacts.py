@@ -97,13 +97,21 @@ class Impacts:
                     yield trial, rows.iloc[part]
 
 
+#: how a ``perturbed`` cell may be written
+PERTURBED_VALUES = {"true": True, "false": False, "1": True, "0": False, "1.0": True,
+                    "0.0": False, "yes": True, "no": False, "y": True, "n": False}
+
+
 def read_data_csv(path: Path) -> pd.DataFrame:
     """A ``--data`` CSV as a DataFrame with stripped column names; an unreadable file is one
     line naming ``data`` and the file."""
     try:
         # only an empty cell is missing: a cell such as 'n/a' stays text, so that an error
         # can show what the file holds
-        frame = pd.read_csv(path, keep_default_na=False, na_values=[""])
+        # trial labels as written: "01" and "1" are two trials, not the number 1 twice
+        header = pd.read_csv(path, nrows=0)
+        labels = {c: str for c in header.columns if str(c).strip() == "trial"}
+        frame = pd.read_csv(path, keep_default_na=False, na_values=[""], dtype=labels)
     except FileNotFoundError:
         raise ConfigError(f"data: {path}: file not found") from None
     except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
@@ -177,6 +185,11 @@ def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: st
         frame[column] = values.astype(float)
     if "theta_rad" not in frame.columns:
         frame["theta_rad"] = np.radians(frame["theta_deg"])
+    elif (np.abs(frame["theta_rad"]) > 2.0 * math.pi + 1e-9).any():
+        row = int(np.flatnonzero((np.abs(frame["theta_rad"]) > 2.0 * math.pi + 1e-9)
+                                 .to_numpy())[0])
+        raise _fail(path, f"column theta_rad: {cell_text(frame['theta_rad'].iloc[row])} in data "
+                          f"row {row + 1} is beyond 2 pi: degrees? (name the column theta_deg)")
     if (frame["k"] != np.round(frame["k"])).any():
         raise _fail(path, "column k: impact indices must be whole numbers")
     frame["k"] = frame["k"].astype(int)
@@ -189,15 +202,15 @@ def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: st
             raise _fail(path, f"column {column}: must be {rule} (data row {row + 1}, trial "
                               f"{frame['trial'].iloc[row]}: "
                               f"{cell_text(frame[column].iloc[row])})")
-    if "perturbed" in frame.columns:
+    if "perturbed" in frame.columns:  # checked wherever present: acf and learning use it too
         text = frame["perturbed"].astype(str).str.strip().str.lower()
-        mapping = {"true": True, "false": False, "1": True, "0": False, "1.0": True, "0.0": False}
-        unknown = ~text.isin(list(mapping))
-        if "perturbed" in checked and unknown.any():
+        unknown = ~text.isin(list(PERTURBED_VALUES))
+        if unknown.any():
             row = int(np.flatnonzero(unknown.to_numpy())[0])
-            raise _fail(path, f"column perturbed: expected True/False in data row {row + 1} "
+            raise _fail(path, f"column perturbed: expected True/False (or yes/no, 1/0) in "
+                              f"data row {row + 1} "
                               f"(got {cell_text(frame['perturbed'].iloc[row])})")
-        frame["perturbed"] = text.map(mapping).fillna(False).astype(bool)
+        frame["perturbed"] = text.map(PERTURBED_VALUES).astype(bool)
     frame["trial"] = frame["trial"].astype(str)
     order = list(dict.fromkeys(frame["trial"]))
     frame["_order"] = frame["trial"].map({t: i for i, t in enumerate(order)})

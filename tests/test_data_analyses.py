@@ -293,6 +293,14 @@ def test_impulse_data_errors(impulse_data, tmp_path, cli, user_error):
     frame.drop(columns=["alpha"]).to_csv(no_alpha, index=False)
     user_error(cli("impulse", "--data", no_alpha, "--out", tmp_path / "b"),
                       "missing column alpha", "impulse --data")
+    # a trial without a baseline is named by its label (not its position) with the file
+    short = frame[frame.trial != 3].copy()
+    last = frame[frame.trial == 3].head(3).assign(trial="T3", perturbed=True, alpha=0.39)
+    labelled = tmp_path / "labelled.csv"
+    pd.concat([short, last]).to_csv(labelled, index=False)
+    user_error(cli("impulse", "--data", labelled, "--out", tmp_path / "c",
+                   "--set", "data_analysis.settle_after_perturbation=8"),
+               str(labelled), "trial T3: no unperturbed impact")
 
 
 # -- bounce regression --data impacts.csv -------------------------------------------------------
@@ -360,3 +368,34 @@ def test_racket_period_modulation_is_recovered(impulse_data, tmp_path, cli):
     assert a["racket_period_s", "decrease", 1] == pytest.approx(-0.02, abs=1e-9)
     assert a["racket_period_s", "increase", 2] == pytest.approx(0.0, abs=1e-9)
     assert np.allclose(a["racket_amplitude_m"].to_numpy(), 0.0, atol=1e-12)
+
+
+def test_acf_data_says_when_the_sds_cannot_be_matched(acf_data, tmp_path, cli):
+    """v's deviations shrunk tenfold: no positive noise at the model's J gives these SDs. The
+    fallback is named in the summary and in stability_data.csv (a new-user review found it
+    presented as "noise from the data's SDs")."""
+    path, _ = acf_data
+    frame = pd.read_csv(path)
+    frame["v_m_s"] = frame["v_m_s"].mean() + 0.1 * (frame["v_m_s"] - frame["v_m_s"].mean())
+    shrunk = tmp_path / "shrunk.csv"
+    frame.to_csv(shrunk, index=False)
+    result = cli("acf", "--data", shrunk, "--out", tmp_path / "o", *ACF_MODEL, *FAST)
+    assert result.exit_code == 0, result.output
+    assert "cannot be matched at the model's J" in result.output
+    assert "noise from the data's SDs" not in result.output
+    stab = pd.read_csv(tmp_path / "o" / "stability_data.csv")
+    sources = set(stab.loc[stab.quantity.isin(["q_v", "q_theta"]), "source"])
+    assert sources == {"data_sd_fallback", "ols_residual"}
+
+
+def test_regression_refuses_equal_periods_without_a_numpy_warning(tmp_path, cli, user_error):
+    """Every trial at one racket period (equal to within rounding after averaging): no line to
+    fit, one line (a new-user review got slope 0.0000 and numpy's divide-by-zero warning)."""
+    rows = [dict(trial=t, k=k, theta_deg=42.0 + 0.1 * ((k * 7 + t) % 5), v_m_s=4.5,
+                 racket_period_s=0.92, racket_amplitude_m=0.3)
+            for t in range(1, 7) for k in range(40)]
+    path = tmp_path / "one_period.csv"
+    pd.DataFrame(rows).to_csv(path, index=False)
+    result = cli("regression", "--data", path, "--out", tmp_path / "o")
+    user_error(result, "two different x values")
+    assert "RuntimeWarning" not in result.output

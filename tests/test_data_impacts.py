@@ -118,3 +118,30 @@ def test_a_bad_cell_is_shown_as_the_file_holds_it(tmp_path, cell, shown):
         read_impacts(path)
     assert shown in str(info.value) and "np.float64" not in str(info.value)
     assert "column v_m_s" in str(info.value)
+
+
+def test_perturbed_is_checked_wherever_present_and_yes_no_is_read(table, tmp_path):
+    """A new-user review: `perturbed` written yes/no was read as never perturbed by acf and
+    learning (only impulse, which needs the column, checked it)."""
+    yes_no = table.assign(perturbed=np.where(table["perturbed"], "yes", "no"))
+    read = read_impacts(write(tmp_path, yes_no))  # no analysis asks for the column
+    np.testing.assert_array_equal(read.frame.sort_values(["trial", "k"])["perturbed"],
+                                  table.sort_values(["trial", "k"])["perturbed"])
+    assert read.frame["perturbed"].any()
+    with pytest.raises(ConfigError, match="column perturbed"):
+        read_impacts(write(tmp_path, table.assign(perturbed="maybe"), "maybe.csv"))
+
+
+def test_trial_labels_are_read_as_written(table, tmp_path):
+    """"01" and "1" are two trials (pandas would read both as the number 1 and merge them)."""
+    two = table[table.trial.isin([1, 2])].copy()
+    two["trial"] = np.where(two["trial"] == 1, "01", "1")
+    read = read_impacts(write(tmp_path, two))
+    assert read.trials == ["01", "1"]
+    assert [len(rows) for _, rows in read.by_trial()] == [30, 30]
+
+
+def test_phases_in_degrees_under_theta_rad_are_refused(table, tmp_path):
+    degrees = table.drop(columns="theta_deg").assign(theta_rad=table["theta_deg"])
+    with pytest.raises(ConfigError, match="beyond 2 pi: degrees"):
+        read_impacts(write(tmp_path, degrees))

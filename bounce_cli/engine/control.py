@@ -553,11 +553,12 @@ def align_perturbations(trial, k, v, theta, tau, perturbed, *, alpha=None, alpha
     perturbed = np.asarray(perturbed, bool)
     alpha_all = np.zeros_like(v) if alpha is None else np.asarray(alpha, float)
     order = np.lexsort((k, trial))
-    groups = [order[trial[order] == t] for t in dict.fromkeys(trial[order])]
+    labels = list(dict.fromkeys(trial[order]))
+    groups = [order[trial[order] == t] for t in labels]
     try:
         aligned = [align([x[g] for g in groups], [perturbed[g] for g in groups],
                          [alpha_all[g] for g in groups], n_after, settle, phase=is_phase,
-                         k_trials=[k[g] for g in groups])
+                         k_trials=[k[g] for g in groups], labels=labels)
                    for x, is_phase in ((v, False), (theta, True), (tau, False))]
     except ModelError as exc:
         if "no perturbed impact" in str(exc):

@@ -242,7 +242,8 @@ def baseline_mask(perturbed: np.ndarray, settle: int) -> np.ndarray:
 
 def align(values_trials: Sequence[np.ndarray], perturbed_trials: Sequence[np.ndarray],
           alpha_trials: Sequence[np.ndarray], n_after: int, settle: int,
-          phase: bool = False, k_trials: Sequence[np.ndarray] | None = None) -> AlignedWindows:
+          phase: bool = False, k_trials: Sequence[np.ndarray] | None = None,
+          labels: Sequence | None = None) -> AlignedWindows:
     """Align one quantity on the perturbed impacts of every trial: the one alignment of the
     data side (``bounce impulse --data``, and ``bounce control --data`` through
     ``engine.control.align_perturbations``).
@@ -251,7 +252,7 @@ def align(values_trials: Sequence[np.ndarray], perturbed_trials: Sequence[np.nda
     circular mean, and deviations wrapped to [-pi, pi)). Windows from
     :func:`perturbation_windows` (cut at gaps in the trials' impact indices ``k_trials`` when
     given). Raises ModelError when there is no perturbed impact or a trial has no baseline
-    impact."""
+    impact (named by its ``labels`` entry, else by its position)."""
     rows, trials, starts, alphas = [], [], [], []
     ks = k_trials if k_trials is not None else [None] * len(values_trials)
     for i, (x, p, a, kk) in enumerate(zip(values_trials, perturbed_trials, alpha_trials, ks)):
@@ -261,8 +262,10 @@ def align(values_trials: Sequence[np.ndarray], perturbed_trials: Sequence[np.nda
             continue
         base = baseline_mask(p, settle) & np.isfinite(x)
         if not base.any():
-            raise ModelError(f"trial {i}: no unperturbed impact {settle} or more impacts after a "
-                             "perturbation to take the baseline from")
+            name = labels[i] if labels is not None else i
+            raise ModelError(f"trial {name}: no unperturbed impact {settle} or more impacts "
+                             "after a perturbation to take the baseline from (lower "
+                             "data_analysis.settle_after_perturbation, or leave the trial out)")
         if phase:
             ref = float(np.angle(np.mean(np.exp(1j * x[base]))))
             dev = phase_difference(x, ref)

@@ -27,7 +27,8 @@ def eq15_amplitude(tau_s, theta_rad, alpha, g):
 
 def phase_from_slope(slope, alpha, g):
     """The impact phase (rad) that eq. 15 implies for a given slope (NaN if none)."""
-    cos_t = (1.0 - alpha) / (1.0 + alpha) * g / (4.0 * np.pi * np.asarray(slope, float))
+    with np.errstate(divide="ignore"):  # slope 0: no phase (NaN below)
+        cos_t = (1.0 - alpha) / (1.0 + alpha) * g / (4.0 * np.pi * np.asarray(slope, float))
     return np.where(np.abs(cos_t) <= 1.0, np.arccos(np.clip(cos_t, -1.0, 1.0)), np.nan)
 
 
@@ -66,7 +67,8 @@ def ols_line(x, y, confidence: float = 0.95) -> LineFit:
     xm = x.mean(axis=-1, keepdims=True)
     ym = y.mean(axis=-1, keepdims=True)
     sxx = np.sum((x - xm) ** 2, axis=-1)
-    if np.any(sxx <= 0):
+    # x values equal to within rounding (means of the same numbers summed in another order)
+    if np.any(sxx <= n * (1e-12 * np.max(np.abs(x), axis=-1)) ** 2):
         raise ModelError("a line fit needs at least two different x values")
     sxy = np.sum((x - xm) * (y - ym), axis=-1)
     syy = np.sum((y - ym) ** 2, axis=-1)

@@ -161,7 +161,9 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
     sd_v, sd_theta = float(np.sqrt(np.mean(dv_all**2))), float(np.sqrt(np.mean(dth_all**2)))
     q_v, q_theta = noise_from_sds(jac, sd_v, sd_theta)
     noise_note = "q from the data's SDs through eq. 19 at the model's J (section 6's route)"
+    noise_source = "data_sd_match"
     if not (math.isfinite(q_v) and math.isfinite(q_theta)):
+        noise_source = "data_sd_fallback"
         noise_note = ("the data's SDs need a negative noise variance at the model's J: theory "
                       "drawn with q_v = SD(v) (1 - |lambda|^2)^0.5 and likewise for theta")
         rad2 = 1 - stability(params).spectral_radius ** 2
@@ -218,8 +220,8 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
             add(name, "mixed", source, float(fit.noise_cov[i, j]), note="residual covariance")
     add("sd_v", "m/s", "data", sd_v, note="pooled within-run SD")
     add("sd_theta", "deg", "data", math.degrees(sd_theta), note="pooled within-run SD")
-    add("q_v", "m/s", "data_sd_match", q_v, note=noise_note)
-    add("q_theta", "rad", "data_sd_match", q_theta, note=noise_note)
+    add("q_v", "m/s", noise_source, q_v, note=noise_note)
+    add("q_theta", "rad", noise_source, q_theta, note=noise_note)
     if not isinstance(fits["ols"], ModelError):
         sig = fits["ols"].noise_cov
         add("q_theta", "rad", "ols_residual", math.sqrt(sig[1, 1]),
@@ -254,7 +256,13 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
         r = fit.eigen_summary(conf)["spectral_radius"]
         lines.append(f"{fit.method}: spectral radius {r[0]:.3f} [{r[2]:.3f}, {r[3]:.3f}] "
                      f"({conf:.0%} CI, delta method)")
-    lines.append(f"noise from the data's SDs: q_v = {q_v:.4f} m/s, q_theta = {q_theta:.4f} rad")
+    if noise_source == "data_sd_match":
+        lines.append(f"noise from the data's SDs: q_v = {q_v:.4f} m/s, q_theta = {q_theta:.4f} "
+                     "rad")
+    else:
+        lines.append(f"noise: the data's SDs cannot be matched at the model's J (a negative "
+                     f"variance); theory drawn with q = SD (1 - radius^2)^0.5: q_v = {q_v:.4f} "
+                     f"m/s, q_theta = {q_theta:.4f} rad (the model's J may not be the data's)")
     lines.append(f"data's mean phase {math.degrees(theta_mean):.1f} deg vs eq. 8's "
                  f"{fp.theta_deg:.1f} deg (eq. 8 would need alpha = "
                  f"{implied_alpha(params, theta_mean):.3f}; model.alpha = {params.alpha:g})")
@@ -441,10 +449,15 @@ def impulse_data_run(config, options, source: ImpactsSource | None = None
     rows, windows = [], {}
     options.progress.start(len(quantities), "aligning perturbations")
     for name, (column, is_phase, scale) in quantities.items():
-        w = align([g[column].to_numpy() for _, g in groups],
-                  [g["perturbed"].to_numpy() for _, g in groups],
-                  [g["alpha"].to_numpy() for _, g in groups], n, d.settle_after_perturbation,
-                  phase=is_phase, k_trials=[g["k"].to_numpy() for _, g in groups])
+        try:
+            w = align([g[column].to_numpy() for _, g in groups],
+                      [g["perturbed"].to_numpy() for _, g in groups],
+                      [g["alpha"].to_numpy() for _, g in groups], n,
+                      d.settle_after_perturbation, phase=is_phase,
+                      k_trials=[g["k"].to_numpy() for _, g in groups],
+                      labels=[label for label, _ in groups])
+        except ModelError as exc:
+            raise ConfigError(f"data: {impacts.path}: {exc}") from None
         windows[name] = (w, scale)
         options.progress.advance(1)
     w_v = windows["v_m_s"][0]
