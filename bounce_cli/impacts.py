@@ -185,6 +185,12 @@ def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: st
         frame[column] = values.astype(float)
     if "theta_rad" not in frame.columns:
         frame["theta_rad"] = np.radians(frame["theta_deg"])
+    elif "theta_deg" in frame.columns and not np.allclose(
+            np.exp(1j * frame["theta_rad"].to_numpy(float)),
+            np.exp(1j * np.radians(pd.to_numeric(frame["theta_deg"], errors="coerce")
+                                   .to_numpy(float))), atol=1e-6, equal_nan=False):
+        raise _fail(path, "columns theta_rad and theta_deg disagree (the same phase in two "
+                          "units; keep one)")
     elif (np.abs(frame["theta_rad"]) > 2.0 * math.pi + 1e-9).any():
         row = int(np.flatnonzero((np.abs(frame["theta_rad"]) > 2.0 * math.pi + 1e-9)
                                  .to_numpy())[0])

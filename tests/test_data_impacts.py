@@ -145,3 +145,11 @@ def test_phases_in_degrees_under_theta_rad_are_refused(table, tmp_path):
     degrees = table.drop(columns="theta_deg").assign(theta_rad=table["theta_deg"])
     with pytest.raises(ConfigError, match="beyond 2 pi: degrees"):
         read_impacts(write(tmp_path, degrees))
+
+
+def test_theta_rad_and_theta_deg_must_agree(table, tmp_path):
+    """Both columns given: they are one phase in two units (theta_deg was silently ignored)."""
+    read_impacts(write(tmp_path, table, "both.csv"))  # ours agree
+    off = table.assign(theta_deg=table["theta_deg"] + 5.0)
+    with pytest.raises(ConfigError, match="theta_rad and theta_deg disagree"):
+        read_impacts(write(tmp_path, off, "off.csv"))

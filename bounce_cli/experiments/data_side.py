@@ -267,11 +267,13 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
                  f"{fp.theta_deg:.1f} deg (eq. 8 would need alpha = "
                  f"{implied_alpha(params, theta_mean):.3f}; model.alpha = {params.alpha:g})")
     n_data = int(sum(len(s[1]) for s in segments))
+    run_length = max(int(round(np.mean([len(s[1]) for s in segments]))), 8)
     for method in ("ols", "lag2"):
         ok = trust[(trust.method == method) & trust.trusted.astype(bool)]
         need = f"from {int(ok.bounces.min())} bounces" if len(ok) else "at none of the sizes tried"
         lines.append(f"trust study ({d.measurement_sd_v_m_s:g} m/s, "
-                     f"{d.measurement_sd_theta_deg:g} deg measurement noise): {method} trusted "
+                     f"{d.measurement_sd_theta_deg:g} deg measurement noise; sizes in whole "
+                     f"runs of the data's mean length, {run_length}): {method} trusted "
                      f"{need}; these data have {n_data}")
     return frames, lines
 
@@ -524,7 +526,8 @@ def impulse_data_run(config, options, source: ImpactsSource | None = None
     n_down, n_up = int((direction == "decrease").sum()), int((direction == "increase").sum())
     lines = [f"data {impacts.path}: {len(w_v.values)} perturbations ({n_down}"
              f" decrease, {n_up} increase); {cut} windows cut short "
-             "by the next perturbation or the trial's end (their later impacts are not averaged)",
+             "by the next perturbation, the trial's end or a gap in k (their later impacts are "
+             "not averaged)",
              f"model at a_r = {params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s"
              f" (the data's), alpha_0 = {params.alpha:g}, g = {params.g:g} m/s^2 (model.alpha, "
              f"model.g): v~ = {fp.v_m_s:.3f} m/s,"
