@@ -209,6 +209,12 @@ def _refined_extrema(t, x, measured, index, kind: int, s: ExtractionSettings):
     return out
 
 
+def _robust_sd(x) -> float:
+    """The SD of a normal sample from its median absolute deviation (outliers barely count)."""
+    x = np.asarray(x, dtype=float)
+    return 1.4826 * float(np.median(np.abs(x - np.median(x))))
+
+
 def _motion_onset(t, x, t0: float, half_window: float, t_peak: float,
                   amplitude: float) -> float | None:
     """For a racket that stood still and then started moving up (a resting start), the time
@@ -227,7 +233,7 @@ def _motion_onset(t, x, t0: float, half_window: float, t_peak: float,
     if not (starts_here or still_here):
         return None
     rest = float(np.median(before))
-    band = 4.0 * 1.4826 * float(np.median(np.abs(before - rest)))
+    band = 4.0 * _robust_sd(before)
     ahead = (t >= t0 - half_window) & (t < t_peak) & finite
     still = np.flatnonzero(ahead & (np.abs(x - rest) <= band))
     if still.size == 0:
@@ -386,22 +392,21 @@ def detect_contacts(t, ball, racket, s: ExtractionSettings) -> np.ndarray:
     whichever is larger."""
     n = t.size
     jump = np.full(t.shape, np.nan)
+    # the sample nearest a contact may be up to the span away from it, while ball and racket
+    # approach each other at several m/s: the distance allowed grows with the span
+    span = np.zeros(t.shape)
     step = float(np.median(np.diff(t))) if n > 1 else 1.0
     m = max(1, int(round(JUMP_SPAN_S / step)))
     if n > 2 * m:
         i = np.arange(m, n - m)
         v_after = (ball[i + m] - ball[i]) / (t[i + m] - t[i])
         v_before = (ball[i] - ball[i - m]) / (t[i] - t[i - m])
-        jump[i] = v_after - v_before + s.g * 0.5 * (t[i + m] - t[i - m])
+        span[i] = 0.5 * (t[i + m] - t[i - m])
+        jump[i] = v_after - v_before + s.g * span[i]
     finite = jump[np.isfinite(jump)]
     threshold = s.min_velocity_jump_m_s
     if finite.size:
-        spread = 1.4826 * float(np.median(np.abs(finite - np.median(finite))))
-        threshold = max(threshold, JUMP_NOISE_FACTOR * spread)
-    # the sample nearest a contact may be up to the span away from it, while ball and racket
-    # approach each other at several m/s: the distance allowed grows with the span
-    span = np.zeros(t.shape)
-    span[m:n - m] = 0.5 * (t[2 * m:] - t[:n - 2 * m]) if n > 2 * m else 0.0
+        threshold = max(threshold, JUMP_NOISE_FACTOR * _robust_sd(finite))
     near = (ball - s.ball_offset_m - racket) < s.contact_distance_m + CLOSING_SPEED_M_S * span
     with np.errstate(invalid="ignore"):
         candidate = np.flatnonzero((jump > threshold) & near)
@@ -488,8 +493,8 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
     """Impacts of one trial (see the module docstring). ``ball`` may be None when events give
     the impact times; ``event_alpha`` (optional) the coefficient of restitution per event."""
     t = np.asarray(t, dtype=float)
-    s = widened_windows(s, float(np.median(np.diff(t))))
-    s = replace(s, guard_samples=guard_samples(s, float(np.median(np.diff(t)))))
+    dt = float(np.median(np.diff(t)))
+    s = replace(widened_windows(s, dt), guard_samples=guard_samples(s, dt))
     g = s.g
     racket_raw = np.asarray(racket, dtype=float)
     racket_f, racket_long = bridge_short_gaps(t, racket_raw, s.max_gap_s)
@@ -623,12 +628,12 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
                 reason[j] = "gap: racket data missing in the flight"
     cycle, theta = cycles.locate(t_k)
     acc = np.full(n, np.nan)
+    period = float(np.median(cycles.periods)) if cycles.periods.size else 0.0
     for j in range(n):
         if reason[j]:
             continue
         if cycle[j] < 0:
             # a cycle with a long racket gap is not a cycle: say so when that is why
-            period = float(np.median(cycles.periods)) if cycles.periods.size else 0.0
             lo, hi = np.searchsorted(t, [t_k[j] - period, t_k[j] + period])
             reason[j] = ("gap: racket data missing in the impact's racket cycle"
                          if np.any(racket_long[lo:hi]) else "outside a complete racket cycle")
