@@ -9,7 +9,9 @@ directory holding results of a different resolved config is refused unless ``for
 
 ``run.json`` holds what the results were made from and nothing that changes from one run to
 the next: command, config file, overrides, the resolved config, the seed (only where the
-run drew random numbers), the ``--data`` file (absolute path and SHA-256), the versions of
+run drew random numbers), the ``--data`` file (absolute path and SHA-256), what the run
+recorded beside the config (``model_at_data``: the alpha and g a ``--data`` analysis used and
+where they came from, ``bounce_cli.data_parameters``), the versions of
 the packages that shape the numbers, the files written. So rerunning an unchanged config
 rewrites it byte for byte, and ``bounce reproduce`` on a clean checkout leaves ``git status``
 clean. What does change -- start time, wall time, git commit, host -- goes to ``timing.json``
@@ -309,6 +311,8 @@ class RunDirectory:
         self._frames: dict[str, pd.DataFrame] = {}
         self._figures: dict[str, Any] = {}
         self.previous: dict[str, Any] = {}
+        #: what the run adds to run.json beside the config (``RunOptions.record``)
+        self.record: dict[str, Any] = {}
         self.created: list[Path] = []  # folders this run made, outermost first
         self.check_writable(force)
 
@@ -375,6 +379,7 @@ class RunDirectory:
         if self.data_file is not None:
             path = Path(self.data_file).resolve()
             manifest["data_file"] = {"path": str(path), "sha256": sha256_of(path)}
+        manifest.update(self.record)
         manifest["versions"] = versions()
         manifest["files"] = sorted([*self._frames, *self._figures])
         return manifest

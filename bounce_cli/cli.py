@@ -38,10 +38,12 @@ except ImportError:  # pragma: no cover - older typer on click
 from . import __version__
 from .artifacts import OutputDirError, RunDirectory
 from .config import (
+    DATA_MODEL_KEYS,
     ConfigError,
     ModelOnlyConfig,
     apply_overrides,
     bundled_config_path,
+    keys_set_by_user,
     load_config,
     parse_override,
     read_yaml,
@@ -343,6 +345,11 @@ def run_experiment(
         )
         progress = make_progress() if not quiet else None
         options = RunOptions(jobs=jobs or os.cpu_count() or 1, warn=warn, scheduler=scheduler)
+        if data_file is not None:  # a --data analysis takes what the user did not set from the data
+            given = keys_set_by_user(config, overrides)
+            options.model_set_by_user = frozenset(
+                key for key in DATA_MODEL_KEYS if f"model.{key}" in given)
+        run_dir.record = options.record
         if entry.resumable:
             from .checkpoints import PointFolder
 

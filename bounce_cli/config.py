@@ -269,6 +269,46 @@ def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any
     return data
 
 
+#: the model keys a --data analysis takes from the data unless the user sets them
+#: (``bounce_cli.data_parameters``)
+DATA_MODEL_KEYS: tuple[str, ...] = ("alpha", "g")
+
+
+def dotted_keys(data: Any, prefix: str = "") -> set[str]:
+    """Every leaf key of a nested mapping, dotted: ``{"model": {"g": 1}}`` -> ``{"model.g"}``."""
+    if not isinstance(data, dict):
+        return {prefix} if prefix else set()
+    keys: set[str] = set()
+    for key, value in data.items():
+        keys |= dotted_keys(value, f"{prefix}.{key}" if prefix else str(key))
+    return keys
+
+
+def keys_set_by_user(config_path: Path | None, overrides: list[str]) -> frozenset[str]:
+    """The dotted keys the user gave: every leaf of their own ``--config`` file (None: the
+    bundled config, whose values are not the user's) and every ``--set`` key (a mapping
+    value counts with its leaves).
+
+    Parameters
+    ----------
+    config_path : Path or None
+        The user's config file, or None when the bundled config is used.
+    overrides : list of str
+        The ``--set`` texts (``dotted.key=value``).
+
+    Returns
+    -------
+    frozenset of str
+        Dotted keys such as ``model.alpha``.
+    """
+    keys = dotted_keys(read_yaml(config_path)) if config_path is not None else set()
+    for text in overrides:
+        path, value = parse_override(text)
+        keys |= dotted_keys(value, ".".join(path)) if isinstance(value, dict) else {
+            ".".join(path)}
+    return frozenset(keys)
+
+
 def format_validation_error(
     exc: ValidationError, source: str, overridden: frozenset[str] = frozenset()
 ) -> str:

@@ -20,7 +20,13 @@ Columns (units in the names; phases are the racket's phase of impact, section 2,
                         mid-position, m
 ``alpha``               coefficient of restitution of this impact (optional: from events)
 ``perturbed``           True where alpha was changed at this impact (optional: from events)
+``alpha_measured``      coefficient of restitution measured at this impact by eq. 3 (optional)
+``g_m_s2``              gravity of the set-up, m/s^2 (optional; ``setup.csv`` beside the table
+                        is read first)
 ======================  ==========================================================================
+
+The ``--data`` analyses take the model's alpha and g from ``alpha_measured`` (else ``alpha``)
+and ``setup.csv`` (else ``g_m_s2``) unless the user sets them (``bounce_cli.data_parameters``).
 """
 
 from __future__ import annotations
@@ -238,7 +244,8 @@ def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: st
 def impacts_frame(sim, params, trial_names=None) -> pd.DataFrame:
     """An impacts table (the columns above) from the engine's synthetic lab
     (``engine.data_stats.simulate_impacts``): racket period and amplitude are the model's,
-    AC = -a_r w^2 sin(theta) / g, ball apex x_r(theta) + v^2 / 2g. Lost trials are left out."""
+    AC = -a_r w^2 sin(theta) / g, ball apex x_r(theta) + v^2 / 2g, the set-up's g (``g_m_s2``,
+    what the data analyses run the model at). Lost trials are left out."""
     from .engine.data_stats import apex_height
 
     rows = []
@@ -255,7 +262,7 @@ def impacts_frame(sim, params, trial_names=None) -> pd.DataFrame:
             "racket_period_s": params.racket_period,
             "racket_amplitude_m": params.racket_amplitude,
             "hop_s": sim.hop[i], "ball_apex_m": apex_height(params, theta, sim.v[i]),
-            "alpha": sim.alpha[i], "perturbed": sim.perturbed[i],
+            "alpha": sim.alpha[i], "perturbed": sim.perturbed[i], "g_m_s2": params.g,
         }))
     return pd.concat(rows, ignore_index=True)
 

@@ -33,13 +33,19 @@ def caption_figures(figures: dict[str, Figure], params: ModelParams | None,
                      fontsize=10 if title else 9)
 
 
-def data_caption(config: Any, source: Any = None) -> str:
+def data_caption(config: Any, source: Any = None, record: dict | None = None) -> str:
     """A data-side figure's caption line: where the impacts came from and the model's alpha
-    and g (the config's; the racket is the data's)."""
+    and g with their sources (``record``: a run's ``RunOptions.record``, whose
+    ``model_at_data`` the data analyses fill; else the config's; the racket is the data's)."""
     if source is not None:
         where = "data: a simulated lab session"
     elif config.data is not None:
         where = f"data: {config.data}"
     else:
         where = "model only (no --data)"
+    used = (record or {}).get("model_at_data")
+    if used:
+        alpha, g = used["alpha"], used["g"]
+        return (f"{where}; model alpha = {alpha['value']:.3g} ({alpha['source']}), "
+                f"g = {g['value']:.3g} m/s^2 ({g['source']})")
     return f"{where}; model alpha = {config.model.alpha:g}, g = {config.model.g:g} m/s^2"

@@ -194,7 +194,8 @@ EXPERIMENTS: tuple[Entry, ...] = (
          ("control_fit.png", "Fit of K and c to mean perturbation responses (simulated trials "
           "of a known controller, or --data).")),
         data_help="impacts.csv with perturbation events (trial, k, theta_rad, v_m_s, "
-        "racket_period_s, perturbed; optional alpha): fit K and c to it (sets `data`).",
+        "racket_period_s, racket_amplitude_m, perturbed; optional alpha): fit K and c to it, "
+        "every result at the data's racket, alpha and g (sets `data`).",
     ),
     Entry(
         "sweep",

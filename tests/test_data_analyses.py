@@ -396,6 +396,7 @@ def test_regression_refuses_equal_periods_without_a_numpy_warning(tmp_path, cli,
             for t in range(1, 7) for k in range(40)]
     path = tmp_path / "one_period.csv"
     pd.DataFrame(rows).to_csv(path, index=False)
-    result = cli("regression", "--data", path, "--out", tmp_path / "o")
+    result = cli("regression", "--data", path, "--out", tmp_path / "o",
+                 "--set", "model.alpha=0.5", "--set", "model.g=9.81")
     user_error(result, "two different x values")
     assert "RuntimeWarning" not in result.output

@@ -405,7 +405,7 @@ def run_data(config: AcfConfig, options: RunOptions, source=None) -> ExperimentR
 
     frames, lines = acf_data_run(config, options, source)
     figures = draw_data(frames)
-    caption_figures(figures, None, data_caption(config, source))
+    caption_figures(figures, None, data_caption(config, source, options.record))
     return ExperimentResult(frames=frames, figures=figures, summary=lines)
 
 

@@ -19,7 +19,8 @@ import numpy as np
 import pandas as pd
 from pydantic import Field
 
-from ..impacts import read_impacts as shared_read_impacts
+from ..data_parameters import model_for_data
+from ..impacts import Impacts, read_impacts as shared_read_impacts
 from ..config import (
     ClassifyBlock,
     ConfigError,
@@ -333,7 +334,10 @@ def correlations_frame(params: ModelParams, config: ControlConfig) -> pd.DataFra
     noise2 = map_noise_covariance(params, block.q_v_m_s, block.q_theta_rad, "theta")
     noise3 = np.zeros((3, 3))
     noise3[:2, :2], noise3[2, 2] = noise2, block.q_tau_s**2
-    passive = var1_theory(jacobian(params), noise2, block.max_lag)
+    try:  # with --data the passive map at the data's parameters may be unstable: NaN then
+        passive = var1_theory(jacobian(params), noise2, block.max_lag)
+    except ModelError:
+        passive = None
     try:
         controlled = var1_theory(controlled_jacobian(params, controller), noise3, block.max_lag)
     except ModelError:  # unstable with this controller: no stationary correlations
@@ -355,16 +359,17 @@ def correlations_frame(params: ModelParams, config: ControlConfig) -> pd.DataFra
         for lag in range(block.max_lag + 1):
             rows.append({
                 "pair": name, "lag": lag,
-                "passive_theory": passive.correlations[name][lag],
+                "passive_theory": passive.correlations[name][lag] if passive else math.nan,
                 "controlled_theory": (controlled.correlations[name][lag] if controlled
                                       else math.nan),
                 "controlled_sample_mean": (sample[name][:, lag].mean() if sample else math.nan),
                 "controlled_sample_se": (sample[name][:, lag].std(ddof=1) / math.sqrt(runs)
                                          if sample else math.nan),
                 "runs": runs,
-                "passive_sd_v_m_s": passive.sd_v_m_s,
+                "passive_sd_v_m_s": passive.sd_v_m_s if passive else math.nan,
                 "controlled_sd_v_m_s": controlled.sd_v_m_s if controlled else math.nan,
-                "passive_sd_theta_deg": math.degrees(passive.sd_theta_rad),
+                "passive_sd_theta_deg": (math.degrees(passive.sd_theta_rad) if passive
+                                         else math.nan),
                 "controlled_sd_theta_deg": (math.degrees(controlled.sd_theta_rad)
                                             if controlled else math.nan),
             })
@@ -375,22 +380,25 @@ def correlations_frame(params: ModelParams, config: ControlConfig) -> pd.DataFra
 DATA_COLUMNS = ("trial", "k", "theta_rad", "v_m_s", "racket_period_s", "perturbed")
 
 
-def read_impacts(path_text: str) -> pd.DataFrame:
+def read_impacts(path_text: str) -> Impacts:
     """An impacts table (``bounce_cli.impacts``, the data side's reader) with the columns the
-    fit needs: trial, k, theta_rad (or theta_deg), v_m_s, racket_period_s, perturbed (and
-    alpha, racket_amplitude_m if present). Problems are one-line ConfigErrors naming ``data``."""
-    impacts = shared_read_impacts(path_text, needs=("racket_period_s", "perturbed"),
-                                  command="control --data",
-                                  optional=("alpha", "racket_amplitude_m"))
-    frame = impacts.frame
-    if not frame["perturbed"].any():
+    fit and the model at the data's racket need: trial, k, theta_rad (or theta_deg), v_m_s,
+    racket_period_s, racket_amplitude_m, perturbed (and alpha if present). Problems are
+    one-line ConfigErrors naming ``data``."""
+    impacts = shared_read_impacts(path_text, needs=("racket_period_s", "racket_amplitude_m",
+                                                    "perturbed"),
+                                  command="control --data", optional=("alpha",))
+    if not impacts.frame["perturbed"].any():
         raise ConfigError(f"data: {impacts.path}: no perturbed impact (column perturbed)")
-    return frame
+    return impacts
 
 
-def fit_inputs(config: ControlConfig) -> tuple[pd.DataFrame, ModelParams, dict]:
+def fit_inputs(config: ControlConfig, options: RunOptions | None = None
+               ) -> tuple[pd.DataFrame, ModelParams, dict]:
     """The impacts to fit (a lab's ``data`` or simulated trials of the configured controller),
-    the model at their parameters, and the truth (simulated) or NaN."""
+    the model at their parameters (with data: the data's racket, alpha and g, as
+    ``data_parameters.model_for_data`` and ``fit.racket_period_s`` say), and the truth
+    (simulated) or NaN. Every result of ``control --data`` is computed at that model."""
     params = config.params
     control = config.model.control
     if config.data is None:
@@ -405,17 +413,18 @@ def fit_inputs(config: ControlConfig) -> tuple[pd.DataFrame, ModelParams, dict]:
         lost = int((per_trial < sim.impacts_per_trial).sum() + (sim.trials - len(per_trial)))
         return impacts, params, {"gain_K": control.gain, "rate_c": control.rate,
                                  "source": "simulated", "trials_lost": lost}
-    impacts = read_impacts(config.data)
-    # the model at the data's racket (section 7: "identical to the ones of the experiment");
-    # alpha_0 and g from the config
-    amplitude = (float(impacts["racket_amplitude_m"].mean()) if "racket_amplitude_m" in impacts
-                 else params.racket_amplitude)
+    table = read_impacts(config.data)
+    impacts = table.frame
+    # the model at the data's racket (section 7: "identical to the ones of the experiment"),
+    # alpha_0 and g the data's unless the user set them
+    model = model_for_data(table, config, options or RunOptions(), config.data)
     period = config.fit.racket_period_s
-    data_params = ModelParams(params.alpha, params.g, amplitude,
+    data_params = ModelParams(model.alpha.value, model.g.value,
+                              float(impacts["racket_amplitude_m"].mean()),
                               float(impacts["racket_period_s"].mean()) if period is None
                               else period)
-    return impacts, data_params, {"gain_K": math.nan, "rate_c": math.nan, "source": "data",
-                                  "trials_lost": math.nan}
+    return impacts, data_params, {"model": model, "gain_K": math.nan, "rate_c": math.nan,
+                                  "source": "data", "trials_lost": math.nan}
 
 
 def align_frame(impacts: pd.DataFrame, params: ModelParams, n_after: int) -> dict:
@@ -498,9 +507,19 @@ def fit_frames(config: ControlConfig, inputs=None) -> dict[str, pd.DataFrame]:
 
 # -- run ------------------------------------------------------------------------------------------
 def run(config: ControlConfig, options: RunOptions) -> ExperimentResult:
-    params = config.params
-    params.fixed_point()  # NoFixedPointError: one line naming model.racket_amplitude
-    fit_data = fit_inputs(config)  # a bad --data file fails before any work
+    if config.data is None:
+        config.params.fixed_point()  # NoFixedPointError: one line naming model.racket_amplitude
+    fit_data = fit_inputs(config, options)  # a bad --data file fails before any work
+    params = fit_data[1]  # with --data: the model at the data's racket, alpha and g
+    if config.data is not None:
+        data_model_text = fit_data[2]["model"].text()
+        where = (f"data: {config.data}: the model at the data's racket a_r = "
+                 f"{params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s, "
+                 f"{data_model_text}")
+        try:
+            params.fixed_point()
+        except ModelError as exc:
+            raise ConfigError(f"{where}: {exc}") from None
     options.progress.start(6, "control: stability, impulses, thresholds, basins, fit")
     frames = radius_frames(params, config)
     options.progress.advance(1)
@@ -518,8 +537,14 @@ def run(config: ControlConfig, options: RunOptions) -> ExperimentResult:
     figures = draw(frames)
     caption_figures(figures, params, f"controller K = {config.model.control.gain:g}, "
                     f"c = {config.model.control.rate:g}"
-                    + (f"; fit to data: {config.data}" if config.data is not None else ""))
-    return ExperimentResult(frames=frames, figures=figures, summary=summary_lines(frames))
+                    + (f"; fit to data: {config.data} (the model at the data's racket)"
+                       if config.data is not None else ""))
+    summary = summary_lines(frames)
+    if config.data is not None:
+        summary.insert(0, f"data {config.data}: every result at the data's racket a_r = "
+                       f"{params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s; "
+                       f"{data_model_text}")
+    return ExperimentResult(frames=frames, figures=figures, summary=summary)
 
 
 def summary_lines(frames: dict[str, pd.DataFrame]) -> list[str]:
@@ -614,8 +639,8 @@ def draw_acf(frames):
     for ax in axes[1]:
         ax.set_xlabel("lag l (bounces)")
     axes[0, 0].legend(fontsize=7)
-    fig.suptitle("Correlation functions (paper Fig. 8) without and with racket period control, "
-                 "at the config's model")
+    fig.suptitle("Correlation functions (paper Fig. 8) without and with racket period control "
+                 "(the model's parameters below)")
     return fig
 
 

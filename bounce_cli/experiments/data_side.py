@@ -3,9 +3,9 @@
 dispatch here when their config has ``data`` set to an impacts table, and draw the figures
 below from the frames these functions return.
 
-The model at the data's parameters: alpha and g from the config's ``model`` block
-(alpha is not observable from a trial), racket period and amplitude from the data's cycles
-(means over all impacts of the file).
+The model at the data's parameters: racket period and amplitude from the data's cycles
+(means over all impacts of the file), alpha and g the data's unless the user set them
+(``bounce_cli.data_parameters``).
 """
 
 from __future__ import annotations
@@ -31,6 +31,7 @@ from ..engine.data_stats import (
     trial_correlations,
 )
 from ..engine.var_fit import EIGEN_QUANTITIES, J_ENTRIES, Var1Fit, fit_var1
+from ..data_parameters import DataModel, model_for_data
 from ..impacts import Impacts, ImpactsSource, circular_mean, read_impacts
 from ..plotting import new_figure
 
@@ -72,13 +73,13 @@ class ImpulseDataBlock(StrictModel):
 def model_at_data(
     impacts: Impacts, alpha: float, g: float, need_stable: bool = True
 ) -> ModelParams:
-    """alpha, g from the config; a_r and tau the means of the data's racket cycles. A
-    one-line error when these give no (stable) period-1 fixed point."""
+    """alpha, g as given (``data_parameters.model_for_data``); a_r and tau the means of the
+    data's racket cycles. A one-line error when these give no (stable) period-1 fixed point."""
     f = impacts.frame
     tau = float(f["racket_period_s"].mean())
     a_r = float(f["racket_amplitude_m"].mean())
     where = (f"data: {impacts.path}: the model at the data's racket amplitude {a_r:.4g} m and "
-             f"period {tau:.4g} s with model.alpha = {alpha:g}, model.g = {g:g}")
+             f"period {tau:.4g} s with alpha = {alpha:g}, g = {g:g} m/s^2")
     params = ModelParams(alpha, g, a_r, tau)
     try:
         st = stability(params)
@@ -91,6 +92,12 @@ def model_at_data(
                           f"{st.spectral_radius:.3g}, AC = {st.ac_g:.3g} g): no stationary "
                           "statistics to compare with")
     return params
+
+
+def racket_text(params: ModelParams) -> str:
+    """``model at the data's racket a_r = 0.11 m, tau = 0.6 s``."""
+    return (f"model at the data's racket a_r = {params.racket_amplitude:.4g} m, tau = "
+            f"{params.racket_period:.4g} s")
 
 
 def relaxed_text(impacts: int, horizon: int | None = None) -> str:
@@ -144,7 +151,8 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
     impacts = read_impacts(config.data if source is None else source, needs=MODEL_COLUMNS,
                            command="acf --data",
                            min_bounces=config.max_lag + 2)
-    params = model_at_data(impacts, config.model.alpha, config.model.g)
+    used = model_for_data(impacts, config, options, source)
+    params = model_at_data(impacts, used.alpha.value, used.g.value)
     segments = stationary_segments(impacts, d.settle_after_perturbation, config.max_lag + 2)
     segments_means = [(s[1], s[3]) for s in segments]
     segments = [s[:3] for s in segments]
@@ -235,8 +243,8 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
     add("theta_mean", "deg", "data", math.degrees(theta_mean),
         note="circular mean phase of impact (compare eq. 8)")
     add("alpha", "1", "data_eq8", implied_alpha(params, theta_mean),
-        note="the alpha for which eq. 8 puts theta~ at the data's mean phase (a check of "
-             "model.alpha)")
+        note=f"the alpha for which eq. 8 puts theta~ at the data's mean phase (a check of "
+             f"the model's alpha, {used.alpha.source})")
     add("ac", "g", "model", st.ac_g)
     add("racket_period", "s", "data", params.racket_period, note="mean over impacts")
     add("racket_amplitude", "m", "data", params.racket_amplitude, note="mean over impacts")
@@ -245,10 +253,8 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
     stab = pd.DataFrame(srows)
     trust = trust_frame(params, q_v, q_theta, config, segments, options)
     frames = {"acf_data.csv": acf, "stability_data.csv": stab, "trust.csv": trust}
-    lines = [f"data {impacts.path}: {n_seg} runs, {len(dv_all)} bounces; model at a_r = "
-             f"{params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s (the data's), "
-             f"alpha = {params.alpha:g}, g = {params.g:g} m/s^2 (model.alpha, model.g: set "
-             f"them to your lab's): spectral radius {st.spectral_radius:.3f}"]
+    lines = [f"data {impacts.path}: {n_seg} runs, {len(dv_all)} bounces; {racket_text(params)}",
+             f"{used.text()}: spectral radius {st.spectral_radius:.3f}"]
     for method, fit in fits.items():
         if isinstance(fit, ModelError):
             lines.append(f"{method}: {fit}")
@@ -265,7 +271,8 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
                      f"m/s, q_theta = {q_theta:.4f} rad (the model's J may not be the data's)")
     lines.append(f"data's mean phase {math.degrees(theta_mean):.1f} deg vs eq. 8's "
                  f"{fp.theta_deg:.1f} deg (eq. 8 would need alpha = "
-                 f"{implied_alpha(params, theta_mean):.3f}; model.alpha = {params.alpha:g})")
+                 f"{implied_alpha(params, theta_mean):.3f}; the model's alpha = {params.alpha:g}, "
+                 f"{used.alpha.source})")
     n_data = int(sum(len(s[1]) for s in segments))
     run_length = max(int(round(np.mean([len(s[1]) for s in segments]))), 8)
     for method in ("ols", "lag2"):
@@ -441,10 +448,11 @@ def impulse_data_run(config, options, source: ImpactsSource | None = None
     if not frame["perturbed"].any():
         raise ConfigError(f"data: {impacts.path}: column perturbed: no perturbed impact, nothing "
                           "to align (bounce impulse --data needs perturbations)")
-    params = model_at_data(impacts, config.model.alpha, config.model.g)
+    used = model_for_data(impacts, config, options, source)
+    params = model_at_data(impacts, used.alpha.value, used.g.value)
     n = config.iterations
     groups = list(impacts.by_trial())
-    alpha_0 = config.model.alpha
+    alpha_0 = params.alpha
     quantities = {"v_m_s": ("v_m_s", False, 1.0), "theta_deg": ("theta_rad", True, 180 / math.pi),
                   "racket_period_s": ("racket_period_s", False, 1.0),
                   "racket_amplitude_m": ("racket_amplitude_m", False, 1.0)}
@@ -528,9 +536,7 @@ def impulse_data_run(config, options, source: ImpactsSource | None = None
              f" decrease, {n_up} increase); {cut} windows cut short "
              "by the next perturbation, the trial's end or a gap in k (their later impacts are "
              "not averaged)",
-             f"model at a_r = {params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s"
-             f" (the data's), alpha_0 = {params.alpha:g}, g = {params.g:g} m/s^2 (model.alpha, "
-             f"model.g): v~ = {fp.v_m_s:.3f} m/s,"
+             f"{racket_text(params)}; {used.text()} (alpha_0): v~ = {fp.v_m_s:.3f} m/s,"
              f" theta~ = {fp.theta_deg:.1f} deg"]
     for row in relax.itertuples():
         lines.append(f"{row.direction} (alpha_p {row.mean_alpha_p:.3f}), {row.source}: impacts "
@@ -595,26 +601,25 @@ def is_impacts_table(path_text: str) -> bool:
     return {"trial", "k", "racket_period_s", "racket_amplitude_m"} <= cols and "a_r_m" not in cols
 
 
-def trial_means_from_impacts(source: ImpactsSource, alpha: float) -> pd.DataFrame:
+def trial_means_from_impacts(source: ImpactsSource, config, options
+                             ) -> tuple[pd.DataFrame, DataModel]:
     """One row per trial: mean racket amplitude (a_r_m), mean racket period (tau_s), the
-    circular mean phase of impact (theta_deg, in (-180, 180]), and the trial's alpha (the
-    median of its impacts' alpha when given: perturbed impacts do not move it)."""
+    circular mean phase of impact (theta_deg, in (-180, 180]), and the model's alpha and g
+    (``data_parameters.model_for_data``: the data's unless set by the user); and that model."""
     impacts = read_impacts(source, needs=MODEL_COLUMNS, command="regression --data",
                            min_bounces=2)
+    model = model_for_data(impacts, config, options, source)
     rows = []
     for trial, g in impacts.by_trial():
         theta = circular_mean(g["theta_rad"])
         rows.append({"trial": trial, "a_r_m": float(g["racket_amplitude_m"].mean()),
                      "tau_s": float(g["racket_period_s"].mean()),
                      "theta_deg": (math.degrees(theta) + 180.0) % 360.0 - 180.0,
-                     "alpha": float(g["alpha"].median()) if "alpha" in g.columns else alpha,
-                     "bounces": len(g)})
+                     "alpha": model.alpha.value, "g": model.g.value, "bounces": len(g)})
     frame = pd.DataFrame(rows)
     if (frame["theta_deg"].abs() >= 90).any():
         bad = frame[frame["theta_deg"].abs() >= 90].iloc[0]
         raise ConfigError(f"data: {impacts.path}: trial {bad['trial']}: mean phase of impact "
                           f"{bad['theta_deg']:.1f} deg is outside (-90, 90): eq. 15 has no "
                           "positive slope there")
-    if frame["alpha"].nunique() > 1:
-        frame["alpha"] = frame["alpha"].median()
-    return frame
+    return frame, model

@@ -294,7 +294,7 @@ def run_data(config: ImpulseConfig, options: RunOptions, source=None) -> Experim
 
     frames, lines = impulse_data_run(config, options, source)
     figures = draw_data(frames)
-    caption_figures(figures, None, data_caption(config, source))
+    caption_figures(figures, None, data_caption(config, source, options.record))
     return ExperimentResult(frames=frames, figures=figures, summary=lines)
 
 

@@ -30,6 +30,7 @@ from ..engine.linear import jacobian, racket_amplitude_for_ac, stability, stable
 from ..engine.params import ModelError, ModelParams, phase_difference
 from ..engine.regression import ols_line
 from ..engine.stochastic import map_noise_covariance, paper_noise_covariance, stationary_covariance
+from ..data_parameters import DataModel, model_for_data
 from ..impacts import circular_mean, read_impacts
 from ..plotting import caption_figures, data_caption, new_figure
 from .base import Experiment, ExperimentResult, RunOptions
@@ -82,15 +83,18 @@ def model_curve(alpha: float, g: float, period: float, q_v: float, q_theta: floa
     return pd.DataFrame(rows)
 
 
-def trial_table(config: LearningConfig, source=None) -> tuple[pd.DataFrame, float]:
+def trial_table(config: LearningConfig, options: RunOptions, source=None
+                ) -> tuple[pd.DataFrame, float, DataModel]:
     """Per-trial statistics of the impacts table (``source``, default the file
-    ``config.data``), in the file's order of trials (trial_number 1, 2, ...), and the data's
-    mean racket period (NaN without that column)."""
+    ``config.data``), in the file's order of trials (trial_number 1, 2, ...), the data's
+    mean racket period (NaN without that column), and the model's alpha and g (the data's
+    unless set by the user, ``data_parameters``)."""
     if source is None:
         assert config.data is not None
         source = config.data
     impacts = read_impacts(source, needs=("racket_acc_g", "ball_apex_m"),
                            command="learning --data", min_bounces=config.min_bounces)
+    model = model_for_data(impacts, config, options, source)
     rows = []
     for number, (trial, g) in enumerate(impacts.by_trial(), start=1):
         if "perturbed" in g.columns:  # the stationary state: not the relaxations
@@ -108,7 +112,7 @@ def trial_table(config: LearningConfig, source=None) -> tuple[pd.DataFrame, floa
         })
     period = (float(impacts.frame["racket_period_s"].mean())
               if "racket_period_s" in impacts.frame.columns else math.nan)
-    return pd.DataFrame(rows), period
+    return pd.DataFrame(rows), period, model
 
 
 def trend_table(trials: pd.DataFrame, confidence: float) -> pd.DataFrame:
@@ -131,12 +135,14 @@ def trend_table(trials: pd.DataFrame, confidence: float) -> pd.DataFrame:
 
 def run(config: LearningConfig, options: RunOptions, source=None) -> ExperimentResult:
     """``source``: an impacts table in memory, ``(label, frame)`` (default: ``config.data``)."""
-    m = config.model
+    alpha, g = config.model.alpha, config.model.g
     frames: dict[str, pd.DataFrame] = {}
     lines = []
-    period = m.racket_period
+    period = config.model.racket_period
     if config.data is not None or source is not None:
-        trials, data_period = trial_table(config, source)
+        trials, data_period, model = trial_table(config, options, source)
+        alpha, g = model.alpha.value, model.g.value
+        lines.append(model.text())
         if len(trials) < 3:
             label = config.data if source is None else source[0]
             raise ConfigError(f"data: {label}: {len(trials)} trial(s); a trend over "
@@ -149,18 +155,18 @@ def run(config: LearningConfig, options: RunOptions, source=None) -> ExperimentR
             lines.append(f"{row.quantity}: slope {row.slope_per_trial:.4g} per trial "
                          f"[{row.slope_ci_low:.4g}, {row.slope_ci_high:.4g}] ({row.trend})")
     try:
-        curve = model_curve(m.alpha, m.g, period, config.noise.q_v, config.noise.q_theta,
+        curve = model_curve(alpha, g, period, config.noise.q_v, config.noise.q_theta,
                             config.ac_points)
     except ModelError as exc:
         raise ConfigError(f"model curve at racket period {period:.4g} s: {exc}") from None
     frames["model_curve.csv"] = curve
     best = curve.loc[curve["apex_sd_m"].idxmin()]
-    lines.append(f"eq. 19 at alpha = {m.alpha:g}, tau = {period:.4g} s, q_v = "
+    lines.append(f"eq. 19 at alpha = {alpha:g}, g = {g:g} m/s^2, tau = {period:.4g} s, q_v = "
                  f"{config.noise.q_v:g} m/s, q_theta = {config.noise.q_theta:g} rad: SD of ball "
                  f"amplitude smallest ({best.apex_sd_m * 100:.2f} cm) at AC = {best.ac_g:.3f} g; "
-                 f"stable AC range ({float(stable_ac_range_g(m.alpha)[0]):.3f}, 0) g (eq. 14)")
+                 f"stable AC range ({float(stable_ac_range_g(alpha)[0]):.3f}, 0) g (eq. 14)")
     figures = draw(frames)
-    caption_figures(figures, None, data_caption(config, source))
+    caption_figures(figures, None, data_caption(config, source, options.record))
     return ExperimentResult(frames=frames, figures=figures, summary=lines)
 
 

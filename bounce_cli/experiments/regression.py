@@ -223,12 +223,14 @@ def _constant(group: pd.DataFrame, column: str, default: float, condition) -> fl
 def run(config: RegressionConfig, options: RunOptions, source=None) -> ExperimentResult:
     """``source``: an impacts table in memory, ``(label, frame)`` (default: ``config.data``)."""
     data_label = config.data if source is None else source[0]  # None: simulated trials
-    if source is not None:
-        trials = trial_means_from_impacts(source, config.model.alpha)
-        described = f"{data_label} (impacts averaged per trial)"
-    elif config.data is not None and is_impacts_table(config.data):
-        trials = trial_means_from_impacts(config.data, config.model.alpha)
-        described = f"data {config.data} (impacts averaged per trial)"
+    at_model = ""  # with an impacts table: the model's alpha and g and where they came from
+    impacts_source = source if source is not None else (
+        config.data if config.data is not None and is_impacts_table(config.data) else None)
+    if impacts_source is not None:
+        trials, model = trial_means_from_impacts(impacts_source, config, options)
+        described = (f"{'data ' if source is None else ''}{data_label} (impacts averaged per "
+                     f"trial); {model.text()}")
+        at_model = f"; {model.text()}"
     elif config.data is not None:
         trials = read_trials(config.data)
         described = f"data {config.data}"
@@ -250,7 +252,7 @@ def run(config: RegressionConfig, options: RunOptions, source=None) -> Experimen
                 "trials at different racket periods, e.g. different target heights)")
     figures = draw({"trials.csv": trials, "fit.csv": fit})
     if data_label is not None:
-        caption_figures(figures, None, f"data: {data_label}")
+        caption_figures(figures, None, f"data: {data_label}{at_model}")
     else:
         caption_figures(figures, None, f"simulated trials: alpha = {config.model.alpha:g}, "
                         f"g = {config.model.g:g} m/s^2; seed {config.seed}")

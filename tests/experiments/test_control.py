@@ -172,6 +172,7 @@ def impacts_csv(tmp_path, gain=0.6, rate=0.7, **drop):
         velocity_noise_sd=0.05, phase_noise_sd=0.02, period_noise_sd=0.005, seed=9))
     data["theta_deg"] = np.degrees(data.theta_rad)
     data["racket_amplitude_m"] = 0.3
+    data["g_m_s2"] = 9.81  # the set-up's gravity (the model runs at the data's)
     data = data.drop(columns=list(drop))
     path = tmp_path / "impacts.csv"
     data.to_csv(path, index=False)

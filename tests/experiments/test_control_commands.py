@@ -122,7 +122,7 @@ def test_fit_to_passive_data_says_no_control_is_detected(tmp_path):
 
     data = Path(__file__).resolve().parents[2] / "results" / "impulse-data" / "impacts.csv"
     result = CliRunner().invoke(app, ["control", "--data", str(data), "--out",
-                                      str(tmp_path / "c")])
+                                      str(tmp_path / "c"), "--set", "model.g=9.81"])
     assert result.exit_code == 0, result.output
     text = " ".join(result.stderr.split())
     assert "K's interval includes 0, no period control is detected" in text

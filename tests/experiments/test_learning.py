@@ -120,7 +120,7 @@ def test_data_statistics_leave_out_the_relaxation_after_perturbations(tmp_path, 
     for settle in (0, 4):
         out = tmp_path / f"s{settle}"
         result = cli("learning", "--data", data, "--set", f"settle_after_perturbation={settle}",
-                     "--out", out, "--quiet")
+                     "--set", "model.g=9.81", "--out", out, "--quiet")
         assert result.exit_code == 0, result.output
         sds[settle] = pd.read_csv(out / "trials.csv")["v_sd_m_s"].to_numpy()
     assert np.all(sds[4] < 0.6 * sds[0])
