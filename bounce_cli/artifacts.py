@@ -46,6 +46,8 @@ if TYPE_CHECKING:  # pandas is imported where a table is written or read (fast s
 
 MANIFEST = "run.json"
 TIMING = "timing.json"
+#: held by the run writing into a directory (``RunDirectoryLock``); removed when it ends
+LOCK_FILE = ".bounce.lock"
 #: the distributions whose versions shape the numbers and figures (run.json "versions")
 VERSIONED_PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "pydantic", "pyyaml")
 
@@ -284,8 +286,66 @@ def files_named_in(config: Any) -> set[Path]:
     return found
 
 
+class RunDirectoryLock:
+    """One run at a time in an output directory: an advisory lock (``flock``) on
+    ``<out>/.bounce.lock``, held from the directory's check until the run has committed or
+    discarded its files. A second run into the same directory refuses with one line naming
+    the holder's pid and command. The lock belongs to the open file, so a run that died
+    (SIGKILL, a crash) holds nothing: its stale lock file is taken over. Where ``fcntl`` is
+    missing (Windows) runs are not locked."""
+
+    def __init__(self, out_dir: Path) -> None:
+        self.path = Path(out_dir) / LOCK_FILE
+        self._fd: int | None = None
+
+    def acquire(self, command: str) -> None:
+        """Take the lock or raise OutputDirError (the directory exists)."""
+        try:
+            import fcntl
+        except ImportError:  # pragma: no cover - no advisory locks on this platform
+            return
+        while True:
+            with deferred():  # the file is open and known to release() in one step
+                self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o666 & ~current_umask())
+            try:
+                fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:  # held by a live run
+                holder = os.pread(self._fd, 200, 0).decode("utf-8", "replace").strip()
+                self._close()
+                raise OutputDirError(
+                    f"--out {self.path.parent}: another bounce run is writing there"
+                    + (f" ({holder})" if holder else "")
+                    + "; wait for it to finish or choose another --out") from None
+            try:  # the holder may have removed the file between our open and our lock
+                current = os.path.samestat(os.fstat(self._fd), os.stat(self.path))
+            except FileNotFoundError:
+                current = False
+            if current:
+                break
+            self._close()
+        os.ftruncate(self._fd, 0)
+        os.pwrite(self._fd, f"pid {os.getpid()}: bounce {command}\n".encode(), 0)
+
+    def release(self) -> None:
+        """Remove the lock file (while still holding it: no one else has it) and unlock."""
+        if self._fd is None:
+            return
+        with deferred():
+            try:
+                self.path.unlink()
+            except FileNotFoundError:
+                pass
+            self._close()
+
+    def _close(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+
 class RunDirectory:
-    """Collects a run's outputs and commits them atomically into ``out_dir``."""
+    """Collects a run's outputs and commits them atomically into ``out_dir``, holding the
+    directory's lock (``RunDirectoryLock``) from the check until ``commit`` or ``discard``."""
 
     def __init__(
         self,
@@ -314,7 +374,12 @@ class RunDirectory:
         #: what the run adds to run.json beside the config (``RunOptions.record``)
         self.record: dict[str, Any] = {}
         self.created: list[Path] = []  # folders this run made, outermost first
-        self.check_writable(force)
+        self.lock = RunDirectoryLock(self.out_dir)
+        try:
+            self.check_writable(force)
+        except BaseException:
+            self.discard()
+            raise
 
     def check_writable(self, force: bool) -> None:
         """Before any computing: the directory can be created and written, and it does not
@@ -334,6 +399,7 @@ class RunDirectory:
                 raise
             reason = exc.strerror or type(exc).__name__
             raise OutputDirError(f"--out {self.out_dir}: cannot write there: {reason}") from None
+        self.lock.acquire(self.command)  # before reading what a concurrent run may replace
         self.previous = read_manifest(self.out_dir)
         if force or not self.previous:
             return
@@ -349,9 +415,15 @@ class RunDirectory:
                 "use --force to replace them or choose another --out"
             )
 
+    def release(self) -> None:
+        """The run is over: the directory's lock is released (``commit`` does it)."""
+        self.lock.release()
+
     def discard(self) -> None:
-        """After an error or an interrupt: remove the folders this run created, if they are
-        still empty (a previous run's folder, or one holding anything, is left alone)."""
+        """After an error or an interrupt: release the lock and remove the folders this run
+        created, if they are still empty (a previous run's folder, or one holding anything, is
+        left alone)."""
+        self.lock.release()
         for folder in reversed(self.created):
             try:
                 folder.rmdir()
@@ -479,6 +551,7 @@ class RunDirectory:
                 child.kill()
             for tmp, _ in staged:
                 tmp.unlink(missing_ok=True)
+            self.release()  # the run's files are in place (or it failed): the next may start
         return [final for _, final in staged]
 
 
