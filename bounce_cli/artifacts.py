@@ -356,7 +356,7 @@ class RunDirectory:
         overrides: list[str],
         config_path: str | None,
         seed: int | None = None,
-        data_file: str | None = None,
+        data_file: str | list[str] | None = None,
         force: bool = False,
     ) -> None:
         self.out_dir = Path(out_dir)
@@ -448,9 +448,11 @@ class RunDirectory:
             "seed": self.seed,
             "config": self.resolved_config,
         }
-        if self.data_file is not None:
-            path = Path(self.data_file).resolve()
-            manifest["data_file"] = {"path": str(path), "sha256": sha256_of(path)}
+        if self.data_file is not None:  # several --data files: a list of them
+            files = [{"path": str(Path(p).resolve()), "sha256": sha256_of(Path(p).resolve())}
+                     for p in (self.data_file if isinstance(self.data_file, list)
+                               else [self.data_file])]
+            manifest["data_file"] = files if isinstance(self.data_file, list) else files[0]
         manifest.update(self.record)
         manifest["versions"] = versions()
         manifest["files"] = sorted([*self._frames, *self._figures])

@@ -150,9 +150,19 @@ def output_folder(text: str) -> Path:
 
 
 OutOption = Annotated[
-    Optional[Path], typer.Option("--out", "-o", parser=output_folder, metavar="PATH",
-                                 help="Output directory (default results/<name>).")
+    Optional[list[Path]], typer.Option("--out", "-o", parser=output_folder, metavar="PATH",
+                                       help="Output directory (default results/<name>).")
 ]
+
+
+def only_once(option: str, values: list | None):
+    """The one value of an option that may be given once (typer would keep the last one of
+    several without a word); None when it is not given."""
+    values = list(values or [])
+    if len(values) > 1:
+        fail(f"{option} given {len(values)} times ({', '.join(map(str, values))}); give it "
+             "once")
+    return values[0] if values else None
 QuietOption = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or summary.")]
 ForceOption = Annotated[
     bool, typer.Option("--force", help="Replace results of a different config in --out: the "
@@ -269,6 +279,17 @@ def warn(message: str) -> None:
     print(f"bounce: warning: {message}", file=sys.stderr, flush=True)
 
 
+def warn_if_implausible_racket(model) -> None:
+    """A warning per racket parameter of a ``model`` block outside what a person can do
+    (``bounce_cli.plausibility``), naming the likely unit slip."""
+    from .plausibility import racket_warnings
+
+    for message in racket_warnings(model.racket_amplitude, model.racket_period,
+                                   "model.racket_amplitude",
+                                   "model.racket_period"):
+        warn(message)
+
+
 def resolve_config_path(config: Path | None, name: str) -> Path:
     return config if config is not None else bundled_config_path(name)
 
@@ -326,6 +347,8 @@ def run_experiment(
         if print_config:
             typer.echo(to_yaml(cfg), nl=False)
             return
+        if getattr(cfg, "data", None) is None:  # with --data the model's racket is the data's
+            warn_if_implausible_racket(cfg.model)
         if entry.needs_fixed_point and getattr(cfg, "data", None) is None:
             # with --data the model is taken at the data's racket, not the config's
             controller = getattr(cfg.model, "controller", lambda: None)()
@@ -410,6 +433,7 @@ def load_model_block(config: Path | None, overrides: list[str] | None, *,
             raise ConfigError(f"--set {'.'.join(keys)}: this command only uses the model block")
     data = apply_overrides(read_yaml(path), overrides)
     cfg = validate(ModelOnlyConfig, {"model": data.get("model") or {}}, str(path), overrides)
+    warn_if_implausible_racket(cfg.model)
     if need_fixed_point:
         cfg.params.fixed_point()
     return cfg.model
@@ -695,16 +719,28 @@ def add_experiment_command(entry: Entry) -> None:
         force: ForceOption = False,
         print_config: PrintConfigOption = False,
         jobs: JobsOption = None,
-        data: Optional[Path] = None,
-        events: Optional[Path] = None,
+        data: Optional[list[Path]] = None,
+        events: Optional[list[Path]] = None,
         resume: ResumeOption = False,
         scheduler: SchedulerOption = None,
     ) -> None:
         overrides = list(overrides or [])
-        for key, path in (("data", data), ("events", events)):
-            if path is not None:
-                overrides.append(f"{key}={json.dumps(str(path))}")
-        run_experiment(entry, config=config, overrides=overrides, out=out, quiet=quiet,
+        out_dir = only_once("--out", out)
+        data_paths = [str(p) for p in data or []]
+        if len(data_paths) > 1:  # several files: the trials of one session, where it can be
+            from .config import accepts_several_files
+
+            if not accepts_several_files(entry.load().schema):
+                fail(f"--data given {len(data_paths)} times ({', '.join(data_paths)}): bounce "
+                     f"{entry.name} reads one file per run (several --data files are the trials "
+                     "of one session for learning, regression, acf, impulse and control)")
+            overrides.append(f"data={json.dumps(data_paths)}")
+        elif data_paths:
+            overrides.append(f"data={json.dumps(data_paths[0])}")
+        event_file = only_once("--events", events)
+        if event_file is not None:
+            overrides.append(f"events={json.dumps(str(event_file))}")
+        run_experiment(entry, config=config, overrides=overrides, out=out_dir, quiet=quiet,
                        force=force, print_config=print_config, jobs=jobs, resume=resume,
                        scheduler=scheduler)
 
@@ -713,7 +749,8 @@ def add_experiment_command(entry: Entry) -> None:
     hints = typing.get_type_hints(command, include_extras=True)
     file_options = {"data": entry.data_help, "events": entry.events_help}
     for key, help_text in file_options.items():
-        hints[key] = Annotated[Optional[Path], typer.Option(f"--{key}", help=help_text)]
+        hints[key] = Annotated[Optional[list[Path]],
+                               typer.Option(f"--{key}", help=help_text, metavar="PATH")]
     declared = {**{k: v is not None for k, v in file_options.items()},
                 "resume": entry.resumable, "scheduler": entry.cluster}
     params = [p.replace(annotation=hints[p.name])

@@ -10,7 +10,7 @@ import copy
 import typing
 from importlib import resources
 from pathlib import Path
-from typing import Any, Literal, Optional, TypeVar
+from typing import Any, Literal, Optional, TypeVar, Union
 
 import yaml
 from pydantic import (
@@ -252,10 +252,21 @@ def parse_override(text: str) -> tuple[list[str], Any]:
 
 def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
     """Return a copy of ``data`` with each ``dotted.key=value`` set (unknown keys are caught
-    by validation, which forbids extra keys)."""
+    by validation, which forbids extra keys). A key given twice (or a key and a mapping that
+    holds it) is an error: the last one would win without a word."""
     data = copy.deepcopy(data)
+    given: dict[str, Any] = {}
     for text in overrides:
         path, value = parse_override(text)
+        dotted = ".".join(path)
+        for earlier, before in given.items():
+            if earlier == dotted:
+                raise ConfigError(f"--set {dotted}: given twice ({show_value(before)}, then "
+                                  f"{show_value(value)}); give each key once")
+            if dotted.startswith(earlier + ".") or earlier.startswith(dotted + "."):
+                raise ConfigError(f"--set {dotted}: overlaps --set {earlier}; give each key "
+                                  "once")
+        given[dotted] = value
         node = data
         for i, part in enumerate(path[:-1]):
             child = node.get(part)
@@ -267,6 +278,29 @@ def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any
             node = child
         node[path[-1]] = value
     return data
+
+
+#: the ``data`` key of the --data analyses: one file, or several (trials of one session:
+#: ``--data a.csv --data b.csv``, read as one table by ``bounce_cli.impacts.read_impacts``)
+DataFiles = Optional[Union[str, list[str]]]
+
+
+def accepts_several_files(schema: type[BaseModel]) -> bool:
+    """Whether a config's ``data`` key takes several files (``DataFiles``)."""
+    field = schema.model_fields.get("data")
+    return field is not None and field.annotation == DataFiles
+
+
+def data_files(data: Any) -> list[str]:
+    """The ``data`` key's files as a list (none for null)."""
+    if data is None:
+        return []
+    return [str(p) for p in data] if isinstance(data, (list, tuple)) else [str(data)]
+
+
+def data_text(data: Any) -> str:
+    """The ``data`` key as messages name it: the path, or the paths joined by `` + ``."""
+    return " + ".join(data_files(data))
 
 
 #: the model keys a --data analysis takes from the data unless the user sets them

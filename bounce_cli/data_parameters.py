@@ -28,6 +28,7 @@ from typing import Any
 import numpy as np
 
 from .config import DATA_MODEL_KEYS, ConfigError
+from .plausibility import racket_warnings
 from .setup_table import SETUP_FILE, read_setup
 
 
@@ -171,11 +172,21 @@ def data_model(impacts, model, set_by_user: frozenset[str] | None,
 def model_for_data(impacts, config, options, source) -> DataModel:
     """``data_model`` for an analysis: the user's settings from ``options`` (the CLI's
     ``model_set_by_user``), the ``setup.csv`` of the file(s) ``source`` names (none for a
-    table in memory), and the result recorded for ``run.json`` (``model_at_data``)."""
+    table in memory), and the result recorded for ``run.json`` (``model_at_data``). The data's
+    racket is checked against what a person can do (``plausibility``: a warning naming the
+    likely unit slip)."""
     if source is None:
         source = config.data
     paths = [] if isinstance(source, tuple) else (
         list(source) if isinstance(source, list) else [source])
     found = data_model(impacts, config.model, options.model_set_by_user, paths)
     options.record["model_at_data"] = found.record()
+    frame = impacts.frame
+    if {"racket_amplitude_m", "racket_period_s"} & set(frame.columns):
+        means = frame.groupby("trial", sort=False).mean(numeric_only=True)
+        for message in racket_warnings(
+                means.get("racket_amplitude_m", np.nan), means.get("racket_period_s", np.nan),
+                f"data: {impacts.path}: column racket_amplitude_m (trial means)",
+                f"data: {impacts.path}: column racket_period_s (trial means)"):
+            options.warn(message)
     return found

@@ -40,7 +40,8 @@ def data_caption(config: Any, source: Any = None, record: dict | None = None) ->
     if source is not None:
         where = "data: a simulated lab session"
     elif config.data is not None:
-        where = f"data: {config.data}"
+        where = "data: " + " + ".join(
+            [str(p) for p in config.data] if isinstance(config.data, list) else [config.data])
     else:
         where = "model only (no --data)"
     used = (record or {}).get("model_at_data")

@@ -186,3 +186,51 @@ def test_control_data_computes_everything_at_the_datas_racket(tmp_path, cli):
     v_stationary = (impulse.v_m_s - impulse.dv_m_s).to_numpy()
     assert v_stationary == pytest.approx(at_data.fixed_point().v_m_s, rel=1e-9)
     assert v_stationary == pytest.approx(LAB.g * tau / 2, rel=1e-9)  # eq. 7, not 4.5 m/s
+
+
+# -- several --data files, repeated --set and --out ----------------------------------------------
+def test_several_data_files_are_the_trials_of_one_session(tmp_path, cli):
+    """Two files whose trials are both labelled 1-4: eight trials, labelled by file (before,
+    the last --data alone was read: "4 trial(s)")."""
+    (tmp_path / "day1").mkdir()
+    (tmp_path / "day2").mkdir()
+    first = lab_table(tmp_path / "day1", name="monday.csv", seed=3)
+    second = lab_table(tmp_path / "day2", name="tuesday.csv", seed=4)
+    out = tmp_path / "out"
+    result = cli("learning", "--data", first, "--data", second, "--out", out, "--quiet",
+                 "--set", "min_bounces=10")
+    assert result.exit_code == 0, result.output
+    trials = pd.read_csv(out / "trials.csv", dtype={"trial": str})
+    assert list(trials["trial"]) == [f"{day}:{t}" for day in ("monday", "tuesday")
+                                     for t in range(1, 5)]
+    manifest = json.loads((out / "run.json").read_text())
+    assert [d["path"] for d in manifest["data_file"]] == [str(first.resolve()),
+                                                          str(second.resolve())]
+    assert manifest["config"]["data"] == [str(first), str(second)]
+    # g from both set-up files (weighted by their flights), alpha from both tables
+    assert manifest["model_at_data"]["g"]["detail"] == "2 setup.csv files"
+    assert manifest["model_at_data"]["alpha"]["n"] == 960
+
+
+def test_distinct_trial_labels_stay_as_written(tmp_path):
+    first = lab_table(tmp_path, name="a.csv")
+    frame = pd.read_csv(first)
+    second = tmp_path / "b.csv"
+    frame.assign(trial=frame["trial"] + 10).to_csv(second, index=False)
+    impacts = read_impacts([first, second])
+    assert impacts.trials == ["1", "2", "3", "4", "11", "12", "13", "14"]
+
+
+def test_a_repeated_set_key_or_out_is_an_error(tmp_path, cli, user_error):
+    user_error(cli("fixed-point", "--set", "model.alpha=0.5", "--set", "model.alpha=0.6"),
+               "--set model.alpha: given twice (0.5, then 0.6)")
+    user_error(cli("trajectory", "--set", "model={alpha: 0.5}", "--set", "model.alpha=0.4",
+                   "--out", tmp_path / "t"), "--set model.alpha: overlaps --set model")
+    user_error(cli("trajectory", "--out", tmp_path / "a", "--out", tmp_path / "b"),
+               "--out given 2 times")
+    user_error(cli("extract", "--data", "x.csv", "--data", "y.csv", "--out", tmp_path / "e"),
+               "--data given 2 times", "bounce extract reads one file per run")
+    assert not any(tmp_path.iterdir())
+    # different keys stay fine
+    result = cli("fixed-point", "--set", "model.alpha=0.5", "--set", "model.g=9.8", "--json")
+    assert result.exit_code == 0, result.output

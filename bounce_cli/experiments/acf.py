@@ -11,14 +11,20 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Literal, Optional
+from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
 from pydantic import Field
 
 from .. import paper
-from ..config import ConfigError, ControllableModelBlock, ExperimentConfig, StrictModel
+from ..config import (
+    ConfigError,
+    ControllableModelBlock,
+    DataFiles,
+    ExperimentConfig,
+    StrictModel,
+)
 from ..engine.linear import jacobian, stability
 from ..engine.control import controlled_jacobian
 from ..engine.params import ModelError, ModelParams, phase_difference
@@ -79,7 +85,8 @@ class AcfConfig(ExperimentConfig):
     burn_in: int = Field(100, ge=0, description="bounces dropped at the start of every run")
     max_lag: int = Field(10, ge=1, description="largest lag, bounces")
     seed: int = Field(0, ge=0)
-    data: Optional[str] = Field(None, description="impacts table: the data's side (--data)")
+    data: DataFiles = Field(None, description="impacts table: the data's side (--data; "
+                            "several: one session)")
     data_analysis: AcfDataBlock = AcfDataBlock()
 
 

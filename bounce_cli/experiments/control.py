@@ -22,6 +22,8 @@ from pydantic import Field
 from ..data_parameters import model_for_data
 from ..impacts import Impacts, read_impacts as shared_read_impacts
 from ..config import (
+    DataFiles,
+    data_text,
     ClassifyBlock,
     ConfigError,
     ControlBlock,
@@ -150,7 +152,7 @@ class ControlConfig(ExperimentConfig):
     basin: BasinGridBlock = BasinGridBlock()
     fit: FitBlock = FitBlock()
     correlations: CorrelationsBlock = CorrelationsBlock()
-    data: Optional[str] = Field(None, description="impacts.csv of perturbation trials to fit")
+    data: DataFiles = Field(None, description="impacts.csv of perturbation trials to fit")
 
 
 def _controllers(config: ControlConfig) -> dict:
@@ -380,7 +382,7 @@ def correlations_frame(params: ModelParams, config: ControlConfig) -> pd.DataFra
 DATA_COLUMNS = ("trial", "k", "theta_rad", "v_m_s", "racket_period_s", "perturbed")
 
 
-def read_impacts(path_text: str) -> Impacts:
+def read_impacts(path_text: str | list[str]) -> Impacts:
     """An impacts table (``bounce_cli.impacts``, the data side's reader) with the columns the
     fit and the model at the data's racket need: trial, k, theta_rad (or theta_deg), v_m_s,
     racket_period_s, racket_amplitude_m, perturbed (and alpha if present). Problems are
@@ -513,7 +515,7 @@ def run(config: ControlConfig, options: RunOptions) -> ExperimentResult:
     params = fit_data[1]  # with --data: the model at the data's racket, alpha and g
     if config.data is not None:
         data_model_text = fit_data[2]["model"].text()
-        where = (f"data: {config.data}: the model at the data's racket a_r = "
+        where = (f"data: {data_text(config.data)}: the model at the data's racket a_r = "
                  f"{params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s, "
                  f"{data_model_text}")
         try:
@@ -537,11 +539,11 @@ def run(config: ControlConfig, options: RunOptions) -> ExperimentResult:
     figures = draw(frames)
     caption_figures(figures, params, f"controller K = {config.model.control.gain:g}, "
                     f"c = {config.model.control.rate:g}"
-                    + (f"; fit to data: {config.data} (the model at the data's racket)"
+                    + (f"; fit to data: {data_text(config.data)} (the model at the data's racket)"
                        if config.data is not None else ""))
     summary = summary_lines(frames)
     if config.data is not None:
-        summary.insert(0, f"data {config.data}: every result at the data's racket a_r = "
+        summary.insert(0, f"data {data_text(config.data)}: every result at the data's racket a_r = "
                        f"{params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s; "
                        f"{data_model_text}")
     return ExperimentResult(frames=frames, figures=figures, summary=summary)

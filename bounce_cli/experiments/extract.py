@@ -83,6 +83,13 @@ class CsvBlock(StrictModel):
         return self
 
 
+#: what a "no bounce found" asks the user to check: a recording read in the wrong unit or axis
+#: shows no bounce at all
+NO_BOUNCE_HINT = ("; check units.length (positions in mm read as m, or cm as mm), the vertical "
+                  "axis (c3d.vertical_axis; a CSV's columns must be heights) and that "
+                  "columns.ball and columns.racket name the ball and the racket")
+
+
 class UnitsBlock(StrictModel):
     """Units of a CSV recording's and the events' columns (C3D: from the file)."""
 
@@ -197,7 +204,8 @@ def extract_all(trials: list[Trial], events, settings: ExtractionSettings, sourc
                                    None if ev is None else ev.t,
                                    None if ev is None else ev.alpha, settings)
         except ModelError as exc:
-            raise ConfigError(f"{source}: trial {trial.label}: {exc}") from None
+            hint = NO_BOUNCE_HINT if str(exc).startswith("no bounce found") else ""
+            raise ConfigError(f"{source}: trial {trial.label}: {exc}{hint}") from None
         frame = pd.DataFrame({"trial": trial.label, **result.impacts})
         if ev is not None and ev.alpha is not None:
             alpha = frame["alpha"]

@@ -7,14 +7,20 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Annotated, Optional
+from typing import Annotated
 
 import numpy as np
 import pandas as pd
 from pydantic import Field
 
 from .. import paper
-from ..config import ClassifyBlock, ControllableModelBlock, ExperimentConfig, StrictModel
+from ..config import (
+    ClassifyBlock,
+    ControllableModelBlock,
+    DataFiles,
+    ExperimentConfig,
+    StrictModel,
+)
 from ..engine.impulse import (
     find_threshold,
     impulse_response_full,
@@ -55,7 +61,8 @@ class ImpulseConfig(ExperimentConfig):
     classify: ClassifyBlock = ClassifyBlock()
     relaxation: RelaxationBlock = RelaxationBlock()
     threshold: ThresholdBlock = ThresholdBlock()
-    data: Optional[str] = Field(None, description="impacts table with perturbations (--data)")
+    data: DataFiles = Field(None, description="impacts table with perturbations (--data; "
+                            "several: one session)")
     data_analysis: ImpulseDataBlock = ImpulseDataBlock()
 
 

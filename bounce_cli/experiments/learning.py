@@ -18,13 +18,12 @@ eq. 19's stationary covariance. Along the model curve alpha, g and the racket pe
 from __future__ import annotations
 
 import math
-from typing import Optional
 
 import numpy as np
 import pandas as pd
 from pydantic import Field
 
-from ..config import ConfigError, ExperimentConfig, ModelBlock, StrictModel
+from ..config import DataFiles, ConfigError, ExperimentConfig, ModelBlock, StrictModel, data_text
 from ..engine.data_stats import apex_sd_eq19, settled_mask
 from ..engine.linear import jacobian, racket_amplitude_for_ac, stability, stable_ac_range_g
 from ..engine.params import ModelError, ModelParams, phase_difference
@@ -58,7 +57,8 @@ class LearningConfig(ExperimentConfig):
         4, ge=0, description="with --data: impacts after a perturbed one left out of the "
                              "per-trial statistics (as acf --data)")
     confidence: float = Field(0.95, gt=0.0, lt=1.0, description="level of the trend intervals")
-    data: Optional[str] = Field(None, description="impacts table with ball_apex_m (--data)")
+    data: DataFiles = Field(None, description="impacts table with ball_apex_m (--data; "
+                            "several: one session)")
 
 
 def model_curve(alpha: float, g: float, period: float, q_v: float, q_theta: float,
@@ -144,7 +144,7 @@ def run(config: LearningConfig, options: RunOptions, source=None) -> ExperimentR
         alpha, g = model.alpha.value, model.g.value
         lines.append(model.text())
         if len(trials) < 3:
-            label = config.data if source is None else source[0]
+            label = data_text(config.data) if source is None else source[0]
             raise ConfigError(f"data: {label}: {len(trials)} trial(s); a trend over "
                               "trials needs at least 3")
         if math.isfinite(data_period):

@@ -12,14 +12,22 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import numpy as np
 import pandas as pd
 from pydantic import Field
 
 from .. import paper
-from ..config import ConfigError, ExperimentConfig, StrictModel, show_value
+from ..config import (
+    ConfigError,
+    DataFiles,
+    ExperimentConfig,
+    StrictModel,
+    data_files,
+    data_text,
+    show_value,
+)
 from ..engine.linear import stability
 from ..engine.params import ModelError, ModelParams, NoFixedPointError
 from ..engine.regression import (
@@ -33,6 +41,7 @@ from ..engine.regression import (
 from ..plotting import caption_figures, new_figure
 from .base import Experiment, ExperimentResult, RunOptions
 from ..impacts import read_data_csv
+from ..plausibility import racket_warnings
 from .data_side import is_impacts_table, trial_means_from_impacts
 
 REQUIRED = ("a_r_m", "tau_s")
@@ -62,7 +71,8 @@ class RegressionConfig(ExperimentConfig):
     design: DesignBlock = DesignBlock()
     stochastic_map: MapNoiseBlock = MapNoiseBlock()
     confidence: float = Field(0.95, gt=0.0, lt=1.0, description="confidence level of the CIs")
-    data: Optional[str] = Field(None, description="CSV of real trials; replaces the simulation")
+    data: DataFiles = Field(None, description="CSV of real trials; replaces the simulation; "
+                            "several: one session")
     seed: int = Field(0, ge=0)
 
 
@@ -222,18 +232,25 @@ def _constant(group: pd.DataFrame, column: str, default: float, condition) -> fl
 
 def run(config: RegressionConfig, options: RunOptions, source=None) -> ExperimentResult:
     """``source``: an impacts table in memory, ``(label, frame)`` (default: ``config.data``)."""
-    data_label = config.data if source is None else source[0]  # None: simulated trials
+    # None: simulated trials
+    data_label = (data_text(config.data) or None) if source is None else source[0]
     at_model = ""  # with an impacts table: the model's alpha and g and where they came from
     impacts_source = source if source is not None else (
-        config.data if config.data is not None and is_impacts_table(config.data) else None)
+        config.data if config.data is not None and all(
+            is_impacts_table(p) for p in data_files(config.data)) else None)
     if impacts_source is not None:
         trials, model = trial_means_from_impacts(impacts_source, config, options)
         described = (f"{'data ' if source is None else ''}{data_label} (impacts averaged per "
                      f"trial); {model.text()}")
         at_model = f"; {model.text()}"
-    elif config.data is not None:
-        trials = read_trials(config.data)
-        described = f"data {config.data}"
+    elif config.data is not None:  # several trials CSVs: their trials together
+        trials = pd.concat([read_trials(p) for p in data_files(config.data)],
+                           ignore_index=True)
+        described = f"data {data_label}"
+        for message in racket_warnings(trials["a_r_m"], trials["tau_s"],
+                                       f"data: {data_label}: column a_r_m",
+                                       f"data: {data_label}: column tau_s"):
+            options.warn(message)
     else:
         trials = simulate_trials(config, options)
         described = (f"{len(trials)} simulated trials ({int(trials['lost'].sum())} lost the "

@@ -427,7 +427,8 @@ def test_bad_recordings_are_one_line_errors_and_write_nothing(simulated, tmp_pat
     cases["few"] = (rec[rec.trial == 1].head(20), ["trial 1", "only 20 samples"])
     resting = rec[rec.trial == 2].copy()
     resting["ball_x_m"] = resting["racket_x_m"]
-    cases["no_bounce"] = (pd.concat([rec[rec.trial == 1], resting]), ["trial 2", "no bounce"])
+    cases["no_bounce"] = (pd.concat([rec[rec.trial == 1], resting]),
+                          ["trial 2", "no bounce", "check units.length", "vertical axis"])
     text = rec.copy().astype({"racket_x_m": object})
     text.loc[7, "racket_x_m"] = "n/a?"
     cases["text"] = (text, ["racket_x_m", "row 9"])
