@@ -12,7 +12,8 @@ velocity noise (e.g. with and without vision).
 
 Writes ``recordings/<subject>_<condition>_t<trial>.csv`` (what a lab measures), the manifest
 ``study.csv`` (file, subject, condition, trial), ``truth_trials.csv`` (each trial's true racket,
-AC, alpha, g and noise) and ``truth.csv`` (every exact impact, with subject, condition and
+AC, alpha, g and noise, and how often it was restarted because the ball fell into sticking) and
+``truth.csv`` (every exact impact, with subject, condition and
 trial). ``damaged_files`` replaces that many recordings (the last ones) with files that cannot
 be read, to see how ``bounce study`` reports failures.
 """
@@ -27,6 +28,7 @@ from pydantic import Field, model_validator
 
 from ..config import ConfigError, ExperimentConfig, ModelBlock, StrictModel
 from ..engine.linear import stable_ac_range_g
+from ..engine.params import ModelError
 from .base import Experiment, ExperimentResult, RunOptions
 from .simulate_recording import PerturbationBlock, RacketBlock, RecordingConfig, session_frames
 
@@ -37,7 +39,7 @@ class SubjectsBlock(StrictModel):
     count: int = Field(6, ge=1, le=200)
     period_mean_s: float = Field(0.6, gt=0.2, le=3.0, description="racket period, s")
     period_sd_s: float = Field(0.04, ge=0.0, description="between subjects, s")
-    ac_first_mean_g: float = Field(-0.3, lt=0.0, description="AC of the first trial, g")
+    ac_first_mean_g: float = Field(-0.4, lt=0.0, description="AC of the first trial, g")
     ac_first_sd_g: float = Field(0.05, ge=0.0)
     ac_slope_mean_g: float = Field(-0.03, description="AC change per trial (learning), g")
     ac_slope_sd_g: float = Field(0.01, ge=0.0)
@@ -56,7 +58,7 @@ class SimulateStudyConfig(ExperimentConfig):
     subjects: SubjectsBlock = SubjectsBlock()
     conditions: list[ConditionSpec] = Field(
         default_factory=lambda: [ConditionSpec(name="vision", velocity_noise_m_s=0.03),
-                                 ConditionSpec(name="no-vision", velocity_noise_m_s=0.06)],
+                                 ConditionSpec(name="no-vision", velocity_noise_m_s=0.05)],
         min_length=1)
     trials: int = Field(5, ge=1, le=100, description="per subject and condition")
     period_factors: list[float] = Field(default_factory=lambda: [0.9, 1.0, 1.1], min_length=1)
@@ -124,6 +126,30 @@ def trial_plan(config: SimulateStudyConfig) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+#: a trial whose ball falls into sticking is started again (as a subject would), this often
+MAX_RESTARTS = 5
+
+
+def simulate_trial(data: dict, row) -> tuple[pd.DataFrame, pd.DataFrame, int]:
+    """(recording, exact impacts, restarts) of one trial. A trial in which the ball falls
+    into sticking (the engine's ModelError) is simulated again from the next stream of its
+    seed, as a subject starts a failed trial again; ``truth_trials.csv`` counts the restarts."""
+    streams = np.random.SeedSequence(int(data["seed"])).spawn(MAX_RESTARTS)
+    for restart in range(MAX_RESTARTS + 1):
+        seed = data["seed"] if restart == 0 else int(streams[restart - 1].generate_state(1)[0])
+        try:
+            config = RecordingConfig.model_validate({**data, "seed": seed})
+        except ValueError as exc:
+            raise ConfigError(f"{row.subject} {row.condition} trial {row.trial}: {exc}") from None
+        try:
+            recording, _, truth = session_frames(config)
+            return recording, truth, restart
+        except ModelError as exc:
+            failure = exc
+    raise ConfigError(f"{row.subject} {row.condition} trial {row.trial}: {failure} (in each of "
+                      f"{MAX_RESTARTS + 1} attempts)")
+
+
 def recording_name(row) -> str:
     return f"recordings/{row.subject}_{row.condition}_t{row.trial}.csv"
 
@@ -134,6 +160,7 @@ def run(config: SimulateStudyConfig, options: RunOptions) -> ExperimentResult:
     frames: dict[str, pd.DataFrame] = {}
     truths = []
     damaged = set(range(len(plan) - config.damaged_files, len(plan)))
+    restarts = [0] * len(plan)
     for i, row in enumerate(plan.itertuples()):
         data = {
             "model": {"alpha": row.alpha, "g": row.g_m_s2,
@@ -146,11 +173,7 @@ def run(config: SimulateStudyConfig, options: RunOptions) -> ExperimentResult:
             "racket": config.racket.model_dump(),
             "perturbations": config.perturbations.model_dump(),
         }
-        try:
-            recording_config = RecordingConfig.model_validate(data)
-        except ValueError as exc:
-            raise ConfigError(f"{row.subject} {row.condition} trial {row.trial}: {exc}") from None
-        recording, _, truth = session_frames(recording_config)
+        recording, truth, restarts[i] = simulate_trial(data, row)
         name = recording_name(row)
         if i in damaged:
             # what a crashed export leaves: a header and half a line
@@ -166,12 +189,15 @@ def run(config: SimulateStudyConfig, options: RunOptions) -> ExperimentResult:
     truth = pd.concat(truths, ignore_index=True)
     truth = truth[["subject", "condition", *[c for c in truth.columns
                                              if c not in ("subject", "condition")]]]
+    plan = plan.assign(restarts=restarts)
     frames.update({"study.csv": manifest,
                    "truth_trials.csv": plan.drop(columns="seed"), "truth.csv": truth})
     summary = [f"{config.subjects.count} subjects x {len(config.conditions)} conditions x "
                f"{config.trials} trials of {config.duration_s:g} s at "
                f"{config.sample_rate_hz:g} Hz: {len(plan)} recordings, {len(truth)} impacts"
                + (f", {config.damaged_files} damaged" if config.damaged_files else "")
+               + (f"; {sum(restarts)} trial(s) restarted after the ball fell into sticking"
+                  if sum(restarts) else "")
                + "; run `bounce study --manifest <out>/study.csv`"]
     return ExperimentResult(frames=frames, figures={}, summary=summary)
 
