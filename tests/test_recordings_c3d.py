@@ -210,8 +210,12 @@ def test_a_parameter_stored_as_another_type_is_read_by_its_size():
     as_int = c3d.c3d.Param("RATE", dtypes, bytes_per_element=2, bytes=struct.pack("<H", 250))
     as_text = c3d.c3d.Param("RATE", dtypes, bytes_per_element=-1, dimensions=[4],
                             bytes=b"250\x00")
+    warned = []
     for param in (as_float, as_int, as_text):
-        assert _value({"POINT:RATE": param}, "POINT:RATE", 1.0) == 250.0
+        notes: list[str] = []
+        assert _value({"POINT:RATE": param}, "POINT:RATE", 1.0, notes.append) == 250.0
+        warned.append(notes)
+    assert warned[0] == [] and "a 16-bit integer" in warned[1][0] and "text" in warned[2][0]
     assert _value({}, "POINT:RATE", 1.0) == 1.0
 
 
@@ -243,3 +247,20 @@ def test_the_btkdata_collection_is_read():
     xyz = read_c3d_points(elite, lambda message: None).xyz
     step = np.nanmedian(np.abs(np.diff(xyz, axis=0)))
     assert step < 5.0  # mm per frame at 100 Hz: a walking subject, not shuffled words
+    # the c3d.org samples store one capture for Intel, DEC and SGI processors: the same
+    # markers from each (the SGI integer file bit for bit, the others within one integer
+    # step of POINT:SCALE: each was rounded to integers on its own)
+    for folder, names in (("sample01", ("Eb015pi", "Eb015si", "Eb015vi", "Eb015pr", "Eb015sr",
+                                        "Eb015vr")),
+                          ("sample02", ("pc_int", "sgi_int", "DEC_INT", "pc_real", "sgi_real",
+                                        "Dec_real"))):
+        found = {p.stem: p for p in files if p.parent.name == folder}
+        reference = read_c3d_points(found[names[0]], lambda message: None)
+        step = abs(_value(reference.parameters, "POINT:SCALE", 1.0))
+        for name in names[1:]:
+            other = read_c3d_points(found[name], lambda message: None)
+            assert other.labels == reference.labels
+            assert np.array_equal(np.isnan(other.xyz), np.isnan(reference.xyz))
+            error = np.nanmax(np.abs(other.xyz - reference.xyz))
+            assert error <= (0.0 if name.startswith("sgi_int") or name == "Eb015si"
+                             else step + 1e-3), name

@@ -140,6 +140,7 @@ def _parse(c3d, raw: bytes, notes: list[str]):
     found: dict[tuple[int, str], Any] = {}
     repeated: dict[int, list[str]] = {}
     problems: list[tuple[int, str, str]] = []  # (group, parameter, what)
+    problems_seen: set[str] = set()
     while position + 2 <= end:
         chars, group_id = struct.unpack("bb", raw[position:position + 2])
         if chars == 0 or group_id == 0:
@@ -157,6 +158,10 @@ def _parse(c3d, raw: bytes, notes: list[str]):
                                      raw[position:position + 2])
             if 0 <= swapped and position + swapped <= end:
                 offset = swapped  # an SGI file written with Intel-order offsets
+                if "swapped" not in problems_seen:
+                    problems_seen.add("swapped")
+                    notes.append("parameter offsets in the other byte order than the "
+                                 "processor's (tolerated)")
             else:
                 problems.append((group_id, name, f"is damaged (offset {offset} to the next "
                                  "parameter); the parameters before it are read"))
@@ -190,31 +195,48 @@ def _parse(c3d, raw: bytes, notes: list[str]):
     return header, dtypes, parameters
 
 
-def _value(parameters: dict[str, Any], key: str, default: float) -> float:
+#: the parameters read as numbers and the element size the C3D standard gives them
+STANDARD_SIZES = {"POINT:SCALE": 4, "POINT:RATE": 4, "ANALOG:RATE": 4, "POINT:USED": 2,
+                  "POINT:DATA_START": 2, "ANALOG:USED": 2}
+SIZE_NAMES = {4: "a float", 2: "a 16-bit integer", 1: "a byte", -1: "text"}
+
+
+def _value(parameters: dict[str, Any], key: str, default: float,
+           warn: Callable[[str], None] = lambda message: None) -> float:
     """A numeric parameter as a float, whatever type the file stored it as (float, 16-bit
-    or 8-bit integer, or digits in a string); ``default`` if absent or empty."""
+    or 8-bit integer, or digits in a string; another type than the standard's is a
+    warning); ``default`` if absent or empty."""
     param = parameters.get(key)
     if param is None or param.total_bytes == 0:
         return float(default)
-    if param.bytes_per_element == 4:
-        return float(param.float_value)
-    if param.bytes_per_element == 2:
-        return float(param.uint16_value)
-    if param.bytes_per_element == 1:
-        return float(param.uint8_value)
-    try:
-        return float(clean_string(param.string_value))
-    except ValueError:
-        return float(default)
+    size = param.bytes_per_element
+    if size == 4:
+        value = float(param.float_value)
+    elif size == 2:
+        value = float(param.uint16_value)
+    elif size == 1:
+        value = float(param.uint8_value)
+    else:
+        try:
+            value = float(clean_string(param.string_value))
+        except ValueError:
+            return float(default)
+    if key in STANDARD_SIZES and size != STANDARD_SIZES[key]:
+        warn(f"{key} is stored as {SIZE_NAMES.get(size, f'type {size}')} (the standard: "
+             f"{SIZE_NAMES[STANDARD_SIZES[key]]}); read as {value:g}")
+    return value
 
 
 def _points(c3d, path: Path, raw: bytes, header, dtypes, parameters, processor: str,
             warn: Callable[[str], None]) -> C3DPoints:
-    scale = _value(parameters, "POINT:SCALE", float(header.scale_factor))
+    def note(message: str) -> None:
+        warn(f"{path}: {message}")
+
+    scale = _value(parameters, "POINT:SCALE", float(header.scale_factor), note)
     if not np.isclose(scale, header.scale_factor, rtol=1e-6):
         warn(f"{path}: POINT:SCALE {scale:g} differs from the header's {header.scale_factor:g}; "
              "POINT:SCALE used")
-    rate = _value(parameters, "POINT:RATE", float(header.frame_rate))
+    rate = _value(parameters, "POINT:RATE", float(header.frame_rate), note)
     if not rate > 0.0:
         rate = float(header.frame_rate)
     if not np.isclose(rate, header.frame_rate, rtol=1e-6):
@@ -236,15 +258,16 @@ def _points(c3d, path: Path, raw: bytes, header, dtypes, parameters, processor: 
     frames = max(last - first + 1, 0)
     is_float = scale < 0.0
     word = 4 if is_float else 2
-    data_start = (int(_value(parameters, "POINT:DATA_START", header.data_block)) - 1) \
+    data_start = (int(_value(parameters, "POINT:DATA_START", header.data_block, note)) - 1) \
         * 512
     if not 0 < data_start < len(raw):
         data_start = (header.data_block - 1) * 512
     available = len(raw) - data_start
-    used = int(_value(parameters, "POINT:USED", header.point_count))
-    per_frame = rate and _value(parameters, "ANALOG:RATE", header.analog_per_frame * rate) / rate
+    used = int(_value(parameters, "POINT:USED", header.point_count, note))
+    analog_rate = _value(parameters, "ANALOG:RATE", header.analog_per_frame * rate, note)
+    per_frame = rate and analog_rate / rate
     channels = _value(parameters, "ANALOG:USED",
-                      header.analog_count // max(header.analog_per_frame, 1))
+                      header.analog_count // max(header.analog_per_frame, 1), note)
     analog_words = int(channels * round(per_frame))
     counts = dict.fromkeys([(used, analog_words), (used, int(header.analog_count)),
                             (int(header.point_count), analog_words),
