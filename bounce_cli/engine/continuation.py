@@ -49,7 +49,7 @@ from .bifurcation import parameter_point
 from .impact import gap, gap_slope, next_impact_phase
 from .lyapunov import map_jacobian
 from .maps import velocity_after_impact
-from .params import ModelError, ModelParams
+from .params import ModelError, ModelParams, phase_difference
 
 TWO_PI = 2.0 * math.pi
 #: Newton on one flight's gap: iterations and relative tolerance of the hop
@@ -61,8 +61,19 @@ RESIDUAL_TOLERANCE = 1e-11
 NEWTON_STEP_TOLERANCE = 1e-10
 #: samples per radian of flight when looking for the gap's interior minima
 GAP_SAMPLES_PER_RAD = 16
+#: a continuation step is retried shorter when the tangent turns by more than this (cosine)
+#: or the corrector moves farther than MAX_CORRECTION steps from the predictor: either is how
+#: a jump onto a neighbouring branch shows
+MAX_TURN_COSINE = math.cos(0.2)
+MAX_CORRECTION = 0.2
 #: the shortest step along a flip's eigenvector tried when switching onto the doubled orbit
 SMALLEST_SWITCH_STEP = 1e-9
+
+
+def signed_phase(theta) -> float:
+    """theta wrapped to [-pi, pi) (rad): the two branches of eq. 8, theta = +-arccos, meet at
+    0 at their fold, so this form keeps a fold's phase away from the wrap."""
+    return float(phase_difference(theta, 0.0))
 
 
 # -- one flight, continued ----------------------------------------------------------------------
@@ -256,7 +267,8 @@ TEST_FUNCTIONS: dict[str, Callable[[OrbitEvaluation, ModelParams], float]] = {
 @dataclass
 class BranchPoint:
     """One converged point of a branch: the parameter value, the orbit's first impact
-    (v m/s, theta rad in [0, 2 pi)), its hops, the monodromy matrix and the test values."""
+    (v m/s, theta rad in [-pi, pi)), its hops, the monodromy matrix, the test values, whether
+    every flight stays above the racket, and all p impacts."""
 
     value: float
     v: float
@@ -265,6 +277,8 @@ class BranchPoint:
     monodromy: np.ndarray
     tests: dict[str, float]
     physical: bool
+    impact_v: np.ndarray  # v after each of the p impacts (m/s)
+    impact_theta: np.ndarray  # their phases (rad, wrapped to [-pi, pi))
 
     @property
     def eigenvalues(self) -> np.ndarray:
@@ -281,7 +295,7 @@ class BranchPoint:
 class Bifurcation:
     """A located bifurcation: ``kind`` (flip, fold, neimark_sacker, grazing) of the orbit of
     ``period`` impacts over ``cycles`` racket cycles, at the parameter ``value`` and the
-    orbit's first impact (v m/s, theta rad); ``residual``: |test function| there."""
+    orbit's first impact (v m/s, theta rad in [-pi, pi)); ``residual``: |test function| there."""
 
     kind: str
     period: int
@@ -401,8 +415,10 @@ class Continuation:
     def point(self, y, ev: OrbitEvaluation) -> BranchPoint:
         params = self.params_at(y[2])
         tests = {name: float(f(ev, params)) for name, f in TEST_FUNCTIONS.items()}
-        return BranchPoint(float(y[2]), float(y[0]), float(np.mod(y[1], TWO_PI)), ev.hops.copy(),
-                           ev.monodromy.copy(), tests, physical=tests["grazing"] > 0.0)
+        return BranchPoint(float(y[2]), float(y[0]), signed_phase(y[1]), ev.hops.copy(),
+                           ev.monodromy.copy(), tests, physical=tests["grazing"] > 0.0,
+                           impact_v=ev.v[:-1].copy(),
+                           impact_theta=phase_difference(ev.theta[:-1], 0.0))
 
     # -- following a branch ---------------------------------------------------------------------
     def follow(self, y0, cycles: int, hops, direction: float | np.ndarray,
@@ -437,6 +453,16 @@ class Continuation:
                     return
                 continue
             y_new, ev_new = out
+            new_tangent = self._tangent(ev_new, tangent)
+            moved = float(np.linalg.norm((y_new - pred) / self._scale))
+            if (float(new_tangent @ tangent) < MAX_TURN_COSINE
+                    or moved > MAX_CORRECTION * step):
+                # the corrector went far from the predictor or the branch turned sharply:
+                # it may have jumped onto another branch; retry with a shorter step
+                step /= 2.0
+                if step < s.min_step:
+                    return
+                continue
             new = self.point(y_new, ev_new)
             located = self._detect(branch, current, new, y, y_new, ev, ev_new, cycles)
             branch.points.append(new)
@@ -444,7 +470,7 @@ class Continuation:
             if located and located.kind == "grazing":
                 return  # the rest of the branch passes through the racket
             y, ev, current = y_new, ev_new, new
-            tangent = self._tangent(ev, tangent)
+            tangent = new_tangent
             if not self.low <= y[2] <= self.high:
                 return
             step = min(step * 1.5, s.max_step)
@@ -493,14 +519,13 @@ class Continuation:
                 grad[i] = (value(y + e) - value(y - e)) / (2.0 * h)
             return value(y), grad
 
-        # onto the branch first, at the secant's parameter (a long orbit's single shooting
-        # needs a start close to it), then the augmented system
-        on_branch = None
-        for start in (y_guess, np.array([ya[0], ya[1], y_guess[2]])):
-            on_branch = self.correct(start, cycles, hops, np.array([0.0, 0.0, 1.0]),
-                                     float(y_guess[2] / self._scale[2]))
-            if on_branch is not None:
-                break
+        # onto the branch first, on the plane through the secant point normal to the chord
+        # (regular at a fold, where fixing the parameter is not; a long orbit's single
+        # shooting needs a start close to the branch), then the augmented system
+        chord = (yb - ya) / self._scale
+        chord /= np.linalg.norm(chord)
+        on_branch = self.correct(y_guess, cycles, hops, chord,
+                                 float(chord @ (y_guess / self._scale)))
         if on_branch is None:
             return None
         hop_state["hops"] = on_branch[1].hops
@@ -509,13 +534,15 @@ class Continuation:
         if out is None:
             return None
         y, ev = out
-        span = sorted((float(ya[2]), float(yb[2])))
-        width = span[1] - span[0]
-        if not span[0] - width - 1e-12 <= y[2] <= span[1] + width + 1e-12:
+        # between the two points along the branch (in the scaled coordinates: a fold's
+        # parameter lies outside the two points' parameters)
+        chord_length = float(np.linalg.norm((yb - ya) / self._scale))
+        if max(float(np.linalg.norm((y - end) / self._scale)) for end in (ya, yb)) > (
+                2.0 * chord_length):
             return None  # converged to another zero
         residual = abs(value(y))
-        bif = Bifurcation(kind, len(hops), cycles, float(y[2]), float(y[0]),
-                          float(np.mod(y[1], TWO_PI)), residual)
+        bif = Bifurcation(kind, len(hops), cycles, float(y[2]), float(y[0]), signed_phase(y[1]),
+                          residual)
         return bif, y, ev
 
     # -- the whole computation ------------------------------------------------------------------
@@ -673,3 +700,23 @@ def period1_flip(base: ModelParams, parameter: str, low: float, high: float, sta
     cont.run(start, v, theta, cycles, [TWO_PI * cycles])
     flips = [b for b in cont.bifurcations if b.kind == "flip" and b.period == 1]
     return flips[0] if flips else None
+
+
+def feigenbaum_ratios(flips) -> np.ndarray:
+    """delta_n = (lambda_n - lambda_{n-1}) / (lambda_{n+1} - lambda_n) of successive flips of
+    a period-doubling cascade (the flips of the orbits of period 2^(n-1) p in order); tends to
+    Feigenbaum's 4.6692 for a cascade of a map with a quadratic maximum.
+
+    Parameters
+    ----------
+    flips : sequence of float
+        The parameter values of the flips, in the order of the cascade.
+
+    Returns
+    -------
+    numpy.ndarray
+        len(flips) - 2 ratios (delta_1 uses flips 0, 1, 2).
+    """
+    x = np.asarray(flips, dtype=float)
+    gaps = np.diff(x)
+    return gaps[:-1] / gaps[1:]
