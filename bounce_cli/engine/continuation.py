@@ -45,10 +45,10 @@ from typing import Callable
 
 import numpy as np
 
-from .bifurcation import parameter_point
-from .impact import gap, gap_slope, next_impact_phase
+from .bifurcation import detect_period, parameter_point, period1_thresholds
+from .impact import gap, gap_slope
 from .lyapunov import map_jacobian
-from .maps import velocity_after_impact
+from .maps import iterate_orbit, velocity_after_impact
 from .params import ModelError, ModelParams, phase_difference
 
 TWO_PI = 2.0 * math.pi
@@ -66,6 +66,9 @@ GAP_SAMPLES_PER_RAD = 16
 #: a jump onto a neighbouring branch shows
 MAX_TURN_COSINE = math.cos(0.2)
 MAX_CORRECTION = 0.2
+#: two located bifurcations of one kind and orbit within this (relative) are the same point
+#: (located to ~1e-14; distinct ones of one orbit family are 1e-4 apart at period 32)
+SAME_BIFURCATION_RTOL = 1e-9
 #: the shortest step along a flip's eigenvector tried when switching onto the doubled orbit
 SMALLEST_SWITCH_STEP = 1e-9
 
@@ -154,7 +157,7 @@ def parameter_derivative(theta, v, hop, params: ModelParams, parameter: str) -> 
     raise ModelError(f"cannot continue in {parameter!r}")
 
 
-# -- the periodic-orbit residual ------------------------------------------------------------------
+# -- the periodic-orbit residual ----------------------------------------------------------------
 @dataclass(frozen=True)
 class OrbitEvaluation:
     """F^p from one point: the impacts along the orbit (k = 0..p), the hops, the monodromy
@@ -196,7 +199,7 @@ def evaluate_orbit(x, params: ModelParams, parameter: str, cycles: int,
     return OrbitEvaluation(theta, v, hops, mono, dpar, residual)
 
 
-# -- test functions ---------------------------------------------------------------------------------
+# -- test functions -----------------------------------------------------------------------------
 def flip_test(monodromy: np.ndarray) -> float:
     """det(M + I): zero where M has the eigenvalue -1 (flip, period doubling)."""
     return float(1.0 + np.trace(monodromy) + np.linalg.det(monodromy))
@@ -263,7 +266,7 @@ TEST_FUNCTIONS: dict[str, Callable[[OrbitEvaluation, ModelParams], float]] = {
 }
 
 
-# -- branches -----------------------------------------------------------------------------------------
+# -- branches -----------------------------------------------------------------------------------
 @dataclass
 class BranchPoint:
     """One converged point of a branch: the parameter value, the orbit's first impact
@@ -490,11 +493,21 @@ class Continuation:
             if found is None:
                 continue
             bif, y_star, ev_star = found
+            if self._known(bif):
+                continue
             self.bifurcations.append(bif)
             last = bif
             if kind == "flip" and 2 * branch.period <= self.settings.max_period:
                 self._pending.append((y_star, ev_star, branch))
         return last
+
+    def _known(self, bif: Bifurcation) -> bool:
+        """Whether ``bif`` was located already: a branch can pass a bifurcation twice, with
+        its first impact at another of the orbit's impacts (the doubled orbit's branch, once
+        through its birth at the flip, follows the same orbit from its other impact)."""
+        return any(b.kind == bif.kind and b.period == bif.period and b.cycles == bif.cycles
+                   and abs(b.value - bif.value) <= SAME_BIFURCATION_RTOL * abs(bif.value)
+                   for b in self.bifurcations)
 
     def locate(self, kind: str, ya, yb, fa: float, fb: float, cycles: int, hops):
         """Newton on the augmented system (R = 0, test function = 0) from the secant point
@@ -609,7 +622,7 @@ class Continuation:
         return branch
 
 
-# -- starts ------------------------------------------------------------------------------------------
+# -- starts -------------------------------------------------------------------------------------
 def eq8_orbit(params: ModelParams, cycles: int = 1) -> tuple[float, float]:
     """(v, theta) of the period-1 orbit hopping ``cycles`` racket cycles (eqs. 7, 8 with
     2 pi -> 2 pi m: v = m pi g / w, cos theta = m pi (1-alpha)/(1+alpha) g / (w^2 a_r)), on
@@ -634,46 +647,34 @@ class IteratedOrbit:
 
 
 def orbit_by_iteration(theta0: float, v0: float, params: ModelParams, *, transient: int,
-                       max_period: int, tolerance: float) -> IteratedOrbit:
-    """Iterate eqs. 5, 6 (first roots) ``transient`` impacts from (theta0, v0), then the
-    smallest period p <= max_period whose v and wrapped theta repeat within ``tolerance``
-    (m/s, rad) over two periods; cycles from the phase it advanced. Raises ModelError when the
-    ball sticks, cannot fly or no period is found."""
-    theta, v = float(theta0), float(v0)
-    for _ in range(transient):
-        hop = float(next_impact_phase(theta, v, params))
-        if not math.isfinite(hop) or hop / params.omega < 1e-3:
-            raise ModelError("the orbit from the initial condition sticks or cannot leave the "
-                             "racket before it settles")
-        theta, v = float(np.mod(theta + hop, TWO_PI)), float(
-            velocity_after_impact(theta + hop, v, hop, params))
-    ths, vs, hops = [theta], [v], []
-    for _ in range(2 * max_period):
-        hop = float(next_impact_phase(ths[-1], vs[-1], params))
-        if not math.isfinite(hop):
-            raise ModelError("the orbit from the initial condition cannot leave the racket")
-        hops.append(hop)
-        vs.append(float(velocity_after_impact(ths[-1] + hop, vs[-1], hop, params)))
-        ths.append(ths[-1] + hop)
-    ths_a, vs_a = np.array(ths), np.array(vs)
-    for p in range(1, max_period + 1):
-        dv = np.abs(vs_a[p:2 * p + 1] - vs_a[:p + 1]).max()
-        dth = np.abs(np.mod(ths_a[p:2 * p + 1] - ths_a[:p + 1] + math.pi, TWO_PI) - math.pi).max()
-        if dv < tolerance and dth < tolerance:
-            cycles = int(round((ths_a[p] - ths_a[0]) / TWO_PI))
-            return IteratedOrbit(float(vs_a[0]), float(ths_a[0]), p, cycles,
-                                 np.array(hops[:p]))
-    raise ModelError(f"no period up to {max_period} found after {transient} impacts from the "
-                     "initial condition")
+                       max_period: int, tolerance: float,
+                       min_hop_s: float = 1e-3) -> IteratedOrbit:
+    """Iterate eqs. 5, 6 (first roots, ``maps.iterate_orbit``) ``transient`` impacts from
+    (theta0, v0), then read the smallest period p <= max_period whose v and wrapped theta
+    repeat within ``tolerance`` (m/s, rad) over the next 2 max_period impacts
+    (``bifurcation.detect_period``); cycles from the phase it advanced. Raises ModelError when
+    the ball sticks (a hop under ``min_hop_s``, section 3), cannot fly or has no period."""
+    orbit = iterate_orbit(theta0, v0, params, transient + 2 * max_period, min_hop_s)
+    if orbit.stop_reason:
+        raise ModelError(f"the orbit from the initial condition ends ({orbit.stop_reason}) "
+                         "before it settles")
+    theta, v, hop = (x[transient:] for x in (orbit.theta, orbit.v, orbit.hop_phase))
+    period = int(detect_period(v[None, :], theta[None, :], max_period, tolerance)[0])
+    if period == 0:
+        raise ModelError(f"no period up to {max_period} found after {transient} impacts from "
+                         "the initial condition")
+    cycles = int(round((theta[period] - theta[0]) / TWO_PI))
+    return IteratedOrbit(float(v[0]), signed_phase(theta[0]), period, cycles,
+                         np.array(hop[1:period + 1]))
 
 
-def period1_flip(base: ModelParams, parameter: str, low: float, high: float, start: float,
-                 cycles: int = 1,
-                 settings: ContinuationSettings = ContinuationSettings(max_period=1)
-                 ) -> Bifurcation | None:
-    """The flip of the period-1 orbit hopping ``cycles`` racket cycles, located by
-    continuation from eq. 8's orbit at ``start`` (where it must exist) within [low, high];
-    None when it does not flip there.
+def period1_branch(base: ModelParams, parameter: str, low: float, high: float, start: float,
+                   cycles: int = 1,
+                   settings: ContinuationSettings = ContinuationSettings(max_period=1)
+                   ) -> Continuation:
+    """The branch of eq. 8's period-1 orbit hopping ``cycles`` racket cycles, converged at
+    ``start`` (where it must exist) and followed both ways within [low, high], with its
+    bifurcations located (no doubled branches by default).
 
     Parameters
     ----------
@@ -688,18 +689,72 @@ def period1_flip(base: ModelParams, parameter: str, low: float, high: float, sta
     cycles : int
         Racket cycles per hop.
     settings : ContinuationSettings
-        Step control (no doubled branches by default).
+        Step control.
+
+    Returns
+    -------
+    Continuation
+        Its ``branches`` and ``bifurcations``.
+    """
+    cont = Continuation(base, parameter, low, high, settings)
+    v, theta = eq8_orbit(cont.params_at(start), cycles)
+    cont.run(start, v, theta, cycles, [TWO_PI * cycles])
+    return cont
+
+
+def first_bifurcation(cont: Continuation, kind: str, period: int = 1) -> Bifurcation | None:
+    """The first located bifurcation of ``kind`` of the orbits of ``period``, or None."""
+    found = [b for b in cont.bifurcations if b.kind == kind and b.period == period]
+    return found[0] if found else None
+
+
+def period1_flip(base: ModelParams, parameter: str, low: float, high: float, start: float,
+                 cycles: int = 1) -> Bifurcation | None:
+    """The flip of eq. 8's orbit hopping ``cycles`` racket cycles located by continuation
+    from ``start`` within [low, high] (:func:`period1_branch`); None when it does not flip
+    there.
+
+    Parameters
+    ----------
+    base, parameter, low, high, start, cycles
+        As for :func:`period1_branch`.
 
     Returns
     -------
     Bifurcation or None
         The first flip of that orbit located on its branch.
     """
-    cont = Continuation(base, parameter, low, high, settings)
-    v, theta = eq8_orbit(cont.params_at(start), cycles)
-    cont.run(start, v, theta, cycles, [TWO_PI * cycles])
-    flips = [b for b in cont.bifurcations if b.kind == "flip" and b.period == 1]
-    return flips[0] if flips else None
+    return first_bifurcation(period1_branch(base, parameter, low, high, start, cycles), "flip")
+
+
+def continued_period1_thresholds(base: ModelParams, parameter: str,
+                                 cycles: int = 1) -> tuple[float, float]:
+    """(existence, flip) of eq. 8's orbit hopping ``cycles`` racket cycles, located by
+    continuation: the fold where the orbit is born (eq. 8: cos theta~ = 1) and its flip
+    (eq. 14). The closed forms only seed it: the branch is converged midway between them and
+    followed over their span widened by a tenth each side. NaN where a closed form is (the
+    threshold lies outside the parameter's valid range) or nothing is located.
+
+    Parameters
+    ----------
+    base, parameter, cycles
+        As for :func:`period1_branch`.
+
+    Returns
+    -------
+    tuple of float
+        The parameter's values at the fold and at the flip.
+    """
+    closed = period1_thresholds(base, parameter, cycles)
+    if not (math.isfinite(closed.existence) and math.isfinite(closed.flip)):
+        return math.nan, math.nan
+    low, high = sorted((closed.existence, closed.flip))
+    margin = 0.1 * (high - low)
+    cont = period1_branch(base, parameter, low - margin, high + margin,
+                          0.5 * (closed.existence + closed.flip), cycles)
+    fold, flip = (first_bifurcation(cont, kind) for kind in ("fold", "flip"))
+    return (fold.value if fold is not None else math.nan,
+            flip.value if flip is not None else math.nan)
 
 
 def feigenbaum_ratios(flips) -> np.ndarray:

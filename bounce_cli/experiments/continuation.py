@@ -134,7 +134,7 @@ def start_orbit(config: ContinuationConfig, index: int, start: StartBlock):
     key = f"starts[{index}]"
     try:
         params = parameter_point(config.params, config.range.parameter, start.at)
-        if start.theta0_deg is None:
+        if start.theta0_deg is None or start.v0_m_s is None:
             v, theta = eq8_orbit(params, start.cycles)
             return v, theta, start.cycles, [2.0 * math.pi * start.cycles]
         found = orbit_by_iteration(math.radians(start.theta0_deg), start.v0_m_s, params,
@@ -332,7 +332,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         if period not in colours:
             colours[period] = palette[len(colours) % len(palette)]
             top.plot([], [], "-", color=colours[period], label=f"period {period}")
-        for (segment, j), imp in group.groupby(["segment", "impact"]):
+        for _, imp in group.groupby(["segment", "impact"]):
             for stable, style in ((True, "-"), (False, "--")):
                 part = imp[column].where(imp["stable"].astype(bool) == stable)
                 top.plot(part, imp["v_m_s"], style, color=colours[period],
@@ -349,10 +349,10 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     top.set_ylabel(r"ball velocity after impact $v_k$ (m/s)")
     top.set_title("Periodic orbits continued over the brute-force bifurcation diagram "
                   "(eqs. 5, 6)")
-    for b, group in branches[branches["physical"].astype(bool)].groupby("branch", sort=True):
+    for _, group in branches[branches["physical"].astype(bool)].groupby("branch", sort=True):
         period = int(group["period"].iloc[0])
         order = group.sort_values(["segment", "point"])
-        for seg, part in order.groupby("segment"):
+        for _, part in order.groupby("segment"):
             bottom.plot(part[column], part["spectral_radius"], color=colours[period], lw=0.9)
     bottom.axhline(1.0, color="black", lw=0.6)
     bottom.set_yscale("log")

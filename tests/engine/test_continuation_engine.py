@@ -12,11 +12,13 @@ from bounce_cli.engine.bifurcation import (
     SweepSettings,
     locate_period_doubling,
     parameter_point,
+    period1_thresholds,
     threshold_gamma,
 )
 from bounce_cli.engine.continuation import (
     Continuation,
     ContinuationSettings,
+    continued_period1_thresholds,
     eq8_orbit,
     evaluate_orbit,
     feigenbaum_ratios,
@@ -107,20 +109,15 @@ def test_period1_flip_equals_eq14_to_1e10(alpha):
     assert flip.residual < 1e-12
 
 
-@pytest.mark.parametrize("parameter", ["racket_period", "alpha"])
-def test_period1_flip_in_other_parameters_equals_eq14(parameter):
-    """The same flip found by continuing in tau or alpha (the parameter derivatives of those
-    parameters drive the predictor and the augmented Newton)."""
-    from bounce_cli.engine.bifurcation import period1_thresholds
-
+@pytest.mark.parametrize("parameter", ["racket_amplitude", "racket_period", "alpha"])
+def test_period1_thresholds_in_other_parameters_equal_eqs_8_and_14(parameter):
+    """The fold and the flip found by continuing in a_r, tau or alpha (their parameter
+    derivatives drive the predictor and the augmented Newton) at eqs. 8 and 14's closed
+    forms in that parameter (bounce bifurcation's thresholds, which it draws)."""
     closed = period1_thresholds(BASE, parameter, 1)
-    lo, hi = sorted((closed.existence, closed.flip))
-    if parameter == "alpha":
-        lo, hi = lo, min(hi + 0.05, 0.99)
-    start = 0.5 * (closed.existence + closed.flip)
-    flip = period1_flip(BASE, parameter, lo - 0.05 * (hi - lo), hi + 0.05 * (hi - lo), start)
-    assert flip is not None
-    assert flip.value == pytest.approx(closed.flip, rel=1e-10)
+    existence, flip = continued_period1_thresholds(BASE, parameter, 1)
+    assert existence == pytest.approx(closed.existence, rel=1e-10)
+    assert flip == pytest.approx(closed.flip, rel=1e-10)
 
 
 @pytest.mark.parametrize("cycles", [1, 2])
@@ -215,17 +212,14 @@ def test_continued_period2_orbit_is_the_attractor_the_map_iterates_to(cascade):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("cycles,bracket", [(1, (1.52, 1.532)), (2, (2.365, 2.375))])
-def test_located_flips_agree_with_the_bifurcation_sweeps_brute_force_flip(cycles, bracket):
+def test_located_flip_agrees_with_the_bifurcation_sweeps_brute_force_flip():
     """The flip located on the map by iterating (bounce bifurcation's multisection on the
     detected period) within its resolution (1e-3 relative) of the continuation's, and on the
     period-1 side of it (critical slowing down biases the brute force that way)."""
     settings = SweepSettings(transient_impacts=3000, measured_impacts=64, recorded_impacts=64)
-    v0 = 5.0 if cycles == 1 else 9.0
-    brute = locate_period_doubling(BASE, "gamma", *bracket, theta0=math.radians(45.0), v0=v0,
-                                   settings=settings, probes=7)
-    start = float(threshold_gamma(0.5, -0.5, cycles))  # inside the stable range: a seed
-    flip = period1_flip(BASE, "gamma", 1.0 * cycles, 1.2 * bracket[1], start, cycles)
+    brute = locate_period_doubling(BASE, "gamma", 1.52, 1.532, theta0=math.radians(45.0),
+                                   v0=5.0, settings=settings, probes=7)
+    flip = period1_flip(BASE, "gamma", 1.0, 1.6, 1.3)
     assert flip is not None
     assert brute.value == pytest.approx(flip.value, rel=1e-3)
     assert brute.period1_end < flip.value
