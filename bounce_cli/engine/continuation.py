@@ -356,6 +356,8 @@ class Continuation:
         self.branches: list[Branch] = []
         self.bifurcations: list[Bifurcation] = []
         self._scale = np.ones(3)
+        #: located flips whose doubled branch is still to be switched onto
+        self._pending: list[tuple[np.ndarray, OrbitEvaluation, Branch]] = []
 
     # -- evaluation in y = (v, theta, lambda) ---------------------------------------------------
     def params_at(self, value: float) -> ModelParams:
@@ -564,7 +566,7 @@ class Continuation:
         """Converge the orbit from (v0, theta0) with the given hops at ``start_value``, follow
         it both ways, then every doubled branch born at a located flip (up to
         ``max_period``), and return all branches (also kept in ``self.branches``)."""
-        self._pending: list = []
+        self._pending = []
         p_fixed = self.params_at(start_value)
         self._scale = np.array([math.pi * p_fixed.g / p_fixed.omega, 1.0,
                                 abs(start_value) if start_value != 0.0 else 1.0])
