@@ -281,9 +281,13 @@ def warn(message: str) -> None:
 
 def warn_if_implausible_racket(model) -> None:
     """A warning per racket parameter of a ``model`` block outside what a person can do
-    (``bounce_cli.plausibility``), naming the likely unit slip."""
+    (``bounce_cli.plausibility``), naming the likely unit slip (a block without a racket, such
+    as a study's, has nothing to check)."""
     from .plausibility import racket_warnings
 
+    if getattr(model, "racket_amplitude", None) is None or getattr(
+            model, "racket_period", None) is None:
+        return
     for message in racket_warnings(model.racket_amplitude, model.racket_period,
                                    "model.racket_amplitude",
                                    "model.racket_period"):

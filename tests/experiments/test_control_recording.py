@@ -24,7 +24,11 @@ CONTROL = ["model.control.gain=0.2", "model.control.rate=0.3", "model.control.sw
 
 
 def session(overrides):
-    cfg = load_config(RecordingConfig, bundled_config_path("recording"), CONTROL + overrides)
+    """A controlled session: CONTROL with ``overrides`` replacing its keys (a key may be given
+    once to --set)."""
+    keys = {o.split("=", 1)[0] for o in overrides}
+    control = [o for o in CONTROL if o.split("=", 1)[0] not in keys]
+    cfg = load_config(RecordingConfig, bundled_config_path("recording"), control + overrides)
     return cfg, session_frames(cfg)
 
 
