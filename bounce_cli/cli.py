@@ -58,6 +58,24 @@ from .registry import EXPERIMENTS, Entry
 USER_ERRORS = (ConfigError, ModelError, OutputDirError, ClusterError)
 
 
+def _flags_show_no_type() -> None:
+    """typer's help prints ``<bool>`` after a flag (``--quiet <bool>``), as if it took a
+    value: a flag's type column is left empty (an option taking a value keeps its type)."""
+    option = getattr(typer.core, "TyperOption", None)
+    shown = getattr(option, "display_type_rich", None)
+    if shown is None or getattr(shown, "flags_show_no_type", False):
+        return
+
+    def display_type_rich(self, ctx):
+        return None if self.is_flag else shown(self, ctx)
+
+    display_type_rich.flags_show_no_type = True  # type: ignore[attr-defined]
+    option.display_type_rich = display_type_rich  # type: ignore[union-attr]
+
+
+_flags_show_no_type()
+
+
 class BounceGroup(TyperGroup):
     """typer's group, with bounce's way of ending: a usage error typer finds (``--jobs 0``, a
     missing option, an unknown command) is one line ``bounce: error: ...`` and exit 2 like
@@ -163,7 +181,7 @@ JobsOption = Annotated[
     Optional[int],
     typer.Option(
         "--jobs", "-j", min=1,
-        help="Worker processes for grid work (basin, sweep; default: all cores).",
+        help="Worker processes for the grid's points (default: all cores).",
     ),
 ]
 ResumeOption = Annotated[
@@ -432,18 +450,35 @@ def fixed_point_report(params: ModelParams) -> dict:
     }
 
 
+def no_fixed_point_report(params: ModelParams, error: Exception) -> dict:
+    """``fixed-point --json`` where eq. 8 has no solution: why, and the racket amplitude from
+    which it has one at the other parameters."""
+    return {"exists": False, "reason": str(error), "cos_theta": params.cos_theta_fixed(),
+            "min_racket_amplitude_m": params.min_racket_amplitude()}
+
+
 @app.command("fixed-point")
 def fixed_point_command(
     config: ConfigOption = None,
     overrides: SetOption = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print a JSON object.")] = False,
 ) -> None:
-    """Period-1 fixed point (eqs. 7, 8), racket acceleration AC, eigenvalues (eq. 10)."""
-    params = _model_or_fail(config, overrides)
-    report = fixed_point_report(params)
+    """Period-1 fixed point (eqs. 7, 8), racket acceleration AC, eigenvalues (eq. 10).
+
+    With --json and parameters without a fixed point: {"exists": false, "reason": ...} and
+    exit status 1."""
+    from .engine import NoFixedPointError
+
+    params = _model_or_fail(config, overrides, need_fixed_point=not as_json)
     if as_json:
+        try:
+            report = {"exists": True, **fixed_point_report(params)}
+        except NoFixedPointError as exc:
+            typer.echo(json.dumps(no_fixed_point_report(params, exc), indent=2))
+            raise typer.Exit(code=1) from None
         typer.echo(json.dumps(report, indent=2))
         return
+    report = fixed_point_report(params)
     table = Table(title="Period-1 fixed point", show_header=True)
     table.add_column("quantity")
     table.add_column("value", justify="right")
@@ -702,13 +737,13 @@ def add_experiment_command(entry: Entry) -> None:
                        scheduler=scheduler)
 
     # the signature typer reads: annotations resolved, file options only where declared,
-    # --resume and --scheduler only for the experiments that take them
+    # --jobs, --resume and --scheduler only for the experiments that take them
     hints = typing.get_type_hints(command, include_extras=True)
     file_options = {"data": entry.data_help, "events": entry.events_help}
     for key, help_text in file_options.items():
         hints[key] = Annotated[Optional[Path], typer.Option(f"--{key}", help=help_text)]
     declared = {**{k: v is not None for k, v in file_options.items()},
-                "resume": entry.resumable, "scheduler": entry.cluster}
+                "resume": entry.resumable, "scheduler": entry.cluster, "jobs": entry.parallel}
     params = [p.replace(annotation=hints[p.name])
               for p in inspect.signature(command).parameters.values()
               if declared.get(p.name, True)]
