@@ -36,7 +36,7 @@ except ImportError:  # pragma: no cover - older typer on click
     )
 
 from . import __version__
-from .artifacts import OutputDirError, RunDirectory
+from .artifacts import FIGURE_DPI, OutputDirError, RunDirectory
 from .config import (
     ConfigError,
     ModelOnlyConfig,
@@ -184,6 +184,32 @@ JobsOption = Annotated[
         help="Worker processes for the grid's points (default: all cores).",
     ),
 ]
+def figure_formats(values: list[str] | None) -> list[str]:
+    """--figure-format: each value one format or a comma list of them (png, pdf, svg), in the
+    order given, each once; none given: png."""
+    from .plotting import FIGURE_FORMATS
+
+    kinds: list[str] = []
+    for text in values or ["png"]:
+        for kind in (part.strip().lower() for part in text.split(",")):
+            if kind not in FIGURE_FORMATS:
+                raise typer.BadParameter(f"{kind!r} is not a figure format; choose from "
+                                         + ", ".join(FIGURE_FORMATS))
+            if kind not in kinds:
+                kinds.append(kind)
+    return kinds
+
+
+FigureFormatOption = Annotated[
+    Optional[list[str]],
+    typer.Option("--figure-format", "-f", metavar="FORMAT", callback=figure_formats,
+                 help="Figure file format: png, pdf or svg; repeatable, or a comma list "
+                 "(--figure-format png,pdf). Default: png."),
+]
+DpiOption = Annotated[
+    int, typer.Option("--dpi", min=30, max=2400, metavar="N",
+                      help=f"Resolution of PNG figures, dots per inch (default {FIGURE_DPI}).")
+]
 ResumeOption = Annotated[
     bool,
     typer.Option("--resume", help="Continue an interrupted run in --out: the points it "
@@ -328,8 +354,11 @@ def run_experiment(
     jobs: int | None = None,
     resume: bool = False,
     scheduler: str | None = None,
+    figure_formats: tuple[str, ...] = ("png",),
+    dpi: int = FIGURE_DPI,
 ) -> None:
-    """Load and validate the config, run the experiment, write its files atomically. On an
+    """Load and validate the config, run the experiment, write its files atomically (each
+    figure once in each of ``figure_formats``, PNGs at ``dpi``). On an
     error or an interrupt nothing is written and an output folder the run made is removed;
     a resumable experiment's finished points stay in ``<out>/points/`` (``--resume``)."""
     overrides = list(overrides or [])
@@ -358,6 +387,8 @@ def run_experiment(
             seed=getattr(cfg, "seed", None) if data_file is None else None,
             data_file=data_file,
             force=force,
+            figure_formats=figure_formats,
+            dpi=dpi,
         )
         progress = make_progress() if not quiet else None
         options = RunOptions(jobs=jobs or os.cpu_count() or 1, warn=warn, scheduler=scheduler)
@@ -727,6 +758,8 @@ def add_experiment_command(entry: Entry) -> None:
         events: Optional[Path] = None,
         resume: ResumeOption = False,
         scheduler: SchedulerOption = None,
+        figure_format: FigureFormatOption = None,
+        dpi: DpiOption = FIGURE_DPI,
     ) -> None:
         overrides = list(overrides or [])
         for key, path in (("data", data), ("events", events)):
@@ -734,7 +767,8 @@ def add_experiment_command(entry: Entry) -> None:
                 overrides.append(f"{key}={json.dumps(str(path))}")
         run_experiment(entry, config=config, overrides=overrides, out=out, quiet=quiet,
                        force=force, print_config=print_config, jobs=jobs, resume=resume,
-                       scheduler=scheduler)
+                       scheduler=scheduler, figure_formats=tuple(figure_format or ["png"]),
+                       dpi=dpi)
 
     # the signature typer reads: annotations resolved, file options only where declared,
     # --jobs, --resume and --scheduler only for the experiments that take them

@@ -36,7 +36,7 @@ from ..recordings import (
     read_recording,
     read_table,
 )
-from ..plotting import caption_figures
+from ..plotting import caption_figures, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
 
@@ -367,19 +367,20 @@ def draw_fig2(samples: pd.DataFrame, impacts: pd.DataFrame, title: str, bounces:
         ax.plot(t, y, "o-", ms=4, lw=0.8, color=color)
         if perturbed.any():
             ax.plot(t[perturbed], y[perturbed], "o", ms=6, color="C3",
-                    label="perturbed impact (alpha changed)")
+                    label=r"perturbed impact ($\alpha$ changed)")
             ax.legend(loc="best", fontsize=7)
         if len(y):
             ax.axhline(float(np.mean(y)), ls="--", color="0.4", lw=0.8)
         ax.set_ylabel(label_)
         for ti in t:
             ax_x.axvline(ti, color="0.85", lw=0.6, zorder=0)
-    ax_th.set_xlabel("time t (s)")
+    ax_th.set_xlabel("time $t$ (s)")
     fig.suptitle(f"Fig. 2: {title}\ntrial {label}; dashed: sample means of the bounces shown",
                  fontsize=10)
     return fig
 
 
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     samples, impacts = frames["fig2_samples.csv"], frames["impacts.csv"]
     return {"fig2.png": draw_fig2(samples, impacts, "extracted ball velocity after impact "
