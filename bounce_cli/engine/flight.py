@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
+from .chatter import release_phase
 from .classify import ClassifySettings
 from .impact import can_fly, next_impact_phase
 from .params import ModelError, ModelParams
@@ -152,14 +153,9 @@ class Trajectory:
 def leave_phase(theta, params: ModelParams) -> float:
     """First phase >= theta at which a ball resting on the racket leaves it: where the
     racket's downward acceleration reaches g (a_r w^2 sin = g, sin increasing), or theta
-    itself when it already exceeds g there. ``inf`` when a_r w^2 <= g (never)."""
-    ratio = params.g / (params.racket_amplitude * params.omega**2)
-    if ratio >= 1.0:
-        return math.inf
-    if math.sin(theta) > ratio:
-        return float(theta)
-    crossing = math.asin(ratio)
-    return float(theta + np.mod(crossing - theta, 2.0 * math.pi))
+    itself when it already exceeds g there. ``inf`` when a_r w^2 <= g (never). The release
+    of exact sticking, ``engine.chatter.release_phase``."""
+    return release_phase(theta, params)
 
 
 def impact_velocity(v_before: float, racket_v: float, alpha: float) -> float:
