@@ -172,7 +172,8 @@ class ExactOrbit:
 
 def iterate_exact_orbit(theta0: float, v0: float, params: ModelParams, n_impacts: int,
                         *, max_events: int | None = None,
-                        start_released: bool = False) -> ExactOrbit:
+                        start_released: bool = False,
+                        until_theta: float = math.inf) -> ExactOrbit:
     """The hybrid motion from a ball leaving the racket at (theta0 rad, v0 m/s): the map
     (eqs. 5, 6) while hops are resolvable, complete chatters summed to their accumulation
     points, riding and release (module docstring).
@@ -191,6 +192,8 @@ def iterate_exact_orbit(theta0: float, v0: float, params: ModelParams, n_impacts
         The start is a release point (v0 the racket's velocity, the racket's acceleration
         -g): row 0 is then a "release" event and the first flight starts with G = G' = G''
         = 0.
+    until_theta : float
+        Stop after the first event at or beyond this phase, rad (a simulated duration).
 
     Returns
     -------
@@ -202,8 +205,8 @@ def iterate_exact_orbit(theta0: float, v0: float, params: ModelParams, n_impacts
     chatter, tail_error = [0], [0.0]
     released, impacts, run, last_hop = start_released, 0, 0, math.inf
     reason = "" if start_released or can_fly(theta0, v0, params) else "below_racket"
-    while not reason and impacts < n_impacts and (max_events is None
-                                                  or len(events) < max_events):
+    while not reason and impacts < n_impacts and theta[-1] < until_theta and (
+            max_events is None or len(events) < max_events):
         hop = float(first_impact_phase(theta[-1], v[-1], params.racket_amplitude, w, params.g,
                                        released=released))
         if not math.isfinite(hop):  # grazing departure that cannot fly (never seen)

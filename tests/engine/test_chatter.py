@@ -18,6 +18,7 @@ from bounce_cli.engine.chatter import (
     release_fate,
     release_phase,
 )
+from bounce_cli.engine.classify import OUTCOMES, ClassifySettings, classify_batch, outcome_names
 from bounce_cli.engine.impact import first_impact_phase
 from bounce_cli.engine.params import ModelParams
 
@@ -175,3 +176,32 @@ def test_alpha_zero_sticks_at_every_impact(paper_params):
     assert sticks.size >= 3
     np.testing.assert_array_equal(orbit.flight[sticks], 0.0)
     assert (orbit.chatter_impacts[sticks] == 1).all()
+
+
+def test_exact_basin_locks_where_the_1ms_rule_sticks_on_fig4(paper_params):
+    """Fig. 4's basin with min_hop_s 0: every point the 1 ms rule calls sticking is locked on
+    the period-1-cycle sticking solution, every other outcome is the same point for point; the
+    compiled kernel falls back to this numpy code (same result)."""
+    theta, v = np.meshgrid(np.radians(np.linspace(0, 360, 41)), np.linspace(0, 10, 41))
+    exact = classify_batch(theta, v, paper_params, ClassifySettings(min_hop_s=0.0),
+                           kernel="numpy")
+    cut = classify_batch(theta, v, paper_params, ClassifySettings(), kernel="numpy")
+    assert exact.locked_cycles == 1
+    names, cut_names = exact.names(), cut.names()
+    assert (names == "locked").sum() > 500
+    np.testing.assert_array_equal(names == "locked", cut_names == "sticking")
+    np.testing.assert_array_equal(names[names != "locked"], cut_names[names != "locked"])
+    compiled = classify_batch(theta, v, paper_params, ClassifySettings(min_hop_s=0.0),
+                              kernel="compiled")
+    np.testing.assert_array_equal(compiled.outcome, exact.outcome)
+    assert outcome_names(ClassifySettings(min_hop_s=0.0))[-2:] == ("locked", "resting")
+    assert outcome_names(ClassifySettings()) == OUTCOMES
+
+
+def test_exact_basin_rests_below_gamma_one():
+    """Gamma = 0.9 (no period-1 orbit either): every ball that can leave ends resting."""
+    p = ModelParams(0.5, 9.81, 0.9 * 9.81 / (2 * math.pi / 0.92) ** 2, 0.92)
+    theta, v = np.radians([10.0, 100.0, 200.0]), np.array([2.0, 2.5, 3.0])
+    result = classify_batch(theta, v, p, ClassifySettings(min_hop_s=0.0),
+                            require_fixed_point=False)
+    assert list(result.names()) == ["resting"] * 3
