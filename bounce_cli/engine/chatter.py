@@ -96,6 +96,31 @@ def release_phase(theta: float, params: ModelParams) -> float:
     return float(theta + np.mod(crossing - theta, TWO_PI))
 
 
+def release_phases(theta, params):
+    """``release_phase`` for arrays, with one parameter point per state (``params`` may be a
+    ``bifurcation.ParameterArrays``): the first phase >= theta where sin = 1/Gamma with sin
+    increasing, theta where the racket already accelerates downward faster than g, ``inf``
+    where Gamma <= 1.
+
+    Parameters
+    ----------
+    theta : array_like
+        Phases at which the balls start riding, rad.
+    params : ModelParams or ParameterArrays
+        The model (per state).
+
+    Returns
+    -------
+    ndarray
+        Release phases, rad (unwrapped, >= theta), ``inf`` where never.
+    """
+    theta = np.asarray(theta, dtype=float)
+    ratio = params.g / (params.racket_amplitude * params.omega**2)
+    crossing = np.arcsin(np.minimum(ratio, 1.0))
+    release = np.where(np.sin(theta) > ratio, theta, theta + np.mod(crossing - theta, TWO_PI))
+    return np.where(ratio >= 1.0, np.inf, release)
+
+
 def chatter_tail(theta, u, params: ModelParams):
     """Phase from an impact to the accumulation point of the chatter that follows it, and the
     error bound of that time (module docstring's closed form).
