@@ -503,6 +503,9 @@ def orbit_command(
     if not (math.isfinite(theta0_deg) and math.isfinite(v0)):
         fail("--theta0-deg and --v0 must be finite numbers")
     if controller is not None:
+        if min_hop_s == 0.0:
+            fail("--min-hop-s 0 (exact sticking) is not implemented with model.control; "
+                 "give a shortest hop > 0")
         controlled_orbit_output(math.radians(theta0_deg), v0, params, controller, n_impacts,
                                 min_hop_s, as_csv)
         return

@@ -266,3 +266,16 @@ def test_orbit_exact_sticking_is_a_locked_orbit_with_events(cli):
     assert releases.v_m_s.to_numpy() == pytest.approx(racket_v)
     assert "locked orbit: period 1 racket cycle" in result.stderr
     assert "-inf" in result.stderr
+
+
+def test_exact_sticking_with_racket_control_is_a_one_line_error(cli, user_error, tmp_path):
+    """Exact sticking is implemented for the passive racket only: orbit, basin and trajectory
+    say so instead of silently ignoring min_hop_s 0."""
+    control = ("--set", "model.control.gain=0.7")
+    user_error(cli("orbit", "--theta0-deg", 43.1, "--v0", 5.7, "--min-hop-s", 0, *control),
+               "exact sticking", "model.control")
+    user_error(cli("basin", "--set", "classify.min_hop_s=0", *control, "--out",
+                   tmp_path / "b", "--quiet"), "classify.min_hop_s", "model.control")
+    user_error(cli("trajectory", "--set", "sticking.min_hop_s=0", *control, "--out",
+                   tmp_path / "t", "--quiet"), "sticking.min_hop_s", "model.control")
+    assert not (tmp_path / "b").exists() and not (tmp_path / "t").exists()

@@ -161,6 +161,9 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
 
     options.progress.start(n_points, "basin: classifying")
     controller = config.model.controller()
+    if controller is not None and settings.min_hop_s == 0.0:
+        raise ConfigError("classify.min_hop_s: 0 (exact sticking) is not implemented with "
+                          "model.control; give a shortest hop > 0")
     if controller is None:
         # the compiled kernel releases the GIL: threads, which cost nothing to start
         threads = n_points >= COMPILED_MIN_POINTS and compiled_kernel_available()

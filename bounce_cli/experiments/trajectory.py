@@ -155,6 +155,9 @@ def run(config: TrajectoryConfig, options: RunOptions) -> ExperimentResult:
     if controller is not None and config.integrator != "exact":
         raise ConfigError("integrator: with model.control only the exact integrator is "
                           "implemented")
+    if controller is not None and settings.min_hop_s == 0.0:
+        raise ConfigError("sticking.min_hop_s: 0 (exact sticking) is not implemented with "
+                          "model.control; give a shortest hop > 0")
     options.progress.start(len(config.cases), f"trajectory ({config.integrator})")
     tracks, impacts, summary, accumulations = [], [], [], []
     for case in config.cases:
