@@ -186,6 +186,15 @@ EXPERIMENTS: tuple[Entry, ...] = (
         needs_fixed_point=False,
     ),
     Entry(
+        "continuation",
+        "Periodic orbits continued in one parameter; flips, folds and grazings located.",
+        (("continuation.png", "Beyond the paper (eqs. 5, 6, 8, 14): periodic orbits followed by "
+          "pseudo-arclength continuation over Gamma at alpha 0.5 (the period-doubling cascade "
+          "to period 32, the orbit hopping two racket cycles) over the brute-force bifurcation "
+          "diagram, flips, folds and grazings marked; the largest multiplier below."),),
+        needs_fixed_point=False,
+    ),
+    Entry(
         "control",
         "Racket period as a third state (active period control, sections 7-8's future work).",
         (("control_stability.png", "Sections 7-8 (future work): spectral radius of the map "
