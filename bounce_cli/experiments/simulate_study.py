@@ -12,11 +12,11 @@ velocity noise (e.g. with and without vision).
 
 Writes ``recordings/<subject>_<condition>_t<trial>.csv`` (what a lab measures; with
 perturbations also ``events/...csv``, the impacts' times and alpha as a virtual set-up logs
-them), the manifest ``study.csv`` (file[, events], subject, condition, trial), ``truth_trials.csv`` (each trial's true racket,
-AC, alpha, g and noise, and how often it was restarted because the ball fell into sticking) and
-``truth.csv`` (every exact impact, with subject, condition and
-trial). ``damaged_files`` replaces that many recordings (the last ones) with files that cannot
-be read, to see how ``bounce study`` reports failures.
+them), the manifest ``study.csv`` (file[, events], subject, condition, trial),
+``truth_trials.csv`` (each trial's true racket, AC, alpha, g and noise, and how often it was
+restarted because the ball fell into sticking) and ``truth.csv`` (every exact impact, with
+subject, condition and trial). ``damaged_files`` replaces that many recordings (the last ones)
+with files that cannot be read, to see how ``bounce study`` reports failures.
 """
 
 from __future__ import annotations
