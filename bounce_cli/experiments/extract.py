@@ -36,7 +36,7 @@ from ..recordings import (
     read_recording,
     read_table,
 )
-from ..plotting import caption_figures
+from ..plotting import caption_figures, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
 
@@ -119,6 +119,9 @@ class MarkersBlock(StrictModel):
     _some = field_validator("racket")(classmethod(lambda cls, value: at_least_one(value)))
 
 
+#: the former ``c3d`` block's keys -> the ``markers`` block's
+FORMER_MARKER_KEYS = {"racket_marker": "racket", "ball_marker": "ball"}
+
 #: the recording formats (``auto``: by the suffix and the first line)
 RECORDING_FORMATS = ("auto", "csv", "c3d", "vicon", "qtm", "motive")
 
@@ -174,6 +177,22 @@ class ExtractConfig(ExperimentConfig):
     markers: MarkersBlock = MarkersBlock()
     extraction: ExtractionBlock = ExtractionBlock()
     figure: FigureBlock = FigureBlock()
+
+    @model_validator(mode="before")
+    @classmethod
+    def _former_c3d_block(cls, data):
+        """Configs written before the ``markers`` block (which now serves every marker
+        format) named it ``c3d`` with ``racket_marker``, ``ball_marker`` and
+        ``vertical_axis``: still read, as that block (its keys win over the markers block's
+        where both are given, e.g. ``--set c3d.ball_marker=b`` on the bundled config)."""
+        if not isinstance(data, dict) or "c3d" not in data:
+            return data
+        former, markers = data["c3d"], data.get("markers") or {}
+        if not isinstance(former, dict) or not isinstance(markers, dict):
+            return data  # validation names the key
+        renamed = {FORMER_MARKER_KEYS.get(k, k): v for k, v in former.items()}
+        return {**{k: v for k, v in data.items() if k != "c3d"},
+                "markers": {**markers, **renamed}}
 
 
 def centred_deg(theta_deg):
@@ -396,19 +415,20 @@ def draw_fig2(samples: pd.DataFrame, impacts: pd.DataFrame, title: str, bounces:
         ax.plot(t, y, "o-", ms=4, lw=0.8, color=color)
         if perturbed.any():
             ax.plot(t[perturbed], y[perturbed], "o", ms=6, color="C3",
-                    label="perturbed impact (alpha changed)")
+                    label=r"perturbed impact ($\alpha$ changed)")
             ax.legend(loc="best", fontsize=7)
         if len(y):
             ax.axhline(float(np.mean(y)), ls="--", color="0.4", lw=0.8)
         ax.set_ylabel(label_)
         for ti in t:
             ax_x.axvline(ti, color="0.85", lw=0.6, zorder=0)
-    ax_th.set_xlabel("time t (s)")
+    ax_th.set_xlabel("time $t$ (s)")
     fig.suptitle(f"Fig. 2: {title}\ntrial {label}; dashed: sample means of the bounces shown",
                  fontsize=10)
     return fig
 
 
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     samples, impacts = frames["fig2_samples.csv"], frames["impacts.csv"]
     return {"fig2.png": draw_fig2(samples, impacts, "extracted ball velocity after impact "
