@@ -100,7 +100,7 @@ class ProcessWatch:
     def alive(self) -> list[str]:
         """Recorded processes that still exist (same pid and start time), zombies aside."""
         left = []
-        for pid, (start, cmd) in self.seen.items():
+        for pid, (start, cmd) in list(self.seen.items()):  # the watch may be adding
             fields = stat_fields(pid)
             if fields and fields[19] == start and fields[0] != "Z":
                 left.append(f"{pid} ({fields[0]}): {cmd}")
@@ -110,6 +110,11 @@ class ProcessWatch:
 def snapshot(folder: Path) -> dict[str, bytes]:
     return {str(p.relative_to(folder)): p.read_bytes()
             for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+#: how long the workers may outlive a SIGKILLed main process (s): they end within
+#: milliseconds on an idle machine; 30 s holds with every core busy many times over
+ORPHAN_DEADLINE_S = 30.0
 
 
 def wait_for(condition, timeout: float, what: str) -> None:
@@ -228,8 +233,12 @@ def test_sigkill_of_the_main_process_takes_the_workers_down(tmp_path):
     wait_for(lambda: len(watch.workers()) == 2, 20, "two workers")
     proc.kill()
     proc.wait()
-    time.sleep(0.3)
-    watch.stop()
+    # the workers notice their parent's death and end: wait for that itself (0.3 s were too
+    # short on a loaded machine), with a deadline no scheduler delay reaches
+    try:
+        wait_for(lambda: watch.alive() == [], ORPHAN_DEADLINE_S, "the workers to end")
+    finally:
+        watch.stop()
     assert watch.alive() == []
 
 
