@@ -6,8 +6,10 @@ a transient is discarded, and the impacts after it are recorded. Each orbit's at
 (``period<p>`` in the wrapped phase, ``chaotic``, ``sticking``, ...) and its largest Lyapunov
 exponent (the map's Jacobian at every impact, by implicit differentiation of eqs. 5, 6) come
 from ``engine.bifurcation`` and ``engine.lyapunov``. The figure draws the period-1 orbit's
-existence threshold (eq. 8) and flip threshold (eq. 14) from the closed forms; the flip is
-also located on the map itself, by multisection on the detected period, and compared.
+existence threshold (the fold, eq. 8) and flip threshold (eq. 14) where continuation locates
+them (``engine.continuation``, exact to rounding), with the closed forms beside them in
+``thresholds.csv``; the flip is also located by brute force on the map's iterated orbits, by
+multisection on the detected period, and compared.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from ..engine.bifurcation import (
     period1_thresholds,
     sweep_parameters,
 )
+from ..engine.continuation import continued_period1_thresholds
 from ..plotting import caption_figures
 from .base import Experiment, ExperimentResult, RunOptions
 
@@ -241,6 +244,12 @@ def threshold_frame(config: BifurcationConfig, per_value: pd.DataFrame, periods:
                 rows.append(dict(threshold=kind, cycles=cycles, equation=equation,
                                  closed_form=value))
     table = pd.DataFrame(rows)
+    # the thresholds located by continuation (engine.continuation): the fold where the orbit
+    # is born and its flip, exact to rounding; the figure draws its lines there
+    continued = {cycles: continued_period1_thresholds(base, sweep.parameter, cycles)
+                 for cycles in sorted(set(table.cycles))}
+    table["continuation"] = [continued[c][0 if kind == "existence" else 1]
+                             for kind, c in zip(table.threshold, table.cycles)]
     for name in ("located", "located_period1_end", "located_period2_end", "relative_difference"):
         table[name] = math.nan
 
@@ -249,8 +258,10 @@ def threshold_frame(config: BifurcationConfig, per_value: pd.DataFrame, periods:
             match = (table.threshold == "flip") & (table.cycles == loc.cycles)
             if not match.any():
                 th = period1_thresholds(base, sweep.parameter, loc.cycles)
-                table.loc[len(table)] = dict(threshold="flip", cycles=loc.cycles,
-                                             equation="eq. 14", closed_form=th.flip)
+                table.loc[len(table)] = dict(
+                    threshold="flip", cycles=loc.cycles, equation="eq. 14", closed_form=th.flip,
+                    continuation=continued_period1_thresholds(base, sweep.parameter,
+                                                              loc.cycles)[1])
                 match = (table.threshold == "flip") & (table.cycles == loc.cycles)
             table.loc[match, "located"] = loc.value
             table.loc[match, "located_period1_end"] = loc.period1_end
@@ -266,8 +277,8 @@ def threshold_frame(config: BifurcationConfig, per_value: pd.DataFrame, periods:
         table.loc[len(table)] = dict(threshold=name, cycles=0, equation="",
                                      closed_form=math.nan, located=onset)
     return table.rename(columns={c: f"{c}_{column}" for c in
-                                 ("closed_form", "located", "located_period1_end",
-                                  "located_period2_end")})
+                                 ("closed_form", "continuation", "located",
+                                  "located_period1_end", "located_period2_end")})
 
 
 ONSET_TEXT = {
@@ -326,7 +337,8 @@ def summary_lines(thresholds: pd.DataFrame, per_value: pd.DataFrame, column: str
         elif np.isfinite(located):
             lines.append(f"flip of the period-1 orbit ({row.cycles} cycle(s) per hop): located "
                          f"{column} = {located:.6g}, eq. 14 {closed:.6g}, relative difference "
-                         f"{row.relative_difference:+.2e}")
+                         f"{row.relative_difference:+.2e}; continuation "
+                         f"{rec[f'continuation_{column}']:.10g}")
     counts = per_value.attractors.str.split("+").explode().value_counts()
     lines.append("attractors found (values where each occurs): "
                  + ", ".join(f"{name} {n}" for name, n in counts.items()))
@@ -370,12 +382,15 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
 
     labelled: set = set()
     for row in thresholds[thresholds.threshold.isin(["existence", "flip"])].itertuples():
-        value = getattr(row, f"closed_form_{column}")
+        # at the continuation's threshold (the closed form's where it located none)
+        value = getattr(row, f"continuation_{column}")
+        if not np.isfinite(value):
+            value = getattr(row, f"closed_form_{column}")
         if not np.isfinite(value):
             continue
         paper_orbit = row.cycles == 1
         verb = "exists" if row.threshold == "existence" else "flips"
-        text = (f"period-1 orbit {verb} ({row.equation})" if paper_orbit else
+        text = (f"period-1 orbit {verb} (continuation; {row.equation})" if paper_orbit else
                 f"period-1 orbit hopping n >= 2 racket cycles {verb}")
         label: str | None = None if text in labelled else text
         labelled.add(text)

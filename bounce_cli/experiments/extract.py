@@ -40,13 +40,22 @@ from ..plotting import caption_figures
 from .base import Experiment, ExperimentResult, RunOptions
 
 
+def at_least_one(names):
+    """The racket's names: one, or a non-empty list (their mean is the racket)."""
+    if isinstance(names, list) and not names:
+        raise ValueError("name at least one")
+    return names
+
+
 class ColumnsBlock(StrictModel):
     """Column names of a CSV recording (null: the file has no such column)."""
 
     trial: Optional[str] = "trial"
     time: str = "t_s"
-    racket: str = "racket_x_m"
+    racket: Union[str, list[str]] = "racket_x_m"
     ball: Optional[str] = "ball_x_m"
+
+    _some = field_validator("racket")(classmethod(lambda cls, value: at_least_one(value)))
 
 
 class EventColumnsBlock(StrictModel):
@@ -90,12 +99,21 @@ class UnitsBlock(StrictModel):
     time: Literal[tuple(TIME_UNITS)] = "s"  # type: ignore[valid-type]
 
 
-class C3DBlock(StrictModel):
-    """Which markers of a C3D file are racket and ball, and which axis is vertical."""
+class MarkersBlock(StrictModel):
+    """Which markers of a marker file (C3D, Vicon, QTM, Motive) are racket and ball, which
+    axis is vertical (null: the format's, y for Motive, else z) and the positions' length unit
+    (null: the file's)."""
 
-    racket_marker: str = "racket"
-    ball_marker: Optional[str] = "ball"
-    vertical_axis: Literal["x", "y", "z"] = "z"
+    racket: Union[str, list[str]] = "racket"
+    ball: Optional[str] = "ball"
+    vertical_axis: Optional[Literal["x", "y", "z"]] = None
+    units: Optional[Literal[tuple(LENGTH_UNITS)]] = None  # type: ignore[valid-type]
+
+    _some = field_validator("racket")(classmethod(lambda cls, value: at_least_one(value)))
+
+
+#: the recording formats (``auto``: by the suffix and the first line)
+RECORDING_FORMATS = ("auto", "csv", "c3d", "vicon", "qtm", "motive")
 
 
 DEFAULTS = ExtractionSettings()
@@ -143,7 +161,10 @@ class ExtractConfig(ExperimentConfig):
     event_columns: EventColumnsBlock = EventColumnsBlock()
     csv: CsvBlock = CsvBlock()
     units: UnitsBlock = UnitsBlock()
-    c3d: C3DBlock = C3DBlock()
+    format: Literal[RECORDING_FORMATS] = Field(  # type: ignore[valid-type]
+        "auto", description="the recording's format: auto (by the suffix and the first line) "
+        "| csv | c3d | vicon | qtm | motive")
+    markers: MarkersBlock = MarkersBlock()
     extraction: ExtractionBlock = ExtractionBlock()
     figure: FigureBlock = FigureBlock()
 
@@ -288,8 +309,8 @@ def run(config: ExtractConfig, options: RunOptions) -> ExperimentResult:
         summary.append(f"no data given: extracted {source} (bounce simulate-recording's "
                        "recording.csv) and compared it with its truth")
     else:
-        trials = read_recording(Path(config.data), config.columns, config.units, config.c3d,
-                                config.csv)
+        trials = read_recording(Path(config.data), config.columns, config.units,
+                                config.markers, config.csv, config.format, options.warn)
         source = config.data
         truth = read_truth(config.truth) if config.truth is not None else None
     events = None
