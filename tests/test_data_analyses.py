@@ -205,6 +205,7 @@ def test_acf_data_without_a_fixed_point_is_one_line(acf_data, tmp_path, cli, use
     assert result.exit_code == 0, result.output
 
 
+@pytest.mark.slow
 def test_full_map_var_intervals_cover_eq9_over_seeds():
     """Coverage on the full stochastic map (not the linear VAR), 40 data sets of 12 trials x
     250 bounces with measurement noise (0.01 m/s, 0.5 deg): the spectral radius of eq. 10

@@ -23,6 +23,15 @@ from bounce_cli.registry import entry, reproduced
 from bounce_cli.reproduce import table_drift
 
 EXPERIMENT_NAMES = [e.name for e in reproduced()]
+#: re-runs too slow for the default suite (15-120 s each on a loaded 2-core machine): run
+#: with -m slow (CI does)
+SLOW_RERUNS = {"bifurcation", "control", "acf-data"}
+SLOW_REDRAWS = {"control"}
+
+
+def experiment_params(slow: set[str]) -> list:
+    return [pytest.param(n, marks=pytest.mark.slow) if n in slow else n
+            for n in EXPERIMENT_NAMES]
 
 RESULTS = Path(__file__).resolve().parent.parent / "results"
 
@@ -31,7 +40,7 @@ def committed_frames(name: str) -> dict[str, pd.DataFrame]:
     return {p.name: pd.read_csv(p) for p in sorted((RESULTS / name).glob("*.csv"))}
 
 
-@pytest.mark.parametrize("name", EXPERIMENT_NAMES)
+@pytest.mark.parametrize("name", experiment_params(SLOW_RERUNS))
 def test_bundled_config_reproduces_committed_results(name):
     experiment = entry(name).load()
     config = load_config(experiment.schema, bundled_config_path(entry(name).config))
@@ -48,7 +57,7 @@ def test_bundled_config_reproduces_committed_results(name):
     assert sorted(result.figures) == sorted(png for png, _ in entry(name).figures)
 
 
-@pytest.mark.parametrize("name", EXPERIMENT_NAMES)
+@pytest.mark.parametrize("name", experiment_params(SLOW_REDRAWS))
 def test_every_figure_redraws_from_its_csvs_alone(name, tmp_path):
     figures = entry(name).load().draw(committed_frames(name))
     assert sorted(figures) == sorted(p.name for p in (RESULTS / name).glob("*.png"))
