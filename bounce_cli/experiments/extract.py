@@ -112,6 +112,9 @@ class MarkersBlock(StrictModel):
     _some = field_validator("racket")(classmethod(lambda cls, value: at_least_one(value)))
 
 
+#: the former ``c3d`` block's keys -> the ``markers`` block's
+FORMER_MARKER_KEYS = {"racket_marker": "racket", "ball_marker": "ball"}
+
 #: the recording formats (``auto``: by the suffix and the first line)
 RECORDING_FORMATS = ("auto", "csv", "c3d", "vicon", "qtm", "motive")
 
@@ -167,6 +170,22 @@ class ExtractConfig(ExperimentConfig):
     markers: MarkersBlock = MarkersBlock()
     extraction: ExtractionBlock = ExtractionBlock()
     figure: FigureBlock = FigureBlock()
+
+    @model_validator(mode="before")
+    @classmethod
+    def _former_c3d_block(cls, data):
+        """Configs written before the ``markers`` block (which now serves every marker
+        format) named it ``c3d`` with ``racket_marker``, ``ball_marker`` and
+        ``vertical_axis``: still read, as that block (its keys win over the markers block's
+        where both are given, e.g. ``--set c3d.ball_marker=b`` on the bundled config)."""
+        if not isinstance(data, dict) or "c3d" not in data:
+            return data
+        former, markers = data["c3d"], data.get("markers") or {}
+        if not isinstance(former, dict) or not isinstance(markers, dict):
+            return data  # validation names the key
+        renamed = {FORMER_MARKER_KEYS.get(k, k): v for k, v in former.items()}
+        return {**{k: v for k, v in data.items() if k != "c3d"},
+                "markers": {**markers, **renamed}}
 
 
 def centred_deg(theta_deg):
