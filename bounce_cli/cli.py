@@ -36,7 +36,7 @@ except ImportError:  # pragma: no cover - older typer on click
     )
 
 from . import __version__
-from .artifacts import OutputDirError, RunDirectory
+from .artifacts import FIGURE_DPI, OutputDirError, RunDirectory
 from .config import (
     ConfigError,
     ModelOnlyConfig,
@@ -56,6 +56,24 @@ from .parallel import ClusterError
 from .registry import EXPERIMENTS, Entry
 
 USER_ERRORS = (ConfigError, ModelError, OutputDirError, ClusterError)
+
+
+def _flags_show_no_type() -> None:
+    """typer's help prints ``<bool>`` after a flag (``--quiet <bool>``), as if it took a
+    value: a flag's type column is left empty (an option taking a value keeps its type)."""
+    option = getattr(typer.core, "TyperOption", None)
+    shown = getattr(option, "display_type_rich", None)
+    if shown is None or getattr(shown, "flags_show_no_type", False):
+        return
+
+    def display_type_rich(self, ctx):
+        return None if self.is_flag else shown(self, ctx)
+
+    display_type_rich.flags_show_no_type = True  # type: ignore[attr-defined]
+    option.display_type_rich = display_type_rich  # type: ignore[union-attr]
+
+
+_flags_show_no_type()
 
 
 class BounceGroup(TyperGroup):
@@ -163,8 +181,34 @@ JobsOption = Annotated[
     Optional[int],
     typer.Option(
         "--jobs", "-j", min=1,
-        help="Worker processes for grid work (basin, sweep; default: all cores).",
+        help="Worker processes for the grid's points (default: all cores).",
     ),
+]
+def figure_formats(values: list[str] | None) -> list[str]:
+    """--figure-format: each value one format or a comma list of them (png, pdf, svg), in the
+    order given, each once; none given: png."""
+    from .plotting import FIGURE_FORMATS
+
+    kinds: list[str] = []
+    for text in values or ["png"]:
+        for kind in (part.strip().lower() for part in text.split(",")):
+            if kind not in FIGURE_FORMATS:
+                raise typer.BadParameter(f"{kind!r} is not a figure format; choose from "
+                                         + ", ".join(FIGURE_FORMATS))
+            if kind not in kinds:
+                kinds.append(kind)
+    return kinds
+
+
+FigureFormatOption = Annotated[
+    Optional[list[str]],
+    typer.Option("--figure-format", "-f", metavar="FORMAT", callback=figure_formats,
+                 help="Figure file format: png, pdf or svg; repeatable, or a comma list "
+                 "(--figure-format png,pdf). Default: png."),
+]
+DpiOption = Annotated[
+    int, typer.Option("--dpi", min=30, max=2400, metavar="N",
+                      help=f"Resolution of PNG figures, dots per inch (default {FIGURE_DPI}).")
 ]
 ResumeOption = Annotated[
     bool,
@@ -310,9 +354,12 @@ def run_experiment(
     jobs: int | None = None,
     resume: bool = False,
     scheduler: str | None = None,
+    figure_formats: tuple[str, ...] = ("png",),
+    dpi: int = FIGURE_DPI,
     agrees=None,
 ) -> dict[str, str]:
-    """Load and validate the config, run the experiment, write its files atomically. On an
+    """Load and validate the config, run the experiment, write its files atomically (each
+    figure once in each of ``figure_formats``, PNGs at ``dpi``). On an
     error or an interrupt nothing is written and an output folder the run made is removed;
     a resumable experiment's finished points stay in ``<out>/points/`` (``--resume``).
     ``agrees``: see ``RunDirectory.commit``. Returns its comparison (file -> how it changed;
@@ -343,6 +390,8 @@ def run_experiment(
             seed=getattr(cfg, "seed", None) if data_file is None else None,
             data_file=data_file,
             force=force,
+            figure_formats=figure_formats,
+            dpi=dpi,
         )
         progress = make_progress() if not quiet else None
         options = RunOptions(jobs=jobs or os.cpu_count() or 1, warn=warn, scheduler=scheduler)
@@ -445,18 +494,35 @@ def fixed_point_report(params: ModelParams) -> dict:
     }
 
 
+def no_fixed_point_report(params: ModelParams, error: Exception) -> dict:
+    """``fixed-point --json`` where eq. 8 has no solution: why, and the racket amplitude from
+    which it has one at the other parameters."""
+    return {"exists": False, "reason": str(error), "cos_theta": params.cos_theta_fixed(),
+            "min_racket_amplitude_m": params.min_racket_amplitude()}
+
+
 @app.command("fixed-point")
 def fixed_point_command(
     config: ConfigOption = None,
     overrides: SetOption = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print a JSON object.")] = False,
 ) -> None:
-    """Period-1 fixed point (eqs. 7, 8), racket acceleration AC, eigenvalues (eq. 10)."""
-    params = _model_or_fail(config, overrides)
-    report = fixed_point_report(params)
+    """Period-1 fixed point (eqs. 7, 8), racket acceleration AC, eigenvalues (eq. 10).
+
+    With --json and parameters without a fixed point: {"exists": false, "reason": ...} and
+    exit status 1."""
+    from .engine import NoFixedPointError
+
+    params = _model_or_fail(config, overrides, need_fixed_point=not as_json)
     if as_json:
+        try:
+            report = {"exists": True, **fixed_point_report(params)}
+        except NoFixedPointError as exc:
+            typer.echo(json.dumps(no_fixed_point_report(params, exc), indent=2))
+            raise typer.Exit(code=1) from None
         typer.echo(json.dumps(report, indent=2))
         return
+    report = fixed_point_report(params)
     table = Table(title="Period-1 fixed point", show_header=True)
     table.add_column("quantity")
     table.add_column("value", justify="right")
@@ -793,6 +859,8 @@ def add_experiment_command(entry: Entry) -> None:
         manifest: Optional[Path] = None,
         resume: ResumeOption = False,
         scheduler: SchedulerOption = None,
+        figure_format: FigureFormatOption = None,
+        dpi: DpiOption = FIGURE_DPI,
     ) -> None:
         overrides = list(overrides or [])
         for key, path in (("data", data), ("events", events), ("manifest", manifest)):
@@ -800,17 +868,18 @@ def add_experiment_command(entry: Entry) -> None:
                 overrides.append(f"{key}={json.dumps(str(path))}")
         run_experiment(entry, config=config, overrides=overrides, out=out, quiet=quiet,
                        force=force, print_config=print_config, jobs=jobs, resume=resume,
-                       scheduler=scheduler)
+                       scheduler=scheduler, figure_formats=tuple(figure_format or ["png"]),
+                       dpi=dpi)
 
     # the signature typer reads: annotations resolved, file options only where declared,
-    # --resume and --scheduler only for the experiments that take them
+    # --jobs, --resume and --scheduler only for the experiments that take them
     hints = typing.get_type_hints(command, include_extras=True)
     file_options = {"data": entry.data_help, "events": entry.events_help,
                     "manifest": entry.manifest_help}
     for key, help_text in file_options.items():
         hints[key] = Annotated[Optional[Path], typer.Option(f"--{key}", help=help_text)]
     declared = {**{k: v is not None for k, v in file_options.items()},
-                "resume": entry.resumable, "scheduler": entry.cluster}
+                "resume": entry.resumable, "scheduler": entry.cluster, "jobs": entry.parallel}
     params = [p.replace(annotation=hints[p.name])
               for p in inspect.signature(command).parameters.values()
               if declared.get(p.name, True)]
