@@ -282,6 +282,40 @@ def test_close_perturbations_do_not_contaminate_each_other(tmp_path, cli):
     assert (aligned.loc[aligned.k < 5, "n"] > 0).all()
 
 
+def test_impacts_to_relax_need_enough_windows_per_impact(impulse_data, tmp_path, cli):
+    """One trial holds 2 and 3 perturbations of each sign: no verdict ("too few perturbations"), the
+    CSV's relaxation_impacts empty for the data (the model's stays); with the whole file the
+    verdict is judged only over the impacts k that data_analysis.min_windows_per_impact windows
+    reach."""
+    path, out = impulse_data
+    frame = pd.read_csv(path)
+    one = tmp_path / "one.csv"
+    frame[frame.trial == frame.trial.iloc[0]].to_csv(one, index=False)
+    result = cli("impulse", "--data", one, "--out", tmp_path / "o",
+                 "--set", "data_analysis.settle_after_perturbation=8")
+    assert result.exit_code == 0, result.output
+    assert result.output.count("too few perturbations (") == 2, result.output
+    assert "(3 < data_analysis.min_windows_per_impact = 10)" in result.output
+    relax = pd.read_csv(tmp_path / "o" / "relaxation_data.csv")
+    data, model = relax[relax.source == "data"], relax[relax.source == "model"]
+    assert data.relaxation_impacts.isna().all() and (data.impacts_compared == 0).all()
+    assert model.relaxation_impacts.notna().all()
+    # the whole file: 24-26 windows per side at k = 0..10, all compared
+    relax = pd.read_csv(out / "relaxation_data.csv")
+    aligned = pd.read_csv(out / "aligned.csv")
+    for row in relax[relax.source == "data"].itertuples():
+        n = aligned[(aligned.quantity == "v_m_s") & (aligned.direction == row.direction)]["n"]
+        assert row.impacts_compared == int((n >= 10).sum()) == 11
+        assert row.relaxation_impacts >= 0
+    # a higher minimum than some impacts reach shortens the comparison
+    result = cli("impulse", "--data", path, "--out", tmp_path / "p", "--quiet",
+                 "--set", "data_analysis.settle_after_perturbation=8",
+                 "--set", "data_analysis.min_windows_per_impact=1000")
+    assert result.exit_code == 0, result.output
+    relax = pd.read_csv(tmp_path / "p" / "relaxation_data.csv")
+    assert relax.loc[relax.source == "data", "verdict"].str.startswith("too few").all()
+
+
 def test_impulse_data_errors(impulse_data, tmp_path, cli, user_error):
     path, _ = impulse_data
     frame = pd.read_csv(path)
@@ -399,3 +433,20 @@ def test_regression_refuses_equal_periods_without_a_numpy_warning(tmp_path, cli,
     result = cli("regression", "--data", path, "--out", tmp_path / "o")
     user_error(result, "two different x values")
     assert "RuntimeWarning" not in result.output
+
+
+def test_acf_data_on_29_bounces_says_there_are_too_few_for_an_interval(tmp_path, cli):
+    """The issue's case: 29 bounces gave 0.455 [-1.126, 2.036]. Now both estimates come
+    without an interval and the summary says why; no interval in the CSV leaves [0, inf)."""
+    sim = simulate_impacts(PAPER, 0.04, 0.05, 1, 29, seed=5)
+    path = tmp_path / "impacts.csv"
+    impacts_frame(sim, PAPER).to_csv(path, index=False)
+    result = cli("acf", "--data", path, "--out", tmp_path / "o", "--set", "max_lag=5", *FAST,
+                 "--set", "model.alpha=0.5", "--set", "model.g=9.81")
+    assert result.exit_code == 0, result.output
+    assert result.output.count("too few bounces for an interval") == 2, result.output
+    stab = pd.read_csv(tmp_path / "o" / "stability_data.csv")
+    fitted = stab[stab.source.str.contains("jackknife")]
+    assert fitted.ci_low.isna().all() and fitted.ci_high.isna().all()
+    radius = fitted[fitted.quantity == "spectral_radius"]
+    assert radius.note.str.contains("no interval: 28 pairs").any()

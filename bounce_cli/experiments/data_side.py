@@ -66,6 +66,9 @@ class ImpulseDataBlock(StrictModel):
                              "the last perturbation")
     relaxation_z: float = Field(2.0, gt=0.0, description="a mean within z SE of 0 counts as "
                                 "relaxed (data and model alike; the model's SE is 0)")
+    min_windows_per_impact: int = Field(
+        10, ge=2, description="impacts to relax are judged only over the impacts k that at "
+        "least this many perturbation windows reach; fewer at k = 0: 'too few perturbations'")
 
 
 # -- the model at the data's parameters ------------------------------------------------------
@@ -208,13 +211,14 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
         source = fit.method
         se = fit.jacobian_se.ravel()
         z = _z(conf)
+        half = z if fit.has_interval else math.nan  # too few bounces: no interval
         for name, value, s in zip(J_ENTRIES, fit.jacobian.ravel(), se):
-            add(name, "mixed", source, float(value), float(s), value - z * s, value + z * s,
-                f"{fit.n_pairs} pairs in {fit.n_trials} runs")
+            add(name, "mixed", source, float(value), float(s), value - half * s,
+                value + half * s, f"{fit.n_pairs} pairs in {fit.n_trials} runs")
         eig = fit.eigen_summary(conf)
         for name in EIGEN_QUANTITIES:
             value, se_, low, high = eig[name]
-            add(name, "1", source, value, se_, low, high, note="delta method")
+            add(name, "1", source, value, se_, low, high, note=interval_note(fit, name))
         for (i, j), name in zip(((0, 0), (1, 1), (0, 1)), ("noise_cov_vv", "noise_cov_thetatheta",
                                                            "noise_cov_vtheta")):
             add(name, "mixed", source, float(fit.noise_cov[i, j]), note="residual covariance")
@@ -253,9 +257,7 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
         if isinstance(fit, ModelError):
             lines.append(f"{method}: {fit}")
             continue
-        r = fit.eigen_summary(conf)["spectral_radius"]
-        lines.append(f"{fit.method}: spectral radius {r[0]:.3f} [{r[2]:.3f}, {r[3]:.3f}] "
-                     f"({conf:.0%} CI, delta method)")
+        lines.append(f"{fit.method}: {radius_text(fit, conf)}")
     if noise_source == "data_sd_match":
         lines.append(f"noise from the data's SDs: q_v = {q_v:.4f} m/s, q_theta = {q_theta:.4f} "
                      "rad")
@@ -276,6 +278,29 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
                      f"runs of the data's mean length, {run_length}): {method} trusted "
                      f"{need}; these data have {n_data}")
     return frames, lines
+
+
+def interval_note(fit: Var1Fit, quantity: str) -> str:
+    """How a fitted quantity's interval was made, or why there is none."""
+    if not fit.has_interval:
+        return (f"no interval: {fit.n_pairs} {_rows_word(fit)}, fewer than the "
+                f"{fit.min_pairs_for_interval} the {fit.method.split('+')[0]} interval needs")
+    return "delta method, log scale" if quantity == "spectral_radius" else "delta method"
+
+
+def _rows_word(fit: Var1Fit) -> str:
+    return "triples" if fit.method.startswith("lag2") else "pairs"
+
+
+def radius_text(fit: Var1Fit, confidence: float) -> str:
+    """The fitted spectral radius with its interval, or with the reason it has none."""
+    value, se, low, high = fit.eigen_summary(confidence)["spectral_radius"]
+    if not fit.has_interval:
+        return (f"spectral radius {value:.3f} (SE {se:.3f}): too few bounces for an interval "
+                f"({fit.n_pairs} {_rows_word(fit)}; the {fit.method.split('+')[0]} interval needs "
+                f"{fit.min_pairs_for_interval})")
+    return (f"spectral radius {value:.3f} [{low:.3f}, {high:.3f}] ({confidence:.0%} CI, delta "
+            "method on the log scale)")
 
 
 def _z(confidence: float) -> float:
@@ -312,7 +337,7 @@ def trust_frame(params, q_v, q_theta, config, segments, options) -> pd.DataFrame
         series += rng.standard_normal(series.shape) * meas
         for method in ("ols", "lag2"):
             found: list[float] = []
-            inside = 0
+            inside, with_interval = 0, 0
             for r in range(reps):
                 try:
                     fit = fit_var1(list(series[r * n_trials:(r + 1) * n_trials]), method,
@@ -321,6 +346,7 @@ def trust_frame(params, q_v, q_theta, config, segments, options) -> pd.DataFrame
                     continue
                 value, _, low, high = fit.eigen_summary(d.confidence)["spectral_radius"]
                 found.append(value)
+                with_interval += fit.has_interval
                 inside += low <= truth <= high
             est = np.array(found)
             q16, med, q84 = np.percentile(est, [16, 50, 84]) if len(est) else (math.nan,) * 3
@@ -328,7 +354,7 @@ def trust_frame(params, q_v, q_theta, config, segments, options) -> pd.DataFrame
                          "repetitions": len(est), "true_spectral_radius": truth,
                          "median_estimate": med, "median_bias": med - truth,
                          "spread_16_84": q84 - q16, "q16": q16, "q84": q84,
-                         "coverage": inside / len(est) if len(est) else math.nan,
+                         "coverage": inside / with_interval if with_interval else math.nan,
                          "measurement_sd_v_m_s": meas[0],
                          "measurement_sd_theta_deg": d.measurement_sd_theta_deg})
         options.progress.advance(1)
@@ -380,6 +406,8 @@ def _stability_figure(stab: pd.DataFrame, trust: pd.DataFrame | None):
         label = f"{src}: radius {radius['estimate']:.3f}"
         if np.isfinite(radius["ci_low"]):
             label += f" [{radius['ci_low']:.3f}, {radius['ci_high']:.3f}]"
+        elif src != "model_eq10":
+            label += " (too few bounces for an interval)"
         for lam in ("lambda_plus", "lambda_minus"):
             try:
                 re = s.loc[(f"{lam}_re", src)]
@@ -500,25 +528,36 @@ def impulse_data_run(config, options, source: ImpactsSource | None = None
         se_v = (mv["sd"] / np.sqrt(mv["n"])).to_numpy()
         se_t = (mt["sd"] / np.sqrt(mt["n"])).to_numpy()
         tol = (rel.tolerance_v_m_s, rel.tolerance_theta_deg)
-        # both over the impacts the data's windows reach (at least 2 windows there)
-        reach = int(np.flatnonzero(mv["n"].to_numpy() >= 2).max(initial=-1)) + 1
-        shown = slice(0, max(reach, 1))
+        # both over the impacts k = 0.. that enough of the data's windows reach
+        windows = mv["n"].to_numpy()
+        reach = int(np.argmin(windows >= d.min_windows_per_impact)
+                    if not (windows >= d.min_windows_per_impact).all() else len(windows))
+        too_few = reach == 0
+        shown = slice(0, reach if not too_few else n + 1)
         relax_rows.append({
             "direction": side, "source": "data", "mean_alpha_p": ap,
             "perturbations": int(sel.sum()), "impacts_compared": reach,
-            "relaxation_impacts": relaxation_impact(
+            "relaxation_impacts": None if too_few else relaxation_impact(
                 [mv["mean"].to_numpy()[shown], mt["mean"].to_numpy()[shown]],
                 [se_v[shown], se_t[shown]], tol, d.relaxation_z),
+            "verdict": (f"too few perturbations ({int(windows[0])} < "
+                        f"data_analysis.min_windows_per_impact = {d.min_windows_per_impact})"
+                        if too_few else ""),
         })
         relax_rows.append({
             "direction": side, "source": "model", "mean_alpha_p": ap, "perturbations": 0,
-            "impacts_compared": reach,
+            "impacts_compared": reach if not too_few else n + 1,
             "relaxation_impacts": relaxation_impact(
                 [r.dv[shown], np.degrees(r.dtheta[shown])], [np.zeros(n + 1)[shown]] * 2, tol,
                 d.relaxation_z),
         })
     model = pd.DataFrame(model_rows)
     relax = pd.DataFrame(relax_rows)
+    relax["relaxation_impacts"] = relax["relaxation_impacts"].astype("Int64")  # NA: no verdict
+    relax["verdict"] = [v if isinstance(v, str) and v else relaxed_text(int(k), int(h))
+                        for v, k, h in zip(relax.get("verdict", [""] * len(relax)),
+                                           relax["relaxation_impacts"].fillna(-1),
+                                           relax["impacts_compared"])]
     relax["criterion"] = (f"|mean| <= max(tol, {d.relaxation_z:g} SE) for v (tol "
                           f"{rel.tolerance_v_m_s:g} m/s) and theta (tol "
                           f"{rel.tolerance_theta_deg:g} deg) from k on")
@@ -533,8 +572,11 @@ def impulse_data_run(config, options, source: ImpactsSource | None = None
              f"model.g): v~ = {fp.v_m_s:.3f} m/s,"
              f" theta~ = {fp.theta_deg:.1f} deg"]
     for row in relax.itertuples():
+        judged = (f" (judged over k < {row.impacts_compared}: the impacts at least "
+                  f"{d.min_windows_per_impact} windows reach)"
+                  if row.source == "data" and not row.verdict.startswith("too few") else "")
         lines.append(f"{row.direction} (alpha_p {row.mean_alpha_p:.3f}), {row.source}: impacts "
-                     f"to relax {relaxed_text(row.relaxation_impacts)}")
+                     f"to relax {row.verdict}{judged}")
     frames = {"aligned.csv": aligned, "model_response.csv": model, "relaxation_data.csv": relax}
     return frames, lines
 
