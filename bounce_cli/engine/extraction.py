@@ -380,7 +380,7 @@ def fit_flight(t, x, t_ref: float, g: float, min_samples: int) -> FlightFit | No
 
 
 # -- contacts -----------------------------------------------------------------------------------
-def detect_contacts(t, ball, racket, s: ExtractionSettings) -> np.ndarray:
+def detect_contacts(t, ball, racket, s: ExtractionSettings, bridged=None) -> np.ndarray:
     """Sample indices of contacts: the ball's velocity jumps upward (net of gravity) by more
     than a threshold within ``contact_distance_m`` (plus ``CLOSING_SPEED_M_S`` times the
     velocities' span) of the racket; a jump straddling two samples counts once (the larger).
@@ -389,7 +389,12 @@ def detect_contacts(t, ball, racket, s: ExtractionSettings) -> np.ndarray:
     sample): over one sample, 0.5 mm of noise at 1 kHz is a jump of 1.2 m/s (SD), and spurious
     contacts split the flights. The threshold is ``min_velocity_jump_m_s`` or
     JUMP_NOISE_FACTOR robust SDs of the jumps (which are noise but at the contacts),
-    whichever is larger."""
+    whichever is larger.
+
+    ``bridged`` (optional) marks the samples of short gaps that ``bridge_short_gaps`` filled:
+    a spline across a contact smears the jump into spurious or missing contacts, so inside a
+    bridged gap (and a span either side) the jump is the one ACROSS the gap, from the measured
+    samples on each side, and such a gap holds at most one contact."""
     n = t.size
     jump = np.full(t.shape, np.nan)
     # the sample nearest a contact may be up to the span away from it, while ball and racket
@@ -408,6 +413,8 @@ def detect_contacts(t, ball, racket, s: ExtractionSettings) -> np.ndarray:
     if finite.size:
         threshold = max(threshold, JUMP_NOISE_FACTOR * _robust_sd(finite))
     near = (ball - s.ball_offset_m - racket) < s.contact_distance_m + CLOSING_SPEED_M_S * span
+    if bridged is not None and np.any(bridged):
+        _jumps_across_gaps(t, ball, racket, bridged, m, jump, near, s)
     with np.errstate(invalid="ignore"):
         candidate = np.flatnonzero((jump > threshold) & near)
     contacts: list[int] = []
@@ -418,6 +425,29 @@ def detect_contacts(t, ball, racket, s: ExtractionSettings) -> np.ndarray:
             continue
         contacts.append(int(i))
     return np.array(contacts, dtype=int)
+
+
+def _jumps_across_gaps(t, ball, racket, bridged, m: int, jump, near,
+                       s: ExtractionSettings) -> None:
+    """In place: for each bridged gap, the jump across it (velocities over ``m`` measured
+    samples before its first and after its last missing sample) at the gap's middle sample,
+    no jump elsewhere within ``m`` samples of the gap; near the racket when a measured sample
+    at either edge is."""
+    n = t.size
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], bridged.astype(int), [0]])))
+    for start, stop in zip(edges[::2], edges[1::2]):
+        before, after = start - 1, stop  # the measured samples either side
+        jump[max(start - m, 0):min(stop + m, n)] = np.nan
+        if before - m < 0 or after + m >= n:
+            continue
+        v_before = (ball[before] - ball[before - m]) / (t[before] - t[before - m])
+        v_after = (ball[after + m] - ball[after]) / (t[after + m] - t[after])
+        elapsed = 0.5 * (t[after + m] + t[after]) - 0.5 * (t[before] + t[before - m])
+        middle = (start + stop - 1) // 2
+        jump[middle] = v_after - v_before + s.g * elapsed
+        reach = s.contact_distance_m + CLOSING_SPEED_M_S * (t[after] - t[before])
+        near[middle] = min(ball[before] - racket[before],
+                           ball[after] - racket[after]) - s.ball_offset_m < reach
 
 
 @dataclass
@@ -524,7 +554,7 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
     else:
         if ball is None:
             raise ModelError("neither ball positions nor events: no impacts to find")
-        ci = detect_contacts(t, ball_f, racket_f, s)
+        ci = detect_contacts(t, ball_f, racket_f, s, ~ball_measured & ~ball_long)
         ct = t[ci]
         exact = np.zeros(ct.shape, dtype=bool)
         k_index = np.arange(len(ct))
@@ -543,6 +573,8 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
         # fits between consecutive contacts (and before the first, after the last)
         bounds = np.concatenate([[-s.guard_samples - 1], ci, [len(t) + s.guard_samples]])
         afters, befores = [None] * n, [None] * n
+        # a contact in a bridged gap is timed from the flights either side: anywhere in it
+        gap_width = np.array([_run_width(t, ~ball_measured, i) for i in ci]) if n else ci
         for j in range(n + 1):
             lo = bounds[j] + s.guard_samples + (0 if j == 0 else 1)
             hi = bounds[j + 1] - s.guard_samples
@@ -571,7 +603,7 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
                 if before is not None and abs(after.v0 - before.v0) > 0.0:
                     # both parabolas have the same g: their difference is linear in t
                     tj = ct[j] - (after.x0 - before.x0) / (after.v0 - before.v0)
-                    if abs(tj - ct[j]) <= 3.0 * _spacing(t, ci[j]):
+                    if abs(tj - ct[j]) <= 3.0 * _spacing(t, ci[j]) + gap_width[j]:
                         t_k[j] = tj
                         offsets.append(float(after.position(tj, g))
                                        - local_derivatives(t, racket_fit, tj,
@@ -582,6 +614,9 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
                 else:
                     t_k[j] = _meet_racket(t, racket_fit, after, ct[j], s)
             if not math.isfinite(t_k[j]):
+                # keep the detected sample's time: the impact is listed (excluded.csv) at it,
+                # the hops and the count of impacts lost in gaps stay defined, and k skips it
+                t_k[j] = ct[j]
                 reason[j] = "contact not located"
                 continue
             v_k[j] = float(after.velocity(t_k[j], g))
@@ -609,7 +644,8 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
         # impacts inside a long gap of the ball data are lost: estimate how many from the
         # typical hop, report them, and keep k counting them
         spans = np.diff(t_k)
-        typical = np.median(spans[~next_unknown[:-1]]) if np.any(~next_unknown[:-1]) else math.nan
+        known = spans[~next_unknown[:-1] & np.isfinite(spans)]
+        typical = float(np.median(known)) if known.size else math.nan
         lost = np.zeros(n, dtype=int)
         for j in np.flatnonzero(next_unknown[:-1]).tolist():
             lost[j] = max(int(round(spans[j] / typical)) - 1, 0) if math.isfinite(typical) else 0
@@ -668,6 +704,19 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
         impacts["alpha"] = alpha[keep]
     offset = float(np.median(offsets)) if offsets else math.nan
     return TrialExtraction(impacts, excluded, cycles, offset)
+
+
+def _run_width(t, mask, i: int) -> float:
+    """Time between the samples either side of the run of ``mask`` holding sample i (0 when
+    ``mask[i]`` is False)."""
+    if not mask[i]:
+        return 0.0
+    lo, hi = i, i
+    while lo > 0 and mask[lo - 1]:
+        lo -= 1
+    while hi < len(mask) - 1 and mask[hi + 1]:
+        hi += 1
+    return float(t[min(hi + 1, len(t) - 1)] - t[max(lo - 1, 0)])
 
 
 def _spacing(t, i: int) -> float:

@@ -553,3 +553,54 @@ def test_other_csv_dialects_give_the_same_impacts(simulated, tmp_path, write, se
     # without the settings: one line that says which key to set
     bare, _ = extract_cli(tmp_path / "bare", "--data", str(path))
     one_line_error(bare, "csv.")
+
+
+# -- extraction faults (issue 24) ------------------------------------------------------------
+FAULT_SESSION = SessionSettings(n_trials=1, duration_s=20.0, sample_rate_hz=200.0,
+                                position_noise_m=0.0005, velocity_noise_m_s=0.04, seed=3)
+
+
+def test_a_40ms_ball_gap_at_an_impact_keeps_the_impact_and_its_k():
+    """A gap shorter than max_gap_s is bridged by a spline for detection; across a contact
+    the spline smeared the velocity jump into a spurious contact at the gap's edge (listed as
+    "no free flight after the impact") and k skipped a number at a real impact: a false lag
+    pair for acf/VAR. Now the jump is taken across the gap from the measured samples either
+    side; the impact is found, timed from the flights, with its own k."""
+    truth, (t, racket, ball) = session(FAULT_SESSION)[0]
+    rows = truth_rows(truth)
+    for j in (2, 5, 8):
+        i = int(np.searchsorted(t, rows["t_s"][j]))
+        for shift in (-6, -4, -3, -2, 0):  # 7 samples missing: 40 ms between measured ones
+            gapped = ball.copy()
+            gapped[i + shift:i + shift + 7] = np.nan
+            result = extract_trial(t, racket, gapped, s=ExtractionSettings())
+            idx = match_impacts(rows["t_s"], result.impacts["t_s"])
+            assert j in idx, (j, shift)
+            np.testing.assert_array_equal(result.impacts["k"], idx)
+            assert [r for _, r in result.excluded] == ["outside a complete racket cycle"]
+            at = np.flatnonzero(idx == j)[0]
+            assert abs(result.impacts["v_m_s"][at] - rows["v_m_s"][j]) <= 0.03
+            theta_err = (result.impacts["theta_deg"][at] - rows["theta_deg"][j] + 180) % 360 - 180
+            assert abs(theta_err) <= 1.0
+
+
+def test_a_contact_that_cannot_be_located_is_listed_at_its_time_and_k_skips_it():
+    """The ball lost for 1.2 s before impact 6 (no flight before it) and the racket for 40 ms
+    at it (no racket fit to meet): its contact cannot be located. Its time was NaN: the
+    median hop of the lost-impacts count became NaN, so the impact lost in the long gap was
+    not counted ("about 0 impact(s) lost"), k did not skip it (a false lag pair) and
+    excluded.csv had a row at t = NaN."""
+    truth, (t, racket, ball) = session(FAULT_SESSION)[0]
+    rows = truth_rows(truth)
+    t6 = rows["t_s"][6]
+    gapped_ball, gapped_racket = ball.copy(), racket.copy()
+    gapped_ball[(t > t6 - 1.2) & (t < t6 - 0.03)] = np.nan
+    gapped_racket[(t > t6 - 0.02) & (t < t6 + 0.02)] = np.nan
+    result = extract_trial(t, gapped_racket, gapped_ball, s=ExtractionSettings())
+    idx = match_impacts(rows["t_s"], result.impacts["t_s"])
+    assert np.all(idx >= 0) and 6 not in idx
+    np.testing.assert_array_equal(result.impacts["k"], idx)
+    times = dict((reason.split(":")[0], tt) for tt, reason in result.excluded)
+    assert abs(times["contact not located"] - t6) <= 0.01
+    assert any("about 1 impact(s) lost" in reason for _, reason in result.excluded)
+    assert all(math.isfinite(tt) for tt, _ in result.excluded)
