@@ -222,6 +222,11 @@ def _prepared(trials: Sequence[np.ndarray], exog: Sequence[np.ndarray] | None, l
         raise ModelError("the exogenous inputs must have one row per impact of each trial")
     width = np.asarray(exog[0]).shape[1] if np.ndim(exog[0]) == 2 else -1
     u = demeaned(exog, width, "inputs")
+    spread = np.sqrt(np.mean(np.concatenate(u) ** 2, axis=0))
+    scale = np.abs(np.concatenate([np.asarray(e, float) for e in exog])).max(axis=0)
+    if np.any(spread <= 1e-9 * np.maximum(scale, 1e-300)):
+        raise ModelError("an input does not vary within the trials: the VARX is not "
+                         "identified (a steady racket: the VAR(1) needs no inputs)")
     u_rows, _ = _lagged_rows(u, lags)
     return y, rows, np.hstack([u_rows[-1], u_rows[-2]]), trial_of
 
@@ -360,3 +365,101 @@ def jacobian_coverage(fit: Var1Fit, truth: np.ndarray, confidence: float = 0.95)
     """Per entry of J: is the true value inside estimate +- z SE? (shape (2, 2), bool)."""
     z = stats.norm.ppf(0.5 + confidence / 2.0)
     return np.abs(fit.jacobian - truth) <= z * fit.jacobian_se
+
+
+# -- residual diagnostics ------------------------------------------------------------------
+@dataclass(frozen=True)
+class LjungBox:
+    """The Ljung-Box test of one residual component, pooled over trials."""
+
+    component: str  # "v" or "theta"
+    lags: int
+    statistic: float  # sum over trials of each trial's Q(lags)
+    df: int  # n_trials * lags - the fitted slopes of the equation
+    p_value: float
+
+
+def ljung_box(fit: Var1Fit, lags: int) -> list[LjungBox]:
+    """Whiteness of the residuals of ``fit``, per component (v, theta): statsmodels'
+    ``acorr_ljungbox`` on each trial's own residuals (never a lag across a trial boundary),
+    the trials' Q statistics summed (independent trials: chi^2 with the summed degrees of
+    freedom), minus the equation's fitted slopes once (they are pooled over trials).
+
+    Parameters
+    ----------
+    fit : Var1Fit
+        A fit with per-trial residuals (``fit_var1`` and the estimators keep them).
+    lags : int
+        Autocorrelations 1..lags enter Q; trials with fewer than lags + 2 residuals are left
+        out.
+
+    Returns
+    -------
+    list of LjungBox
+        One per component.
+    """
+    from statsmodels.stats.diagnostic import acorr_ljungbox
+
+    slopes = 2 + fit.exog_coef.shape[1]
+    out = []
+    for index, component in enumerate(("v", "theta")):
+        total, used = 0.0, 0
+        for resid in fit.residuals:
+            if len(resid) < lags + 2:
+                continue
+            table = acorr_ljungbox(resid[:, index], lags=[lags])
+            total += float(table["lb_stat"].iloc[0])
+            used += 1
+        df = used * lags - slopes
+        p_value = float(stats.chi2.sf(total, df)) if used and df > 0 else math.nan
+        out.append(LjungBox(component, lags, total if used else math.nan, max(df, 0), p_value))
+    return out
+
+
+@dataclass(frozen=True)
+class LagOrder:
+    """Information criteria of a VAR(p) fitted by OLS on the same impacts for every p."""
+
+    order: int
+    aic: float
+    bic: float
+    n_rows: int
+
+
+def lag_order_criteria(trials: Sequence[np.ndarray], max_order: int) -> list[LagOrder]:
+    """AIC and BIC of VAR(p), p = 1..max_order, fitted by least squares pooled over trials
+    (each trial's mean removed, no lag across a trial boundary; statsmodels' VAR knows no
+    trial boundaries): ln det Sigma_p + 2 K^2 p / T and ln det Sigma_p + ln(T) K^2 p / T with
+    K = 2, Sigma_p the maximum-likelihood residual covariance and T the rows used, the same
+    rows for every p (each trial from its impact max_order on).
+
+    Parameters
+    ----------
+    trials : sequence of (N_i, 2) arrays
+        (v, theta) of each trial's consecutive impacts.
+    max_order : int
+        The largest lag order compared (>= 1).
+
+    Returns
+    -------
+    list of LagOrder
+        One per order, 1..max_order.
+    """
+    y = demeaned(trials)
+    parts, _ = _lagged_rows(y, max_order)  # parts[max_order] is the target y_{k+max_order}
+    target = parts[max_order]
+    n = len(target)
+    out = []
+    for order in range(1, max_order + 1):
+        x = np.hstack([parts[max_order - lag] for lag in range(1, order + 1)])
+        if n <= x.shape[1] + len(y):
+            break
+        coef, *_ = np.linalg.lstsq(x, target, rcond=None)
+        resid = target - x @ coef
+        sign, logdet = np.linalg.slogdet(resid.T @ resid / n)
+        if sign <= 0:
+            break
+        k2p = 4 * order
+        out.append(LagOrder(order, logdet + 2.0 * k2p / n, logdet + math.log(n) * k2p / n, n))
+    return out
+
