@@ -308,6 +308,7 @@ class RunDirectory:
         self._t0 = time.perf_counter()
         self._frames: dict[str, pd.DataFrame] = {}
         self._figures: dict[str, Any] = {}
+        self._files: dict[str, bytes] = {}
         self.previous: dict[str, Any] = {}
         self.created: list[Path] = []  # folders this run made, outermost first
         self.check_writable(force)
@@ -362,6 +363,10 @@ class RunDirectory:
     def add_figure(self, name: str, figure) -> None:
         self._figures[name] = figure
 
+    def add_file(self, name: str, content: bytes) -> None:
+        """Any other file, as bytes (e.g. an HTML report)."""
+        self._files[name] = content
+
     def manifest(self, status: str) -> dict[str, Any]:
         """``run.json``: what the results were made from; the same for the same inputs."""
         manifest: dict[str, Any] = {
@@ -376,7 +381,7 @@ class RunDirectory:
             path = Path(self.data_file).resolve()
             manifest["data_file"] = {"path": str(path), "sha256": sha256_of(path)}
         manifest["versions"] = versions()
-        manifest["files"] = sorted([*self._frames, *self._figures])
+        manifest["files"] = sorted([*self._frames, *self._figures, *self._files])
         return manifest
 
     def timing(self) -> dict[str, Any]:
@@ -423,7 +428,12 @@ class RunDirectory:
         paths. Until the staging is complete, the previous run's files are untouched."""
         self.out_dir.mkdir(parents=True, exist_ok=True)
         writers: dict[str, Callable[[Path], object]] = {}
-        written = {*self._frames, *self._figures}
+        written = {*self._frames, *self._figures, *self._files}
+        for name in written:
+            if Path(name).is_absolute() or ".." in Path(name).parts:
+                raise ValueError(f"result file {name!r} is not a path inside the run directory")
+        for name, content in self._files.items():
+            writers[name] = functools.partial(_write_bytes, content)
         for name, frame in self._frames.items():
             writers[name] = functools.partial(write_frame, frame, kind=frame_format(name))
         for name, figure in self._figures.items():
@@ -466,7 +476,9 @@ class RunDirectory:
                 # wrote it): a run never deletes its own input
                 inputs = files_named_in(self.resolved_config)
                 for name in set(self.previous.get("files", [])) - written:
-                    stale = self.out_dir / Path(name).name
+                    if Path(name).is_absolute() or ".." in Path(name).parts:
+                        continue  # not a file of the run directory
+                    stale = self.out_dir / name
                     if stale.is_file() and stale.resolve() not in inputs:
                         stale.unlink()
         finally:
@@ -475,6 +487,10 @@ class RunDirectory:
             for tmp, _ in staged:
                 tmp.unlink(missing_ok=True)
         return [final for _, final in staged]
+
+
+def _write_bytes(content: bytes, path: Path) -> None:
+    Path(path).write_bytes(content)
 
 
 # -- tables: CSV (fast, byte for byte what pandas writes) and binary formats -----------------

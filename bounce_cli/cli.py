@@ -346,9 +346,10 @@ def run_experiment(
         if entry.resumable:
             from .checkpoints import PointFolder
 
-            checkpoints = PointFolder(run_dir.out_dir, {"command": entry.name,
-                                                        "config": run_dir.resolved_config},
-                                      resume=resume, force=force)
+            identity: dict = {"command": entry.name}
+            if not entry.task_keys:  # else each task knows what it was made from
+                identity["config"] = run_dir.resolved_config
+            checkpoints = PointFolder(run_dir.out_dir, identity, resume=resume, force=force)
             options.checkpoints = checkpoints
         if progress is not None:
             options.progress = progress
@@ -361,6 +362,8 @@ def run_experiment(
             run_dir.add_csv(name_, frame)
         for name_, figure in result.figures.items():
             run_dir.add_figure(name_, figure)
+        for name_, content in result.files.items():
+            run_dir.add_file(name_, content)
         written = run_dir.commit()
         if checkpoints is not None:
             checkpoints.remove()
@@ -377,10 +380,16 @@ def run_experiment(
     if not quiet:
         # as written (no markup: a summary may hold "[a, b]"); wrapped on a terminal only, so
         # that a log file keeps one line per result (grep finds the numbers)
+        shown = [str(p.relative_to(run_dir.out_dir)) for p in written]
+        if len(shown) > 40:  # a study writes hundreds: the top level and a count
+            top = sorted({s.split("/")[0] for s in shown})
+            shown = [s for s in top if "/" not in s] + [f"({len(written)} files in all)"]
         lines = [*result.summary, f"wrote {len(written)} files to {run_dir.out_dir}/: "
-                 + ", ".join(p.name for p in written)]
+                 + ", ".join(shown)]
         for line in lines:
             stderr.print(line, highlight=False, markup=False, soft_wrap=not stderr.is_terminal)
+    if result.exit_code:
+        raise typer.Exit(result.exit_code)
 
 
 # -- engine commands ------------------------------------------------------------------------
@@ -690,11 +699,12 @@ def add_experiment_command(entry: Entry) -> None:
         jobs: JobsOption = None,
         data: Optional[Path] = None,
         events: Optional[Path] = None,
+        manifest: Optional[Path] = None,
         resume: ResumeOption = False,
         scheduler: SchedulerOption = None,
     ) -> None:
         overrides = list(overrides or [])
-        for key, path in (("data", data), ("events", events)):
+        for key, path in (("data", data), ("events", events), ("manifest", manifest)):
             if path is not None:
                 overrides.append(f"{key}={json.dumps(str(path))}")
         run_experiment(entry, config=config, overrides=overrides, out=out, quiet=quiet,
@@ -704,7 +714,8 @@ def add_experiment_command(entry: Entry) -> None:
     # the signature typer reads: annotations resolved, file options only where declared,
     # --resume and --scheduler only for the experiments that take them
     hints = typing.get_type_hints(command, include_extras=True)
-    file_options = {"data": entry.data_help, "events": entry.events_help}
+    file_options = {"data": entry.data_help, "events": entry.events_help,
+                    "manifest": entry.manifest_help}
     for key, help_text in file_options.items():
         hints[key] = Annotated[Optional[Path], typer.Option(f"--{key}", help=help_text)]
     declared = {**{k: v is not None for k, v in file_options.items()},

@@ -20,6 +20,13 @@ Columns (units in the names; phases are the racket's phase of impact, section 2,
                         mid-position, m
 ``alpha``               coefficient of restitution of this impact (optional: from events)
 ``perturbed``           True where alpha was changed at this impact (optional: from events)
+``v_in_m_s``            ball velocity just before the impact, m/s (optional: ``bounce extract``
+                        with the ball tracked; at a finite contact, of the equivalent
+                        instantaneous impact: where the flights before and after meet)
+``alpha_measured``      coefficient of restitution by eq. 3 from v_in, v_k and the racket's
+                        velocity at t_k (optional: as ``v_in_m_s``)
+``contact_s``           time the ball is off its free flights around the impact, s (0: an
+                        instant; optional: as ``v_in_m_s``)
 ======================  ==========================================================================
 """
 
@@ -51,6 +58,8 @@ REQUIRED_COLUMNS: tuple[str, ...] = (
 )
 #: columns present when the recording came with events (a virtual set-up's log)
 EVENT_COLUMNS: tuple[str, ...] = ("alpha", "perturbed")
+#: columns present when the ball was tracked: what the impact itself shows (eq. 3)
+MEASURED_COLUMNS: tuple[str, ...] = ("v_in_m_s", "alpha_measured", "contact_s")
 
 #: what every analysis needs: the trial, the impact index, and the map's state (v, theta);
 #: theta may come as theta_rad or theta_deg

@@ -29,7 +29,11 @@ class Entry:
     ``bounce reproduce`` and of the committed ``results/``. ``resumable``: the command takes
     ``--resume`` (the run keeps finished tasks in ``RunOptions.checkpoints``); ``cluster``:
     it takes ``--scheduler ADDRESS`` (its tasks can run on a Dask cluster). ``attribute``:
-    the module's attribute holding the :class:`Experiment` (one module may define several)."""
+    the module's attribute holding the :class:`Experiment` (one module may define several).
+    ``manifest_help``: the command takes ``--manifest FILE`` (config key ``manifest``);
+    ``task_keys``: its resumed tasks carry keys of what they were made from and are rerun
+    when those change, so ``--resume`` accepts a changed config (the experiment decides
+    which tasks to keep)."""
 
     name: str
     summary: str
@@ -43,6 +47,8 @@ class Entry:
     module: str = ""
     config: str = ""
     attribute: str = "EXPERIMENT"
+    manifest_help: str | None = None
+    task_keys: bool = False
 
     def __post_init__(self) -> None:
         if not self.module:
@@ -203,6 +209,27 @@ EXPERIMENTS: tuple[Entry, ...] = (
           "(alpha, AC) the basin's outcome fractions, the fixed point's spectral radius (eq. "
           "10), the basin entropy and boundary basin entropy; dashed: spectral radius 1."),),
         needs_fixed_point=False, resumable=True, cluster=True,
+    ),
+    Entry(
+        "simulate-study",
+        "A simulated lab study with known truth: subjects x conditions x trials of recordings.",
+        (),
+        needs_fixed_point=False, reproduce=False, module="simulate_study",
+    ),
+    Entry(
+        "study",
+        "A lab's whole study: every recording extracted and analysed, group statistics, report.",
+        (("group_regression.png", "Fig. 7 over the study: trial means of racket amplitude "
+          "against squared period, pooled by condition, with eq. 15's prediction."),
+         ("group_learning.png", "Fig. 6 over the study: per-trial AC and SD of ball amplitude "
+          "of every subject, and the mixed model's fixed-effect trend."),
+         ("group_stability.png", "The data's VAR(1) spectral radius per unit against the "
+          "model's (eq. 10 at the unit's parameters)."),
+         ("group_acf.png", "Fig. 8 per condition, averaged over subjects."),
+         ("group_impulse.png", "Figs. 9 and 11 per condition, averaged over subjects.")),
+        manifest_help="The study's manifest CSV: one row per recording (file, subject[, "
+        "condition, trial, events, extract.<key>]); sets the config key `manifest`.",
+        needs_fixed_point=False, reproduce=False, resumable=True, cluster=True, task_keys=True,
     ),
 )
 

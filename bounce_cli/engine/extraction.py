@@ -57,6 +57,13 @@ JUMP_NOISE_FACTOR = 4.0
 #: time kept away from each contact by the flight fits and the resting test (s; at least
 #: ``guard_samples``; 10 ms: 2 samples at 200 Hz)
 CONTACT_GUARD_S = 0.01
+#: racket positions within this fraction of the racket's range of its mid-position count as at
+#: the mid-position (and a still racket as still within it): a racket resting at its
+#: mid-position was "below" it, hence found to start a cycle, or not, by the last bits of the
+#: least-squares mid-position (they differ between BLAS kernels). 1e-9 of a 0.6 m range is
+#: 0.6 nm: 10^4 times below a motion-capture file's resolution (0.01 mm), 10^6 times above
+#: the rounding of the fits (1e-16 relative, times their conditioning, < 1e-13)
+ROUNDING_TOLERANCE = 1e-9
 
 
 @dataclass(frozen=True)
@@ -222,7 +229,8 @@ def _motion_onset(t, x, t0: float, half_window: float, t_peak: float,
     None when it was moving at the upward crossing ``t0``. Still: it moved less than a quarter
     as far in the half window before ``t0`` as in the one after, or less than 2 % of its
     ``amplitude`` in both (a still racket dithering about its mid-position crosses it by
-    noise alone, before it starts moving)."""
+    noise alone, before it starts moving). A noise-free still racket's band is
+    ROUNDING_TOLERANCE x ``amplitude``, not 0."""
     finite = np.isfinite(x)
     before = x[(t >= t0 - half_window) & (t < t0) & finite]
     after = x[(t > t0) & (t <= t0 + half_window) & finite]
@@ -233,7 +241,7 @@ def _motion_onset(t, x, t0: float, half_window: float, t_peak: float,
     if not (starts_here or still_here):
         return None
     rest = float(np.median(before))
-    band = 4.0 * _robust_sd(before)
+    band = max(4.0 * _robust_sd(before), ROUNDING_TOLERANCE * abs(amplitude))
     ahead = (t >= t0 - half_window) & (t < t_peak) & finite
     still = np.flatnonzero(ahead & (np.abs(x - rest) <= band))
     if still.size == 0:
@@ -252,6 +260,7 @@ def racket_cycles(t, racket, measured, s: ExtractionSettings) -> RacketCycles:
     work = np.interp(t, t[finite], racket[finite])  # long gaps: only for coarse detection
     lo, hi = np.percentile(work, [1.0, 99.0])
     prominence = 0.2 * (hi - lo)  # an extremum at the recording's edge has a low prominence
+    at_mid = ROUNDING_TOLERANCE * (hi - lo)
     if prominence <= 0.0:
         raise ModelError("the racket does not move")
     peaks, _ = find_peaks(work, prominence=prominence)
@@ -296,7 +305,10 @@ def racket_cycles(t, racket, measured, s: ExtractionSettings) -> RacketCycles:
         mid = float(cycles.mid_position(0.5 * (t_before + t_peak))[0])
         a, b = np.searchsorted(t, [t_before, t_peak])
         y = work[a:b] - mid
-        up = np.flatnonzero((y[:-1] < 0.0) & (y[1:] >= 0.0))
+        # from at or below the mid-position to at or above it, "at" within at_mid: a racket
+        # resting at its mid-position starts a cycle at its last still sample, whichever side
+        # of it the last bits of ``mid`` fall
+        up = np.flatnonzero((y[:-1] <= at_mid) & (y[1:] >= -at_mid))
         if up.size == 0:
             continue
         i = a + up[-1]  # the last one before the peak (a still racket before it may dither)

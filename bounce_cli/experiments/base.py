@@ -104,12 +104,16 @@ class RunOptions:
 
 @dataclass
 class ExperimentResult:
-    """Tables (file name -> DataFrame), figures (file name -> matplotlib Figure) and a few
-    human-readable summary lines for the terminal."""
+    """Tables (file name -> DataFrame), figures (file name -> matplotlib Figure), a few
+    human-readable summary lines for the terminal, other files (name -> bytes: a report), and
+    the exit status once everything is written (1: some of the work failed, as a study's
+    ``failures.csv`` says). File names may hold folders (``s1/vision/acf/acf.csv``)."""
 
     frames: dict[str, pd.DataFrame]
     figures: dict[str, Any]
     summary: list[str] = field(default_factory=list)
+    files: dict[str, bytes] = field(default_factory=dict)
+    exit_code: int = 0
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,12 @@ law eq. 3 with eq. 16's velocity noise q_v after each impact, per-cycle racket p
 amplitude, perturbations of alpha as in section 7) and samples both positions like a motion
 capture system. Writes ``recording.csv`` (what a lab measures), ``events.csv`` (every impact's
 time and alpha, as a virtual set-up logs them), ``truth.csv`` (the exact impacts in the columns
-of ``bounce_cli.impacts``) and ``recording.png`` (Fig. 2's layout drawn from the truth).
+of ``bounce_cli.impacts``, with ``v_in_m_s, alpha_measured, contact_s``) and ``recording.png``
+(Fig. 2's layout drawn from the truth).
+
+A physical set-up (``contact:``, ``racket.harmonic2_m``, ``racket.disturbance_*``, the marker
+offset, the model's g): see ``engine.recording``; the truth then holds the equivalent
+instantaneous impacts (where the flights before and after a contact meet).
 """
 
 from __future__ import annotations
@@ -17,7 +22,7 @@ from pydantic import Field, model_validator
 
 from ..config import ControllableModelBlock, ExperimentConfig, StrictModel
 from ..engine.recording import SessionSettings, simulate_session, truth_rows
-from ..impacts import EVENT_COLUMNS, REQUIRED_COLUMNS
+from ..impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
 from ..plotting import caption_figures
 from .base import Experiment, ExperimentResult, RunOptions
 from .extract import centred_deg, draw_fig2
@@ -33,6 +38,19 @@ class RacketBlock(StrictModel):
     amplitude_sd_m: float = Field(0.0, ge=0.0, description="SD of each cycle's amplitude, m")
     drift_amplitude_m: float = Field(0.0, ge=0.0, description="slow drift of the mid-position, m")
     drift_period_s: float = Field(20.0, gt=0.0, description="period of that drift, s")
+    harmonic2_m: float = Field(0.0, description="second harmonic b sin(2 theta) in each "
+                               "cycle, m (|b| <= a_r / 4)")
+    disturbance_m: float = Field(0.0, ge=0.0, description="the impact's disturbance of the "
+                                 "racket: its scale A, m")
+    disturbance_s: float = Field(0.1, gt=0.0, le=0.5, description="... lasting this long, s")
+
+
+class ContactBlock(StrictModel):
+    """A physical set-up's contact: a spring-damper lasting ``duration_s`` whose restitution
+    is alpha (the model's, or alpha_p) plus ``alpha_sd`` xi_k per impact."""
+
+    duration_s: float = Field(0.0, ge=0.0, le=0.05, description="0: instantaneous (eq. 3)")
+    alpha_sd: float = Field(0.0, ge=0.0, le=0.2, description="SD of alpha per impact")
 
 
 class PerturbationBlock(StrictModel):
@@ -62,13 +80,18 @@ class RecordingConfig(ExperimentConfig):
     racket: RacketBlock = RacketBlock()
     perturbations: PerturbationBlock = PerturbationBlock()
     rest_s: float = Field(0.0, ge=0.0, description="ball resting on the still racket first, s")
-    ball_marker_offset_m: float = Field(0.0, description="ball marker above the contact point")
+    ball_marker_offset_m: float = Field(0.0, description="ball marker above the ball's "
+                                        "lowest point (its radius: a marker at the centre)")
+    contact: ContactBlock = ContactBlock()
     min_hop_s: float = Field(0.01, gt=0.0, description="a shorter hop is sticking: an error")
 
     @model_validator(mode="after")
     def _limits(self):
         if self.racket.period_sd_s > 0.1 * self.model.racket_period:
             raise ValueError("racket.period_sd_s must be at most 10% of model.racket_period")
+        if abs(self.racket.harmonic2_m) > 0.25 * self.model.racket_amplitude:
+            raise ValueError("racket.harmonic2_m must be at most a quarter of "
+                             "model.racket_amplitude (one peak per cycle)")
         if self.racket.amplitude_sd_m > 0.1 * self.model.racket_amplitude:
             raise ValueError("racket.amplitude_sd_m must be at most 10% of "
                              "model.racket_amplitude")
@@ -92,7 +115,10 @@ class RecordingConfig(ExperimentConfig):
             ball_marker_offset_m=self.ball_marker_offset_m,
             perturb_every=self.perturbations.every, perturb_first=self.perturbations.first,
             perturb_alphas=tuple(self.perturbations.alphas), min_hop_s=self.min_hop_s,
-            seed=self.seed, controller=self.model.active_controller())
+            seed=self.seed, controller=self.model.active_controller(),
+            contact_s=self.contact.duration_s, alpha_sd=self.contact.alpha_sd,
+            harmonic2_m=self.racket.harmonic2_m, disturbance_m=self.racket.disturbance_m,
+            disturbance_s=self.racket.disturbance_s)
 
 
 def session_frames(config: RecordingConfig, options: RunOptions | None = None):
@@ -109,7 +135,8 @@ def session_frames(config: RecordingConfig, options: RunOptions | None = None):
         }))
         rows = truth_rows(truth)
         events.append(pd.DataFrame({"trial": i, "t_s": rows["t_s"], "alpha": rows["alpha"]}))
-        truths.append(pd.DataFrame({"trial": i, **rows})[list(REQUIRED_COLUMNS + EVENT_COLUMNS)])
+        truths.append(pd.DataFrame({"trial": i, **rows})[
+            list(REQUIRED_COLUMNS + EVENT_COLUMNS + MEASURED_COLUMNS)])
         if options is not None:
             options.progress.advance(1)
     return (pd.concat(recordings, ignore_index=True), pd.concat(events, ignore_index=True),

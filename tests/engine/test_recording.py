@@ -10,12 +10,14 @@ from typer.testing import CliRunner
 from bounce_cli.cli import app
 from bounce_cli.engine import FlightSettings, ModelError, ModelParams, simulate
 from bounce_cli.engine.recording import (
+    CycleRacket,
     SessionSettings,
+    compliant_contact,
     next_contact,
     simulate_session,
     truth_rows,
 )
-from bounce_cli.impacts import EVENT_COLUMNS, REQUIRED_COLUMNS
+from bounce_cli.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
 
 PAPER = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.30, racket_period=0.92)
 VARIED = SessionSettings(n_trials=2, duration_s=20.0, velocity_noise_m_s=0.03,
@@ -180,7 +182,7 @@ def test_simulate_recording_command_writes_recording_events_and_truth(tmp_path):
     truth = pd.read_csv(out / "truth.csv")
     assert list(recording.columns) == ["trial", "t_s", "racket_x_m", "ball_x_m"]
     assert list(events.columns) == ["trial", "t_s", "alpha"]
-    assert list(truth.columns) == [*REQUIRED_COLUMNS, *EVENT_COLUMNS]
+    assert list(truth.columns) == [*REQUIRED_COLUMNS, *EVENT_COLUMNS, *MEASURED_COLUMNS]
     assert sorted(recording["trial"].unique()) == [1, 2]
     assert len(recording) == 2 * (8 * 200 + 1)
     np.testing.assert_array_equal(events["t_s"], truth["t_s"])
@@ -189,3 +191,110 @@ def test_simulate_recording_command_writes_recording_events_and_truth(tmp_path):
                               "racket.period_sd_s=0.5"])
     assert bad.exit_code == 2 and "period_sd_s" in bad.stderr
     assert not (tmp_path / "bad").exists()
+
+
+# -- a physical set-up (issue 24) -------------------------------------------------------------
+BOOM = ModelParams(alpha=0.42, g=5.8, racket_amplitude=0.065, racket_period=0.55)
+STILL = CycleRacket(np.array([1e9]), np.array([1.0]), np.array([0.1]))  # never moves
+
+
+@pytest.mark.parametrize("alpha, contact_s", [(0.42, 0.01), (0.8, 0.03), (0.1, 0.005)])
+def test_the_spring_damper_contact_has_its_duration_and_restitution(alpha, contact_s):
+    """Without gravity, on a still racket, the integrated contact (DOP853, event at the
+    release) gives the closed form's duration pi / omega_d and restitution exactly."""
+    release, dy, solution = compliant_contact(2.0, -3.0, 0.0, STILL, alpha, contact_s)
+    assert release - 2.0 == pytest.approx(contact_s, rel=1e-7)
+    assert dy / 3.0 == pytest.approx(alpha, rel=1e-7)
+    assert solution(2.0 + 0.5 * contact_s)[0] < -0.01 * 3.0 * contact_s  # compressed
+
+
+def test_a_compliant_contact_tends_to_the_instant_impact():
+    """Equivalent impacts of ever shorter contacts converge to the instantaneous ones (eq. 3)
+    of the same session (no noise: the flights are the same up to the contacts' effect)."""
+    base = dict(n_trials=1, duration_s=6.0, velocity_noise_m_s=0.0)
+    (instant, _), = simulate_session(BOOM, SessionSettings(**base))
+    (short, _), = simulate_session(BOOM, SessionSettings(contact_s=1e-4, **base))
+    (finite, _), = simulate_session(BOOM, SessionSettings(contact_s=0.01, **base))
+    n = min(len(instant.impact_t), len(short.impact_t))
+    assert n >= 9
+    np.testing.assert_allclose(short.impact_t[:n], instant.impact_t[:n], atol=5e-5)
+    np.testing.assert_allclose(short.impact_v[:n], instant.impact_v[:n], atol=2e-3)
+    rows = truth_rows(short)
+    np.testing.assert_allclose(rows["alpha_measured"], 0.42, atol=2e-3)
+    # a 10 ms contact: the same g on both flights, so they meet once, inside the contact
+    touches = np.array([touch for touch, _, _ in finite.contacts])
+    for t_k in finite.impact_t:
+        touch, release, _ = finite.contacts[int(np.searchsorted(touches, t_k)) - 1]
+        assert touch < t_k < release and release - touch == pytest.approx(0.01, abs=5e-4)
+    rows = truth_rows(finite)
+    assert np.all(rows["v_in_m_s"] < 0) and np.all(rows["contact_s"] > 0.009)
+    assert abs(np.mean(rows["alpha_measured"]) - 0.42) < 0.03
+
+
+def test_the_ball_follows_its_free_flights_outside_the_contacts_and_stays_above():
+    """Samples away from each contact lie on the parabolas through the equivalent impact
+    (position of the incoming flight there, v_k and v_in); within the contacts the ball is
+    below its free flights and never more than a few mm into the racket."""
+    (truth, _), = simulate_session(BOOM, SessionSettings(n_trials=1, duration_s=6.0,
+                                                         contact_s=0.01, alpha_sd=0.03,
+                                                         seed=2))
+    rows = truth_rows(truth)
+    touches = np.array([touch for touch, _, _ in truth.contacts])
+    for j in range(1, len(rows["t_s"]) - 1):
+        t_k = rows["t_s"][j]
+        touch, release, _ = truth.contacts[int(np.searchsorted(touches, t_k)) - 1]
+        after = np.linspace(release + 1e-4, release + 0.1, 50)
+        before = np.linspace(touch - 0.1, touch - 1e-4, 50)
+        x_eq = float(truth.ball_position(np.array([touch]))[0]) + (
+            rows["v_in_m_s"][j] * (t_k - touch) + 0.5 * 5.8 * (t_k - touch) ** 2)
+        out = x_eq + rows["v_m_s"][j] * (after - t_k) - 2.9 * (after - t_k) ** 2
+        inc = x_eq + rows["v_in_m_s"][j] * (before - t_k) - 2.9 * (before - t_k) ** 2
+        np.testing.assert_allclose(truth.ball_position(after), out, atol=1e-8)
+        np.testing.assert_allclose(truth.ball_position(before), inc, atol=1e-8)
+        inside = np.linspace(touch, release, 30)[1:-1]
+        depth = truth.ball_position(inside) - truth.racket.position(inside)
+        assert depth.max() < 0.0 and depth.min() > -0.02
+    assert np.std(rows["alpha"][1:]) == pytest.approx(0.03, rel=0.5)
+
+
+def test_the_second_harmonic_keeps_the_crossing_and_has_its_amplitude():
+    """b sin(2 theta) is odd about the mid-position crossing: the racket is at its mid-position
+    at each cycle start, rising; (peak - trough) / 2 is the closed form's (dense check)."""
+    session = SessionSettings(n_trials=1, duration_s=10.0, harmonic2_m=0.012, seed=1,
+                              amplitude_sd_m=0.003)
+    (truth, _), = simulate_session(PAPER, session)
+    r = truth.racket
+    assert np.max(np.abs(r.position(r.starts[1:10]))) < 1e-12
+    assert np.all(r.velocity(r.starts[1:10] + 1e-9) > 0)
+    rows = truth_rows(truth)
+    for j in range(3):
+        c = int(r.cycle_index(rows["t_s"][j]))
+        t = np.linspace(r.starts[c], r.ends[c], 200_001)[:-1]
+        x = r.position(t)
+        assert rows["racket_amplitude_m"][j] == pytest.approx(0.5 * np.ptp(x), abs=1e-9)
+        assert rows["racket_amplitude_m"][j] > r.amplitudes[c] + 1e-4
+    h = 1e-5  # AC by finite differences of the position
+    t = rows["t_s"][:5]
+    fd = (r.position(t + h) - 2 * r.position(t) + r.position(t - h)) / h**2
+    np.testing.assert_allclose(rows["racket_acc_g"][:5] * 9.81, fd, atol=1e-3)
+
+
+def test_the_racket_disturbance_starts_at_each_release_and_is_gone_after_its_duration():
+    session = SessionSettings(n_trials=1, duration_s=8.0, disturbance_m=0.003,
+                              disturbance_s=0.1, contact_s=0.01)
+    (truth, _), = simulate_session(BOOM, session)
+    r = truth.racket
+    smooth = CycleRacket(r.starts, r.periods, r.amplitudes)
+    releases = np.array([release for _, release, _ in truth.contacts])
+    np.testing.assert_allclose(r.disturbance_starts, releases)
+    t = np.linspace(1.0, 7.0, 600_001)
+    d = r.position(t) - smooth.position(t)
+    since = t - releases[np.maximum(np.searchsorted(releases, t) - 1, 0)]
+    assert np.max(np.abs(d[since > 0.1])) < 1e-15  # exactly gone after 100 ms
+    assert np.max(np.abs(d[since < 0.1])) > 0.5 * 0.003  # the shape peaks at 0.61 A
+    assert np.max(np.abs(np.diff(d))) < 1e-4  # continuous
+    # the ball stays above the disturbed racket between contacts (the first contact is found)
+    free = np.ones(t.shape, dtype=bool)
+    for touch, release, _ in truth.contacts:
+        free &= ~((t >= touch) & (t <= release))
+    assert (truth.ball_position(t) - r.position(t))[free].min() > -1e-9

@@ -1,0 +1,782 @@
+"""``bounce study --manifest study.csv``: a lab's whole study in one command.
+
+The manifest (:mod:`bounce_cli.study_manifest`) lists the recordings, one row each, with their
+subject, condition and other factors. The study groups them into units (default subject x
+condition), and for each unit: extracts every recording (``bounce extract``'s engine, with the
+study's ``extract:`` settings and the row's own ``extract.<key>`` columns; an impacts table is
+read as it is), pools the unit's trials, and runs the chosen analyses on them exactly as
+``bounce <analysis> --data impacts.csv`` runs them (Figs. 6-9, 11, eq. 15). Units are
+independent tasks on the one executor (``--jobs``, ``--scheduler``), resumable
+(``--resume``: a unit whose config, manifest rows or files changed is rerun).
+
+Then group statistics over the units: Fig. 7 pooled by condition (eq. 15's line and its
+prediction), Fig. 6's learning trend over subjects (a mixed-effects model), the data's
+spectral radius against the model's (eq. 10) with the paired difference across units, and
+Figs. 8, 9, 11 averaged over subjects; and ``report.html`` (self-contained) with a section per
+subject, and ``<subject>/report.html``.
+
+A recording that cannot be read or a unit that cannot be analysed does not stop the study: it
+is a row of ``failures.csv``, and the command exits 1 once everything else is written.
+"""
+
+from __future__ import annotations
+
+import base64
+import copy
+import hashlib
+import io
+import json
+import math
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable, Literal, Optional
+
+import numpy as np
+import pandas as pd
+from pydantic import Field, field_validator, model_validator
+
+from .. import parallel
+from ..config import (
+    ConfigError,
+    ExperimentConfig,
+    StrictModel,
+    apply_overrides,
+    bundled_config_path,
+    read_yaml,
+    validate,
+)
+from ..engine.group_stats import (
+    across_units,
+    eq15_prediction,
+    mixed_trend,
+    paired_difference,
+)
+from ..engine.linear import stability
+from ..engine.params import ModelError, ModelParams, phase_difference
+from ..impacts import circular_mean
+from ..report import Section, embed_png, html_table, page
+from ..study_manifest import ManifestRow, Unit, read_manifest
+from .base import Experiment, ExperimentResult, RunOptions
+
+#: the analyses a study can run, in the paper's order
+ANALYSES = ("learning", "regression", "acf", "impulse", "control")
+AnalysisName = Literal["learning", "regression", "acf", "impulse", "control"]
+#: what a study runs unless told
+DEFAULT_ANALYSES: tuple[AnalysisName, ...] = ("learning", "regression", "acf", "impulse")
+#: the analyses that need perturbations in the data (the impacts table's ``perturbed``)
+NEEDS_PERTURBATIONS = ("impulse", "control")
+#: errors that make a recording or an analysis a failure row (anything else is a bug)
+RECORDED_ERRORS = (ConfigError, ModelError, ValueError, OSError)
+
+
+class StudyModelBlock(StrictModel):
+    """alpha and g of the model; null: each unit's own, measured from its data (the impacts
+    table's ``alpha_measured`` or event ``alpha``; the extraction's ``setup.csv`` or a
+    ``g_m_s2`` column). A value given here is used for every unit."""
+
+    alpha: Optional[float] = Field(None, ge=0.0, lt=1.0, description="coefficient of restitution")
+    g: Optional[float] = Field(None, gt=0.0, description="gravitational acceleration, m/s^2")
+
+
+class ReportBlock(StrictModel):
+    """What the reports hold besides the group figures and tables."""
+
+    unit_figures: bool = Field(True, description="each unit's figures (Fig. 2 of its first "
+                               "recording and its analyses'), written and in the reports")
+
+
+class StudyConfig(ExperimentConfig):
+    model: StudyModelBlock = StudyModelBlock()  # type: ignore[assignment]
+    manifest: Optional[str] = Field(None, description="the study's manifest CSV (--manifest)")
+    grouping: list[str] = Field(default_factory=lambda: ["subject", "condition"], min_length=1,
+                                description="the factors that make a unit")
+    analyses: list[AnalysisName] = Field(
+        default_factory=lambda: list(DEFAULT_ANALYSES))
+    extract: dict[str, Any] = Field(default_factory=dict,
+                                    description="bounce extract's keys for every recording")
+    settings: dict[str, dict[str, Any]] = Field(
+        default_factory=dict, description="per analysis, its config's keys (e.g. acf: {...})")
+    confidence: float = Field(0.95, gt=0.0, lt=1.0, description="level of the group intervals")
+    seed: int = Field(0, ge=0, description="each unit's analyses get a stream of their own")
+    report: ReportBlock = ReportBlock()
+
+    @field_validator("grouping")
+    @classmethod
+    def _grouping(cls, value):
+        if "subject" not in value:
+            raise ValueError("must include subject (a unit is one subject's recordings)")
+        if len(set(value)) != len(value):
+            raise ValueError("each factor once")
+        return value
+
+    @model_validator(mode="after")
+    def _blocks(self):
+        unknown = [k for k in self.settings if k not in ANALYSES]
+        if unknown:
+            raise ValueError(f"settings: {unknown[0]!r} is not an analysis (one of "
+                             f"{', '.join(ANALYSES)})")
+        if len(set(self.analyses)) != len(self.analyses):
+            raise ValueError("analyses: each analysis once")
+        extraction_config({"extract": self.extract}, ())  # unknown keys fail now
+        for name in self.analyses:
+            analysis_config(name, self.settings.get(name, {}), 0.5, 9.81, 0, None)
+        return self
+
+
+# -- configs of the steps ------------------------------------------------------------------------
+def extraction_config(config: dict[str, Any], overrides: tuple[str, ...], file: Path | None = None,
+                      events: Path | None = None, g: float | None = None):
+    """``bounce extract``'s config for one recording: the bundled one, the study's
+    ``extract`` keys, the manifest row's ``extract.<key>`` columns, the file."""
+    from .extract import ExtractConfig
+
+    data = read_yaml(bundled_config_path("extract"))
+    data = _merged(data, config.get("extract", {}))
+    if g is not None:
+        data.setdefault("model", {})["g"] = g
+    data = apply_overrides(data, list(overrides))
+    data["data"] = None if file is None else str(file)
+    data["events"] = None if events is None else str(events)
+    return validate(ExtractConfig, data, "extract" if not overrides else "manifest extract.*",
+                    list(overrides))
+
+
+def analysis_config(name: str, settings: dict[str, Any], alpha: float, g: float, seed: int,
+                    data: str | None):
+    """The config of analysis ``name`` for a unit: its bundled config, the study's
+    ``settings.<name>`` keys, the unit's alpha and g, its own seed."""
+    from ..registry import entry
+
+    experiment = entry(name).load()
+    raw = _merged(read_yaml(bundled_config_path(entry(name).config)), settings)
+    raw.setdefault("model", {}).update({"alpha": alpha, "g": g})
+    if "seed" in experiment.schema.model_fields:
+        raw["seed"] = seed
+    raw["data"] = data
+    return validate(experiment.schema, raw, f"settings.{name}")
+
+
+def _merged(base: dict[str, Any], extra: dict[str, Any]) -> dict[str, Any]:
+    out = copy.deepcopy(base)
+    for key, value in extra.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _merged(out[key], value)
+        else:
+            out[key] = copy.deepcopy(value)
+    return out
+
+
+# -- one unit ------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class UnitTask:
+    """A unit to analyse: its position, its rows, the study's config (JSON) and its key (what
+    its results are made from: config, rows, files' contents)."""
+
+    index: int
+    unit: Unit
+    config: dict[str, Any]
+    key: str
+
+
+def unit_key(unit: Unit, config: dict[str, Any]) -> str:
+    """SHA-256 over the study's config, the unit's manifest rows and its files' bytes."""
+    h = hashlib.sha256(json.dumps(config, sort_keys=True).encode())
+    for row in unit.rows:
+        h.update(json.dumps([str(row.file), str(row.events), sorted(row.factors.items()),
+                             list(row.overrides)]).encode())
+        for path in (row.file, row.events):
+            if path is not None:
+                h.update(hashlib.sha256(Path(path).read_bytes()).digest())
+    return h.hexdigest()
+
+
+def unit_seed(study_seed: int, unit: Unit) -> int:
+    """A seed of the unit's own, from the study's seed and the unit's name (not its position:
+    adding a subject leaves the others' numbers as they were)."""
+    words = np.frombuffer(hashlib.sha256(unit.folder.encode()).digest()[:16], dtype=np.uint32)
+    return int(np.random.SeedSequence([study_seed, *words.tolist()]).generate_state(1)[0])
+
+
+def frame_to_json(frame: pd.DataFrame) -> dict[str, Any]:
+    """A DataFrame as JSON that keeps every float exactly (``repr``) and each column's dtype."""
+    return {"columns": [str(c) for c in frame.columns],
+            "dtypes": [str(t) for t in frame.dtypes],
+            "data": [frame[c].tolist() for c in frame.columns]}
+
+
+def frame_from_json(data: dict[str, Any]) -> pd.DataFrame:
+    columns = {}
+    for name, dtype, values in zip(data["columns"], data["dtypes"], data["data"]):
+        try:
+            columns[name] = pd.Series(values, dtype=dtype)
+        except (TypeError, ValueError):
+            columns[name] = pd.Series(values)
+    return pd.DataFrame(columns, columns=data["columns"])
+
+
+def row_label(row: ManifestRow) -> str:
+    return row.factors.get("trial") or row.file.stem
+
+
+def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures: list[dict],
+                      summary: list[str]) -> tuple[pd.DataFrame | None, dict[str, float]]:
+    """Extract (or read) every recording of the unit; its pooled impacts table and what the
+    extraction measured of the set-up (``setup.csv`` quantities, pooled over files)."""
+    from ..impacts import read_impacts
+    from ..setup_table import read_setup
+    from . import extract
+    from .data_side import is_impacts_table
+
+    cfg = task.config
+    unit = task.unit
+    tables, setups = [], []
+    user_g = cfg["model"].get("g")
+    for row in unit.rows:
+        label = row_label(row)
+        try:
+            if is_impacts_table(str(row.file)):
+                table = read_impacts(str(row.file)).frame
+                setup = {q.quantity: q.estimate for q in read_setup(row.file).values()}
+            else:
+                ex_cfg = extraction_config(cfg, row.overrides, row.file, row.events, user_g)
+                result = extract.run(ex_cfg, RunOptions())
+                stem = f"{unit.folder}/extract/{row.file.stem}"
+                for name, frame in result.frames.items():
+                    frames[f"{stem}/{name}"] = frame
+                table = result.frames["impacts.csv"]
+                setup_frame = result.frames.get("setup.csv")
+                setup = ({} if setup_frame is None else
+                         dict(zip(setup_frame["quantity"], setup_frame["estimate"])))
+        except RECORDED_ERRORS as exc:
+            failures.append({"unit": unit.folder, "file": str(row.file), "stage": "extract",
+                             "error": one_line(exc)})
+            continue
+        trials = table["trial"].astype(str)
+        single = trials.nunique() == 1 and "trial" in row.factors and row.factors["trial"]
+        table = table.assign(trial=label if single else label + ":" + trials)
+        tables.append(table)
+        setups.append((len(table), setup))
+    if not tables:
+        return None, {}
+    pooled = pd.concat(tables, ignore_index=True)
+    measured: dict[str, float] = {}
+    for quantity in ("g_m_s2",):
+        pairs = [(n, s[quantity]) for n, s in setups
+                 if quantity in s and math.isfinite(s[quantity])]
+        if pairs:
+            weights = np.array([n for n, _ in pairs], float)
+            measured[quantity] = float(np.average([v for _, v in pairs], weights=weights))
+    summary.append(f"{unit.label}: {len(tables)} of {len(unit.rows)} recording(s), "
+                   f"{pooled['trial'].nunique()} trial(s), {len(pooled)} impacts")
+    return pooled, measured
+
+
+def unit_parameters(pooled: pd.DataFrame, measured: dict[str, float],
+                    model: dict[str, Any]) -> tuple[float, str, float, str]:
+    """(alpha, where from, g, where from): the study's model block where set, else what the
+    unit's data show; a unit that shows neither is a one-line error naming both ways."""
+    alpha, alpha_source = model.get("alpha"), "set in the study's config"
+    if alpha is None:
+        unperturbed = (~pooled["perturbed"].astype(bool) if "perturbed" in pooled.columns
+                       else pd.Series(True, index=pooled.index))
+        for column, how in (("alpha_measured", "measured (eq. 3)"), ("alpha", "from events")):
+            if column in pooled.columns:
+                values = pd.to_numeric(pooled.loc[unperturbed, column], errors="coerce")
+                values = values[np.isfinite(values)]
+                if len(values):
+                    alpha, alpha_source = float(values.mean()), f"{how}, {len(values)} impacts"
+                    break
+    g, g_source = model.get("g"), "set in the study's config"
+    if g is None and "g_m_s2" in measured:
+        g, g_source = measured["g_m_s2"], "measured from the flights"
+    elif g is None and "g_m_s2" in pooled.columns:
+        values = pd.to_numeric(pooled["g_m_s2"], errors="coerce").dropna()
+        if len(values):
+            g, g_source = float(values.mean()), "from the table's g_m_s2"
+    missing = [name for name, value in (("alpha", alpha), ("g", g)) if value is None]
+    if missing:
+        raise ConfigError(f"the data show no {' and no '.join(missing)} (no alpha_measured or "
+                          f"alpha column, no setup.csv or g_m_s2 column): set "
+                          f"{' and '.join('model.' + m for m in missing)} in the study's config "
+                          f"(--set), or give tables that carry them")
+    return float(alpha), alpha_source, float(g), g_source  # type: ignore[arg-type]
+
+
+def one_line(exc: BaseException) -> str:
+    text = str(exc).strip().splitlines()
+    return text[0] if text else type(exc).__name__
+
+
+def analyse_unit(task: UnitTask) -> dict[str, Any]:
+    """Everything of one unit (a worker's task): its extracted recordings, its analyses' tables,
+    its row of group.csv, its warnings and failures; JSON-able (checkpoints, other processes)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    cfg, unit = task.config, task.unit
+    frames: dict[str, pd.DataFrame] = {}
+    failures: list[dict] = []
+    summary: list[str] = []
+    warnings: list[str] = []
+    row: dict[str, Any] = {**unit.factors(), "recordings": len(unit.rows)}
+    pooled, measured = read_unit_impacts(task, frames, failures, summary)
+    if pooled is not None:
+        frames[f"{unit.folder}/impacts.csv"] = pooled
+        parameters = None
+        try:
+            parameters = unit_parameters(pooled, measured, cfg["model"])
+        except ConfigError as exc:
+            failures.append({"unit": unit.folder, "file": "", "stage": "model",
+                             "error": one_line(exc)})
+        if parameters is not None:
+            alpha, alpha_source, g, g_source = parameters
+            row.update(alpha=alpha, alpha_source=alpha_source, g_m_s2=g, g_source=g_source)
+            summary[0] += (f"; model at alpha {alpha:.3f} ({alpha_source}), g {g:.2f} m/s^2 "
+                           f"({g_source})")
+            seed = unit_seed(cfg["seed"], unit)
+            for name in cfg["analyses"]:
+                if name in NEEDS_PERTURBATIONS and not (
+                        "perturbed" in pooled.columns and pooled["perturbed"].astype(bool).any()):
+                    continue  # nothing to align on: not a failure, the data have no perturbations
+                try:
+                    result = run_analysis(name, cfg, alpha, g, seed, unit, pooled, warnings)
+                except RECORDED_ERRORS as exc:
+                    failures.append({"unit": unit.folder, "file": "", "stage": name,
+                                     "error": one_line(exc)})
+                    continue
+                for file_name, frame in result.frames.items():
+                    frames[f"{unit.folder}/{name}/{file_name}"] = frame
+                summary += [f"{unit.label}: {name}: {line}" for line in result.summary]
+        row.update(unit_row(pooled, frames, unit, row.get("alpha"), row.get("g_m_s2")))
+    row["failures"] = len(failures)
+    pngs = {}
+    if cfg["report"]["unit_figures"]:
+        for name, fig in draw_units(frames, [unit]).items():
+            pngs[name] = base64.b64encode(png_bytes(fig)).decode("ascii")
+    return {"index": task.index, "key": task.key,
+            "frames": {name: frame_to_json(f) for name, f in frames.items()}, "pngs": pngs,
+            "row": row, "summary": summary, "warnings": warnings, "failures": failures}
+
+
+def run_analysis(name: str, cfg: dict[str, Any], alpha: float, g: float, seed: int, unit: Unit,
+                 pooled: pd.DataFrame, warnings: list[str]) -> ExperimentResult:
+    """One analysis of a unit, as ``bounce <name> --data`` runs it on the pooled table."""
+    from . import acf, impulse, learning, regression
+
+    options = RunOptions(warn=lambda message: warnings.append(f"{unit.label}: {name}: "
+                                                              f"{message}"))
+    source = (f"{unit.label}", pooled)
+    settings = cfg["settings"].get(name, {})
+    if name == "control":
+        from . import control
+
+        with tempfile.TemporaryDirectory() as folder:
+            path = Path(folder) / "impacts.csv"
+            pooled.to_csv(path, index=False)
+            config = analysis_config(name, settings, alpha, g, seed, str(path))
+            result = control.run(config, options)
+        result.figures = {}
+        return result
+    config = analysis_config(name, settings, alpha, g, seed, None)
+    runners: dict[str, Callable[..., ExperimentResult]] = {
+        "learning": learning.run, "regression": regression.run, "acf": acf.run_data,
+        "impulse": impulse.run_data}
+    runner = runners[name]
+    result = runner(config, options, source)
+    result.figures = {}
+    return result
+
+
+def unit_row(pooled: pd.DataFrame, frames: dict[str, pd.DataFrame], unit: Unit,
+             alpha: float | None, g: float | None) -> dict[str, Any]:
+    """group.csv's numbers of one unit: its bounces, the state's means and SDs, the racket,
+    the measured set-up, the data's VAR(1) radius beside the model's eq. 10 radius, the
+    impacts to relax, the control fit."""
+    theta = pooled["theta_rad"].to_numpy(float) if "theta_rad" in pooled.columns else \
+        np.radians(pooled["theta_deg"].to_numpy(float))
+    mean_theta = circular_mean(theta)
+    out: dict[str, Any] = {
+        "trials": int(pooled["trial"].nunique()), "impacts": len(pooled),
+        "theta_mean_deg": math.degrees(mean_theta),
+        "theta_sd_deg": math.degrees(float(np.std(phase_difference(theta, mean_theta), ddof=1))),
+        "v_mean_m_s": float(pooled["v_m_s"].mean()), "v_sd_m_s": float(pooled["v_m_s"].std()),
+    }
+    for column, name in (("racket_acc_g", "ac"), ("racket_period_s", "racket_period"),
+                         ("racket_amplitude_m", "racket_amplitude")):
+        if column in pooled.columns:
+            unit_name = {"ac": "g", "racket_period": "s", "racket_amplitude": "m"}[name]
+            out[f"{name}_mean_{unit_name}"] = float(pooled[column].mean())
+            out[f"{name}_sd_{unit_name}"] = float(pooled[column].std())
+    if "ball_apex_m" in pooled.columns:
+        per_trial = pooled.groupby("trial")["ball_apex_m"].std()
+        out["apex_sd_m"] = float(per_trial.mean())
+    out["model_spectral_radius"] = math.nan
+    if alpha is not None and g is not None and "racket_period_mean_s" in out:
+        try:
+            params = ModelParams(alpha, g, out["racket_amplitude_mean_m"],
+                                 out["racket_period_mean_s"])
+            out["model_spectral_radius"] = float(stability(params).spectral_radius)
+        except ModelError:
+            pass
+    stab = frames.get(f"{unit.folder}/acf/stability_data.csv")
+    for method in ("ols", "lag2"):
+        for field in ("estimate", "ci_low", "ci_high"):
+            out[f"radius_{method}" + ("" if field == "estimate" else f"_{field}")] = math.nan
+        if stab is not None:
+            rows = stab[(stab["quantity"] == "spectral_radius")
+                        & stab["source"].astype(str).str.startswith(method)]
+            if len(rows):
+                out[f"radius_{method}"] = float(rows["estimate"].iloc[0])
+                out[f"radius_{method}_ci_low"] = float(rows["ci_low"].iloc[0])
+                out[f"radius_{method}_ci_high"] = float(rows["ci_high"].iloc[0])
+    relax = frames.get(f"{unit.folder}/impulse/relaxation_data.csv")
+    for direction in ("decrease", "increase"):
+        value = math.nan
+        if relax is not None:
+            rows = relax[(relax["direction"] == direction) & (relax["source"] == "data")]
+            if len(rows):
+                value = float(rows["relaxation_impacts"].iloc[0])
+        out[f"relax_impacts_{direction}"] = value
+    fit = frames.get(f"{unit.folder}/control/fit.csv")
+    for quantity, name in (("gain_K", "control_K"), ("rate_c", "control_c")):
+        value = math.nan
+        if fit is not None:
+            rows = fit[fit["quantity"] == quantity]
+            if len(rows):
+                value = float(rows["estimate"].iloc[-1])
+        out[name] = value
+    return out
+
+
+# -- the study -----------------------------------------------------------------------------------
+def run(config: StudyConfig, options: RunOptions) -> ExperimentResult:
+    if config.manifest is None:
+        raise ConfigError("manifest: give the study's manifest (--manifest study.csv: one row "
+                          "per recording with file, subject[, condition, trial])")
+    manifest = read_manifest(config.manifest)
+    units = manifest.units(tuple(config.grouping))
+    dumped = config.model_dump(mode="json")
+    tasks = [UnitTask(i, unit, dumped, unit_key(unit, dumped)) for i, unit in enumerate(units)]
+    done = {i: r for i, r in options.checkpoints.load().items()
+            if 0 <= i < len(tasks) and r.get("key") == tasks[i].key}
+    todo = [t for t in tasks if t.index not in done]
+    options.progress.start(len(tasks), "study: units")
+    options.progress.advance(len(done))
+    if todo:
+        jobs = min(options.jobs, len(todo))
+        with parallel.executor(jobs, options.scheduler) as executor:
+            for result in executor.map(analyse_unit, todo):
+                options.checkpoints.save(result["index"], result)
+                done[result["index"]] = result
+                options.progress.advance()
+    results = [done[t.index] for t in tasks]
+    for result in results:
+        for message in result["warnings"]:
+            options.warn(message)
+    frames: dict[str, pd.DataFrame] = {}
+    for result in results:
+        for name, data in result["frames"].items():
+            frames[name] = frame_from_json(data)
+    group = pd.DataFrame([r["row"] for r in results])
+    frames["group.csv"] = group
+    failures = pd.DataFrame([f for r in results for f in r["failures"]],
+                            columns=["unit", "file", "stage", "error"])
+    frames["failures.csv"] = failures
+    frames.update(group_tables(frames, units, config))
+    # each figure rendered once, to PNG: written as it is and embedded in the reports (the
+    # units' own in their workers)
+    pngs = {name: png_bytes(fig) for name, fig in draw(frames).items()}
+    for result in results:
+        pngs.update({name: base64.b64decode(data) for name, data in result["pngs"].items()})
+    files = report_files(frames, pngs, units, manifest.path, config)
+    summary = [f"study: {len(units)} unit(s) ({' x '.join(config.grouping)}) of "
+               f"{len(manifest.rows)} recording(s)"
+               + (f"; {len(tasks) - len(todo)} resumed" if len(todo) < len(tasks) else "")]
+    summary += [r["summary"][0] for r in results if r["summary"]]
+    summary += group_summary(frames)
+    exit_code = 0
+    if len(failures):
+        summary.append(f"{len(failures)} failure(s) in {failures['unit'].nunique()} unit(s): "
+                       "see failures.csv (everything else was written)")
+        exit_code = 1
+    return ExperimentResult(frames=frames, figures={}, summary=summary,
+                            files={**pngs, **files}, exit_code=exit_code)
+
+
+# -- group statistics ----------------------------------------------------------------------------
+def _unit_frames(frames: dict[str, pd.DataFrame], units: list[Unit], analysis: str,
+                 name: str) -> pd.DataFrame:
+    """One analysis table of every unit, stacked, with the unit's factors in front."""
+    parts = []
+    for unit in units:
+        frame = frames.get(f"{unit.folder}/{analysis}/{name}")
+        if frame is not None and len(frame):
+            factors = unit.factors()
+            parts.append(frame.assign(unit=unit.folder, **{k: v for k, v in factors.items()
+                                                            if k not in frame.columns}))
+    if not parts:
+        return pd.DataFrame()
+    out = pd.concat(parts, ignore_index=True)
+    front = ["unit", *[g for g in units[0].grouping if g in out.columns]]
+    return out[front + [c for c in out.columns if c not in front]]
+
+
+def condition_of(frame: pd.DataFrame) -> pd.Series:
+    return (frame["condition"].astype(str) if "condition" in frame.columns
+            else pd.Series("all", index=frame.index))
+
+
+def group_tables(frames: dict[str, pd.DataFrame], units: list[Unit],
+                 config: StudyConfig) -> dict[str, pd.DataFrame]:
+    """The group statistics' tables (see the module docstring)."""
+    out: dict[str, pd.DataFrame] = {}
+    conf = config.confidence
+    group = frames["group.csv"]
+    # Fig. 7 over the study: trial means pooled by condition
+    trials = _unit_frames(frames, units, "regression", "trials.csv")
+    if len(trials):
+        trials = trials.assign(condition=condition_of(trials))
+        alpha_g = group.set_index(group["subject"].astype(str) + "/" + condition_of(group))
+        rows = []
+        from ..engine.regression import ols_line
+
+        for condition, part in trials.groupby("condition", sort=True):
+            key = part["subject"].astype(str) + "/" + str(condition)
+            alpha = key.map(alpha_g["alpha"]) if "alpha" in alpha_g else pd.Series(math.nan)
+            g = key.map(alpha_g["g_m_s2"]) if "g_m_s2" in alpha_g else pd.Series(math.nan)
+            theta = np.radians(part["theta_deg"].to_numpy(float))
+            row = {"condition": condition, "n": len(part), "subjects": part["subject"].nunique()}
+            try:
+                fit = ols_line(part["tau_s"].to_numpy(float) ** 2, part["a_r_m"].to_numpy(float),
+                               conf)
+            except ModelError as exc:
+                row["note"] = str(exc)
+                rows.append(row)
+                continue
+            predicted = eq15_prediction(part["tau_s"], theta, alpha, g)
+            row.update({
+                "slope": float(fit.slope), "slope_ci_low": float(fit.slope_ci_low),
+                "slope_ci_high": float(fit.slope_ci_high), "intercept": float(fit.intercept),
+                "intercept_ci_low": float(fit.intercept_ci_low),
+                "intercept_ci_high": float(fit.intercept_ci_high), "r2": float(fit.r2),
+                "predicted_slope": predicted,
+                "mean_theta_deg": math.degrees(circular_mean(theta)),
+                "confidence": conf,
+                "slope_ci_covers_prediction": bool(fit.slope_ci_low <= predicted
+                                                   <= fit.slope_ci_high),
+                "intercept_ci_covers_zero": bool(fit.intercept_ci_low <= 0.0
+                                                 <= fit.intercept_ci_high),
+                "note": "",
+            })
+            rows.append(row)
+        out["group_regression_trials.csv"] = trials
+        out["group_regression.csv"] = pd.DataFrame(rows)
+    # Fig. 6 over the study: the learning trend with a mixed model
+    learning = _unit_frames(frames, units, "learning", "trials.csv")
+    if len(learning):
+        learning = learning.assign(condition=condition_of(learning))
+        rows = []
+        for condition, part in learning.groupby("condition", sort=True):
+            for quantity in ("ac_mean_g", "apex_sd_m"):
+                try:
+                    trend = mixed_trend(part, quantity, "trial_number", "subject", conf)
+                except ValueError as exc:
+                    rows.append({"condition": condition, "quantity": quantity,
+                                 "method": f"not estimable: {exc}"})
+                    continue
+                rows.append({"condition": condition, "quantity": quantity,
+                             "slope_per_trial": trend.slope, "intercept": trend.intercept,
+                             "se": trend.se,
+                             "ci_low": trend.ci_low, "ci_high": trend.ci_high,
+                             "p_value": trend.p_value, "subjects": trend.groups,
+                             "trials": trend.observations, "method": trend.method,
+                             "mixed_model": trend.mixed, "confidence": conf,
+                             "trend": ("decreasing" if trend.ci_high < 0 else "increasing"
+                                       if trend.ci_low > 0 else "none detected")})
+        out["group_learning_trials.csv"] = learning
+        out["group_learning.csv"] = pd.DataFrame(rows)
+    # stability across units: the data's radius beside the model's
+    if "radius_ols" in group.columns and group["radius_ols"].notna().any():
+        rows = []
+        cond = condition_of(group)
+        for condition in sorted(cond.unique()):
+            part = group[cond == condition]
+            for method in ("ols", "lag2"):
+                d = paired_difference(part[f"radius_{method}"], part["model_spectral_radius"],
+                                      conf)
+                rows.append({"condition": condition, "estimate": method, "units": d.n,
+                             "data_mean": float(part[f"radius_{method}"].mean()),
+                             "model_mean": float(part["model_spectral_radius"].mean()),
+                             "difference_mean": d.mean, "difference_sd": d.sd,
+                             "ci_low": d.ci_low, "ci_high": d.ci_high, "p_value": d.p_value,
+                             "confidence": conf,
+                             "verdict": ("data faster than the model" if d.ci_high < 0 else
+                                         "data slower than the model" if d.ci_low > 0 else
+                                         "no difference detected" if d.n >= 2 else
+                                         "too few units")})
+        out["group_stability.csv"] = pd.DataFrame(rows)
+    # Fig. 8 per condition: correlation functions averaged over units
+    acf = _unit_frames(frames, units, "acf", "acf_data.csv")
+    if len(acf):
+        acf = acf.assign(condition=condition_of(acf))
+        data = across_units(acf, ["condition", "pair", "lag"], "data_mean")
+        theory = across_units(acf, ["condition", "pair", "lag"], "theory")
+        out["group_acf.csv"] = data.merge(
+            theory.rename(columns={"mean": "theory_mean", "sd": "theory_sd",
+                                   "units": "theory_units"}),
+            on=["condition", "pair", "lag"], how="left")
+    # Figs. 9 and 11 per condition: responses averaged over units
+    aligned = _unit_frames(frames, units, "impulse", "aligned.csv")
+    if len(aligned):
+        aligned = aligned.assign(condition=condition_of(aligned))
+        out["group_impulse.csv"] = across_units(
+            aligned, ["condition", "quantity", "direction", "k"], "mean")
+    return out
+
+
+def group_summary(frames: dict[str, pd.DataFrame]) -> list[str]:
+    lines = []
+    reg = frames.get("group_regression.csv")
+    if reg is not None:
+        for r in reg.to_dict("records"):
+            if "slope" in r and isinstance(r["slope"], float) and math.isfinite(r["slope"]):
+                lines.append(f"Fig. 7 ({r['condition']}, {r['n']} trials of {r['subjects']} "
+                             f"subjects): slope {r['slope']:.4f} m/s^2 [{r['slope_ci_low']:.4f}, "
+                             f"{r['slope_ci_high']:.4f}] vs eq. 15 {r['predicted_slope']:.4f}; "
+                             f"intercept {100 * r['intercept']:.2f} cm "
+                             f"[{100 * r['intercept_ci_low']:.2f}, "
+                             f"{100 * r['intercept_ci_high']:.2f}]; R^2 {r['r2']:.3f}")
+    learn = frames.get("group_learning.csv")
+    if learn is not None:
+        for r in learn.to_dict("records"):
+            if isinstance(r.get("slope_per_trial"), float):
+                lines.append(f"Fig. 6 ({r['condition']}): {r['quantity']} "
+                             f"{r['slope_per_trial']:.4g} per trial [{r['ci_low']:.4g}, "
+                             f"{r['ci_high']:.4g}] over "
+                             f"{r['subjects']} subjects ({r['method']}): {r['trend']}")
+    stab = frames.get("group_stability.csv")
+    if stab is not None:
+        for r in stab.to_dict("records"):
+            lines.append(f"stability ({r['condition']}, {r['estimate']}, {r['units']} units): "
+                         f"data {r['data_mean']:.3f} vs model {r['model_mean']:.3f}, difference "
+                         f"{r['difference_mean']:.3f} [{r['ci_low']:.3f}, {r['ci_high']:.3f}]: "
+                         f"{r['verdict']}")
+    return lines
+
+
+# -- figures -------------------------------------------------------------------------------------
+def draw(frames: dict[str, pd.DataFrame]) -> dict:
+    """The group figures, from the group tables."""
+    from .study_figures import draw_group
+
+    return draw_group(frames)
+
+
+def draw_units(frames: dict[str, pd.DataFrame], units: list[Unit]) -> dict:
+    """Each unit's figures, drawn by each analysis's own ``draw`` from the unit's tables, and
+    Fig. 2 of its first extracted recording."""
+    from ..registry import entry
+
+    figures = {}
+    for unit in units:
+        prefixes = {name.rsplit("/", 1)[0] for name in frames if name.startswith(unit.folder + "/")}
+        for prefix in sorted(prefixes):
+            tail = prefix[len(unit.folder) + 1:]
+            own = {name[len(prefix) + 1:]: frame for name, frame in frames.items()
+                   if name.startswith(prefix + "/") and "/" not in name[len(prefix) + 1:]}
+            if tail in ANALYSES:
+                try:
+                    drawn = entry(tail).load().draw(own)
+                except (KeyError, ValueError):
+                    continue
+            elif tail.startswith("extract/") and prefix == _first_extract(frames, unit):
+                from .extract import draw as draw_extract
+
+                drawn = draw_extract(own)
+            else:
+                continue
+            for name, fig in drawn.items():
+                fig.suptitle(f"{unit.label}" + (f": {fig.get_suptitle()}"
+                                                if fig.get_suptitle() else ""), fontsize=10)
+                figures[f"{prefix}/{name}"] = fig
+    return figures
+
+
+def _first_extract(frames: dict[str, pd.DataFrame], unit: Unit) -> str | None:
+    names = sorted(n for n in frames if n.startswith(f"{unit.folder}/extract/")
+                   and n.endswith("/fig2_samples.csv"))
+    return names[0].rsplit("/", 1)[0] if names else None
+
+
+# -- the report ----------------------------------------------------------------------------------
+def png_bytes(fig) -> bytes:
+    from ..artifacts import FIGURE_DPI
+
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", dpi=FIGURE_DPI)
+    return buffer.getvalue()
+
+
+def report_files(frames, rendered: dict[str, bytes], units: list[Unit], manifest_path: Path,
+                 config: StudyConfig) -> dict[str, bytes]:
+    """``report.html`` (the study) and ``<subject>/report.html`` (each subject), each one
+    self-contained: the figures (``rendered``: name -> PNG bytes) embedded."""
+    group = frames["group.csv"]
+    failures = frames["failures.csv"]
+    impacts = int(group["impacts"].sum()) if "impacts" in group else 0
+    overview = Section("Study", [
+        f"<p>{len(units)} unit(s) ({' x '.join(config.grouping)}) from "
+        f"{html_escape(str(manifest_path))}; {impacts} impacts; {len(failures)} failure(s).</p>",
+        html_table(group, digits=4),
+    ])
+    sections = [overview]
+    if len(failures):
+        sections.append(Section("Failures", [html_table(failures)]))
+    titles = {"group_regression.png": "Fig. 7 over the study",
+              "group_learning.png": "Fig. 6 over the study (mixed model)",
+              "group_stability.png": "Stability: the data against the model (eq. 10)",
+              "group_acf.png": "Fig. 8 averaged over subjects",
+              "group_impulse.png": "Figs. 9 and 11 averaged over subjects"}
+    tables = {"group_regression.png": "group_regression.csv",
+              "group_learning.png": "group_learning.csv",
+              "group_stability.png": "group_stability.csv"}
+    for name, title in titles.items():
+        if name in rendered:
+            parts = [embed_png(rendered[name], title)]
+            if tables.get(name) in frames:
+                parts.append(html_table(frames[tables[name]], digits=4))
+            sections.append(Section(title, parts))
+    subjects: dict[str, list[Unit]] = {}
+    for unit in units:
+        subjects.setdefault(unit.key[0], []).append(unit)
+    files: dict[str, bytes] = {}
+    subject_sections = []
+    for subject, subject_units in subjects.items():
+        parts = []
+        for unit in subject_units:
+            parts.append(f"<h3>{html_escape(unit.label)}</h3>")
+            parts.append(html_table(group.iloc[[units.index(unit)]], digits=4))
+            unit_failures = failures[failures["unit"] == unit.folder]
+            if len(unit_failures):
+                parts.append("<p class='warn'>Failures:</p>" + html_table(unit_failures))
+            for name in sorted(n for n in rendered if n.startswith(unit.folder + "/")):
+                parts.append(embed_png(rendered[name], name))
+        section = Section(f"Subject {subject}", parts)
+        subject_sections.append(section)
+        files[f"{subject}/report.html"] = page(f"bounce study: subject {subject}",
+                                               [section]).encode()
+    files["report.html"] = page("bounce study", sections + subject_sections).encode()
+    return files
+
+
+def html_escape(text: str) -> str:
+    import html
+
+    return html.escape(text)
+
+
+EXPERIMENT = Experiment(name="study", schema=StudyConfig, run=run, draw=draw)
+
+__all__ = ["EXPERIMENT", "StudyConfig", "analyse_unit", "group_tables", "run"]
+

@@ -1,0 +1,173 @@
+"""The group figures of ``bounce study``, drawn from its group tables (so that each can be
+redrawn from its CSVs): Figs. 6, 7 and 8, 9, 11 over the study, and the data's stability
+against the model's."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+from matplotlib.ticker import MaxNLocator
+
+from ..plotting import new_figure
+
+COLORS = ["k", "tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange"]
+PAIRS = (("v_v", "$v \\to v$"), ("theta_to_v", "$\\theta \\to v$"),
+         ("v_to_theta", "$v \\to \\theta$"), ("theta_theta", "$\\theta \\to \\theta$"))
+RESPONSES = (("v_m_s", "$\\Delta v_k$ (m/s)"), ("theta_deg", "$\\Delta \\theta_k$ (deg)"),
+             ("racket_period_s", "$\\Delta$ racket period (s)"),
+             ("racket_amplitude_m", "$\\Delta$ racket amplitude (m)"))
+
+
+def draw_group(frames: dict[str, pd.DataFrame]) -> dict:
+    """Every group figure whose table is present."""
+    figures = {}
+    if "group_regression.csv" in frames and "slope" in frames["group_regression.csv"]:
+        from .regression import draw as draw_regression
+
+        fit = frames["group_regression.csv"].dropna(subset=["slope"])
+        if len(fit):
+            fig = draw_regression({"trials.csv": frames["group_regression_trials.csv"],
+                                   "fit.csv": fit})["regression.png"]
+            fig.axes[0].set_title("Fig. 7 over the study: trial means of every subject, "
+                                  "pooled by condition")
+            figures["group_regression.png"] = fig
+    if "group_learning_trials.csv" in frames:
+        figures["group_learning.png"] = learning_figure(frames["group_learning_trials.csv"],
+                                                        frames.get("group_learning.csv"))
+    group = frames.get("group.csv")
+    if group is not None and "radius_ols" in group and group["radius_ols"].notna().any():
+        figures["group_stability.png"] = stability_figure(group,
+                                                          frames.get("group_stability.csv"))
+    if "group_acf.csv" in frames:
+        figures["group_acf.png"] = acf_figure(frames["group_acf.csv"])
+    if "group_impulse.csv" in frames:
+        figures["group_impulse.png"] = impulse_figure(frames["group_impulse.csv"])
+    return figures
+
+
+def learning_figure(trials: pd.DataFrame, trends: pd.DataFrame | None):
+    """Fig. 6 over the study: each subject's per-trial AC and SD of ball amplitude (thin), the
+    mixed model's fixed-effect line (thick), one column per condition."""
+    conditions = sorted(trials["condition"].astype(str).unique())
+    fig, axes = new_figure(2, len(conditions), width=4.2 * len(conditions) + 1, height=6.4,
+                           sharex=True)
+    quantities = (("ac_mean_g", "AC, trial mean (g)", 1.0),
+                  ("apex_sd_m", "SD of ball amplitude (cm)", 100.0))
+    for j, condition in enumerate(conditions):
+        part = trials[trials["condition"].astype(str) == condition]
+        for i, (column, label, scale) in enumerate(quantities):
+            ax = axes[i, j]
+            for k, (subject, rows) in enumerate(part.groupby("subject", sort=True)):
+                ax.plot(rows["trial_number"], rows[column] * scale, "-o", ms=3, lw=0.8,
+                        color=COLORS[1 + k % (len(COLORS) - 1)], alpha=0.6, label=str(subject))
+            if trends is not None and "intercept" in trends:
+                row = trends[(trends["condition"].astype(str) == condition)
+                             & (trends["quantity"] == column)]
+                if len(row) and np.isfinite(row["slope_per_trial"].iloc[0]):
+                    r = row.iloc[0]
+                    xs = np.array([part["trial_number"].min(), part["trial_number"].max()])
+                    ax.plot(xs, (r["intercept"] + r["slope_per_trial"] * xs) * scale, "k-",
+                            lw=2.2, label=f"fixed effect {r['slope_per_trial'] * scale:+.3g}/trial "
+                            f"[{r['ci_low'] * scale:.3g}, {r['ci_high'] * scale:.3g}]")
+            ax.set_ylabel(label)
+            if column == "apex_sd_m":
+                ax.set_ylim(bottom=0.0)
+            ax.legend(fontsize=6, loc="best")
+            ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        axes[0, j].set_title(f"condition {condition}")
+        axes[1, j].set_xlabel("trial number")
+    fig.suptitle("Fig. 6 over the study: learning trends (mixed model, random intercept and "
+                 "slope per subject)", fontsize=10)
+    return fig
+
+
+def stability_figure(group: pd.DataFrame, table: pd.DataFrame | None):
+    """Each unit's VAR(1) spectral radius from its data (OLS and the noise-robust lag-2
+    estimate, interval bars) beside the model's eq. 10 radius at the unit's parameters
+    (crosses), units side by side, grouped by condition."""
+    conditions = (group["condition"].astype(str) if "condition" in group
+                  else pd.Series("all", index=group.index))
+    order = group.assign(_c=conditions).sort_values(["_c", "subject"], kind="stable")
+    fig, axes = new_figure(1, 1, width=max(6.0, 0.45 * len(order) + 2.5), height=4.8)
+    ax = axes[0, 0]
+    x = np.arange(len(order))
+    for offset, method, color, label in ((-0.12, "ols", "k", "data, OLS VAR(1)"),
+                                         (0.12, "lag2", "tab:blue", "data, lag-2 (noise-robust)")):
+        y = order[f"radius_{method}"].to_numpy(float)
+        low = y - order[f"radius_{method}_ci_low"].to_numpy(float)
+        high = order[f"radius_{method}_ci_high"].to_numpy(float) - y
+        ax.errorbar(x + offset, y, yerr=np.vstack([low, high]), fmt="o", color=color, ms=4,
+                    capsize=2, label=f"{label} with interval")
+    ax.plot(x, order["model_spectral_radius"], "x", color="tab:red", ms=8, mew=2,
+            label="model, eq. 10 at the unit's parameters")
+    labels = [f"{s}\n{c}" for s, c in zip(order["subject"].astype(str), order["_c"])]
+    ax.set_xticks(x, labels, fontsize=7)
+    ax.axhline(1.0, color="0.7", lw=0.8, ls=":")
+    ax.set_ylim(0.0, 1.2)
+    ax.set_ylabel("spectral radius")
+    ax.set_xlabel("unit (subject, condition)")
+    title = "Stability per unit: the data against the model"
+    if table is not None and len(table):
+        ols = table[table["estimate"] == "ols"]
+        title += "\n" + "; ".join(
+            f"{r.condition}: data - model {r.difference_mean:+.3f} [{r.ci_low:.3f}, "
+            f"{r.ci_high:.3f}]" for r in ols.itertuples())
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=7, loc="upper right")
+    return fig
+
+
+def acf_figure(table: pd.DataFrame):
+    """Fig. 8 per condition: each correlation function's mean over units (SD across units as
+    bars) and the theory's (eq. 19) mean over units (circles)."""
+    fig, axes = new_figure(2, 2, width=9.0, height=6.8, sharex=True)
+    conditions = sorted(table["condition"].astype(str).unique())
+    for (pair, label), ax in zip(PAIRS, axes.flat):
+        for i, condition in enumerate(conditions):
+            part = table[(table["condition"].astype(str) == condition) & (table["pair"] == pair)]
+            part = part.sort_values("lag")
+            color = COLORS[i % len(COLORS)]
+            ax.errorbar(part["lag"] + 0.08 * i, part["mean"], yerr=part["sd"], fmt="-",
+                        color=color, lw=1.2, capsize=2, label=f"{condition}: data (SD across "
+                        "subjects)")
+            ax.plot(part["lag"] + 0.08 * i, part["theory_mean"], "o", mfc="none", mec=color,
+                    ms=5, label=f"{condition}: eq. 19")
+        ax.axhline(0, color="0.8", lw=0.8)
+        ax.set_title(label)
+        ax.set_ylabel("correlation")
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+    for ax in axes[1]:
+        ax.set_xlabel("lag (bounces)")
+    axes[0, 0].legend(fontsize=6)
+    fig.suptitle("Fig. 8 averaged over subjects, per condition", fontsize=10)
+    return fig
+
+
+def impulse_figure(table: pd.DataFrame):
+    """Figs. 9 and 11 per condition: mean response after a perturbation of alpha (SD across
+    subjects as bars), for decreases (left) and increases (right)."""
+    quantities = [(q, label) for q, label in RESPONSES if q in set(table["quantity"])]
+    fig, axes = new_figure(len(quantities), 2, width=9.0, height=2.3 * len(quantities) + 0.6,
+                           sharex=True)
+    conditions = sorted(table["condition"].astype(str).unique())
+    for i, (quantity, label) in enumerate(quantities):
+        for j, direction in enumerate(("decrease", "increase")):
+            ax = axes[i, j]
+            for c, condition in enumerate(conditions):
+                part = table[(table["condition"].astype(str) == condition)
+                             & (table["quantity"] == quantity) & (table["direction"] == direction)]
+                part = part.sort_values("k")
+                ax.errorbar(part["k"] + 0.08 * c, part["mean"], yerr=part["sd"], fmt="-o",
+                            ms=3, color=COLORS[c % len(COLORS)], capsize=2, label=condition)
+            ax.axhline(0, color="0.8", lw=0.8)
+            ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+            if j == 0:
+                ax.set_ylabel(label)
+            if i == 0:
+                ax.set_title(f"alpha {direction}d at impact 0")
+    for ax in axes[-1]:
+        ax.set_xlabel("impact after the perturbation, k")
+    axes[0, 0].legend(fontsize=7)
+    fig.suptitle("Figs. 9 and 11 averaged over subjects (deviation from each trial's baseline)",
+                 fontsize=10)
+    return fig

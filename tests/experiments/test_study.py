@@ -1,0 +1,331 @@
+"""bounce study: a simulated study with known truth is recovered unit by unit and as a group;
+manifest errors are one line before anything runs; a damaged file is one failure row; the
+results do not depend on workers or on an interruption."""
+
+import math
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bounce_cli.artifacts import read_frames
+from bounce_cli.config import load_config
+from bounce_cli.experiments import study
+from bounce_cli.experiments.base import RunOptions
+
+#: a small study: fast enough for every run of the suite
+SIM = ["--set", "subjects.count=4", "--set", "trials=4", "--set", "duration_s=14",
+       "--set", "subjects.ac_slope_sd_g=0.005", "--set", "subjects.ac_slope_mean_g=-0.05"]
+#: the trust study of acf --data at a small size (its own tests cover it)
+FAST = ["--set", "settings.acf.data_analysis.trust_repetitions=10",
+        "--set", "settings.acf.data_analysis.trust_bounces=[100]",
+        "--set", "model.alpha=0.5", "--set", "model.g=9.81"]
+
+
+@pytest.fixture(scope="module")
+def simulated(tmp_path_factory, cli_module):
+    out = tmp_path_factory.mktemp("sim") / "sim"
+    result = cli_module("simulate-study", "--quiet", "--out", out, *SIM)
+    assert result.exit_code == 0, result.output
+    return out
+
+
+@pytest.fixture(scope="module")
+def cli_module():
+    from typer.testing import CliRunner
+
+    from bounce_cli.cli import app
+
+    runner = CliRunner()
+    return lambda *args: runner.invoke(app, [str(a) for a in args])
+
+
+#: a tiny study for the quick tests: 2 subjects x 1 condition x 3 trials
+TINY = ["--set", "subjects.count=2", "--set", "conditions=[{name: a}]", "--set", "trials=3",
+        "--set", "duration_s=10"]
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory, cli_module):
+    out = tmp_path_factory.mktemp("tiny") / "sim"
+    result = cli_module("simulate-study", "--quiet", "--out", out, *TINY)
+    assert result.exit_code == 0, result.output
+    return out
+
+
+@pytest.fixture(scope="module")
+def tiny_study(tiny, tmp_path_factory, cli_module):
+    out = tmp_path_factory.mktemp("tiny-study") / "study"
+    result = cli_module("study", "--manifest", tiny / "study.csv", "--out", out,
+                        "--set", "analyses=[regression, learning]", *FAST)
+    assert result.exit_code == 0, result.output
+    return out
+
+
+@pytest.fixture(scope="module")
+def studied(simulated, tmp_path_factory, cli_module):
+    out = tmp_path_factory.mktemp("study") / "study"
+    result = cli_module("study", "--manifest", simulated / "study.csv", "--out", out,
+                        "--jobs", "1", *FAST)
+    assert result.exit_code == 0, result.output
+    return out, result
+
+
+@pytest.mark.slow
+def test_every_unit_and_the_group_tables_are_written(studied):
+    out, result = studied
+    group = pd.read_csv(out / "group.csv")
+    assert len(group) == 8 and set(group["condition"]) == {"vision", "no-vision"}
+    assert (group["trials"] == 4).all() and (group["failures"] == 0).all()
+    for name in ("group_regression.csv", "group_learning.csv", "group_stability.csv",
+                 "group_acf.csv", "failures.csv", "report.html", "s1/report.html",
+                 "s1/vision/impacts.csv", "s1/vision/acf/stability_data.csv",
+                 "s1/vision/learning/trials.csv", "s1/vision/regression/fit.csv",
+                 "s1/vision/extract/s1_vision_t1/impacts.csv", "group_learning.png"):
+        assert (out / name).is_file(), name
+    assert pd.read_csv(out / "failures.csv").empty
+    assert "study: 8 unit(s)" in result.stderr
+
+
+@pytest.mark.slow
+def test_each_unit_recovers_its_truth(studied, simulated):
+    """Per unit: the mean AC of its trials within 0.02 g of the simulated targets, the racket
+    period within 1 ms, and the model's radius is eq. 10's at alpha 0.5 (complex regime)."""
+    out, _ = studied
+    group = pd.read_csv(out / "group.csv").set_index(["subject", "condition"])
+    truth = pd.read_csv(simulated / "truth.csv").groupby(["subject", "condition"]).mean(
+        numeric_only=True)  # over the impacts, as the study averages
+    for key, row in group.iterrows():
+        assert row["ac_mean_g"] == pytest.approx(truth.loc[key, "racket_acc_g"], abs=0.02), key
+        assert row["racket_period_mean_s"] == pytest.approx(
+            truth.loc[key, "racket_period_s"], abs=1e-3)
+        assert row["model_spectral_radius"] == pytest.approx(0.5, abs=1e-9)
+
+
+@pytest.mark.slow
+def test_the_group_recovers_the_learning_trend_and_eq15(studied, simulated):
+    """The mixed model's slope interval covers the subjects' mean AC slope (-0.05 g/trial,
+    SD 0.005 across subjects, clipped nowhere at these ACs); the pooled Fig. 7 fit covers eq.
+    15's prediction and an intercept of 0 in each condition."""
+    out, _ = studied
+    learning = pd.read_csv(out / "group_learning.csv").set_index(["condition", "quantity"])
+    for condition in ("vision", "no-vision"):
+        row = learning.loc[(condition, "ac_mean_g")]
+        assert row["ci_low"] <= -0.05 <= row["ci_high"], row.to_dict()
+        assert row["subjects"] == 4
+    regression = pd.read_csv(out / "group_regression.csv")
+    assert len(regression) == 2
+    assert regression["intercept_ci_covers_zero"].all()
+    assert regression["slope_ci_covers_prediction"].all()
+    assert (regression["r2"] > 0.95).all()
+
+
+@pytest.mark.slow
+def test_the_data_are_as_fast_as_the_model_that_made_them(studied):
+    """The recordings were made by the model: the paired difference of the spectral radii
+    (data - model) has an interval covering 0 in each condition (the paper's "too slow"
+    finding is a difference whose interval excludes 0)."""
+    out, _ = studied
+    table = pd.read_csv(out / "group_stability.csv")
+    ols = table[table["estimate"] == "ols"]
+    assert len(ols) == 2
+    assert ((ols["ci_low"] <= 0) & (ols["ci_high"] >= 0)).all(), ols
+    assert (ols["units"] == 4).all()
+
+
+def test_the_report_is_self_contained(tiny_study):
+    out = tiny_study
+    text = (out / "report.html").read_text()
+    assert text.startswith("<!DOCTYPE html>")
+    assert "data:image/png;base64," in text
+    assert "http://" not in text and "https://" not in text and "<script" not in text
+    for subject in ("s1", "s2"):
+        assert f"Subject {subject}" in text
+    own = (out / "s2" / "report.html").read_text()
+    assert "Subject s2" in own and "Subject s1" not in own
+    # every figure the report shows is a file too, and each unit's figures are there
+    assert (out / "group_regression.png").is_file()
+    assert (out / "s1" / "a" / "regression" / "regression.png").is_file()
+    assert pd.read_csv(out / "group.csv").shape[0] == 2
+
+
+def test_a_damaged_file_is_one_failure_row_and_exit_1(tmp_path, cli_module):
+    """One unreadable recording: one failures.csv row, every other file and unit analysed,
+    exit 1 after writing."""
+    sim = tmp_path / "sim"
+    assert cli_module("simulate-study", "--quiet", "--out", sim, "--set", "subjects.count=2",
+                      "--set", "conditions=[{name: a}]", "--set", "trials=4",
+                      "--set", "duration_s=10", "--set", "damaged_files=1").exit_code == 0
+    out = tmp_path / "study"
+    result = cli_module("study", "--manifest", sim / "study.csv", "--out", out,
+                        "--set", "analyses=[regression]", "--set", "report.unit_figures=false",
+                        *FAST)
+    assert result.exit_code == 1, result.output
+    failures = pd.read_csv(out / "failures.csv")
+    assert len(failures) == 1
+    assert failures.iloc[0]["stage"] == "extract"
+    assert failures.iloc[0]["file"].endswith("s2_a_t4.csv")
+    assert "1 failure(s)" in result.stderr
+    group = pd.read_csv(out / "group.csv").set_index("subject")
+    assert group.loc["s1", "trials"] == 4 and group.loc["s2", "trials"] == 3
+    assert (out / "s2" / "a" / "regression" / "fit.csv").is_file()
+
+
+def manifest(tmp_path, text, files=("a.csv",)):
+    for name in files:
+        (tmp_path / name).write_text("trial,t_s,racket_x_m,ball_x_m\n")
+    path = tmp_path / "study.csv"
+    path.write_text(text)
+    return path
+
+
+@pytest.mark.parametrize("text, needle", [
+    ("file,condition\na.csv,x\n", "missing column(s) subject"),
+    ("file,subject\nb.csv,s1\n", "line 2: file 'b.csv': no such file"),
+    ("file,subject\na.csv,s1\na.csv,s1\n", "line 3: the same recording and factors as line 2"),
+    ("file,subject\na.csv,s/1\n", "line 2: subject 's/1': a factor value names a folder"),
+    ("file,subject\n", "no rows"),
+    ("file,subject,extract.units.length\na.csv,s1,[mm\n", "cannot parse"),
+])
+def test_manifest_errors_are_one_line_before_anything_runs(tmp_path, cli, user_error, text,
+                                                           needle):
+    out = tmp_path / "out"
+    result = cli("study", "--manifest", manifest(tmp_path, text), "--out", out,
+                 "--set", "model.alpha=0.5", "--set", "model.g=9.81")
+    user_error(result, "manifest", needle)
+    assert not out.exists()
+
+
+def test_a_grouping_factor_the_manifest_lacks_is_one_line(tmp_path, cli, user_error):
+    result = cli("study", "--manifest", manifest(tmp_path, "file,subject\na.csv,s1\n"),
+                 "--out", tmp_path / "out")
+    user_error(result, "grouping", "'condition'")
+
+
+def test_an_unknown_setting_fails_before_anything_runs(tmp_path, cli, user_error):
+    result = cli("study", "--manifest", manifest(tmp_path, "file,subject\na.csv,s1\n"),
+                 "--set", "settings.acf.max_lagg=4", "--out", tmp_path / "out")
+    user_error(result, "max_lagg")
+
+
+def test_without_alpha_and_g_the_data_must_show_them(tiny, tmp_path, cli_module):
+    """Recordings without events or a measured set-up and no model.alpha/model.g: each
+    unit is a failure naming both ways to give them (nothing silently at a default)."""
+    rows = pd.read_csv(tiny / "study.csv").head(3)
+    rows["file"] = [str(tiny / f) for f in rows["file"]]
+    rows.to_csv(tmp_path / "study.csv", index=False)
+    result = cli_module("study", "--manifest", tmp_path / "study.csv", "--out",
+                        tmp_path / "out", "--set", "analyses=[regression]")
+    failures = pd.read_csv(tmp_path / "out" / "failures.csv")
+    if result.exit_code == 0:  # the extraction measures alpha and g from the flights
+        group = pd.read_csv(tmp_path / "out" / "group.csv")
+        assert group["alpha_source"].str.contains("measured").all()
+        return
+    assert result.exit_code == 1
+    assert failures["stage"].eq("model").all()
+    assert "model.alpha" in failures.iloc[0]["error"]
+
+
+class StopAfter:
+    """Checkpoints that keep points in memory and stop the run after ``n`` saves (an
+    interrupt in the middle of a study)."""
+
+    def __init__(self, n, stored=None):
+        self.n, self.stored = n, dict(stored or {})
+
+    def load(self):
+        return dict(self.stored)
+
+    def save(self, index, result):
+        self.stored[index] = result
+        if len(self.stored) >= self.n:
+            raise KeyboardInterrupt
+
+
+def study_config(simulated, *overrides):
+    from bounce_cli.config import bundled_config_path
+
+    return load_config(study.StudyConfig, bundled_config_path("study"),
+                       [f"manifest={simulated / 'study.csv'}", "model.alpha=0.5",
+                        "model.g=9.81", "analyses=[regression, learning]",
+                        "grouping=[subject]", "report.unit_figures=false", *overrides])
+
+
+def test_an_interrupted_study_resumed_gives_the_same_tables(tiny):
+    config = study_config(tiny)
+    whole = study.run(config, RunOptions())
+    checkpoints = StopAfter(1)
+    with pytest.raises(KeyboardInterrupt):
+        study.run(config, RunOptions(checkpoints=checkpoints))
+    resumed = study.run(config, RunOptions(checkpoints=StopAfter(99, checkpoints.stored)))
+    assert "1 resumed" in resumed.summary[0]
+    assert whole.frames.keys() == resumed.frames.keys()
+    for name, frame in whole.frames.items():
+        pd.testing.assert_frame_equal(frame, resumed.frames[name], check_exact=True, obj=name)
+
+
+def test_a_changed_recording_reruns_only_its_unit(tiny, tmp_path):
+    copy = tmp_path / "sim"
+    shutil.copytree(tiny, copy)
+    config = study_config(copy)
+    first = StopAfter(99)
+    study.run(config, RunOptions(checkpoints=first))
+    keys = {i: r["key"] for i, r in first.stored.items()}
+    target = copy / "recordings" / "s1_a_t1.csv"
+    frame = pd.read_csv(target)
+    frame["racket_x_m"] += 0.001  # the lab re-exported this file
+    frame.to_csv(target, index=False)
+    again = StopAfter(99, first.stored)
+    result = study.run(config, RunOptions(checkpoints=again))
+    assert "1 resumed" in result.summary[0]
+    assert again.stored[0]["key"] != keys[0] and again.stored[1]["key"] == keys[1]
+
+
+@pytest.mark.slow
+def test_two_workers_and_a_dask_cluster_give_identical_group_tables(simulated, tmp_path,
+                                                                      cli_module):
+    """The same files (group tables and every unit's) on 1 and 2 local workers and on a Dask
+    LocalCluster."""
+    distributed = pytest.importorskip("distributed")
+    args = ["study", "--manifest", simulated / "study.csv", "--quiet", *FAST,
+            "--set", "analyses=[learning, regression]"]
+    assert cli_module(*args, "--out", tmp_path / "one", "--jobs", "1").exit_code == 0
+    assert cli_module(*args, "--out", tmp_path / "two", "--jobs", "2").exit_code == 0
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=":0") as cluster:
+        result = cli_module(*args, "--out", tmp_path / "dask", "--scheduler",
+                            cluster.scheduler_address)
+        assert result.exit_code == 0, result.output
+    one = read_frames(tmp_path / "one")
+    assert "group.csv" in one
+    names = sorted(p.relative_to(tmp_path / "one") for p in (tmp_path / "one").rglob("*.csv"))
+    assert len(names) > 20
+    for other in ("two", "dask"):
+        for name in names:
+            assert (tmp_path / "one" / name).read_bytes() == (tmp_path / other / name).read_bytes()
+
+
+@pytest.mark.slow
+def test_the_report_renders_in_a_browser(tiny_study, tmp_path):
+    """A headless Chromium screenshot of report.html: the page loads from the file system
+    and is not blank."""
+    browser = shutil.which("chromium") or shutil.which("chromium-browser")
+    if browser is None:
+        pytest.skip("Chromium is not installed (Debian package chromium)")
+    out = tiny_study
+    shot = tmp_path / "report.png"
+    subprocess.run([browser, "--headless", "--no-sandbox", "--disable-gpu",
+                    "--disable-background-networking", "--no-first-run",
+                    f"--user-data-dir={tmp_path / 'profile'}", f"--screenshot={shot}",
+                    "--window-size=1200,2400", (out / "report.html").as_uri()],
+                   check=True, capture_output=True, timeout=120)
+    from matplotlib.image import imread
+
+    pixels = imread(shot)
+    assert pixels.shape[0] >= 2000
+    assert np.std(pixels[..., :3]) > 0.05  # figures and tables, not an empty page
+    assert math.isfinite(float(pixels.mean()))
+    assert Path(shot).stat().st_size > 10_000
