@@ -750,7 +750,7 @@ def impulse_data_run(config, options, source: ImpactsSource | None = None
         })
     model = pd.DataFrame(model_rows)
     relax = pd.DataFrame(relax_rows)
-    relax["relaxation_impacts"] = relax["relaxation_impacts"].astype("Int64")  # NA: no verdict
+    relax["relaxation_impacts"] = relax["relaxation_impacts"].astype(float)  # NaN: no verdict
     relax["verdict"] = [v if isinstance(v, str) and v else relaxed_text(int(k), int(h))
                         for v, k, h in zip(relax.get("verdict", [""] * len(relax)),
                                            relax["relaxation_impacts"].fillna(-1),
