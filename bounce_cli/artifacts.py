@@ -38,6 +38,7 @@ import numpy as np
 
 from . import __version__
 from .interrupts import deferred
+from .plotting import save_figure
 
 if TYPE_CHECKING:  # pandas is imported where a table is written or read (fast start-up)
     import pandas as pd
@@ -84,7 +85,7 @@ def reserve(path: Path) -> Path:
     return tmp
 
 
-#: resolution of the PNG figures
+#: resolution of the PNG figures unless ``--dpi`` says otherwise
 FIGURE_DPI = 150
 #: zlib level of the PNGs: 1 encodes the basin's two figures in 0.5 s instead of 0.8 s, for
 #: files about a quarter larger (basin_iterations.png 480 kB instead of 370 kB)
@@ -296,8 +297,11 @@ class RunDirectory:
         seed: int | None = None,
         data_file: str | None = None,
         force: bool = False,
+        figure_formats: tuple[str, ...] = ("png",),
+        dpi: float = FIGURE_DPI,
     ) -> None:
         self.out_dir = Path(out_dir)
+        self.figure_formats, self.dpi = tuple(figure_formats), dpi
         self.command = command
         self.resolved_config = resolved_config
         self.overrides = list(overrides)
@@ -361,7 +365,11 @@ class RunDirectory:
         self._frames[name] = frame
 
     def add_figure(self, name: str, figure) -> None:
-        self._figures[name] = figure
+        """A figure to write once in each of the run's figure formats: ``basin.png`` is
+        written as ``basin.png``, ``basin.pdf``, ``basin.svg`` as ``figure_formats`` say."""
+        stem = Path(name).stem
+        for kind in self.figure_formats:
+            self._figures[f"{stem}.{kind}"] = (figure, kind)
 
     def add_file(self, name: str, content: bytes) -> None:
         """Any other file, as bytes (e.g. an HTML report)."""
@@ -436,9 +444,10 @@ class RunDirectory:
             writers[name] = functools.partial(_write_bytes, content)
         for name, frame in self._frames.items():
             writers[name] = functools.partial(write_frame, frame, kind=frame_format(name))
-        for name, figure in self._figures.items():
-            writers[name] = functools.partial(figure.savefig, format="png", dpi=FIGURE_DPI,
-                                              pil_kwargs=PNG_OPTIONS)
+        for name, (figure, kind) in self._figures.items():
+            writers[name] = functools.partial(save_figure, figure, kind=kind, dpi=self.dpi,
+                                              source=f"bounce {self.command}",
+                                              png_options=PNG_OPTIONS)
         staged: list[tuple[Path, Path]] = []
         children: list[_ChildWriter] = []
 

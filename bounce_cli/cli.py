@@ -36,7 +36,7 @@ except ImportError:  # pragma: no cover - older typer on click
     )
 
 from . import __version__
-from .artifacts import OutputDirError, RunDirectory
+from .artifacts import FIGURE_DPI, OutputDirError, RunDirectory
 from .config import (
     ConfigError,
     ModelOnlyConfig,
@@ -56,6 +56,24 @@ from .parallel import ClusterError
 from .registry import EXPERIMENTS, Entry
 
 USER_ERRORS = (ConfigError, ModelError, OutputDirError, ClusterError)
+
+
+def _flags_show_no_type() -> None:
+    """typer's help prints ``<bool>`` after a flag (``--quiet <bool>``), as if it took a
+    value: a flag's type column is left empty (an option taking a value keeps its type)."""
+    option = getattr(typer.core, "TyperOption", None)
+    shown = getattr(option, "display_type_rich", None)
+    if shown is None or getattr(shown, "flags_show_no_type", False):
+        return
+
+    def display_type_rich(self, ctx):
+        return None if self.is_flag else shown(self, ctx)
+
+    display_type_rich.flags_show_no_type = True  # type: ignore[attr-defined]
+    option.display_type_rich = display_type_rich  # type: ignore[union-attr]
+
+
+_flags_show_no_type()
 
 
 class BounceGroup(TyperGroup):
@@ -163,8 +181,34 @@ JobsOption = Annotated[
     Optional[int],
     typer.Option(
         "--jobs", "-j", min=1,
-        help="Worker processes for grid work (basin, sweep; default: all cores).",
+        help="Worker processes for the grid's points (default: all cores).",
     ),
+]
+def figure_formats(values: list[str] | None) -> list[str]:
+    """--figure-format: each value one format or a comma list of them (png, pdf, svg), in the
+    order given, each once; none given: png."""
+    from .plotting import FIGURE_FORMATS
+
+    kinds: list[str] = []
+    for text in values or ["png"]:
+        for kind in (part.strip().lower() for part in text.split(",")):
+            if kind not in FIGURE_FORMATS:
+                raise typer.BadParameter(f"{kind!r} is not a figure format; choose from "
+                                         + ", ".join(FIGURE_FORMATS))
+            if kind not in kinds:
+                kinds.append(kind)
+    return kinds
+
+
+FigureFormatOption = Annotated[
+    Optional[list[str]],
+    typer.Option("--figure-format", "-f", metavar="FORMAT", callback=figure_formats,
+                 help="Figure file format: png, pdf or svg; repeatable, or a comma list "
+                 "(--figure-format png,pdf). Default: png."),
+]
+DpiOption = Annotated[
+    int, typer.Option("--dpi", min=30, max=2400, metavar="N",
+                      help=f"Resolution of PNG figures, dots per inch (default {FIGURE_DPI}).")
 ]
 ResumeOption = Annotated[
     bool,
@@ -310,8 +354,11 @@ def run_experiment(
     jobs: int | None = None,
     resume: bool = False,
     scheduler: str | None = None,
+    figure_formats: tuple[str, ...] = ("png",),
+    dpi: int = FIGURE_DPI,
 ) -> None:
-    """Load and validate the config, run the experiment, write its files atomically. On an
+    """Load and validate the config, run the experiment, write its files atomically (each
+    figure once in each of ``figure_formats``, PNGs at ``dpi``). On an
     error or an interrupt nothing is written and an output folder the run made is removed;
     a resumable experiment's finished points stay in ``<out>/points/`` (``--resume``)."""
     overrides = list(overrides or [])
@@ -340,6 +387,8 @@ def run_experiment(
             seed=getattr(cfg, "seed", None) if data_file is None else None,
             data_file=data_file,
             force=force,
+            figure_formats=figure_formats,
+            dpi=dpi,
         )
         progress = make_progress() if not quiet else None
         options = RunOptions(jobs=jobs or os.cpu_count() or 1, warn=warn, scheduler=scheduler)
@@ -441,18 +490,35 @@ def fixed_point_report(params: ModelParams) -> dict:
     }
 
 
+def no_fixed_point_report(params: ModelParams, error: Exception) -> dict:
+    """``fixed-point --json`` where eq. 8 has no solution: why, and the racket amplitude from
+    which it has one at the other parameters."""
+    return {"exists": False, "reason": str(error), "cos_theta": params.cos_theta_fixed(),
+            "min_racket_amplitude_m": params.min_racket_amplitude()}
+
+
 @app.command("fixed-point")
 def fixed_point_command(
     config: ConfigOption = None,
     overrides: SetOption = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print a JSON object.")] = False,
 ) -> None:
-    """Period-1 fixed point (eqs. 7, 8), racket acceleration AC, eigenvalues (eq. 10)."""
-    params = _model_or_fail(config, overrides)
-    report = fixed_point_report(params)
+    """Period-1 fixed point (eqs. 7, 8), racket acceleration AC, eigenvalues (eq. 10).
+
+    With --json and parameters without a fixed point: {"exists": false, "reason": ...} and
+    exit status 1."""
+    from .engine import NoFixedPointError
+
+    params = _model_or_fail(config, overrides, need_fixed_point=not as_json)
     if as_json:
+        try:
+            report = {"exists": True, **fixed_point_report(params)}
+        except NoFixedPointError as exc:
+            typer.echo(json.dumps(no_fixed_point_report(params, exc), indent=2))
+            raise typer.Exit(code=1) from None
         typer.echo(json.dumps(report, indent=2))
         return
+    report = fixed_point_report(params)
     table = Table(title="Period-1 fixed point", show_header=True)
     table.add_column("quantity")
     table.add_column("value", justify="right")
@@ -484,7 +550,8 @@ def orbit_command(
     min_hop_s: Annotated[
         float,
         typer.Option("--min-hop-s", min=0.0,
-                     help="Stop when a hop is shorter than this, s (sticking, section 3)."),
+                     help="Stop when a hop is shorter than this, s (sticking, section 3); "
+                          "0: exact sticking (complete chatters, riding, release)."),
     ] = ClassifySettings().min_hop_s,
     config: ConfigOption = None,
     overrides: SetOption = None,
@@ -502,8 +569,14 @@ def orbit_command(
     if not (math.isfinite(theta0_deg) and math.isfinite(v0)):
         fail("--theta0-deg and --v0 must be finite numbers")
     if controller is not None:
+        if min_hop_s == 0.0:
+            fail("--min-hop-s 0 (exact sticking) is not implemented with model.control; "
+                 "give a shortest hop > 0")
         controlled_orbit_output(math.radians(theta0_deg), v0, params, controller, n_impacts,
                                 min_hop_s, as_csv)
+        return
+    if min_hop_s == 0.0:
+        exact_orbit_output(math.radians(theta0_deg), v0, params, n_impacts, as_csv)
         return
     orbit = iterate_orbit(math.radians(theta0_deg), v0, params, n_impacts, min_hop_s)
     rows = orbit_rows(orbit, params)
@@ -543,16 +616,8 @@ def controlled_orbit_output(theta0, v0, params, controller, n_impacts, min_hop_s
                           "theta_rad": orbit.theta,
                           "theta_deg": np.degrees(wrap_phase(orbit.theta)), "v_m_s": orbit.v,
                           "flight_s": orbit.flight_s, "racket_period_s": orbit.tau})
-    if as_csv:
-        frame.to_csv(sys.stdout, index=False, lineterminator="\n")
-    else:
-        table = Table(title=f"Orbit with racket period control from theta0 = "
-                            f"{math.degrees(theta0):g} deg, v0 = {v0:g} m/s")
-        for col in frame.columns:
-            table.add_column(col, justify="right")
-        for row in frame.itertuples(index=False):
-            table.add_row(str(row.k), *("" if math.isnan(x) else f"{x:.5f}" for x in row[1:]))
-        Console().print(table)
+    write_orbit_frame(frame, as_csv, f"Orbit with racket period control from theta0 = "
+                                     f"{math.degrees(theta0):g} deg, v0 = {v0:g} m/s")
     if orbit.stop_reason == "below_racket":
         print(f"note: stopped: the initial velocity {v0:g} m/s is not above the racket's "
               f"velocity at that phase (below the racket)", file=sys.stderr)
@@ -560,6 +625,22 @@ def controlled_orbit_output(theta0, v0, params, controller, n_impacts, min_hop_s
         print(f"note: stopped at impact {len(orbit.theta) - 1}: the hop lasted "
               f"{orbit.flight_s[-1]:.3g} s < {min_hop_s:g} s, or the ball could not "
               f"leave the racket (sticking)", file=sys.stderr)
+
+
+def write_orbit_frame(frame, as_csv: bool, title: str, small: tuple[str, ...] = ()) -> None:
+    """An orbit's table to stdout: CSV, or a rich table with floats to 5 decimals (columns
+    in ``small`` to 3 significant digits, NaN blank) and the rest (k, event) as they are."""
+    if as_csv:
+        frame.to_csv(sys.stdout, index=False, lineterminator="\n")
+        return
+    table = Table(title=title)
+    for col in frame.columns:
+        table.add_column(col, justify="right")
+    for row in frame.itertuples(index=False):
+        table.add_row(*(("" if math.isnan(x) else f"{x:.3g}" if col in small else f"{x:.5f}")
+                        if isinstance(x, float) else str(x)
+                        for col, x in zip(frame.columns, row)))
+    Console().print(table)
 
 
 def orbit_rows(orbit, params: ModelParams) -> list[dict]:
@@ -572,9 +653,61 @@ def orbit_rows(orbit, params: ModelParams) -> list[dict]:
             "theta_deg": math.degrees(float(wrap_phase(orbit.theta[k]))),
             "v_m_s": orbit.v[k],
             "flight_s": orbit.hop_phase[k] / w,
+            "event": "start" if k == 0 else "impact",
         }
         for k in range(len(orbit.theta))
     ]
+
+
+def exact_orbit_output(theta0: float, v0: float, params: ModelParams, n_impacts: int,
+                       as_csv: bool) -> None:
+    """``bounce orbit --min-hop-s 0``: the hybrid orbit of ``engine.chatter`` (impacts,
+    accumulation points of complete chatters, releases), one row per event; ``k`` counts the
+    resolved impacts (a stick or release row carries the k of the impact before it)."""
+    import pandas as pd
+
+    from .engine.chatter import IMPACT, iterate_exact_orbit, locked_period
+
+    orbit = iterate_exact_orbit(theta0, v0, params, n_impacts)
+    w = params.omega
+    frame = pd.DataFrame({
+        "k": np.cumsum(np.asarray(orbit.event, dtype=object) == IMPACT),
+        "t_s": orbit.theta / w, "theta_rad": orbit.theta,
+        "theta_deg": np.degrees(wrap_phase(orbit.theta)), "v_m_s": orbit.v,
+        "flight_s": orbit.flight / w, "event": orbit.event,
+        "chatter_impacts": orbit.chatter_impacts, "tail_error_s": orbit.tail_error_s,
+    })
+    write_orbit_frame(frame, as_csv, f"Exact orbit from theta0 = {math.degrees(theta0):g} "
+                                     f"deg, v0 = {v0:g} m/s", small=("flight_s", "tail_error_s"))
+    for note in orbit_notes_exact(orbit, params, locked_period(orbit)):
+        print(note, file=sys.stderr)
+
+
+def below_racket_note(orbit, params: ModelParams) -> str:
+    """The note of an orbit whose ball cannot leave the racket at its initial condition."""
+    v_r = float(params.racket_velocity(orbit.theta[0]))
+    return (f"note: stopped: the initial velocity {orbit.v[0]:g} m/s is not above the racket's "
+            f"{v_r:.4f} m/s at that phase (below the racket)")
+
+
+def orbit_notes_exact(orbit, params: ModelParams, cycles: int) -> list[str]:
+    """``orbit_notes`` for the hybrid orbit: below the racket, resting, or locked (with its
+    period in racket cycles, the release phase and the Lyapunov exponent -inf)."""
+    notes = []
+    if orbit.stop_reason == "below_racket":
+        notes.append(below_racket_note(orbit, params))
+    elif orbit.stop_reason == "resting":
+        notes.append(
+            f"note: resting: the ball stuck at t = {orbit.theta[-1] / params.omega:.6g} s and "
+            f"is never released (Gamma = a_r w^2 / g = "
+            f"{params.racket_amplitude * params.omega**2 / params.g:.4g} <= 1)")
+    elif cycles > 0:
+        release = orbit.theta[orbit.rows("release")[-1]]
+        notes.append(
+            f"note: locked orbit: period {cycles} racket cycle{'s' if cycles > 1 else ''} "
+            f"(stick, ride, release at {math.degrees(float(wrap_phase(release))):.4f} deg = "
+            f"asin(1/Gamma)); Lyapunov exponent -inf (superstable)")
+    return notes
 
 
 def orbit_notes(orbit, params: ModelParams, min_hop_s: float) -> list[str]:
@@ -588,11 +721,7 @@ def orbit_notes(orbit, params: ModelParams, min_hop_s: float) -> list[str]:
             f"{cos_theta:.4g} > 1): the orbit cannot settle on one"
         )
     if orbit.stop_reason == "below_racket":
-        v_r = float(params.racket_velocity(orbit.theta[0]))
-        notes.append(
-            f"note: stopped: the initial velocity {orbit.v[0]:g} m/s is not above the racket's "
-            f"{v_r:.4f} m/s at that phase (below the racket)"
-        )
+        notes.append(below_racket_note(orbit, params))
     elif orbit.stop_reason == "sticking":
         k = len(orbit.theta) - 1
         notes.append(
@@ -702,6 +831,8 @@ def add_experiment_command(entry: Entry) -> None:
         manifest: Optional[Path] = None,
         resume: ResumeOption = False,
         scheduler: SchedulerOption = None,
+        figure_format: FigureFormatOption = None,
+        dpi: DpiOption = FIGURE_DPI,
     ) -> None:
         overrides = list(overrides or [])
         for key, path in (("data", data), ("events", events), ("manifest", manifest)):
@@ -709,17 +840,18 @@ def add_experiment_command(entry: Entry) -> None:
                 overrides.append(f"{key}={json.dumps(str(path))}")
         run_experiment(entry, config=config, overrides=overrides, out=out, quiet=quiet,
                        force=force, print_config=print_config, jobs=jobs, resume=resume,
-                       scheduler=scheduler)
+                       scheduler=scheduler, figure_formats=tuple(figure_format or ["png"]),
+                       dpi=dpi)
 
     # the signature typer reads: annotations resolved, file options only where declared,
-    # --resume and --scheduler only for the experiments that take them
+    # --jobs, --resume and --scheduler only for the experiments that take them
     hints = typing.get_type_hints(command, include_extras=True)
     file_options = {"data": entry.data_help, "events": entry.events_help,
                     "manifest": entry.manifest_help}
     for key, help_text in file_options.items():
         hints[key] = Annotated[Optional[Path], typer.Option(f"--{key}", help=help_text)]
     declared = {**{k: v is not None for k, v in file_options.items()},
-                "resume": entry.resumable, "scheduler": entry.cluster}
+                "resume": entry.resumable, "scheduler": entry.cluster, "jobs": entry.parallel}
     params = [p.replace(annotation=hints[p.name])
               for p in inspect.signature(command).parameters.values()
               if declared.get(p.name, True)]

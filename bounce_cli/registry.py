@@ -27,7 +27,8 @@ class Entry:
     key ``events``). ``needs_fixed_point``: the run is about the period-1
     fixed point, so the CLI warns when it is unstable. ``reproduce``: part of
     ``bounce reproduce`` and of the committed ``results/``. ``resumable``: the command takes
-    ``--resume`` (the run keeps finished tasks in ``RunOptions.checkpoints``); ``cluster``:
+    ``--resume`` (the run keeps finished tasks in ``RunOptions.checkpoints``); ``parallel``:
+    it takes ``--jobs N`` (its tasks run on N local workers); ``cluster``:
     it takes ``--scheduler ADDRESS`` (its tasks can run on a Dask cluster). ``attribute``:
     the module's attribute holding the :class:`Experiment` (one module may define several).
     ``manifest_help``: the command takes ``--manifest FILE`` (config key ``manifest``);
@@ -43,6 +44,7 @@ class Entry:
     needs_fixed_point: bool = True
     reproduce: bool = True
     resumable: bool = False
+    parallel: bool = False
     cluster: bool = False
     module: str = ""
     config: str = ""
@@ -78,6 +80,7 @@ EXPERIMENTS: tuple[Entry, ...] = (
           "white period-1, grey sticking, black below the racket."),
          ("basin_iterations.png", "Section 3: number of impacts until each initial condition "
           "was classified.")),
+        parallel=True,
     ),
     Entry(
         "stability",
@@ -186,6 +189,15 @@ EXPERIMENTS: tuple[Entry, ...] = (
         needs_fixed_point=False,
     ),
     Entry(
+        "continuation",
+        "Periodic orbits continued in one parameter; flips, folds and grazings located.",
+        (("continuation.png", "Beyond the paper (eqs. 5, 6, 8, 14): periodic orbits followed by "
+          "pseudo-arclength continuation over Gamma at alpha 0.5 (the period-doubling cascade "
+          "to period 32, the orbit hopping two racket cycles) over the brute-force bifurcation "
+          "diagram, flips, folds and grazings marked; the largest multiplier below."),),
+        needs_fixed_point=False,
+    ),
+    Entry(
         "control",
         "Racket period as a third state (active period control, sections 7-8's future work).",
         (("control_stability.png", "Sections 7-8 (future work): spectral radius of the map "
@@ -208,7 +220,7 @@ EXPERIMENTS: tuple[Entry, ...] = (
         (("sweep.png", "Beyond the paper (section 3's basin over section 4's plane): at each "
           "(alpha, AC) the basin's outcome fractions, the fixed point's spectral radius (eq. "
           "10), the basin entropy and boundary basin entropy; dashed: spectral radius 1."),),
-        needs_fixed_point=False, resumable=True, cluster=True,
+        needs_fixed_point=False, resumable=True, parallel=True, cluster=True,
     ),
     Entry(
         "simulate-study",

@@ -33,7 +33,7 @@ from ..engine.stochastic import (
     stationary_sds,
     var1_theory,
 )
-from ..plotting import caption_figures, data_caption, new_figure
+from ..plotting import caption_figures, data_caption, integer_axis, new_figure, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 from .data_side import AcfDataBlock
 
@@ -345,13 +345,16 @@ def summary_frame(config: AcfConfig, theory, theory_map, dv, dtheta) -> pd.DataF
 #: panel layout of Fig. 8: (row, column) -> pair
 PANELS = {(0, 0): "v_v", (0, 1): "theta_to_v", (1, 0): "v_to_theta", (1, 1): "theta_theta"}
 TITLES = {
-    "v_v": "ACF of velocity: corr(v[k+l], v[k])",
-    "theta_to_v": "phase -> velocity: corr(v[k+l], theta[k])",
-    "v_to_theta": "velocity -> phase: corr(theta[k+l], v[k])",
-    "theta_theta": "ACF of phase: corr(theta[k+l], theta[k])",
+    "v_v": r"ACF of velocity: corr($v_{k+l}$, $v_k$)",
+    "theta_to_v": r"phase $\to$ velocity: corr($v_{k+l}$, $\theta_k$)",
+    "v_to_theta": r"velocity $\to$ phase: corr($\theta_{k+l}$, $v_k$)",
+    "theta_theta": r"ACF of phase: corr($\theta_{k+l}$, $\theta_k$)",
 }
+#: the x axis of every correlation panel (Fig. 8, with data, with control)
+LAG_LABEL = "lag $l$ (bounces)"
 
 
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     if "acf_data.csv" in frames:
         return draw_data(frames)
@@ -363,10 +366,10 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         lag = d["lag"].to_numpy()
         ax.axhline(0, color="0.7", lw=0.8)
         ax.fill_between(lag, d["trial_mean"] - d["trial_sd"], d["trial_mean"] + d["trial_sd"],
-                        color="0.85", label="simulated trials, mean +- SD")
+                        color="0.85", label=r"simulated trials, mean $\pm$ SD")
         ax.plot(lag, d["trial_mean"], color="0.55", lw=1.2)
         ax.errorbar(lag, d["sample_mean"], yerr=d["sample_sd"], fmt="x", color="k", ms=7,
-                    capsize=2, lw=0.8, label="sample, long runs (mean +- SD)")
+                    capsize=2, lw=0.8, label=r"sample, long runs (mean $\pm$ SD)")
         ax.plot(lag, d["theory"], "o", mfc="none", mec="k", ms=9,
                 label="theory eq. 19 (diagonal noise)")
         if not np.allclose(d["theory"], d["theory_map"], atol=5e-3):
@@ -375,8 +378,9 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         ax.set_ylim(-1.05, 1.05)
         ax.set_title(TITLES[pair], fontsize=10)
         ax.set_ylabel("correlation")
+        integer_axis(ax)
         if r == 1:
-            ax.set_xlabel("lag l (bounces)")
+            ax.set_xlabel(LAG_LABEL)
     handles: dict[str, Any] = {}
     for ax in axes.flat:
         for handle, label in zip(*ax.get_legend_handles_labels()):
@@ -388,7 +392,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     if summary is not None:
         indexed = summary.set_index(["quantity", "source"])
         s, quoted = indexed["ours"], indexed["paper"]
-        title += (f"\nSD theory (eq. 19): v {s['sd_v', 'theory_eq19']:.3f} m/s, theta "
+        title += (f"\nSD theory (eq. 19): $v$ {s['sd_v', 'theory_eq19']:.3f} m/s, $\\theta$ "
                   f"{s['sd_theta', 'theory_eq19']:.1f} deg")
         if np.isfinite(quoted["sd_v", "theory_eq19"]):  # only at the paper's parameters
             title += (f" (paper {quoted['sd_v', 'theory_eq19']:g}, "
@@ -409,6 +413,7 @@ def run_data(config: AcfConfig, options: RunOptions, source=None) -> ExperimentR
     return ExperimentResult(frames=frames, figures=figures, summary=lines)
 
 
+@publication_style
 def draw_data(frames: dict[str, pd.DataFrame]) -> dict:
     from .data_side import acf_data_draw
 

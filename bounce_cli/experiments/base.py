@@ -18,9 +18,11 @@ What an experiment must provide (as scipy's ``OdeSolver`` documents what a solve
     are raised as ``ConfigError`` or ``ModelError`` with one line naming the key or file.
 ``draw(frames) -> dict[str, Figure]``
     Every figure of the run, drawn from the DataFrames ``run`` returned (or read back from the
-    CSVs): a figure can always be redrawn from its data. ``run`` builds its figures by calling
-    ``draw`` on its own frames, then adds the parameters it ran at to their titles
-    (:func:`bounce_cli.plotting.caption_figures`), so that two runs' figures can be told apart.
+    CSVs): a figure can always be redrawn from its data. ``draw`` is decorated with
+    :func:`bounce_cli.plotting.publication_style` (the one style of every figure). ``run``
+    builds its figures by calling ``draw`` on its own frames, then records the parameters it
+    ran at as their caption (:func:`bounce_cli.plotting.caption_figures`), which goes into
+    each figure file's metadata (not its title), so that two runs' figures can be told apart.
 
 The paper's values come from :mod:`bounce_cli.paper` (never literals in an experiment), and a
 summary line or CSV column states one only where the run is at the paper's parameters

@@ -6,8 +6,10 @@ a transient is discarded, and the impacts after it are recorded. Each orbit's at
 (``period<p>`` in the wrapped phase, ``chaotic``, ``sticking``, ...) and its largest Lyapunov
 exponent (the map's Jacobian at every impact, by implicit differentiation of eqs. 5, 6) come
 from ``engine.bifurcation`` and ``engine.lyapunov``. The figure draws the period-1 orbit's
-existence threshold (eq. 8) and flip threshold (eq. 14) from the closed forms; the flip is
-also located on the map itself, by multisection on the detected period, and compared.
+existence threshold (the fold, eq. 8) and flip threshold (eq. 14) where continuation locates
+them (``engine.continuation``, exact to rounding), with the closed forms beside them in
+``thresholds.csv``; the flip is also located by brute force on the map's iterated orbits, by
+multisection on the detected period, and compared.
 """
 
 from __future__ import annotations
@@ -35,12 +37,13 @@ from ..engine.bifurcation import (
     period1_thresholds,
     sweep_parameters,
 )
-from ..plotting import caption_figures
+from ..engine.continuation import continued_period1_thresholds
+from ..plotting import caption_figures, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
 Parameter = Literal["gamma", "racket_amplitude", "racket_period", "alpha"]
 #: outcomes that are not an attractor of the map (the orbit ends)
-NOT_ATTRACTORS = ("sticking", "below_racket")
+NOT_ATTRACTORS = ("sticking", "below_racket", "resting")
 
 
 class SweepBlock(StrictModel):
@@ -153,6 +156,8 @@ def run(config: BifurcationConfig, options: RunOptions) -> ExperimentResult:
         "lyapunov_per_impact": orbits.lyapunov,
         "stuck_at_impact": orbits.stuck_at,
     })
+    if orbits.locked_cycles is not None:  # exact sticking: the locked orbits' periods
+        attractors["locked_cycles"] = orbits.locked_cycles
     recorded = np.isfinite(orbits.v[:, 0])
     n_rec = settings.recorded_impacts
     bifurcation = pd.DataFrame({
@@ -241,6 +246,12 @@ def threshold_frame(config: BifurcationConfig, per_value: pd.DataFrame, periods:
                 rows.append(dict(threshold=kind, cycles=cycles, equation=equation,
                                  closed_form=value))
     table = pd.DataFrame(rows)
+    # the thresholds located by continuation (engine.continuation): the fold where the orbit
+    # is born and its flip, exact to rounding; the figure draws its lines there
+    continued = {cycles: continued_period1_thresholds(base, sweep.parameter, cycles)
+                 for cycles in sorted(set(table.cycles))}
+    table["continuation"] = [continued[c][0 if kind == "existence" else 1]
+                             for kind, c in zip(table.threshold, table.cycles)]
     for name in ("located", "located_period1_end", "located_period2_end", "relative_difference"):
         table[name] = math.nan
 
@@ -249,8 +260,10 @@ def threshold_frame(config: BifurcationConfig, per_value: pd.DataFrame, periods:
             match = (table.threshold == "flip") & (table.cycles == loc.cycles)
             if not match.any():
                 th = period1_thresholds(base, sweep.parameter, loc.cycles)
-                table.loc[len(table)] = dict(threshold="flip", cycles=loc.cycles,
-                                             equation="eq. 14", closed_form=th.flip)
+                table.loc[len(table)] = dict(
+                    threshold="flip", cycles=loc.cycles, equation="eq. 14", closed_form=th.flip,
+                    continuation=continued_period1_thresholds(base, sweep.parameter,
+                                                              loc.cycles)[1])
                 match = (table.threshold == "flip") & (table.cycles == loc.cycles)
             table.loc[match, "located"] = loc.value
             table.loc[match, "located_period1_end"] = loc.period1_end
@@ -266,8 +279,8 @@ def threshold_frame(config: BifurcationConfig, per_value: pd.DataFrame, periods:
         table.loc[len(table)] = dict(threshold=name, cycles=0, equation="",
                                      closed_form=math.nan, located=onset)
     return table.rename(columns={c: f"{c}_{column}" for c in
-                                 ("closed_form", "located", "located_period1_end",
-                                  "located_period2_end")})
+                                 ("closed_form", "continuation", "located",
+                                  "located_period1_end", "located_period2_end")})
 
 
 ONSET_TEXT = {
@@ -326,7 +339,8 @@ def summary_lines(thresholds: pd.DataFrame, per_value: pd.DataFrame, column: str
         elif np.isfinite(located):
             lines.append(f"flip of the period-1 orbit ({row.cycles} cycle(s) per hop): located "
                          f"{column} = {located:.6g}, eq. 14 {closed:.6g}, relative difference "
-                         f"{row.relative_difference:+.2e}")
+                         f"{row.relative_difference:+.2e}; continuation "
+                         f"{rec[f'continuation_{column}']:.10g}")
     counts = per_value.attractors.str.split("+").explode().value_counts()
     lines.append("attractors found (values where each occurs): "
                  + ", ".join(f"{name} {n}" for name, n in counts.items()))
@@ -344,6 +358,7 @@ def _runs(mask: np.ndarray):
     return list(zip(edges[::2], edges[1::2] - 1))
 
 
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     """bifurcation.png: v after impact against the swept parameter with the closed-form
     thresholds, and the Lyapunov exponents below; from the CSVs alone."""
@@ -357,26 +372,47 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     fig, axes = new_figure(2, 1, width=8.0, height=7.5, sharex=True,
                            gridspec_kw=dict(height_ratios=[2.2, 1]))
     top, bottom = axes[0, 0], axes[1, 0]
-    top.plot(bif[column], bif["v_m_s"], ",", color="black", alpha=0.6, rasterized=True)
+    exact = "locked_cycles" in attractors  # exact sticking (min_hop_s 0)
+    on_locked = np.zeros(len(bif), dtype=bool)
+    if exact:
+        locked = attractors.loc[attractors.attractor == "locked", [column, "initial_condition"]]
+        on_locked = pd.MultiIndex.from_frame(bif[[column, "initial_condition"]]).isin(
+            pd.MultiIndex.from_frame(locked))
+    top.plot(bif.loc[~on_locked, column], bif.loc[~on_locked, "v_m_s"], ",", color="black",
+             alpha=0.6, rasterized=True)
+    if on_locked.any():
+        top.plot(bif.loc[on_locked, column], bif.loc[on_locked, "v_m_s"], ",", color="tab:blue",
+                 alpha=0.8, rasterized=True,
+                 label="locked orbits (exact sticking): resolved impacts of a period")
 
     x = per_value[column].to_numpy()
     half_step = abs(x[1] - x[0]) / 2 if x.size > 1 else 0.0
-    all_stick = (per_value["n_sticking"] == per_value["n_initial_conditions"]).to_numpy()
+    if exact:  # where every initial condition locks: today's grey bands, now resolved
+        n_locked = attractors.groupby(column, sort=False)["attractor"].agg(
+            lambda s: int((s == "locked").sum())).reindex(x).to_numpy()
+        all_stick = n_locked == per_value["n_initial_conditions"].to_numpy()
+        band = "every initial condition locks (sticks and is released each period)"
+    else:
+        all_stick = (per_value["n_sticking"] == per_value["n_initial_conditions"]).to_numpy()
+        band = "every initial condition sticks"
     for k, (a, b) in enumerate(_runs(all_stick)):
         for ax in (top, bottom):
-            ax.axvspan(min(x[a], x[b]) - half_step, max(x[a], x[b]) + half_step, color="0.88",
-                       lw=0,
-                       label="every initial condition sticks" if (k, ax) == (0, top) else None)
+            ax.axvspan(min(x[a], x[b]) - half_step, max(x[a], x[b]) + half_step,
+                       color="#e3ecf7" if exact else "0.88", lw=0,
+                       label=band if (k, ax) == (0, top) else None)
 
     labelled: set = set()
     for row in thresholds[thresholds.threshold.isin(["existence", "flip"])].itertuples():
-        value = getattr(row, f"closed_form_{column}")
+        # at the continuation's threshold (the closed form's where it located none)
+        value = getattr(row, f"continuation_{column}")
+        if not np.isfinite(value):
+            value = getattr(row, f"closed_form_{column}")
         if not np.isfinite(value):
             continue
         paper_orbit = row.cycles == 1
         verb = "exists" if row.threshold == "existence" else "flips"
-        text = (f"period-1 orbit {verb} ({row.equation})" if paper_orbit else
-                f"period-1 orbit hopping n >= 2 racket cycles {verb}")
+        text = (f"period-1 orbit {verb} (continuation; {row.equation})" if paper_orbit else
+                f"period-1 orbit hopping $n \\geq 2$ racket cycles {verb}")
         label: str | None = None if text in labelled else text
         labelled.add(text)
         for ax in (top, bottom):
@@ -391,10 +427,15 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     top.set_ylabel(r"ball velocity after impact $v_k$ (m/s)")
     top.set_title("Bifurcation diagram of the ball bouncing map (eqs. 5, 6)")
 
-    ok = attractors["lyapunov_per_impact"].notna()
+    ok = np.isfinite(attractors["lyapunov_per_impact"])
     bottom.plot(attractors.loc[ok, column], attractors.loc[ok, "lyapunov_per_impact"], ".",
                 ms=1.5, color="0.4", label="largest Lyapunov exponent of each orbit",
                 rasterized=True)
+    superstable = np.isneginf(attractors["lyapunov_per_impact"])
+    if superstable.any():  # -inf: drawn on the panel's lower edge
+        bottom.plot(attractors.loc[superstable, column], np.zeros(int(superstable.sum())), "v",
+                    ms=2.5, color="tab:blue", transform=bottom.get_xaxis_transform(),
+                    clip_on=False, label="locked orbit: exponent -inf (superstable)")
     log_radius = per_value["ln_spectral_radius_eq10"].where(
         per_value["ln_spectral_radius_eq10"] <= 0.0)
     bottom.plot(x, log_radius, color="tab:green", lw=1.2,

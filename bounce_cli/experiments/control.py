@@ -55,6 +55,16 @@ from ..engine.control import (
     predicted_deviations,
     simulate_perturbation_trials,
 )
+from .. import paper
+from ..plotting import (
+    IMPACT_AFTER_LABEL,
+    PHASE_LABEL,
+    VELOCITY_LABEL,
+    integer_axis,
+    perturbation_title,
+    publication_style,
+)
+from .acf import LAG_LABEL, PANELS, TITLES
 from .base import Experiment, ExperimentResult, RunOptions
 from .basin import OUTCOME_COLOURS, OUTCOME_LABELS, GridAxis
 from .impulse import RelaxationBlock, ThresholdBlock
@@ -577,6 +587,45 @@ def _fmt(x: float) -> str:
 
 
 # -- figures --------------------------------------------------------------------------------------
+def passive_model(frames: dict[str, pd.DataFrame]) -> ModelParams:
+    """The model a run was made at, recovered from its tables alone (a figure is drawn from
+    its CSVs): tau from the passive impulse response's racket period, g from v~ = g tau / 2
+    (eq. 7), alpha from the passive Jacobian's determinant alpha^2 (eq. 9: the product of the
+    eigenvalues of eq. 10 is alpha^2), and a_r from theta~ (eq. 8: cos theta~ is inversely
+    proportional to a_r at the other parameters).
+
+    Parameters
+    ----------
+    frames : dict of DataFrame
+        The run's tables; ``impulse.csv`` and ``eigen.csv`` are read.
+
+    Returns
+    -------
+    ModelParams
+        alpha, g, racket amplitude and period, to within the tables' rounding.
+    """
+    impulse = frames["impulse.csv"]
+    row = impulse[(impulse.model == "passive") & (impulse.k == 0)].iloc[0]
+    tau = float(row.racket_period_s)
+    g = 2.0 * float(row.v_m_s - row.dv_m_s) / tau
+    eig = frames["eigen.csv"].set_index("model").loc["passive"]
+    alpha = math.sqrt(abs(complex(eig.lambda1_re, eig.lambda1_im)
+                          * complex(eig.lambda2_re, eig.lambda2_im)))
+    theta = math.radians(float(row.theta_deg - row.dtheta_deg))
+    amplitude = ModelParams(alpha, g, 1.0, tau).cos_theta_fixed() / math.cos(theta)
+    return ModelParams(alpha, g, amplitude, tau)
+
+
+def at_section7(frames: dict[str, pd.DataFrame]) -> bool:
+    """Whether the run's model (:func:`passive_model`) is section 7's (the paper's Figs. 3, 9
+    parameters) to 1e-6: only there are the subject's numbers (Fig. 9: about one impact to
+    relax, eigenvalues below 0.2) references for the figure."""
+    model = passive_model(frames)
+    return all(math.isclose(getattr(model, name), getattr(paper.FIG3_MODEL, name), rel_tol=1e-6)
+               for name in ("alpha", "g", "racket_amplitude", "racket_period"))
+
+
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     return {"control_stability.png": draw_stability(frames),
             "control_impulse.png": draw_impulse(frames),
@@ -589,30 +638,27 @@ def draw_acf(frames):
     from ..plotting import new_figure
 
     df = frames["acf.csv"]
-    panels = {(0, 0): ("v_v", "ACF of velocity: corr(v[k+l], v[k])"),
-              (0, 1): ("theta_to_v", "phase -> velocity: corr(v[k+l], theta[k])"),
-              (1, 0): ("v_to_theta", "velocity -> phase: corr(theta[k+l], v[k])"),
-              (1, 1): ("theta_theta", "ACF of phase: corr(theta[k+l], theta[k])")}
     fig, axes = new_figure(2, 2, width=11.0, height=7.5, sharex=True)
     first = df.iloc[0]
-    for (r, c), (pair, title) in panels.items():
+    for (r, c), pair in PANELS.items():
         ax = axes[r, c]
         d = df[df.pair == pair].sort_values("lag")
         ax.plot(d.lag, d.passive_theory, "o-", color="0.6", ms=4,
-                label=f"passive, eq. 19 (SD v {first.passive_sd_v_m_s:.3f} m/s, "
-                      f"theta {first.passive_sd_theta_deg:.2f} deg)")
+                label=f"passive, eq. 19 (SD $v$ {first.passive_sd_v_m_s:.3f} m/s, "
+                      f"$\\theta$ {first.passive_sd_theta_deg:.2f} deg)")
         ax.plot(d.lag, d.controlled_theory, "o-", color="k", ms=4,
-                label=f"controlled, eq. 19 with the 3x3 Jacobian (SD v "
-                      f"{first.controlled_sd_v_m_s:.3f} m/s, theta "
+                label=f"controlled, eq. 19 with the 3$\\times$3 Jacobian (SD $v$ "
+                      f"{first.controlled_sd_v_m_s:.3f} m/s, $\\theta$ "
                       f"{first.controlled_sd_theta_deg:.2f} deg)")
         ax.errorbar(d.lag, d.controlled_sample_mean, yerr=2 * d.controlled_sample_se, fmt="x",
                     color="tab:red", ms=6, label=f"controlled map, {int(first.runs)} runs "
-                    "(+-2 SE)")
+                    r"($\pm$2 SE)")
         ax.axhline(0.0, color="k", lw=0.6)
-        ax.set_title(title, fontsize=10)
+        ax.set_title(TITLES[pair], fontsize=10)
         ax.set_ylabel("correlation")
+        integer_axis(ax)
     for ax in axes[1]:
-        ax.set_xlabel("lag l (bounces)")
+        ax.set_xlabel(LAG_LABEL)
     axes[0, 0].legend(fontsize=7)
     fig.suptitle("Correlation functions (paper Fig. 8) without and with racket period control, "
                  "at the config's model")
@@ -629,8 +675,8 @@ def _radius_image(ax, frame: pd.DataFrame, target: float, levels_extra=(0.5,)):
     ax.contour(gains, rates, radius, levels=[target], colors="w", linewidths=1.4)
     ax.contour(gains, rates, radius, levels=list(levels_extra), colors="w", linewidths=0.8,
                linestyles=":")
-    ax.set_xlabel("gain K (1: the period follows the ball's flight time)")
-    ax.set_ylabel("rate c (per impact; 1: immediate)")
+    ax.set_xlabel("gain $K$ (1: the period follows the ball's flight time)")
+    ax.set_ylabel("rate $c$ (per impact; 1: immediate)")
     return im
 
 
@@ -645,7 +691,7 @@ def _controller_markers(ax, eigen: pd.DataFrame, window=None):
             if not (k0 <= row.gain_K <= k1 and c0 <= row.rate_c <= c1):
                 continue
         ax.plot(row.gain_K, row.rate_c, marker, ms=10 if marker == "*" else 7, mfc=colour,
-                mec="k", label=f"{label}: K = {row.gain_K:.3f}, c = {row.rate_c:.3f}, "
+                mec="k", label=f"{label}: $K$ = {row.gain_K:.3f}, $c$ = {row.rate_c:.3f}, "
                 f"radius {row.spectral_radius:.3f}")
 
 
@@ -659,27 +705,30 @@ def draw_stability(frames):
     fig, axes = new_figure(2, 2, width=13.0, height=10.5)
     im = _radius_image(axes[0, 0], grid, target)
     _controller_markers(axes[0, 0], eigen)
-    axes[0, 0].set_title(f"Spectral radius over (K, c); white: {target:g}, dotted: 0.5")
+    axes[0, 0].set_title(f"Spectral radius over ($K$, $c$); white: {target:g}, dotted: 0.5")
     axes[0, 0].legend(fontsize=7, loc="lower left")
     _radius_image(axes[0, 1], zoom, target, levels_extra=(0.25, 0.3))
     window = ((zoom.gain_K.min(), zoom.gain_K.max()), (zoom.rate_c.min(), zoom.rate_c.max()))
     _controller_markers(axes[0, 1], eigen, window)
     axes[0, 1].set_title(f"Around the fastest: white {target:g}, dotted 0.25, 0.3")
     axes[0, 1].legend(fontsize=7, loc="lower left")
-    fig.colorbar(im, ax=axes[0, :], label="spectral radius of the 3x3 Jacobian "
-                 "(grey: >= 1, not stable)", shrink=0.9)
+    fig.colorbar(im, ax=axes[0, :], label="spectral radius of the 3$\\times$3 Jacobian "
+                 r"(grey: $\geq 1$, not stable)", shrink=0.9)
 
     ax = axes[1, 0]
     rate = line.rate_c.iloc[0]
     passive = float(eigen.set_index("model").loc["passive", "spectral_radius"])
-    ax.plot(line.gain_K, line.spectral_radius, "k-", label=f"c = {rate:g}")
-    ax.axhline(passive, color="0.5", ls="--", label=f"passive K = 0: {passive:.2f} (eq. 10)")
-    ax.axhline(target, color="tab:red", ls=":", label=f"data: < {target:g} (section 7)")
+    section7 = at_section7(frames)  # the subject's numbers are references there only
+    ax.plot(line.gain_K, line.spectral_radius, "k-", label=f"$c$ = {rate:g}")
+    ax.axhline(passive, color="0.5", ls="--", label=f"passive $K$ = 0: {passive:.2f} (eq. 10)")
+    ax.axhline(target, color="tab:red", ls=":",
+               label=f"data: < {target:g} (section 7)" if section7
+               else f"target {target:g} (radius.target_radius)")
     ax.axhline(1.0, color="k", lw=0.6)
     ax.set_ylim(0.0, 1.5)
-    ax.set_xlabel("gain K")
+    ax.set_xlabel("gain $K$")
     ax.set_ylabel("spectral radius")
-    ax.set_title(f"Linear: spectral radius along K at c = {rate:g}")
+    ax.set_title(f"Linear: spectral radius along $K$ at $c$ = {rate:g}")
     ax.legend(fontsize=8)
 
     ax = axes[1, 1]
@@ -687,12 +736,13 @@ def draw_stability(frames):
     for i, (alpha_p, part) in enumerate(relax.groupby("alpha_p")):
         n = part.relaxation_impacts.where(part.relaxation_impacts >= 0)
         ax.plot(part.gain_K, n, ["-o", "-s", "--^", "--D"][i % 4], ms=3,
-                label=f"alpha_p = {alpha_p:g}")
-    ax.axhline(1.0, color="tab:red", ls=":", label="the subject: about 1 impact (Fig. 9)")
+                label=f"$\\alpha_p$ = {alpha_p:g}")
+    if section7:
+        ax.axhline(1.0, color="tab:red", ls=":", label="the subject: about 1 impact (Fig. 9)")
     ax.set_yscale("log")
-    ax.set_xlabel("gain K")
+    ax.set_xlabel("gain $K$")
     ax.set_ylabel("impacts to relax (full map; missing: never)")
-    ax.set_title(f"Full map: section 7's perturbations along K at c = {rate:g}")
+    ax.set_title(f"Full map: perturbations along $K$ at $c$ = {rate:g}")
     ax.legend(fontsize=8)
     return fig
 
@@ -714,9 +764,9 @@ def draw_impulse(frames):
         for i, alpha_p in enumerate(group):
             for model in MODELS:
                 d = df[(df.alpha_p == alpha_p) & (df.model == model)].sort_values("k")
-                label = f"{model}, alpha_p = {alpha_p:g}"
+                label = f"{model}, $\\alpha_p$ = {alpha_p:g}"
                 if outcome.get((model, alpha_p), "period1") != "period1":
-                    label += f" ({outcome[(model, alpha_p)]})"
+                    label += f" ({outcome[(model, alpha_p)].replace('_', ' ')})"
                 kw = dict(styles[model], marker=markers[i % 4], ms=4,
                           ls="-" if i == 0 else "--", label=label)
                 axes[0, col].plot(d.k, d.v_m_s, **kw)
@@ -725,15 +775,14 @@ def draw_impulse(frames):
         axes[0, col].axhline(v_st, color="k", lw=0.8, ls=":")
         axes[1, col].axhline(th_st, color="k", lw=0.8, ls=":")
         axes[2, col].axhline(0.0, color="k", lw=0.8, ls=":")
-        axes[0, col].set_title(f"alpha_p {'<' if col == 0 else '>'} alpha_0")
-        axes[2, col].set_xlabel("impact k after the perturbation (0 = perturbed impact)")
+        axes[0, col].set_title(perturbation_title(col == 0))
+        axes[2, col].set_xlabel(IMPACT_AFTER_LABEL)
+        integer_axis(*axes[:, col])
         if group:
             axes[0, col].legend(fontsize=7)
-    axes[0, 0].set_ylabel("velocity after impact v_k (m/s)")
-    axes[1, 0].set_ylabel("phase of impact theta_k (deg)")
-    axes[2, 0].set_ylabel("racket period - tau_bar (ms)")
-    for ax in axes[1]:
-        ax.set_ylim(th_st - 180.0, th_st + 180.0)  # wrapped to theta~ +- 180 deg
+    axes[0, 0].set_ylabel(VELOCITY_LABEL)
+    axes[1, 0].set_ylabel(PHASE_LABEL)  # theta~ + the wrapped difference, axis fitted to it
+    axes[2, 0].set_ylabel(r"racket period $-\ \bar\tau$ (ms)")
     fig.suptitle("Impulse responses, passive (grey) vs period control (black): paper Fig. 9 "
                  "with the model's Fig. 11 (bottom)")
     return fig
@@ -775,9 +824,9 @@ def draw_fit(frames):
 
     curves, fit = frames["fit_responses.csv"], frames["fit.csv"].set_index("quantity")
     fig, axes = new_figure(1, 3, width=13.0, height=4.2, sharex=True)
-    columns = (("dv_m_s", "se_v_m_s", "fit_dv_m_s", "v_k - mean (m/s)"),
-               ("dtheta_deg", "se_theta_deg", "fit_dtheta_deg", "theta_k - mean (deg)"),
-               ("dtau_ms", "se_tau_ms", "fit_dtau_ms", "racket period - mean (ms)"))
+    columns = (("dv_m_s", "se_v_m_s", "fit_dv_m_s", "$v_k$ $-$ mean (m/s)"),
+               ("dtheta_deg", "se_theta_deg", "fit_dtheta_deg", r"$\theta_k$ $-$ mean (deg)"),
+               ("dtau_ms", "se_tau_ms", "fit_dtau_ms", "racket period $-$ mean (ms)"))
     colours = {"decrease": "0.55", "increase": "k"}
     for ax, (mean, se, model, label) in zip(axes[0], columns):
         for direction, part in curves.groupby("direction"):
@@ -786,17 +835,18 @@ def draw_fit(frames):
                         label=f"{direction} ({int(part.events.iloc[0])} perturbations)")
             ax.plot(part.k, part[model], "-", color=c, lw=1, label=f"fit, {direction}")
         ax.axhline(0.0, color="k", lw=0.6, ls=":")
-        ax.set_xlabel("impact k after the perturbation")
+        ax.set_xlabel(IMPACT_AFTER_LABEL)
         ax.set_ylabel(label)
+        integer_axis(ax)
     axes[0, 0].legend(fontsize=7)
     source = fit.source.iloc[0]
     k, c = fit.loc["gain_K"], fit.loc["rate_c"]
-    title = (f"Fit to {source} perturbation trials: K = {k.estimate:.3f} "
-             f"[{k.ci_low:.3f}, {k.ci_high:.3f}], c = {c.estimate:.3f} "
+    title = (f"Fit to {source} perturbation trials: $K$ = {k.estimate:.3f} "
+             f"[{k.ci_low:.3f}, {k.ci_high:.3f}], $c$ = {c.estimate:.3f} "
              f"[{c.ci_low:.3f}, {c.ci_high:.3f}], spectral radius "
              f"{fit.loc['spectral_radius', 'estimate']:.3f}")
     if source == "simulated":
-        title += f" (truth K = {k.truth:g}, c = {c.truth:g})"
+        title += f" (truth $K$ = {k.truth:g}, $c$ = {c.truth:g})"
     fig.suptitle(title, fontsize=10)
     return fig
 

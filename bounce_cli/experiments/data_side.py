@@ -34,7 +34,7 @@ from ..engine.data_stats import (
 from ..engine.racket_inputs import INPUT_COEFFICIENTS, racket_input_jacobian
 from ..engine.var_fit import EIGEN_QUANTITIES, J_ENTRIES, Var1Fit, fit_var1
 from ..impacts import Impacts, ImpactsSource, circular_mean, read_impacts
-from ..plotting import new_figure
+from ..plotting import IMPACT_AFTER_LABEL, integer_axis, new_figure, perturbation_title
 from ..setup_table import SETUP_FILE, read_setup
 
 MODEL_COLUMNS = ("racket_period_s", "racket_amplitude_m")
@@ -559,7 +559,7 @@ def trust_frame(params, q_v, q_theta, config, segments, options,
 
 
 def acf_data_draw(frames: dict[str, pd.DataFrame]) -> dict:
-    from .acf import PANELS, TITLES  # Fig. 8's layout, shared with the model's side
+    from .acf import LAG_LABEL, PANELS, TITLES  # Fig. 8's layout, shared with the model's side
 
     acf = frames["acf_data.csv"]
     fig, axes = new_figure(2, 2, width=10, height=7.5, sharex=True)
@@ -568,14 +568,16 @@ def acf_data_draw(frames: dict[str, pd.DataFrame]) -> dict:
         d = acf[acf["pair"] == pair].sort_values("lag")
         ax.axhline(0, color="0.8", lw=0.8)
         ax.errorbar(d["lag"], d["data_mean"], yerr=d["data_sd"].fillna(0), color="0.5", lw=1.5,
-                    capsize=3, label=f"data: mean +- SD over {int(d['data_trials'].iloc[0])} runs")
+                    capsize=3,
+                    label=f"data: mean $\\pm$ SD over {int(d['data_trials'].iloc[0])} runs")
         ax.plot(d["lag"], d["theory"], "o", mfc="none", mec="k", ms=9,
                 label="model, eq. 19 at the data's parameters")
         ax.set_ylim(-1.05, 1.05)
         ax.set_title(TITLES[pair], fontsize=10)
         ax.set_ylabel("correlation")
+        integer_axis(ax)
         if r == 1:
-            ax.set_xlabel("lag l (bounces)")
+            ax.set_xlabel(LAG_LABEL)
     handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncol=2, fontsize=9)
     fig.suptitle("Fig. 8 with data: correlation functions of the data (grey) and eq. 19 (circles)")
@@ -592,13 +594,17 @@ def _stability_figure(stab: pd.DataFrame, trust: pd.DataFrame | None):
     s = stab.set_index(["quantity", "source"])
     styles = {"model_eq10": ("o", "k"), "ols": ("s", "tab:blue"), "lag2": ("D", "tab:red"),
               "varx_ols": ("P", "tab:cyan"), "varx_lag2": ("X", "tab:orange")}
+    names = {"model_eq10": "model (eq. 10)", "ols": "VAR(1), OLS", "lag2": "VAR(1), lag 2",
+             "varx_ols": "VARX (racket inputs), OLS", "varx_lag2": "VARX (racket inputs), lag 2"}
     sources = [src for src in dict.fromkeys(stab["source"]) if src.split("+")[0] in styles]
     t = np.linspace(0, 2 * np.pi, 200)
     ax.plot(np.cos(t), np.sin(t), color="0.8", lw=0.8)
     for src in sorted(sources, key=lambda x: x == "model_eq10"):  # the model on top
         marker, colour = styles[src.split("+")[0]]
         radius = s.loc[("spectral_radius", src)]
-        label = f"{src}: radius {radius['estimate']:.3f}"
+        method, _, interval = src.partition("+")  # e.g. ols+jackknife
+        label = (f"{names[method]}{f' ({interval})' if interval else ''}: "
+                 f"radius {radius['estimate']:.3f}")
         if np.isfinite(radius["ci_low"]):
             label += f" [{radius['ci_low']:.3f}, {radius['ci_high']:.3f}]"
         elif src != "model_eq10":
@@ -619,9 +625,10 @@ def _stability_figure(stab: pd.DataFrame, trust: pd.DataFrame | None):
     ax.set_aspect("equal")
     ax.set_xlim(-1.1, 1.1)
     ax.set_ylim(-1.1, 1.1)
-    ax.set_xlabel("Re lambda")
-    ax.set_ylabel("Im lambda")
-    ax.set_title("eigenvalues of J (+- SE): model eq. 10 vs VAR(1) and VARX fits", fontsize=10)
+    ax.set_xlabel(r"Re $\lambda$")
+    ax.set_ylabel(r"Im $\lambda$")
+    ax.set_title(r"eigenvalues of $J$ ($\pm$ SE): model eq. 10 vs VAR(1) and VARX fits",
+                 fontsize=10)
     ax.legend(fontsize=7, title="spectral radius [95 % CI]", title_fontsize=7, loc="center")
     ax = axes[0, 1]
     if trust is not None and len(trust):
@@ -630,11 +637,11 @@ def _stability_figure(stab: pd.DataFrame, trust: pd.DataFrame | None):
             ax.errorbar(d["bounces"], d["median_estimate"],
                         yerr=[d["median_estimate"] - d["q16"], d["q84"] - d["median_estimate"]],
                         fmt="-o", color=colour, capsize=2,
-                        label=f"{method}: median and 16-84 % of the estimates")
+                        label=f"{names[method]}: median and 16-84 % of the estimates")
             ok = d[d["trusted"].astype(bool)]
             if len(ok):
                 ax.plot(ok["bounces"], ok["median_estimate"], "*", color=colour, ms=13,
-                        mec="k", label=f"{method}: trusted (coverage, bias)")
+                        mec="k", label=f"{names[method]}: trusted (coverage, bias)")
         ax.axhline(trust["true_spectral_radius"].iloc[0], color="k", ls="--",
                    label="true (model at the data's parameters)")
         n_data = stab.loc[(stab.quantity == "bounces") & (stab.source == "data"), "estimate"]
@@ -782,24 +789,25 @@ def impulse_data_draw(frames: dict[str, pd.DataFrame]) -> dict:
     aligned, model = frames["aligned.csv"], frames["model_response.csv"]
     fig, axes = new_figure(2, 2, width=11, height=7, sharex=True)
     for col, side in enumerate(("decrease", "increase")):
-        for row, (q, mq, label) in enumerate((("v_m_s", "dv_m_s", "deviation of v_k (m/s)"),
+        for row, (q, mq, label) in enumerate((("v_m_s", "dv_m_s", "deviation of $v_k$ (m/s)"),
                                               ("theta_deg", "dtheta_deg",
-                                               "deviation of theta_k (deg)"))):
+                                               r"deviation of $\theta_k$ (deg)"))):
             ax = axes[row, col]
             ax.axhline(0, color="k", ls="--", lw=1)
             a = aligned[(aligned.quantity == q) & (aligned.direction == side)].sort_values("k")
             m = model[model.direction == side].sort_values("k")
             if len(a):
                 ax.errorbar(a["k"], a["mean"], yerr=a["sd"], fmt="-o", color="k", capsize=3,
-                            ms=4, label="data: mean +- SD")
+                            ms=4, label=r"data: mean $\pm$ SD")
             if len(m):
                 ax.plot(m["k"], m[mq], "-s", color="0.6", ms=4,
-                        label=f"model at alpha_p = {m['alpha_p'].iloc[0]:.3f}")
+                        label=f"model at $\\alpha_p$ = {m['alpha_p'].iloc[0]:.3f}")
             ax.set_ylabel(label)
+            integer_axis(ax)
             if row == 1:
-                ax.set_xlabel("impact k after the perturbation (0 = perturbed)")
+                ax.set_xlabel(IMPACT_AFTER_LABEL)
             if row == 0:
-                ax.set_title(f"alpha_p {'<' if side == 'decrease' else '>'} alpha_0")
+                ax.set_title(perturbation_title(side == "decrease"))
                 ax.legend(fontsize=8)
     fig.suptitle("Fig. 9 with data: relaxation after a perturbation (data black, model grey)")
     fig2, axes2 = new_figure(2, 1, width=7, height=7, sharex=True)
@@ -812,14 +820,15 @@ def impulse_data_draw(frames: dict[str, pd.DataFrame]) -> dict:
             a = aligned[(aligned.quantity == q) & (aligned.direction == side)].sort_values("k")
             if len(a):
                 ax.errorbar(a["k"], a["mean"] * unit_scale, yerr=a["sd"] * unit_scale, fmt="-o",
-                            color=colour, capsize=3, ms=4, label=f"alpha {side}")
+                            color=colour, capsize=3, ms=4, label=f"$\\alpha$ {side}")
         ax.set_ylabel(label)
+        integer_axis(ax)
         low, high = ax.get_ylim()
         ax.set_ylim(min(low, -1.0), max(high, 1.0))  # a constant racket shows as flat, not noise
         ax.legend(fontsize=8)
-    axes2[1, 0].set_xlabel("impact k after the perturbation (0 = perturbed)")
+    axes2[1, 0].set_xlabel(IMPACT_AFTER_LABEL)
     fig2.suptitle("Fig. 11 with data: racket period and amplitude modulation\n(difference from "
-                  "the trial's baseline, mean +- SD)")
+                  r"the trial's baseline, mean $\pm$ SD)")
     return {"impulse_data.png": fig, "modulation_data.png": fig2}
 
 

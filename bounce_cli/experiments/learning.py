@@ -31,7 +31,7 @@ from ..engine.params import ModelError, ModelParams, phase_difference
 from ..engine.regression import ols_line
 from ..engine.stochastic import map_noise_covariance, paper_noise_covariance, stationary_covariance
 from ..impacts import circular_mean, read_impacts
-from ..plotting import caption_figures, data_caption, new_figure
+from ..plotting import caption_figures, data_caption, integer_axis, new_figure, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
 TREND_QUANTITIES = {
@@ -177,7 +177,11 @@ def run(config: LearningConfig, options: RunOptions, source=None) -> ExperimentR
     return ExperimentResult(frames=frames, figures=figures, summary=lines)
 
 
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
+    """learning.png: with trials, each trial's AC and SD of ball amplitude over the trials
+    (left; the SD's axis from 0, so that its change is seen at its size) and eq. 19's SD
+    against AC with the trials on it (right); without, the model's curve alone."""
     curve = frames["model_curve.csv"]
     trials = frames.get("trials.csv")
     alpha = float(curve["alpha"].iloc[0])
@@ -185,10 +189,12 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     if trials is not None:
         fig, axes = new_figure(1, 2, width=12, height=4.8)
         ax = axes[0, 0]
-        ax.axhspan(low, 0.0, color="0.92", label=f"stable AC range, eq. 14 (alpha = {alpha:g})")
+        ax.axhspan(low, 0.0, color="0.92",
+                   label=f"stable AC range, eq. 14 ($\\alpha$ = {alpha:g})")
         ax.errorbar(trials["trial_number"], trials["ac_mean_g"], yerr=trials["ac_sd_g"], fmt="-o",
-                    color="k", ms=4, capsize=2, label="mean AC +- SD per trial")
+                    color="k", ms=4, capsize=2, label=r"mean AC $\pm$ SD per trial")
         ax.set_xlabel("trial number")
+        integer_axis(ax)
         ax.set_ylabel("racket acceleration at impact AC (g)")
         ax.set_ylim(min(low * 1.1, float((trials["ac_mean_g"] - trials["ac_sd_g"]).min()) - 0.1),
                     max(0.3, float((trials["ac_mean_g"] + trials["ac_sd_g"]).max()) + 0.1))
@@ -196,6 +202,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         right.plot(trials["trial_number"], trials["apex_sd_m"] * 100, "-s", color="0.55", ms=4,
                    label="SD of ball amplitude")
         right.set_ylabel("SD of ball amplitude (cm)", color="0.4")
+        right.set_ylim(0.0, float(trials["apex_sd_m"].max()) * 100 * 1.15)
         h1, l1 = ax.get_legend_handles_labels()
         h2, l2 = right.get_legend_handles_labels()
         ax.legend(h1 + h2, l1 + l2, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.13),
@@ -207,21 +214,21 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         ax2 = axes[0, 0]
     ax2.axvspan(low, 0.0, color="0.92", label="stable AC range, eq. 14")
     ax2.plot(curve["ac_g"], curve["apex_sd_m"] * 100, "-", color="0.3",
-             label=f"eq. 19: q_v = {curve['q_v_m_s'].iloc[0]:.3g} m/s, q_theta = "
+             label=f"eq. 19: $q_v$ = {curve['q_v_m_s'].iloc[0]:.3g} m/s, $q_\\theta$ = "
                    f"{curve['q_theta_rad'].iloc[0]:.3g} rad")
     ax2.plot(curve["ac_g"], curve["apex_sd_map_m"] * 100, ":", color="0.3",
              label="eq. 19 with the noise of eqs. 16-18 as printed")
     if trials is not None:
         sc = ax2.scatter(trials["ac_mean_g"], trials["apex_sd_m"] * 100, c=trials["trial_number"],
                          cmap="viridis", s=22, zorder=3, label="data: trials")
-        fig.colorbar(sc, ax=ax2, label="trial number")
+        integer_axis(fig.colorbar(sc, ax=ax2, label="trial number").ax, which="y")
     top = float(np.nanpercentile(curve["apex_sd_m"], 90)) * 100
     if trials is not None:
         top = max(top, float(trials["apex_sd_m"].max()) * 100 * 1.1)
     ax2.set_ylim(0, top)
     ax2.set_xlabel("racket acceleration at impact AC (g)")
     ax2.set_ylabel("SD of ball amplitude (cm)")
-    ax2.set_title(f"model: SD of ball amplitude vs AC (alpha = {alpha:g}, tau = "
+    ax2.set_title(f"model: SD of ball amplitude vs AC ($\\alpha$ = {alpha:g}, $\\tau$ = "
                   f"{curve['racket_period_s'].iloc[0]:.3g} s)", fontsize=10)
     ax2.legend(fontsize=8)
     return {"learning.png": fig}

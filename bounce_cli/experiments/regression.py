@@ -30,7 +30,7 @@ from ..engine.regression import (
     phase_from_slope,
     simulate_trial,
 )
-from ..plotting import caption_figures, new_figure
+from ..plotting import caption_figures, new_figure, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 from ..impacts import read_data_csv
 from .data_side import is_impacts_table, trial_means_from_impacts
@@ -271,6 +271,7 @@ def run(config: RegressionConfig, options: RunOptions, source=None) -> Experimen
                             summary=lines)
 
 
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     trials, fit = frames["trials.csv"], frames["fit.csv"]
     fig, axes = new_figure(1, 1, width=7, height=5.2)
@@ -287,19 +288,19 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         if "lost" in group.columns:
             group = group[~group["lost"].astype(bool)]
         ax.plot(group["tau_s"] ** 2, group["a_r_m"] * 100, "o", mfc="none", mec=color, ms=5,
-                label=f"{tag}trial means (n={row.n})")
+                label=f"{tag}trial means ($n$ = {row.n})")
         ax.plot(xs, (row.intercept + row.slope * xs) * 100, "-", color=color, lw=1.5,
-                label=f"{tag}OLS fit: slope {row.slope:.3f} m/s^2, intercept "
-                      f"{row.intercept * 100:.2f} cm, R^2 {row.r2:.3f}")
+                label=f"{tag}OLS fit: slope {row.slope:.3f} m/s$^2$, intercept "
+                      f"{row.intercept * 100:.2f} cm, $R^2$ = {row.r2:.3f}")
         if np.isfinite(row.predicted_slope):
             ax.plot(xs, row.predicted_slope * xs * 100, "--", color=color, lw=1.2,
                     label=f"{tag}eq. 15 at mean phase {row.mean_theta_deg:.1f} deg: slope "
-                          f"{row.predicted_slope:.3f} m/s^2")
+                          f"{row.predicted_slope:.3f} m/s$^2$")
     ax.set_xlim(0, x_max)
     ax.set_ylim(bottom=min(0.0, float(ax.get_ylim()[0])))
     ax.axhline(0, color="0.8", lw=0.8)
-    ax.set_xlabel("squared racket period tau^2 (s^2)")
-    ax.set_ylabel("racket amplitude a_r (cm)")
+    ax.set_xlabel(r"squared racket period $\tau^2$ (s$^2$)")
+    ax.set_ylabel(r"racket amplitude $a_r$ (cm)")
     ax.set_title("Fig. 7: trial means of racket amplitude vs squared period (eq. 15)")
     ax.legend(fontsize=7, loc="upper left")
     return {"regression.png": fig}

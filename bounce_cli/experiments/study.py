@@ -55,6 +55,7 @@ from ..engine.group_stats import (
 from ..engine.linear import stability
 from ..engine.params import ModelError, ModelParams, phase_difference
 from ..impacts import circular_mean
+from ..plotting import publication_style
 from ..report import Section, embed_png, html_table, page
 from ..study_manifest import ManifestRow, Unit, read_manifest
 from .base import Experiment, ExperimentResult, RunOptions
@@ -666,6 +667,7 @@ def group_summary(frames: dict[str, pd.DataFrame]) -> list[str]:
 
 
 # -- figures -------------------------------------------------------------------------------------
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     """The group figures, from the group tables."""
     from .study_figures import draw_group

@@ -26,7 +26,7 @@ from pydantic import Field, model_validator
 
 from .. import parallel
 from ..config import ClassifyBlock, ConfigError, ExperimentConfig, StrictModel
-from ..engine.classify import OUTCOMES, compiled_kernel_available
+from ..engine.classify import EXACT_OUTCOMES, compiled_kernel_available
 from ..engine.linear import flip_boundary_g
 from ..engine.params import ModelError, ModelParams
 from ..engine.sweep import (
@@ -38,7 +38,7 @@ from ..engine.sweep import (
     parameter_point,
     point_tasks,
 )
-from ..plotting import caption_figures
+from ..plotting import caption_figures, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 from .basin import GridAxis
 
@@ -245,7 +245,7 @@ def tables(axes: list[SweepAxis], points: list[ModelParams], index: np.ndarray,
 
 #: the quantities drawn, with their labels
 QUANTITIES = {
-    **{f"fraction_{o}": f"fraction {o.replace('_', ' ')}" for o in OUTCOMES},
+    **{f"fraction_{o}": f"fraction {o.replace('_', ' ')}" for o in EXACT_OUTCOMES},
     "spectral_radius": "spectral radius of the fixed point (eq. 10)",
     "basin_entropy": "basin entropy $S_b$ (nats)",
     "boundary_basin_entropy": "boundary basin entropy $S_{bb}$ (nats)",
@@ -253,6 +253,7 @@ QUANTITIES = {
 }
 
 
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     """sweep.png from sweep.csv and axes.csv: heat maps of each quantity over a 2-D sweep
     (the spectral radius 1 contour dashed on each; grey: no fixed point), lines over a 1-D."""
@@ -342,8 +343,9 @@ def _draw_line(sweep: pd.DataFrame, axis, quantities: list[str]):
     fig, panels = new_figure(3 + has_exponent, 1, width=7.5, height=2.4 * (3 + has_exponent),
                              sharex=True)
     ax = panels[0, 0]
-    for o in OUTCOMES:
-        ax.plot(x, sweep[f"fraction_{o}"], "o-", ms=3, label=o.replace("_", " "))
+    for o in EXACT_OUTCOMES:  # locked and resting with exact sticking only
+        if f"fraction_{o}" in sweep:
+            ax.plot(x, sweep[f"fraction_{o}"], "o-", ms=3, label=o.replace("_", " "))
     ax.set_ylabel("fraction of the basin grid")
     ax.set_ylim(-0.02, 1.02)
     ax.legend(fontsize=8, ncol=2)
@@ -356,7 +358,8 @@ def _draw_line(sweep: pd.DataFrame, axis, quantities: list[str]):
     ax.plot(x, sweep["basin_entropy"], "o-", ms=3, label="basin entropy $S_b$")
     ax.plot(x, sweep["boundary_basin_entropy"], "s-", ms=3,
             label="boundary basin entropy $S_{bb}$")
-    ax.axhline(math.log(2), color="0.5", ls="--", lw=1, label="ln 2 (fractal if $S_{bb}$ above)")
+    ax.axhline(math.log(2), color="0.5", ls="--", lw=1,
+               label=r"$\ln 2$ (fractal if $S_{bb}$ above)")
     ax.set_ylabel("entropy (nats)")
     ax.legend(fontsize=8)
     if has_exponent:
