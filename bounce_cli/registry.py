@@ -241,7 +241,8 @@ EXPERIMENTS: tuple[Entry, ...] = (
          ("group_impulse.png", "Figs. 9 and 11 per condition, averaged over subjects.")),
         manifest_help="The study's manifest CSV: one row per recording (file, subject[, "
         "condition, trial, events, extract.<key>]); sets the config key `manifest`.",
-        needs_fixed_point=False, reproduce=False, resumable=True, cluster=True, task_keys=True,
+        needs_fixed_point=False, reproduce=False, resumable=True, parallel=True, cluster=True,
+        task_keys=True,
     ),
 )
 

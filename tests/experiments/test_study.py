@@ -59,7 +59,7 @@ def tiny(tmp_path_factory, cli_module):
 @pytest.fixture(scope="module")
 def tiny_study(tiny, tmp_path_factory, cli_module):
     out = tmp_path_factory.mktemp("tiny-study") / "study"
-    result = cli_module("study", "--manifest", tiny / "study.csv", "--out", out,
+    result = cli_module("study", "--manifest", tiny / "study.csv", "--out", out, "--jobs", "2",
                         "--set", "analyses=[regression, learning]", *FAST)
     assert result.exit_code == 0, result.output
     return out
