@@ -378,6 +378,8 @@ class RunDirectory:
         self.previous: dict[str, Any] = {}
         #: what the run adds to run.json beside the config (``RunOptions.record``)
         self.record: dict[str, Any] = {}
+        #: per file, after ``commit``: identical / within tolerance / kept / changed / new
+        self.comparison: dict[str, str] = {}
         self.created: list[Path] = []  # folders this run made, outermost first
         self.lock = RunDirectoryLock(self.out_dir)
         try:
@@ -509,10 +511,17 @@ class RunDirectory:
             manifest = {**manifest, "versions": previous["versions"]}
         return json.dumps(manifest, indent=2) + "\n"
 
-    def commit(self) -> list[Path]:
+    def commit(self, agrees: Callable[[str, pd.DataFrame, pd.DataFrame], bool] | None = None,
+               ) -> list[Path]:
         """Stage every collected file under a temporary name (the slow part: CSVs, PNGs),
         then move them all into place with ``os.replace``, ``run.json`` last. Returns the
-        paths. Until the staging is complete, the previous run's files are untouched."""
+        paths written. Until the staging is complete, the previous run's files are untouched.
+
+        With ``agrees`` (``bounce reproduce``: ``agrees(table, new, previous)``, the
+        reproduction tolerance), a table whose previous file agrees with the new one is left
+        untouched, and the figures are not redrawn when every table agrees and they exist
+        (their data did not change). ``self.comparison`` then says per file: identical,
+        within tolerance, kept (a figure not redrawn), changed or new."""
         self.out_dir.mkdir(parents=True, exist_ok=True)
         writers: dict[str, Callable[[Path], object]] = {}
         written = {*self._frames, *self._figures, *self._files}
@@ -539,16 +548,32 @@ class RunDirectory:
             return staged[-1][0]
 
         try:
-            for group in self._background_groups():
+            for group in self._background_groups() if agrees is None else []:
                 jobs = [(reserved(name), writers.pop(name), self.out_dir / name)
                         for name in group]
                 children.append(_ChildWriter(jobs))
                 children[-1].start()
             unchanged = True
-            for name, write in writers.items():
+            tables_agree = True
+            for name, write in writers.items():  # the tables first, then the figures
+                final = self.out_dir / name
+                if (agrees is not None and name in self._figures and tables_agree
+                        and final.is_file()):
+                    self.comparison[name] = "kept"
+                    continue
                 tmp = reserved(name)
                 write(tmp)
-                unchanged = unchanged and same_bytes(tmp, self.out_dir / name)
+                if same_bytes(tmp, final):
+                    self.comparison[name] = "identical"
+                elif (agrees is not None and name in self._frames and final.is_file()
+                      and agrees(name, read_frame(tmp), read_frame(final))):
+                    self.comparison[name] = "within tolerance"
+                    tmp.unlink()  # leave the previous file as it is
+                    staged.pop()
+                else:
+                    self.comparison[name] = "changed" if final.is_file() else "new"
+                    unchanged = False
+                    tables_agree = tables_agree and name not in self._frames
             while children:
                 unchanged &= children[0].wait()  # the child compared its files
                 children.pop(0)

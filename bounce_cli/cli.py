@@ -383,11 +383,14 @@ def run_experiment(
     scheduler: str | None = None,
     figure_formats: tuple[str, ...] = ("png",),
     dpi: int = FIGURE_DPI,
-) -> None:
+    agrees=None,
+) -> dict[str, str]:
     """Load and validate the config, run the experiment, write its files atomically (each
     figure once in each of ``figure_formats``, PNGs at ``dpi``). On an
     error or an interrupt nothing is written and an output folder the run made is removed;
-    a resumable experiment's finished points stay in ``<out>/points/`` (``--resume``)."""
+    a resumable experiment's finished points stay in ``<out>/points/`` (``--resume``).
+    ``agrees``: see ``RunDirectory.commit``. Returns its comparison (file -> how it changed;
+    {} for ``print_config``)."""
     overrides = list(overrides or [])
     run_dir = None
     checkpoints = None
@@ -397,7 +400,7 @@ def run_experiment(
         cfg = load_config(experiment.schema, path, overrides)
         if print_config:
             typer.echo(to_yaml(cfg), nl=False)
-            return
+            return {}
         if getattr(cfg, "data", None) is None:  # with --data the model's racket is the data's
             warn_if_implausible_racket(cfg.model)
         if entry.needs_fixed_point and getattr(cfg, "data", None) is None:
@@ -447,7 +450,7 @@ def run_experiment(
             run_dir.add_figure(name_, figure)
         for name_, content in result.files.items():
             run_dir.add_file(name_, content)
-        written = run_dir.commit()
+        written = run_dir.commit(agrees)
         if checkpoints is not None:
             checkpoints.remove()
     except BaseException as exc:
@@ -473,6 +476,7 @@ def run_experiment(
             stderr.print(line, highlight=False, markup=False, soft_wrap=not stderr.is_terminal)
     if result.exit_code:
         raise typer.Exit(result.exit_code)
+    return run_dir.comparison
 
 
 # -- engine commands ------------------------------------------------------------------------
@@ -768,31 +772,55 @@ def orbit_notes(orbit, params: ModelParams, min_hop_s: float) -> list[str]:
 
 @app.command("reproduce")
 def reproduce_command(
+    names: Annotated[Optional[list[str]], typer.Argument(
+        metavar="[EXPERIMENT]...", help="Only these experiments (default: every one).",
+        show_default=False)] = None,
     out: Annotated[Path, typer.Option("--out", "-o", parser=output_folder, metavar="PATH",
                                       help="Results root directory.")] = Path("results"),
     jobs: JobsOption = None,
     quiet: QuietOption = False,
     force: ForceOption = False,
+    force_regen: Annotated[bool, typer.Option(
+        "--force-regen", help="Rewrite every file, also those that agree within the "
+        "reproduction tolerance (and redraw every figure).")] = False,
 ) -> None:
     """Regenerate every figure from the bundled configs, with a gallery and the claims.
 
     Runs every bundled config into OUT/<name>/ and writes OUT/README.md: each figure with a
     caption naming the paper's figure, and the table of the paper's claims (bounce verify).
+    A table that agrees with the one in OUT within the reproduction tolerance is left as it
+    is, and an experiment's figures are redrawn only when one of its tables changed beyond
+    it (or a figure is missing); each experiment is reported identical, within tolerance or
+    changed (with the files).
     """
     from .claims import markdown_table, verify
     from .artifacts import write_text_atomic
     from .registry import reproduced
-    from .reproduce import gallery_markdown
+    from .reproduce import experiment_status, gallery_markdown, tables_agree
 
+    known = [entry.name for entry in reproduced()]
+    unknown = [name for name in names or [] if name not in known]
+    if unknown:
+        fail(f"reproduce {unknown[0]}: no such reproduced experiment (one of: "
+             f"{', '.join(known)})")
     for entry in reproduced():
+        if names and entry.name not in names:
+            continue
         if not quiet:
             stderr.print(f"[bold]bounce {entry.name}[/bold]")
-        run_experiment(entry, config=None, overrides=[], out=out / entry.name,
-                       quiet=quiet, force=force, print_config=False, jobs=jobs)
+        comparison = run_experiment(
+            entry, config=None, overrides=[], out=out / entry.name, quiet=quiet, force=force,
+            print_config=False, jobs=jobs,
+            agrees=None if force_regen else tables_agree(entry.name))
+        if not quiet:
+            print(f"{entry.name}: {experiment_status(comparison)}", flush=True)
     verdicts = verify(out)
-    write_text_atomic(out / "README.md", gallery_markdown(out, markdown_table(verdicts)))
+    gallery, text = out / "README.md", gallery_markdown(out, markdown_table(verdicts))
+    same = gallery.is_file() and gallery.read_text(encoding="utf-8") == text
+    if not same:
+        write_text_atomic(gallery, text)
     if not quiet:
-        stderr.print(f"wrote {out / 'README.md'}", highlight=False)
+        stderr.print(f"{'unchanged' if same else 'wrote'} {gallery}", highlight=False)
         print_verdicts(verdicts)
 
 

@@ -84,11 +84,14 @@ def model_curve(alpha: float, g: float, period: float, q_v: float, q_theta: floa
 
 
 def trial_table(config: LearningConfig, options: RunOptions, source=None
-                ) -> tuple[pd.DataFrame, float, DataModel]:
+                ) -> tuple[pd.DataFrame, float, DataModel, tuple[float, float, int]]:
     """Per-trial statistics of the impacts table (``source``, default the file
     ``config.data``), in the file's order of trials (trial_number 1, 2, ...), the data's
-    mean racket period (NaN without that column), and the model's alpha and g (the data's
-    unless set by the user, ``data_parameters``)."""
+    mean racket period (NaN without that column), the model's alpha and g (the data's
+    unless set by the user, ``data_parameters``) and the data's noise strengths (q_v, q_theta,
+    pairs) from the VAR(1) residuals of each trial (``data_side.noise_from_trials``)."""
+    from .data_side import noise_from_trials
+
     if source is None:
         assert config.data is not None
         source = config.data
@@ -112,7 +115,8 @@ def trial_table(config: LearningConfig, options: RunOptions, source=None
         })
     period = (float(impacts.frame["racket_period_s"].mean())
               if "racket_period_s" in impacts.frame.columns else math.nan)
-    return pd.DataFrame(rows), period, model
+    noise = noise_from_trials(impacts, config.settle_after_perturbation)
+    return pd.DataFrame(rows), period, model, noise
 
 
 def trend_table(trials: pd.DataFrame, confidence: float) -> pd.DataFrame:
@@ -139,8 +143,11 @@ def run(config: LearningConfig, options: RunOptions, source=None) -> ExperimentR
     frames: dict[str, pd.DataFrame] = {}
     lines = []
     period = config.model.racket_period
+    q_v, q_theta = config.noise.q_v, config.noise.q_theta
+    noise_words = "the config's noise"
     if config.data is not None or source is not None:
-        trials, data_period, model = trial_table(config, options, source)
+        trials, data_period, model, (data_q_v, data_q_theta, pairs) = trial_table(
+            config, options, source)
         alpha, g = model.alpha.value, model.g.value
         lines.append(model.text())
         if len(trials) < 3:
@@ -149,20 +156,26 @@ def run(config: LearningConfig, options: RunOptions, source=None) -> ExperimentR
                               "trials needs at least 3")
         if math.isfinite(data_period):
             period = data_period
+        if math.isfinite(data_q_v) and data_q_v > 0.0:
+            q_v, q_theta = data_q_v, data_q_theta
+            noise_words = (f"the data's noise (VAR(1) residuals of each trial, {pairs} degrees "
+                           "of freedom; measurement noise inflates it)")
+        else:
+            noise_words = ("the config's noise: the data's trials have no run of 8 consecutive "
+                           "unperturbed impacts to estimate their own")
         frames["trials.csv"] = trials
         frames["trend.csv"] = trend_table(trials, config.confidence)
         for row in frames["trend.csv"].itertuples():
             lines.append(f"{row.quantity}: slope {row.slope_per_trial:.4g} per trial "
                          f"[{row.slope_ci_low:.4g}, {row.slope_ci_high:.4g}] ({row.trend})")
     try:
-        curve = model_curve(alpha, g, period, config.noise.q_v, config.noise.q_theta,
-                            config.ac_points)
+        curve = model_curve(alpha, g, period, q_v, q_theta, config.ac_points)
     except ModelError as exc:
         raise ConfigError(f"model curve at racket period {period:.4g} s: {exc}") from None
     frames["model_curve.csv"] = curve
     best = curve.loc[curve["apex_sd_m"].idxmin()]
     lines.append(f"eq. 19 at alpha = {alpha:g}, g = {g:g} m/s^2, tau = {period:.4g} s, q_v = "
-                 f"{config.noise.q_v:g} m/s, q_theta = {config.noise.q_theta:g} rad: SD of ball "
+                 f"{q_v:.4g} m/s, q_theta = {q_theta:.4g} rad ({noise_words}): SD of ball "
                  f"amplitude smallest ({best.apex_sd_m * 100:.2f} cm) at AC = {best.ac_g:.3f} g; "
                  f"stable AC range ({float(stable_ac_range_g(alpha)[0]):.3f}, 0) g (eq. 14)")
     figures = draw(frames)
@@ -207,8 +220,8 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         ax2 = axes[0, 0]
     ax2.axvspan(low, 0.0, color="0.92", label="stable AC range, eq. 14")
     ax2.plot(curve["ac_g"], curve["apex_sd_m"] * 100, "-", color="0.3",
-             label=f"eq. 19: $q_v$ = {curve['q_v_m_s'].iloc[0]:g} m/s, $q_\\theta$ = "
-                   f"{curve['q_theta_rad'].iloc[0]:g} rad")
+             label=f"eq. 19: $q_v$ = {curve['q_v_m_s'].iloc[0]:.3g} m/s, $q_\\theta$ = "
+                   f"{curve['q_theta_rad'].iloc[0]:.3g} rad")
     ax2.plot(curve["ac_g"], curve["apex_sd_map_m"] * 100, ":", color="0.3",
              label="eq. 19 with the noise of eqs. 16-18 as printed")
     if trials is not None:

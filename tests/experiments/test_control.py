@@ -49,6 +49,7 @@ def test_bundled_config_is_section7s_model():
     assert cfg.impulse.alpha_p == [0.4, 0.6, 0.35, 0.65]
 
 
+@pytest.mark.slow
 def test_frames_and_figures(result):
     assert sorted(result.figures) == sorted(png for png, _ in entry("control").figures)
     assert sorted(result.frames) == sorted([
@@ -148,6 +149,7 @@ def test_relaxation_along_gain_matches_single_responses(result, paper_params):
                                                            "relaxation_impacts"]
 
 
+@pytest.mark.slow
 def test_zero_gain_controlled_equals_passive_end_to_end():
     res = exp.run(load(["model.control.gain=0", "model.control.rate=0.4"]), RunOptions())
     for name, key in (("impulse.csv", ["alpha_p", "k"]), ("basin.csv", ["theta0_deg", "v0_m_s"]),
@@ -179,6 +181,7 @@ def impacts_csv(tmp_path, gain=0.6, rate=0.7, **drop):
     return path
 
 
+@pytest.mark.slow
 def test_cli_fits_a_labs_impacts_table(tmp_path):
     path = impacts_csv(tmp_path)
     out = tmp_path / "out"

@@ -97,6 +97,7 @@ def fit_table(path, overrides=()):
     return control_exp.fit_frames(cfg)["fit.csv"].set_index("quantity")
 
 
+@pytest.mark.slow
 def test_without_noise_control_data_returns_k_and_c_exactly(tmp_path):
     """Section 7's protocol in the recording (alpha 0.4 / 0.6 every 8th impact from impact
     4), 4 trials of 60 s without velocity noise: on the exact impacts the fit returns K and c
