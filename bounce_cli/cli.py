@@ -643,8 +643,8 @@ def orbit_command(
 
 def controlled_orbit_output(theta0, v0, params, controller, n_impacts, min_hop_s,
                             as_csv) -> None:
-    """``bounce orbit`` with racket period control: the passive columns plus
-    ``racket_period_s`` (the period of the flight ending at each impact)."""
+    """``bounce orbit`` with racket period control: the passive columns (``event`` among
+    them) plus ``racket_period_s`` (the period of the flight ending at each impact)."""
     import pandas as pd
 
     from .engine.control import iterate_controlled_orbit
@@ -654,7 +654,9 @@ def controlled_orbit_output(theta0, v0, params, controller, n_impacts, min_hop_s
     frame = pd.DataFrame({"k": np.arange(len(orbit.theta)), "t_s": orbit.t_s,
                           "theta_rad": orbit.theta,
                           "theta_deg": np.degrees(wrap_phase(orbit.theta)), "v_m_s": orbit.v,
-                          "flight_s": orbit.flight_s, "racket_period_s": orbit.tau})
+                          "flight_s": orbit.flight_s,
+                          "event": ["start", *["impact"] * (len(orbit.theta) - 1)],
+                          "racket_period_s": orbit.tau})
     write_orbit_frame(frame, as_csv, f"Orbit with racket period control from theta0 = "
                                      f"{math.degrees(theta0):g} deg, v0 = {v0:g} m/s")
     if orbit.stop_reason == "below_racket":
