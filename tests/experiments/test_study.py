@@ -17,7 +17,8 @@ from bounce_cli.experiments import study
 from bounce_cli.experiments.base import RunOptions
 
 #: a small study: fast enough for every run of the suite
-SIM = ["--set", "subjects.count=4", "--set", "trials=4", "--set", "duration_s=14",
+#: (40 s trials: each unit has the 200 pairs acf --data needs for an interval of the radius)
+SIM = ["--set", "subjects.count=4", "--set", "trials=4", "--set", "duration_s=40",
        "--set", "subjects.ac_slope_sd_g=0.005", "--set", "subjects.ac_slope_mean_g=-0.05"]
 #: the trust study of acf --data at a small size (its own tests cover it)
 FAST = ["--set", "settings.acf.data_analysis.trust_repetitions=10",
@@ -132,8 +133,8 @@ def test_the_data_are_as_fast_as_the_model_that_made_them(studied):
     table = pd.read_csv(out / "group_stability.csv")
     ols = table[table["estimate"] == "ols"]
     assert len(ols) == 2
+    assert (ols["units"] == 4).all(), ols
     assert ((ols["ci_low"] <= 0) & (ols["ci_high"] >= 0)).all(), ols
-    assert (ols["units"] == 4).all()
 
 
 def test_the_report_is_self_contained(tiny_study):
