@@ -36,13 +36,13 @@ except ImportError:  # pragma: no cover - older typer on click
     )
 
 from . import __version__
-from .artifacts import OutputDirError, RunDirectory
+from .api import check_fixed_point, load_run_config, open_run_directory, write_result
+from .artifacts import OutputDirError
 from .config import (
     ConfigError,
     ModelOnlyConfig,
     apply_overrides,
     bundled_config_path,
-    load_config,
     parse_override,
     read_yaml,
     to_yaml,
@@ -267,37 +267,6 @@ def warn(message: str) -> None:
     print(f"bounce: warning: {message}", file=sys.stderr, flush=True)
 
 
-def resolve_config_path(config: Path | None, name: str) -> Path:
-    return config if config is not None else bundled_config_path(name)
-
-
-def warn_if_unstable(params: ModelParams, controller=None) -> None:
-    """A one-line warning on stderr when the period-1 fixed point exists but is linearly
-    unstable (eq. 10; with racket period control the 3 x 3 Jacobian of engine.control): the
-    figures then describe an orbit nothing converges to.
-    Raises NoFixedPointError when there is no fixed point at all."""
-    from .engine import flip_boundary_g
-
-    if controller is not None:
-        from .engine.control import controlled_jacobian, spectral_radius_3x3
-
-        radius = float(spectral_radius_3x3(controlled_jacobian(params, controller)))
-        if not radius < 1.0:
-            print(f"bounce: warning: the period-1 fixed point is linearly unstable with this "
-                  f"racket period control (model.control: spectral radius {radius:.3g} of the "
-                  f"3 x 3 Jacobian)", file=sys.stderr)
-        return
-
-    st = stability(params)
-    if not st.stable:
-        print(
-            f"bounce: warning: the period-1 fixed point is linearly unstable at these "
-            f"parameters (spectral radius {st.spectral_radius:.3g}, AC = {st.ac_g:.3g} g; "
-            f"stable for {float(flip_boundary_g(params.alpha)):.3g} g < AC < 0, eq. 14)",
-            file=sys.stderr,
-        )
-
-
 def run_experiment(
     entry: Entry,
     *,
@@ -318,29 +287,13 @@ def run_experiment(
     run_dir = None
     checkpoints = None
     try:
-        experiment = entry.load()
-        path = resolve_config_path(config, entry.config)
-        cfg = load_config(experiment.schema, path, overrides)
+        experiment, path, cfg = load_run_config(entry, config, overrides)
         if print_config:
             typer.echo(to_yaml(cfg), nl=False)
             return
-        if entry.needs_fixed_point and getattr(cfg, "data", None) is None:
-            # with --data the model is taken at the data's racket, not the config's
-            controller = getattr(cfg.model, "controller", lambda: None)()
-            warn_if_unstable(cfg.params, controller)
-        name = path.stem if config is not None else entry.name
-        data_file = getattr(cfg, "data", None)
-        run_dir = RunDirectory(
-            out if out is not None else Path("results") / name,
-            command=entry.name,
-            resolved_config=cfg.model_dump(mode="json"),
-            overrides=overrides,
-            config_path=str(path) if config is not None else f"bundled: configs/{path.name}",
-            # a fit to a data file draws no random numbers: its seed is not part of the run
-            seed=getattr(cfg, "seed", None) if data_file is None else None,
-            data_file=data_file,
-            force=force,
-        )
+        check_fixed_point(entry, cfg, warn)
+        run_dir = open_run_directory(entry, cfg, path, config_given=config is not None,
+                                     overrides=overrides, out=out, force=force)
         progress = make_progress() if not quiet else None
         options = RunOptions(jobs=jobs or os.cpu_count() or 1, warn=warn, scheduler=scheduler)
         if entry.resumable:
@@ -358,13 +311,7 @@ def run_experiment(
         finally:
             if progress is not None:
                 progress.stop()
-        for name_, frame in result.frames.items():
-            run_dir.add_csv(name_, frame)
-        for name_, figure in result.figures.items():
-            run_dir.add_figure(name_, figure)
-        for name_, content in result.files.items():
-            run_dir.add_file(name_, content)
-        written = run_dir.commit()
+        written = write_result(run_dir, result)
         if checkpoints is not None:
             checkpoints.remove()
     except BaseException as exc:
@@ -404,7 +351,7 @@ def load_model(config: Path | None, overrides: list[str] | None, *,
 def load_model_block(config: Path | None, overrides: list[str] | None, *,
                      need_fixed_point: bool = True):
     """``load_model``'s validated block, with its ``control`` (racket period control)."""
-    path = resolve_config_path(config, "model")
+    path = config if config is not None else bundled_config_path("model")
     overrides = list(overrides or [])
     for text in overrides:
         keys, _ = parse_override(text)
