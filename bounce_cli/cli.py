@@ -431,7 +431,8 @@ def orbit_command(
     min_hop_s: Annotated[
         float,
         typer.Option("--min-hop-s", min=0.0,
-                     help="Stop when a hop is shorter than this, s (sticking, section 3)."),
+                     help="Stop when a hop is shorter than this, s (sticking, section 3); "
+                          "0: exact sticking (complete chatters, riding, release)."),
     ] = ClassifySettings().min_hop_s,
     config: ConfigOption = None,
     overrides: SetOption = None,
@@ -449,8 +450,14 @@ def orbit_command(
     if not (math.isfinite(theta0_deg) and math.isfinite(v0)):
         fail("--theta0-deg and --v0 must be finite numbers")
     if controller is not None:
+        if min_hop_s == 0.0:
+            fail("--min-hop-s 0 (exact sticking) is not implemented with model.control; "
+                 "give a shortest hop > 0")
         controlled_orbit_output(math.radians(theta0_deg), v0, params, controller, n_impacts,
                                 min_hop_s, as_csv)
+        return
+    if min_hop_s == 0.0:
+        exact_orbit_output(math.radians(theta0_deg), v0, params, n_impacts, as_csv)
         return
     orbit = iterate_orbit(math.radians(theta0_deg), v0, params, n_impacts, min_hop_s)
     rows = orbit_rows(orbit, params)
@@ -490,16 +497,8 @@ def controlled_orbit_output(theta0, v0, params, controller, n_impacts, min_hop_s
                           "theta_rad": orbit.theta,
                           "theta_deg": np.degrees(wrap_phase(orbit.theta)), "v_m_s": orbit.v,
                           "flight_s": orbit.flight_s, "racket_period_s": orbit.tau})
-    if as_csv:
-        frame.to_csv(sys.stdout, index=False, lineterminator="\n")
-    else:
-        table = Table(title=f"Orbit with racket period control from theta0 = "
-                            f"{math.degrees(theta0):g} deg, v0 = {v0:g} m/s")
-        for col in frame.columns:
-            table.add_column(col, justify="right")
-        for row in frame.itertuples(index=False):
-            table.add_row(str(row.k), *("" if math.isnan(x) else f"{x:.5f}" for x in row[1:]))
-        Console().print(table)
+    write_orbit_frame(frame, as_csv, f"Orbit with racket period control from theta0 = "
+                                     f"{math.degrees(theta0):g} deg, v0 = {v0:g} m/s")
     if orbit.stop_reason == "below_racket":
         print(f"note: stopped: the initial velocity {v0:g} m/s is not above the racket's "
               f"velocity at that phase (below the racket)", file=sys.stderr)
@@ -507,6 +506,22 @@ def controlled_orbit_output(theta0, v0, params, controller, n_impacts, min_hop_s
         print(f"note: stopped at impact {len(orbit.theta) - 1}: the hop lasted "
               f"{orbit.flight_s[-1]:.3g} s < {min_hop_s:g} s, or the ball could not "
               f"leave the racket (sticking)", file=sys.stderr)
+
+
+def write_orbit_frame(frame, as_csv: bool, title: str, small: tuple[str, ...] = ()) -> None:
+    """An orbit's table to stdout: CSV, or a rich table with floats to 5 decimals (columns
+    in ``small`` to 3 significant digits, NaN blank) and the rest (k, event) as they are."""
+    if as_csv:
+        frame.to_csv(sys.stdout, index=False, lineterminator="\n")
+        return
+    table = Table(title=title)
+    for col in frame.columns:
+        table.add_column(col, justify="right")
+    for row in frame.itertuples(index=False):
+        table.add_row(*(("" if math.isnan(x) else f"{x:.3g}" if col in small else f"{x:.5f}")
+                        if isinstance(x, float) else str(x)
+                        for col, x in zip(frame.columns, row)))
+    Console().print(table)
 
 
 def orbit_rows(orbit, params: ModelParams) -> list[dict]:
@@ -519,9 +534,61 @@ def orbit_rows(orbit, params: ModelParams) -> list[dict]:
             "theta_deg": math.degrees(float(wrap_phase(orbit.theta[k]))),
             "v_m_s": orbit.v[k],
             "flight_s": orbit.hop_phase[k] / w,
+            "event": "start" if k == 0 else "impact",
         }
         for k in range(len(orbit.theta))
     ]
+
+
+def exact_orbit_output(theta0: float, v0: float, params: ModelParams, n_impacts: int,
+                       as_csv: bool) -> None:
+    """``bounce orbit --min-hop-s 0``: the hybrid orbit of ``engine.chatter`` (impacts,
+    accumulation points of complete chatters, releases), one row per event; ``k`` counts the
+    resolved impacts (a stick or release row carries the k of the impact before it)."""
+    import pandas as pd
+
+    from .engine.chatter import IMPACT, iterate_exact_orbit, locked_period
+
+    orbit = iterate_exact_orbit(theta0, v0, params, n_impacts)
+    w = params.omega
+    frame = pd.DataFrame({
+        "k": np.cumsum(np.asarray(orbit.event, dtype=object) == IMPACT),
+        "t_s": orbit.theta / w, "theta_rad": orbit.theta,
+        "theta_deg": np.degrees(wrap_phase(orbit.theta)), "v_m_s": orbit.v,
+        "flight_s": orbit.flight / w, "event": orbit.event,
+        "chatter_impacts": orbit.chatter_impacts, "tail_error_s": orbit.tail_error_s,
+    })
+    write_orbit_frame(frame, as_csv, f"Exact orbit from theta0 = {math.degrees(theta0):g} "
+                                     f"deg, v0 = {v0:g} m/s", small=("flight_s", "tail_error_s"))
+    for note in orbit_notes_exact(orbit, params, locked_period(orbit)):
+        print(note, file=sys.stderr)
+
+
+def below_racket_note(orbit, params: ModelParams) -> str:
+    """The note of an orbit whose ball cannot leave the racket at its initial condition."""
+    v_r = float(params.racket_velocity(orbit.theta[0]))
+    return (f"note: stopped: the initial velocity {orbit.v[0]:g} m/s is not above the racket's "
+            f"{v_r:.4f} m/s at that phase (below the racket)")
+
+
+def orbit_notes_exact(orbit, params: ModelParams, cycles: int) -> list[str]:
+    """``orbit_notes`` for the hybrid orbit: below the racket, resting, or locked (with its
+    period in racket cycles, the release phase and the Lyapunov exponent -inf)."""
+    notes = []
+    if orbit.stop_reason == "below_racket":
+        notes.append(below_racket_note(orbit, params))
+    elif orbit.stop_reason == "resting":
+        notes.append(
+            f"note: resting: the ball stuck at t = {orbit.theta[-1] / params.omega:.6g} s and "
+            f"is never released (Gamma = a_r w^2 / g = "
+            f"{params.racket_amplitude * params.omega**2 / params.g:.4g} <= 1)")
+    elif cycles > 0:
+        release = orbit.theta[orbit.rows("release")[-1]]
+        notes.append(
+            f"note: locked orbit: period {cycles} racket cycle{'s' if cycles > 1 else ''} "
+            f"(stick, ride, release at {math.degrees(float(wrap_phase(release))):.4f} deg = "
+            f"asin(1/Gamma)); Lyapunov exponent -inf (superstable)")
+    return notes
 
 
 def orbit_notes(orbit, params: ModelParams, min_hop_s: float) -> list[str]:
@@ -535,11 +602,7 @@ def orbit_notes(orbit, params: ModelParams, min_hop_s: float) -> list[str]:
             f"{cos_theta:.4g} > 1): the orbit cannot settle on one"
         )
     if orbit.stop_reason == "below_racket":
-        v_r = float(params.racket_velocity(orbit.theta[0]))
-        notes.append(
-            f"note: stopped: the initial velocity {orbit.v[0]:g} m/s is not above the racket's "
-            f"{v_r:.4f} m/s at that phase (below the racket)"
-        )
+        notes.append(below_racket_note(orbit, params))
     elif orbit.stop_reason == "sticking":
         k = len(orbit.theta) - 1
         notes.append(

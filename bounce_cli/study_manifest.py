@@ -12,7 +12,7 @@ Columns:
 ``trial`` and any other    its subject's series (the learning trend's x axis); an empty cell is
 column                     the factor's value ``""`` (printed as ``-``)
 ``extract.<key>``          a per-row override of the study's extraction settings, e.g.
-                           ``extract.c3d.ball_marker`` (an empty cell: no override)
+                           ``extract.markers.ball`` (an empty cell: no override)
 =========================  =====================================================================
 
 Read before anything runs: a missing column, a file that does not exist, a duplicate row or a

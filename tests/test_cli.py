@@ -5,6 +5,7 @@ import json
 import math
 import os
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -86,7 +87,9 @@ def test_orbit_period1_settles_on_fixed_point(cli):
     result = cli("orbit", "--theta0-deg", 43.1, "--v0", 4.8, "-n", 40, "--csv")
     assert result.exit_code == 0, result.output
     df = read_orbit_csv(result)
-    assert list(df.columns) == ["k", "t_s", "theta_rad", "theta_deg", "v_m_s", "flight_s"]
+    assert list(df.columns) == ["k", "t_s", "theta_rad", "theta_deg", "v_m_s", "flight_s",
+                                "event"]
+    assert df.event.tolist() == ["start"] + ["impact"] * 40
     assert len(df) == 41 and df.k.tolist() == list(range(41))
     assert df.iloc[0].v_m_s == 4.8 and df.iloc[0].theta_deg == pytest.approx(43.1)
     assert math.isnan(df.iloc[0].flight_s)
@@ -238,3 +241,41 @@ def test_the_summary_is_not_wrapped_when_not_on_a_terminal(cli, tmp_path):
     assert result.exit_code == 0, result.output
     wrote = [line for line in result.output.splitlines() if line.startswith("wrote ")]
     assert len(wrote) == 1 and len(wrote[0]) > 120 and wrote[0].endswith("run.json")
+
+
+def test_orbit_exact_sticking_is_a_locked_orbit_with_events(cli):
+    """--min-hop-s 0 (Fig. 3 bottom): impacts, then stick (accumulation point, with the
+    number of resolved impacts of its chatter) and release at asin(1/Gamma) every racket
+    cycle; the note calls it locked with Lyapunov exponent -inf."""
+    result = cli("orbit", "--theta0-deg", 43.1, "--v0", 5.7, "--impacts", 200,
+                 "--min-hop-s", 0, "--csv")
+    assert result.exit_code == 0, result.output
+    df = read_orbit_csv(result)
+    assert list(df.columns) == ["k", "t_s", "theta_rad", "theta_deg", "v_m_s", "flight_s",
+                                "event", "chatter_impacts", "tail_error_s"]
+    assert df.event.iloc[0] == "start" and df.k.iloc[-1] == 200
+    assert set(df.event) == {"start", "impact", "stick", "release"}
+    sticks, releases = df[df.event == "stick"], df[df.event == "release"]
+    assert len(sticks) >= 10 and len(releases) >= 10
+    gamma = 0.30 * (2 * math.pi / 0.92) ** 2 / 9.81
+    assert releases.theta_deg.to_numpy() == pytest.approx(math.degrees(math.asin(1 / gamma)))
+    assert np.diff(releases.t_s.to_numpy()) == pytest.approx(0.92)
+    assert (sticks.chatter_impacts > 5).all() and (sticks.tail_error_s < 1e-12).all()
+    # stick and release rows carry the racket's velocity
+    racket_v = 0.30 * 2 * math.pi / 0.92 * np.cos(np.radians(releases.theta_deg))
+    assert releases.v_m_s.to_numpy() == pytest.approx(racket_v)
+    assert "locked orbit: period 1 racket cycle" in result.stderr
+    assert "-inf" in result.stderr
+
+
+def test_exact_sticking_with_racket_control_is_a_one_line_error(cli, user_error, tmp_path):
+    """Exact sticking is implemented for the passive racket only: orbit, basin and trajectory
+    say so instead of silently ignoring min_hop_s 0."""
+    control = ("--set", "model.control.gain=0.7")
+    user_error(cli("orbit", "--theta0-deg", 43.1, "--v0", 5.7, "--min-hop-s", 0, *control),
+               "exact sticking", "model.control")
+    user_error(cli("basin", "--set", "classify.min_hop_s=0", *control, "--out",
+                   tmp_path / "b", "--quiet"), "classify.min_hop_s", "model.control")
+    user_error(cli("trajectory", "--set", "sticking.min_hop_s=0", *control, "--out",
+                   tmp_path / "t", "--quiet"), "sticking.min_hop_s", "model.control")
+    assert not (tmp_path / "b").exists() and not (tmp_path / "t").exists()

@@ -21,6 +21,13 @@ a transient, in the wrapped phase (phases compared modulo 2 pi):
 * ``chaotic``: no such p and a positive largest Lyapunov exponent (above a threshold);
 * ``unresolved``: no such p and a non-positive exponent (a longer period, or an orbit that has
   not settled within the transient, as happens right at a bifurcation).
+
+With ``min_hop_s`` 0 (exact sticking, ``engine.chatter``) an orbit is not stopped where it
+sticks: it rides to the release and flies on from there (the release state is the same every
+time). ``locked``: it was released at least twice during the measured impacts (periodic from
+its first release; ``SweepOrbits.locked_cycles`` racket cycles per period; the recorded
+impacts are the resolved ones of a period); its exponent is -inf (a stick forgets every
+perturbation), as for any orbit that stuck while measured. ``resting``: stuck with Gamma <= 1.
 """
 
 from __future__ import annotations
@@ -211,6 +218,10 @@ class SweepOrbits:
     stuck_at: np.ndarray
     flies: np.ndarray
     first_recorded_impact: int
+    #: exact sticking (min_hop_s 0): per state, the racket cycles between its last two
+    #: releases when it stuck during the measured impacts (a locked orbit), else 0; None
+    #: with the 1 ms rule
+    locked_cycles: np.ndarray | None = None
 
 
 def iterate_sweep(
@@ -243,9 +254,12 @@ def iterate_sweep(
     idx = np.flatnonzero(flies)
     th, vv, pars = np.mod(theta0[idx], TWO_PI), v0[idx], params.take(idx)
     tangent = initial_tangent(idx.size)
+    exact = settings.min_hop_s == 0.0  # exact sticking (engine.chatter)
+    chatter = _ExactSticking(n, idx.size) if exact else None
     for k in range(1, total + 1):
         if idx.size:
-            step = map_step(th, vv, pars.duck())
+            step = map_step(th, vv, pars.duck(),
+                            released=None if chatter is None else chatter.released)
             hop = step.hop_phase
             jac = map_jacobian(th, vv, hop, pars)
             tangent, growth = advance_tangent(tangent, jac, pars)
@@ -257,11 +271,16 @@ def iterate_sweep(
                 theta_rec[idx, k - first_recorded] = th
             # a NaN hop (the ball cannot leave after the impact: alpha = 0) is sticking too
             stuck = ~(hop / pars.omega >= settings.min_hop_s)
+            if chatter is not None:  # complete chatters: stick, ride, release (or rest)
+                th, vv, tangent, stuck = chatter.after_impact(
+                    k, k > settings.transient_impacts, idx, th, vv, hop, tangent, pars, stuck)
             if stuck.any():
                 stuck_at[idx[stuck]] = k
                 keep = ~stuck
                 idx, th, vv, tangent = idx[keep], th[keep], vv[keep], tangent[keep]
                 pars = pars.take(keep)
+                if chatter is not None:
+                    chatter.keep(keep)
         if on_impact is not None:
             on_impact(1)
 
@@ -269,7 +288,66 @@ def iterate_sweep(
     v_rec[~settled] = np.nan
     theta_rec[~settled] = np.nan
     lyapunov = np.where(settled, log_growth / settings.measured_impacts, np.nan)
-    return SweepOrbits(v_rec, theta_rec, lyapunov, stuck_at, flies, first_recorded)
+    if chatter is None:
+        return SweepOrbits(v_rec, theta_rec, lyapunov, stuck_at, flies, first_recorded)
+    locked = settled & chatter.locked
+    lyapunov[locked] = -np.inf  # superstable: a stick forgets the state
+    return SweepOrbits(v_rec, theta_rec, lyapunov, stuck_at, flies, first_recorded,
+                       np.where(locked, chatter.cycles, 0))
+
+
+class _ExactSticking:
+    """``iterate_sweep``'s bookkeeping of exact sticking (``engine.chatter``), per state: the
+    unwrapped phase since the start (to count racket cycles between releases), the phase of
+    the last release, whether the next flight starts at a release, and whether the state
+    stuck during the measured impacts (locked)."""
+
+    def __init__(self, n: int, active: int) -> None:
+        self.clock = np.zeros(active)  # phase flown since the start, rad (active states)
+        self.released = np.zeros(active, dtype=bool)
+        self.last_release = np.full(n, np.nan)
+        self.cycles = np.zeros(n, dtype=np.int64)
+        self.locked = np.zeros(n, dtype=bool)
+
+    def keep(self, keep: np.ndarray) -> None:
+        self.clock, self.released = self.clock[keep], self.released[keep]
+
+    def after_impact(self, k, measuring, idx, th, vv, hop, tangent, pars, stuck):
+        """States whose chatter's tail is summable stick at its accumulation point and are
+        released (state: the release phase, wrapped, and the racket's velocity; tangent
+        reset); Gamma <= 1 rests (returned in ``stuck``, as the 1 ms rule's sticking is)."""
+        from .chatter import TAIL_TOLERANCE_S, chatter_tail, release_phases
+
+        self.clock += hop
+        tail, bound = chatter_tail(th, vv - pars.racket_velocity(th), pars)
+        sticks = bound <= TAIL_TOLERANCE_S
+        self.released = np.zeros(th.size, dtype=bool)
+        if not sticks.any():
+            return th, vv, tangent, stuck
+        s = np.flatnonzero(sticks)
+        at = pars.take(s)
+        release = release_phases(th[s] + tail[s], at)
+        rests = ~np.isfinite(release)
+        stuck = stuck.copy()
+        stuck[s[rests]] = True
+        s, release = s[~rests], release[~rests]
+        if s.size == 0:
+            return th, vv, tangent, stuck
+        at = pars.take(s)
+        self.clock[s] += release - th[s]
+        states = idx[s]
+        seen = np.isfinite(self.last_release[states])
+        self.cycles[states[seen]] = np.rint(
+            (self.clock[s][seen] - self.last_release[states[seen]]) / TWO_PI).astype(np.int64)
+        self.last_release[states] = self.clock[s]
+        if measuring:
+            self.locked[states] = True
+        th, vv, tangent = th.copy(), vv.copy(), tangent.copy()
+        th[s] = np.mod(release, TWO_PI)
+        vv[s] = at.racket_velocity(release)
+        tangent[s] = initial_tangent(s.size)
+        self.released[s] = True
+        return th, vv, tangent, stuck
 
 
 def detect_period(v, theta, max_period: int, tolerance: float) -> np.ndarray:
@@ -297,7 +375,9 @@ def attractor_names(orbits: SweepOrbits, settings: SweepSettings) -> tuple[np.nd
     names = names.astype(object)
     chaotic = (period == 0) & (orbits.lyapunov > settings.chaos_threshold)
     names[chaotic] = "chaotic"
-    names[orbits.stuck_at >= 0] = "sticking"
+    names[orbits.stuck_at >= 0] = "sticking" if orbits.locked_cycles is None else "resting"
+    if orbits.locked_cycles is not None:  # exact sticking: released twice while measured
+        names[orbits.locked_cycles > 0] = "locked"
     names[~orbits.flies] = "below_racket"
     return names, period
 

@@ -13,6 +13,13 @@ conditions occurs:
   ``|wrap(theta) - theta~| < tolerance`` (rad, the wrapped phase difference).
 * ``undecided``: none of these within ``max_iterations`` impacts.
 
+With ``min_hop_s`` 0 (exact sticking, ``engine.chatter``) a point sticks where a complete
+chatter's tail is summable instead; since every orbit that sticks is released in the same
+state, it takes the released ball's one fate: ``locked`` (the periodic sticking solution,
+``Classification.locked_cycles`` racket cycles), ``resting`` (Gamma <= 1), or ``period1`` /
+``undecided`` when the released ball goes there. The compiled kernel does not implement it:
+the numpy code runs whatever ``kernel`` says.
+
 The iteration count is the number of impacts computed until the point was classified
 (1..max_iterations for period1 / sticking, max_iterations for undecided, 0 for below_racket).
 The initial state itself is NOT compared with the fixed point: the first check is after
@@ -38,13 +45,24 @@ from typing import Any, Callable, Iterable, Iterator, Literal
 
 import numpy as np
 
+from .chatter import release_fate, tail_is_summable
 from .impact import MAX_SAFE_STEPS, can_fly, first_impact_phase
 from .maps import velocity_after_impact
 from .params import FixedPoint, ModelParams, phase_difference
 
-PERIOD1, STICKING, BELOW_RACKET, UNDECIDED = 0, 1, 2, 3
-#: outcome names indexed by their integer code
+PERIOD1, STICKING, BELOW_RACKET, UNDECIDED, LOCKED, RESTING = 0, 1, 2, 3, 4, 5
+#: outcome names indexed by their integer code (section 3's, with ``min_hop_s`` > 0)
 OUTCOMES = ("period1", "sticking", "below_racket", "undecided")
+#: with exact sticking (``min_hop_s`` 0: ``engine.chatter``) "sticking" never occurs; an orbit
+#: that sticks is "locked" (its release repeats: periodic, superstable) or "resting" (Gamma
+#: <= 1: never released), or takes the fate of the released ball (period1, undecided)
+EXACT_OUTCOMES = OUTCOMES + ("locked", "resting")
+
+
+def outcome_names(settings: "ClassifySettings") -> tuple[str, ...]:
+    """The outcomes a classification with ``settings`` can give: ``OUTCOMES``, or
+    ``EXACT_OUTCOMES`` with exact sticking (min_hop_s 0)."""
+    return EXACT_OUTCOMES if settings.min_hop_s == 0.0 else OUTCOMES
 
 TWO_PI = 2.0 * math.pi
 #: default number of grid points per tile (memory per tile: a few tens of MB)
@@ -70,13 +88,16 @@ class ClassifySettings:
 
 @dataclass(frozen=True)
 class Classification:
-    """Outcome codes (index into ``OUTCOMES``, int8) and iteration counts (int16)."""
+    """Outcome codes (index into ``EXACT_OUTCOMES``, int8) and iteration counts (int16);
+    ``locked_cycles``: with exact sticking, the period in racket cycles of the locked orbit
+    that every orbit that sticks ends on (0: none at these parameters)."""
 
     outcome: np.ndarray
     iterations: np.ndarray
+    locked_cycles: int = 0
 
     def names(self) -> np.ndarray:
-        return np.asarray(OUTCOMES, dtype=object)[self.outcome]
+        return np.asarray(EXACT_OUTCOMES, dtype=object)[self.outcome]
 
 
 def compiled_kernel_available() -> bool:
@@ -129,7 +150,9 @@ def classify_batch(theta0, v0, params: ModelParams,
         fp = params.fixed_point()
     else:  # a NaN target: no state is within any tolerance of it
         fp = FixedPoint(v_m_s=math.nan, theta_rad=math.nan)
-    if kernel == "compiled" or (kernel == "auto" and compiled_kernel_available()):
+    exact = settings.min_hop_s == 0.0  # exact sticking: the numpy kernel, whatever ``kernel``
+    if not exact and (kernel == "compiled"
+                      or (kernel == "auto" and compiled_kernel_available())):
         from .compiled import classify_arrays
 
         codes, counts = classify_arrays(theta0, v0, params, fp, settings.max_iterations,
@@ -139,6 +162,9 @@ def classify_batch(theta0, v0, params: ModelParams,
     tol = settings.tolerance
     min_hop = settings.min_hop_s
     w = params.omega
+    stick_code, stick_iterations, locked_cycles = STICKING, None, 0
+    if exact:
+        stick_code, stick_iterations, locked_cycles = _exact_sticking_fate(params, settings, fp)
 
     outcome = np.full(theta0.shape, UNDECIDED, dtype=np.int8)
     iterations = np.full(theta0.shape, settings.max_iterations, dtype=np.int16)
@@ -163,6 +189,8 @@ def classify_batch(theta0, v0, params: ModelParams,
         vv = velocity_after_impact(th, vv, hop, params, cos_theta_next=cos_th)
         # NaN hop (cannot leave the racket) compares False: sticking
         sticking = ~(hop / w >= min_hop)
+        if exact:  # sticks where a complete chatter's tail is summable (``engine.chatter``)
+            sticking |= tail_is_summable(th, vv - a * w * cos_th, params)
         period1 = (
             (np.abs(vv - fp.v_m_s) < tol)
             & (np.abs(phase_difference(th, fp.theta_rad)) < tol)
@@ -171,11 +199,33 @@ def classify_batch(theta0, v0, params: ModelParams,
         settled = sticking | period1
         if settled.any():
             done = idx[settled]
-            outcome[done] = np.where(sticking[settled], STICKING, PERIOD1)
-            iterations[done] = k
+            outcome[done] = np.where(sticking[settled], stick_code, PERIOD1)
+            iterations[done] = (k if stick_iterations is None else
+                                np.where(sticking[settled], stick_iterations(k), k))
             keep = ~settled
             idx, th, vv, cos_th = idx[keep], th[keep], vv[keep], cos_th[keep]
-    return Classification(outcome.reshape(shape), iterations.reshape(shape))
+    return Classification(outcome.reshape(shape), iterations.reshape(shape), locked_cycles)
+
+
+def _exact_sticking_fate(params: ModelParams, settings: ClassifySettings, fp: FixedPoint):
+    """With exact sticking (min_hop_s 0): every orbit that sticks is released in the same
+    state, so it takes the one fate of the released ball (``chatter.release_fate``): locked
+    (its period in racket cycles), resting, or, when the released ball reaches the fixed point
+    or nothing within ``max_iterations``, period1 (iterations: the impacts to the stick plus
+    the released ball's) or undecided. Returns (outcome code of a sticking orbit, its
+    iterations as a function of the impact k at which it stuck, locked period in cycles)."""
+    fate = release_fate(params, settings.max_iterations, settings.tolerance,
+                        None if math.isnan(fp.v_m_s) else fp)
+    code = {"locked": LOCKED, "resting": RESTING, "period1": PERIOD1,
+            "undecided": UNDECIDED}[fate.kind]
+    limit = settings.max_iterations
+
+    def iterations(k: int) -> int:
+        if fate.kind == "period1":
+            return min(k + fate.impacts, limit)
+        return limit if fate.kind == "undecided" else k
+
+    return code, iterations, fate.cycles if fate.kind == "locked" else 0
 
 
 def classify_tile(args):
@@ -183,7 +233,7 @@ def classify_tile(args):
     iterations) arrays; a module-level function, so that worker processes can receive it."""
     theta0, v0, params, settings, kernel = args
     result = classify_batch(theta0, v0, params, settings, kernel=kernel)
-    return result.outcome, result.iterations
+    return result.outcome, result.iterations, result.locked_cycles
 
 
 def classify_grid(
@@ -218,11 +268,14 @@ def classify_grid(
     iterations = np.empty(theta0.shape, dtype=np.int16)
     # copies: contiguous arrays for a worker (and small pickles); made as tiles are sent
     tasks = ((theta0[t].copy(), v0[t].copy(), params, settings, kernel) for t in tiles)
-    for tile, (tile_outcome, tile_iterations) in zip(tiles, map(classify_tile, tasks)):
+    locked_cycles = 0  # the same in every tile: one release per parameter point
+    for tile, (tile_outcome, tile_iterations, tile_cycles) in zip(
+            tiles, map(classify_tile, tasks)):
         outcome[tile], iterations[tile] = tile_outcome, tile_iterations
+        locked_cycles = tile_cycles
         if on_tile_done is not None:
             on_tile_done(tile_outcome.size)
-    return Classification(outcome.reshape(shape), iterations.reshape(shape))
+    return Classification(outcome.reshape(shape), iterations.reshape(shape), locked_cycles)
 
 
 def tile_slices(size: int, tile_points: int, workers: int = 1) -> list[slice]:

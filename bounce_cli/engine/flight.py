@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
+from .chatter import IMPACT, RELEASE, STICK, iterate_exact_orbit, release_phase
 from .classify import ClassifySettings
 from .impact import can_fly, next_impact_phase
 from .params import ModelError, ModelParams
@@ -66,7 +67,9 @@ class FlightSettings:
 
     integrator: str = "exact"
     rk4_step_s: float = 1e-3  # the paper's RK4 step (section 3)
-    min_hop_s: float = ClassifySettings().min_hop_s  # section 3's sticking criterion
+    #: section 3's sticking criterion; 0: exact sticking (``engine.chatter``, integrator
+    #: exact only; ``min_relative_velocity_m_s`` is then not used)
+    min_hop_s: float = ClassifySettings().min_hop_s
     min_relative_velocity_m_s: float = 1e-3
 
     def __post_init__(self) -> None:
@@ -78,6 +81,9 @@ class FlightSettings:
                 raise ModelError(f"{name} must be a finite number >= 0 (got {value!r})")
         if self.rk4_step_s <= 0.0:
             raise ModelError(f"rk4_step_s must be > 0 (got {self.rk4_step_s!r})")
+        if self.min_hop_s == 0.0 and self.integrator != "exact":
+            raise ModelError("min_hop_s 0 (exact sticking) needs integrator exact: a fixed "
+                             "step cannot resolve a complete chatter's shrinking hops")
 
 
 @dataclass(frozen=True)
@@ -85,7 +91,10 @@ class Segment:
     """A piece of the ball's motion on [t_start, t_end].
 
     kind "flight": x(t) = x_start + v_start (t - t_start) - g (t - t_start)^2 / 2 (eqs. 1, 2);
-    kind "stuck": the ball moves with the racket (x_start, v_start are the racket's).
+    kind "stuck": the ball moves with the racket (x_start, v_start are the racket's);
+    kind "chatter" (exact sticking): the tail of a complete chatter, infinitely many hops
+    from the last resolved impact to the accumulation point, all within u^2 / (2 g_eff) (about
+    1e-11 m) of the racket: sampled as the racket.
     """
 
     kind: str
@@ -116,6 +125,8 @@ class Trajectory:
     t_end: float
     segments: tuple[Segment, ...]
     impacts: tuple[Impact, ...]
+    #: exact sticking: times (s) of the accumulation points of complete chatters
+    accumulations: tuple[float, ...] = ()
 
     @property
     def stuck_phases(self) -> list[tuple[float, float]]:
@@ -145,21 +156,16 @@ class Trajectory:
             else:
                 x[m] = p.racket_position(p.omega * t[m])
                 v[m] = p.racket_velocity(p.omega * t[m])
-                stuck[m] = True
+                stuck[m] = seg.kind == "stuck"
         return x, v, stuck
 
 
 def leave_phase(theta, params: ModelParams) -> float:
     """First phase >= theta at which a ball resting on the racket leaves it: where the
     racket's downward acceleration reaches g (a_r w^2 sin = g, sin increasing), or theta
-    itself when it already exceeds g there. ``inf`` when a_r w^2 <= g (never)."""
-    ratio = params.g / (params.racket_amplitude * params.omega**2)
-    if ratio >= 1.0:
-        return math.inf
-    if math.sin(theta) > ratio:
-        return float(theta)
-    crossing = math.asin(ratio)
-    return float(theta + np.mod(crossing - theta, 2.0 * math.pi))
+    itself when it already exceeds g there. ``inf`` when a_r w^2 <= g (never). The release
+    of exact sticking, ``engine.chatter.release_phase``."""
+    return release_phase(theta, params)
 
 
 def impact_velocity(v_before: float, racket_v: float, alpha: float) -> float:
@@ -181,9 +187,60 @@ def simulate(
         raise ModelError("initial phase and velocity must be finite")
     if not (math.isfinite(duration_s) and duration_s > 0.0):
         raise ModelError(f"duration must be > 0 (got {duration_s!r})")
+    if settings.min_hop_s == 0.0:
+        return _exact_sticking_trajectory(float(theta0), float(v0), params, duration_s)
     sim = _Simulation(params, settings, theta0 / params.omega, duration_s)
     sim.run(float(theta0), float(v0))
     return Trajectory(params, sim.t0, sim.t_end, tuple(sim.segments), tuple(sim.impacts))
+
+
+def _exact_sticking_trajectory(theta0: float, v0: float, params: ModelParams,
+                               duration_s: float) -> Trajectory:
+    """``simulate`` with exact sticking (``min_hop_s`` 0): the events of
+    ``chatter.iterate_exact_orbit`` (impacts, accumulation points, releases) laid out as
+    segments. A ball that cannot leave at the start rides until its release first."""
+    w = params.omega
+    t0, t_end = theta0 / w, theta0 / w + duration_s
+    segments: list[Segment] = []
+    start_released = not bool(can_fly(theta0, v0, params))
+    if start_released:  # rides from the start until the racket's acceleration reaches -g
+        theta_r = release_phase(theta0, params)
+        segments.append(Segment("stuck", t0, min(theta_r / w, t_end),
+                                float(params.racket_position(theta0)),
+                                float(params.racket_velocity(theta0))))
+        if theta_r / w >= t_end:
+            return Trajectory(params, t0, t_end, tuple(segments), ())
+        theta0, v0 = theta_r, float(params.racket_velocity(theta_r))
+    orbit = iterate_exact_orbit(theta0, v0, params, n_impacts=2**62,
+                                start_released=start_released, until_theta=w * t_end)
+    impacts: list[Impact] = []
+    accumulations: list[float] = []
+    for i in range(1, len(orbit.event)):
+        kind, t_prev, t_i = orbit.event[i], orbit.theta[i - 1] / w, orbit.theta[i] / w
+        if t_prev >= t_end:
+            break
+        if kind == IMPACT:
+            segments.append(Segment("flight", t_prev, min(t_i, t_end),
+                                    float(params.racket_position(orbit.theta[i - 1])),
+                                    float(orbit.v[i - 1])))
+            if t_i <= t_end:
+                v_before = float(orbit.v[i - 1]) - params.g * (t_i - t_prev)
+                impacts.append(Impact(t_i, float(orbit.theta[i]), v_before, float(orbit.v[i]),
+                                      float(params.racket_velocity(orbit.theta[i])),
+                                      t_i - t_prev))
+        elif kind == STICK:
+            segments.append(Segment("chatter", t_prev, min(t_i, t_end),
+                                    float(params.racket_position(orbit.theta[i - 1])),
+                                    float(params.racket_velocity(orbit.theta[i - 1]))))
+            if t_i <= t_end:
+                accumulations.append(t_i)
+                # released at the next event; resting (or the run's end): rides to the end
+                ride_end = (orbit.theta[i + 1] / w if i + 1 < len(orbit.event)
+                            and orbit.event[i + 1] == RELEASE else math.inf)
+                segments.append(Segment("stuck", t_i, min(ride_end, t_end),
+                                        float(params.racket_position(orbit.theta[i])),
+                                        float(orbit.v[i])))
+    return Trajectory(params, t0, t_end, tuple(segments), tuple(impacts), tuple(accumulations))
 
 
 class _Simulation:

@@ -11,6 +11,11 @@ racket. Every step taken here is one that a lower bound of G proves root-free:
 
 * first step, from s = 0: Taylor to third order with |G'''| <= a gives
   G(h) >= h (d + c h / 2 - a h^2 / 6), d = G'(0), c = G''(0);
+* first step after a release (exact sticking, ``engine.chatter``: the ball leaves the racket
+  where the racket's acceleration reaches -g, sin theta = 1/Gamma, with the racket's
+  velocity), where G = G' = G'' = 0 and that bound has no positive step: one order further,
+  G''' (0) = a cos theta > 0 and |G''''| <= a give G(h) >= h^3 (a cos theta / 6 - a h / 24),
+  positive for h < 4 cos theta; the first step is half that;
 * later steps, from a point with G > 0: |G''| <= g/w^2 + a =: M gives
   G(s + h) >= G + d h - M h^2 / 2 > 0 for h < (d + sqrt(d^2 + 2 M G)) / M.
 
@@ -84,7 +89,8 @@ def can_fly(theta, v, params: ModelParams):
     return (slope > 0.0) | ((slope == 0.0) & (curvature > 0.0))
 
 
-def next_impact_phase(theta, v, params: ModelParams, *, max_steps: int = MAX_SAFE_STEPS):
+def next_impact_phase(theta, v, params: ModelParams, *, max_steps: int = MAX_SAFE_STEPS,
+                      released=None):
     """Phase elapsed until the FIRST impact after leaving the racket at (theta, v).
 
     theta: phase of the current impact (rad, wrapped or not); v: ball velocity just after it
@@ -93,13 +99,14 @@ def next_impact_phase(theta, v, params: ModelParams, *, max_steps: int = MAX_SAF
 
     ``params`` is a ``ModelParams``, or any object with the same attributes holding arrays that
     broadcast to the states' shape: one parameter point per state (bifurcation sweeps).
+    ``released``: as for ``first_impact_phase``.
     """
     return first_impact_phase(theta, v, params.racket_amplitude, params.omega, params.g,
-                              max_steps=max_steps)
+                              max_steps=max_steps, released=released)
 
 
 def first_impact_phase(theta, v, amplitude, omega, g, *, max_steps: int = MAX_SAFE_STEPS,
-                       cos_theta=None, sin_theta=None):
+                       cos_theta=None, sin_theta=None, released=None):
     """``next_impact_phase`` with the racket's amplitude a (m), angular frequency w (rad/s)
     and gravity g (m/s^2) given directly, each a scalar or an array broadcasting with theta
     and v: one call serves states at different parameters (a sweep of the map, or a racket
@@ -109,6 +116,14 @@ def first_impact_phase(theta, v, amplitude, omega, g, *, max_steps: int = MAX_SA
     ``cos_theta`` and ``sin_theta``, when given, are ``np.cos`` and ``np.sin`` of theta
     wrapped to [0, 2 pi) (a caller that has them, the basin's classifier, saves two
     transcendental functions per state); the result is the same to the last bit.
+
+    ``released``: None, or a boolean (array broadcasting with theta) marking states that
+    leave the racket at a release point of exact sticking (``engine.chatter``): there the
+    ball moves with the racket and the racket's acceleration is -g, so G'(0) and G''(0) are
+    zero by construction (whatever their rounded values: they are set to 0) and the first
+    step is the module docstring's fourth-order one (needs cos theta > 0, i.e. the release
+    of sin theta = 1/Gamma in the first quadrant; elsewhere NaN). With None (or all False)
+    the arithmetic is the one without the argument, bit for bit.
 
     The work per step is that of the module docstring's safe step, written to compute each
     subexpression once (``engine.compiled`` repeats these expressions in the same order);
@@ -120,6 +135,8 @@ def first_impact_phase(theta, v, amplitude, omega, g, *, max_steps: int = MAX_SA
     theta, v, *given = np.broadcast_arrays(*(np.asarray(x, dtype=float)
                                              for x in (theta, v, amplitude, omega, g)))
     shape = theta.shape
+    release = (None if released is None or not np.any(released)
+               else np.broadcast_to(np.asarray(released, dtype=bool), shape).ravel())
     theta = np.mod(theta.ravel(), 2.0 * np.pi)  # sin/cos periodic: keep arguments small
     v = v.ravel()
     # racket parameters: plain floats when they are one value (the fast path), else arrays
@@ -134,7 +151,10 @@ def first_impact_phase(theta, v, amplitude, omega, g, *, max_steps: int = MAX_SA
     result = np.full(theta.shape, np.nan)
     slope = (v - a * w * cos_th) / w
     curvature = -g / w**2 + a * sin_th
-    idx = np.flatnonzero((slope > 0.0) | ((slope == 0.0) & (curvature > 0.0)))  # can_fly
+    flies = (slope > 0.0) | ((slope == 0.0) & (curvature > 0.0))  # can_fly
+    if release is not None:  # a release point flies when G''' = a cos theta > 0
+        flies = np.where(release, cos_th > 0.0, flies)
+    idx = np.flatnonzero(flies)
     vv = v[idx]
     a, w, g, bound = (x if isinstance(x, float) else x[idx] for x in (a, w, g, bound))
 
@@ -143,6 +163,10 @@ def first_impact_phase(theta, v, amplitude, omega, g, *, max_steps: int = MAX_SA
     d0 = vv / w - a * cos_th
     c0 = -g / (w * w) + a * sin_th
     s = (c0 / 2.0 + np.sqrt(c0 * c0 / 4.0 + 2.0 * a * np.maximum(d0, 0.0) / 3.0)) / (a / 3.0)
+    if release is not None:  # G' = G'' = 0 at a release: the fourth-order first step
+        at_release = release[idx]
+        d0 = np.where(at_release, 0.0, d0)
+        s = np.where(at_release, 2.0 * cos_th, s)
     tmp = np.empty_like(s)
     del slope, curvature, c0
 

@@ -42,18 +42,20 @@ class MapStep:
     hop_phase: np.ndarray  # phi_{k+1} - theta_k: phase elapsed in flight (NaN: no flight)
 
 
-def map_step(theta, v, params: ModelParams, velocity_noise=0.0, phase_noise=0.0) -> MapStep:
+def map_step(theta, v, params: ModelParams, velocity_noise=0.0, phase_noise=0.0, *,
+             released=None) -> MapStep:
     """Advance states (theta_k, v_k) by one impact.
 
     Deterministic map: eqs. 5 and 6. With noise terms (already scaled: q_v xi and q_theta xi'
     with independent xi, xi'), the stochastic map of eqs. 16-18: the noiseless next phase
     phi_{k+1} solves eq. 17, theta_{k+1} = phi_{k+1} + phase_noise (eq. 18), and
     v_{k+1} follows eq. 16 with cos(theta_{k+1}) and (phi_{k+1} - theta_k).
-    States whose ball cannot leave the racket give NaN.
+    States whose ball cannot leave the racket give NaN. ``released``: states that leave from
+    a release point of exact sticking (``engine.chatter``; ``next_impact_phase``).
     """
     theta = np.asarray(theta, dtype=float)
     v = np.asarray(v, dtype=float)
-    hop = next_impact_phase(theta, v, params)
+    hop = next_impact_phase(theta, v, params, released=released)
     theta_next = theta + hop + phase_noise
     v_next = velocity_after_impact(theta_next, v, hop, params) + velocity_noise
     return MapStep(theta=theta_next, v=v_next, hop_phase=hop)

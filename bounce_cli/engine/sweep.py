@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from .basin_measures import basin_entropy, uncertainty_exponent
-from .classify import OUTCOMES, Classification, ClassifySettings, classify_batch
+from .classify import OUTCOMES, Classification, ClassifySettings, classify_batch, outcome_names
 from .linear import racket_acceleration_at_impact_g, racket_amplitude_for_ac, stability
 from .params import ModelError, ModelParams
 
@@ -137,10 +137,14 @@ def evaluate_point(task: PointTask) -> dict[str, Any]:
         row.update(ac_g=math.nan, fixed_point_v_m_s=math.nan, fixed_point_theta_deg=math.nan,
                    spectral_radius=math.nan)
     theta_grid, v_grid = np.meshgrid(np.deg2rad(task.theta0_deg.values()), task.v0_m_s.values())
-    outcome = classify_points(theta_grid, v_grid, params, task.settings).outcome
-    counts = np.bincount(outcome.ravel(), minlength=len(OUTCOMES))
-    for name, count in zip(OUTCOMES, counts):
+    classified = classify_points(theta_grid, v_grid, params, task.settings)
+    outcome = classified.outcome
+    names = outcome_names(task.settings)  # exact sticking (min_hop_s 0): locked, resting too
+    counts = np.bincount(outcome.ravel(), minlength=len(names))
+    for name, count in zip(names, counts):
         row[f"fraction_{name}"] = float(count / outcome.size)
+    if names is not OUTCOMES:  # the locked orbit's period in racket cycles (0: none)
+        row["locked_cycles"] = int(classified.locked_cycles)
     entropy = basin_entropy(outcome, box=task.entropy_box)
     row.update(basin_entropy=entropy.basin_entropy,
                boundary_basin_entropy=entropy.boundary_basin_entropy,

@@ -26,12 +26,14 @@ from ..config import (
     StrictModel,
 )
 from ..engine.classify import (
+    EXACT_OUTCOMES,
     OUTCOMES,
     ClassifySettings,
     classify_batch,
     classify_grid,
     compiled_kernel_available,
     load_compiled_kernel,
+    outcome_names,
 )
 from ..engine.control import is_passive
 from ..engine.params import ModelParams
@@ -46,12 +48,16 @@ OUTCOME_COLOURS = {
     "sticking": "#9a9a9a",
     "below_racket": "#000000",
     "undecided": "#d62728",
+    "locked": "#6a8fc7",
+    "resting": "#8c564b",
 }
 OUTCOME_LABELS = {
     "period1": "period-1 (reaches the fixed point)",
     "sticking": "sticking",
     "below_racket": "below the racket",
     "undecided": "undecided (max impacts)",
+    "locked": "locked: exact sticking solution",
+    "resting": "resting on the racket (Gamma <= 1)",
 }
 
 LEGEND_BELOW: dict[str, Any] = dict(loc="outside lower center", ncol=3, fontsize=8, frameon=False)
@@ -148,12 +154,16 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
             "bounce_cli.artifacts.read_frame), or reduce grid.theta0_deg.num / grid.v0_m_s.num"
         )
     settings = config.classify.settings()
+    outcomes = outcome_names(settings)
     # rows: v0 outer, theta0 inner
     theta_grid_deg, v_grid = np.meshgrid(theta_deg, v0)
     theta_grid_rad = np.deg2rad(theta_grid_deg)
 
     options.progress.start(n_points, "basin: classifying")
     controller = config.model.controller()
+    if controller is not None and settings.min_hop_s == 0.0:
+        raise ConfigError("classify.min_hop_s: 0 (exact sticking) is not implemented with "
+                          "model.control; give a shortest hop > 0")
     if controller is None:
         # the compiled kernel releases the GIL: threads, which cost nothing to start
         threads = n_points >= COMPILED_MIN_POINTS and compiled_kernel_available()
@@ -185,27 +195,36 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
             "theta0_rad": theta_grid_rad.ravel(),
             "theta0_deg": theta_grid_deg.ravel(),
             "v0_m_s": v_grid.ravel(),
-            "outcome": pd.Categorical.from_codes(result.outcome, categories=list(OUTCOMES)),
+            "outcome": pd.Categorical.from_codes(result.outcome, categories=list(outcomes)),
             "iterations": result.iterations,
         }
     )
     del theta_grid_deg, theta_grid_rad, v_grid  # the frame holds copies (large grids)
-    counts = np.bincount(result.outcome, minlength=len(OUTCOMES))
+    counts = np.bincount(result.outcome, minlength=len(outcomes))
     fractions = pd.DataFrame(
-        {"outcome": list(OUTCOMES), "count": counts, "fraction": counts / n_points}
+        {"outcome": list(outcomes), "count": counts, "fraction": counts / n_points}
     )
+    if outcomes is EXACT_OUTCOMES:  # exact sticking: the locked orbit's period
+        fractions["period_cycles"] = np.where(fractions.outcome == "locked",
+                                              result.locked_cycles, 0)
     at_paper = is_passive(controller) and at_paper_parameters(params, settings)
-    markers = marker_frame(params, settings, fig3=at_paper, controller=controller)
+    # Fig. 3's starts also on the exact-sticking basin at the paper's model
+    fig3 = at_paper or (outcomes is EXACT_OUTCOMES and is_passive(controller)
+                        and paper.at_parameters(params, paper.FIG3_MODEL))
+    markers = marker_frame(params, settings, fig3=fig3, controller=controller)
 
     frames = {table: basin, "fractions.csv": fractions, "markers.csv": markers}
     summary = [
         f"basin: {theta_deg.size} x {v0.size} grid, "
-        + ", ".join(f"{o} {f:.4f}" for o, f in zip(OUTCOMES, counts / n_points)),
+        + ", ".join(f"{o} {f:.4f}" for o, f in zip(outcomes, counts / n_points))
+        + (f" (locked: period {result.locked_cycles} racket cycle"
+           f"{'s' if result.locked_cycles > 1 else ''}, Lyapunov exponent -inf)"
+           if result.locked_cycles else ""),
         f"max impacts until classified: {int(result.iterations.max())} "
         f"(limit {settings.max_iterations}"
         + ("; paper: no point reached 100)" if at_paper else ")"),
     ]
-    if at_paper:
+    if fig3:
         summary.append("Fig. 3 initial conditions: " + ", ".join(
             f"v0 = {row.v0_m_s:g} m/s -> {row.outcome} after {row.iterations}"
             for row in markers.itertuples() if row.marker != "fixed_point"))
@@ -361,24 +380,33 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     from ..plotting import new_figure
 
     basin, markers = basin_table(frames), frames["markers.csv"]
-    codes = pd.Categorical(basin["outcome"], categories=list(OUTCOMES)).codes
+    codes = pd.Categorical(basin["outcome"], categories=list(EXACT_OUTCOMES)).codes
+    fractions = frames.get("fractions.csv")
+    exact = fractions is not None and "period_cycles" in fractions
+    shown = [o for i, o in enumerate(EXACT_OUTCOMES) if o in OUTCOMES or (codes == i).any()]
+    labels = dict(OUTCOME_LABELS)
+    if exact and fractions is not None:
+        cycles = int(fractions.period_cycles.max())
+        labels["locked"] += f", period {cycles} racket cycle{'s' if cycles != 1 else ''}"
+        labels["undecided"] = "undecided in max impacts (chaotic or a long transient)"
     grid = _Grid(basin)
     image, extent = grid.image(codes), grid.extent
 
     fig, axes = new_figure(width=7.5, height=6.2)
     ax = axes[0, 0]
-    cmap = ListedColormap([OUTCOME_COLOURS[o] for o in OUTCOMES])
-    norm = BoundaryNorm(np.arange(len(OUTCOMES) + 1) - 0.5, cmap.N)
+    cmap = ListedColormap([OUTCOME_COLOURS[o] for o in EXACT_OUTCOMES])
+    norm = BoundaryNorm(np.arange(len(EXACT_OUTCOMES) + 1) - 0.5, cmap.N)
     ax.imshow(image, origin="lower", extent=extent, aspect="auto", cmap=cmap, norm=norm,
               interpolation="nearest")
     _draw_markers(ax, markers, extent)
-    handles = [Patch(facecolor=OUTCOME_COLOURS[o], edgecolor="0.3", label=OUTCOME_LABELS[o])
-               for o in OUTCOMES]
+    handles = [Patch(facecolor=OUTCOME_COLOURS[o], edgecolor="0.3", label=labels[o])
+               for o in shown if not (exact and o == "sticking")]
     handles += ax.get_legend_handles_labels()[0]
-    fig.legend(handles=handles, **LEGEND_BELOW)
+    fig.legend(handles=handles, **(LEGEND_BELOW | {"ncol": 2} if exact else LEGEND_BELOW))
     ax.set_xlabel(r"initial phase $\theta_0$ (deg)")
     ax.set_ylabel(r"initial velocity $v_0$ (m/s)")
-    ax.set_title("Domain of attraction of the period-1 attractor (paper Fig. 4)")
+    ax.set_title("Domain of attraction of the period-1 attractor (paper Fig. 4)"
+                 + (",\nexact sticking (min_hop_s 0)" if exact else ""))
 
     iters = grid.image(basin["iterations"].to_numpy())
     below = grid.image(codes == OUTCOMES.index("below_racket"))

@@ -43,7 +43,7 @@ from .base import Experiment, ExperimentResult, RunOptions
 
 Parameter = Literal["gamma", "racket_amplitude", "racket_period", "alpha"]
 #: outcomes that are not an attractor of the map (the orbit ends)
-NOT_ATTRACTORS = ("sticking", "below_racket")
+NOT_ATTRACTORS = ("sticking", "below_racket", "resting")
 
 
 class SweepBlock(StrictModel):
@@ -156,6 +156,8 @@ def run(config: BifurcationConfig, options: RunOptions) -> ExperimentResult:
         "lyapunov_per_impact": orbits.lyapunov,
         "stuck_at_impact": orbits.stuck_at,
     })
+    if orbits.locked_cycles is not None:  # exact sticking: the locked orbits' periods
+        attractors["locked_cycles"] = orbits.locked_cycles
     recorded = np.isfinite(orbits.v[:, 0])
     n_rec = settings.recorded_impacts
     bifurcation = pd.DataFrame({
@@ -369,16 +371,34 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     fig, axes = new_figure(2, 1, width=8.0, height=7.5, sharex=True,
                            gridspec_kw=dict(height_ratios=[2.2, 1]))
     top, bottom = axes[0, 0], axes[1, 0]
-    top.plot(bif[column], bif["v_m_s"], ",", color="black", alpha=0.6, rasterized=True)
+    exact = "locked_cycles" in attractors  # exact sticking (min_hop_s 0)
+    on_locked = np.zeros(len(bif), dtype=bool)
+    if exact:
+        locked = attractors.loc[attractors.attractor == "locked", [column, "initial_condition"]]
+        on_locked = pd.MultiIndex.from_frame(bif[[column, "initial_condition"]]).isin(
+            pd.MultiIndex.from_frame(locked))
+    top.plot(bif.loc[~on_locked, column], bif.loc[~on_locked, "v_m_s"], ",", color="black",
+             alpha=0.6, rasterized=True)
+    if on_locked.any():
+        top.plot(bif.loc[on_locked, column], bif.loc[on_locked, "v_m_s"], ",", color="tab:blue",
+                 alpha=0.8, rasterized=True,
+                 label="locked orbits (exact sticking): resolved impacts of a period")
 
     x = per_value[column].to_numpy()
     half_step = abs(x[1] - x[0]) / 2 if x.size > 1 else 0.0
-    all_stick = (per_value["n_sticking"] == per_value["n_initial_conditions"]).to_numpy()
+    if exact:  # where every initial condition locks: today's grey bands, now resolved
+        n_locked = attractors.groupby(column, sort=False)["attractor"].agg(
+            lambda s: int((s == "locked").sum())).reindex(x).to_numpy()
+        all_stick = n_locked == per_value["n_initial_conditions"].to_numpy()
+        band = "every initial condition locks (sticks and is released each period)"
+    else:
+        all_stick = (per_value["n_sticking"] == per_value["n_initial_conditions"]).to_numpy()
+        band = "every initial condition sticks"
     for k, (a, b) in enumerate(_runs(all_stick)):
         for ax in (top, bottom):
-            ax.axvspan(min(x[a], x[b]) - half_step, max(x[a], x[b]) + half_step, color="0.88",
-                       lw=0,
-                       label="every initial condition sticks" if (k, ax) == (0, top) else None)
+            ax.axvspan(min(x[a], x[b]) - half_step, max(x[a], x[b]) + half_step,
+                       color="#e3ecf7" if exact else "0.88", lw=0,
+                       label=band if (k, ax) == (0, top) else None)
 
     labelled: set = set()
     for row in thresholds[thresholds.threshold.isin(["existence", "flip"])].itertuples():
@@ -406,10 +426,15 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     top.set_ylabel(r"ball velocity after impact $v_k$ (m/s)")
     top.set_title("Bifurcation diagram of the ball bouncing map (eqs. 5, 6)")
 
-    ok = attractors["lyapunov_per_impact"].notna()
+    ok = np.isfinite(attractors["lyapunov_per_impact"])
     bottom.plot(attractors.loc[ok, column], attractors.loc[ok, "lyapunov_per_impact"], ".",
                 ms=1.5, color="0.4", label="largest Lyapunov exponent of each orbit",
                 rasterized=True)
+    superstable = np.isneginf(attractors["lyapunov_per_impact"])
+    if superstable.any():  # -inf: drawn on the panel's lower edge
+        bottom.plot(attractors.loc[superstable, column], np.zeros(int(superstable.sum())), "v",
+                    ms=2.5, color="tab:blue", transform=bottom.get_xaxis_transform(),
+                    clip_on=False, label="locked orbit: exponent -inf (superstable)")
     log_radius = per_value["ln_spectral_radius_eq10"].where(
         per_value["ln_spectral_radius_eq10"] <= 0.0)
     bottom.plot(x, log_radius, color="tab:green", lw=1.2,

@@ -40,13 +40,22 @@ from ..plotting import caption_figures
 from .base import Experiment, ExperimentResult, RunOptions
 
 
+def at_least_one(names):
+    """The racket's names: one, or a non-empty list (their mean is the racket)."""
+    if isinstance(names, list) and not names:
+        raise ValueError("name at least one")
+    return names
+
+
 class ColumnsBlock(StrictModel):
     """Column names of a CSV recording (null: the file has no such column)."""
 
     trial: Optional[str] = "trial"
     time: str = "t_s"
-    racket: str = "racket_x_m"
+    racket: Union[str, list[str]] = "racket_x_m"
     ball: Optional[str] = "ball_x_m"
+
+    _some = field_validator("racket")(classmethod(lambda cls, value: at_least_one(value)))
 
 
 class EventColumnsBlock(StrictModel):
@@ -90,12 +99,24 @@ class UnitsBlock(StrictModel):
     time: Literal[tuple(TIME_UNITS)] = "s"  # type: ignore[valid-type]
 
 
-class C3DBlock(StrictModel):
-    """Which markers of a C3D file are racket and ball, and which axis is vertical."""
+class MarkersBlock(StrictModel):
+    """Which markers of a marker file (C3D, Vicon, QTM, Motive) are racket and ball, which
+    axis is vertical (null: the format's, y for Motive, else z) and the positions' length unit
+    (null: the file's)."""
 
-    racket_marker: str = "racket"
-    ball_marker: Optional[str] = "ball"
-    vertical_axis: Literal["x", "y", "z"] = "z"
+    racket: Union[str, list[str]] = "racket"
+    ball: Optional[str] = "ball"
+    vertical_axis: Optional[Literal["x", "y", "z"]] = None
+    units: Optional[Literal[tuple(LENGTH_UNITS)]] = None  # type: ignore[valid-type]
+
+    _some = field_validator("racket")(classmethod(lambda cls, value: at_least_one(value)))
+
+
+#: the former ``c3d`` block's keys -> the ``markers`` block's
+FORMER_MARKER_KEYS = {"racket_marker": "racket", "ball_marker": "ball"}
+
+#: the recording formats (``auto``: by the suffix and the first line)
+RECORDING_FORMATS = ("auto", "csv", "c3d", "vicon", "qtm", "motive")
 
 
 DEFAULTS = ExtractionSettings()
@@ -143,9 +164,28 @@ class ExtractConfig(ExperimentConfig):
     event_columns: EventColumnsBlock = EventColumnsBlock()
     csv: CsvBlock = CsvBlock()
     units: UnitsBlock = UnitsBlock()
-    c3d: C3DBlock = C3DBlock()
+    format: Literal[RECORDING_FORMATS] = Field(  # type: ignore[valid-type]
+        "auto", description="the recording's format: auto (by the suffix and the first line) "
+        "| csv | c3d | vicon | qtm | motive")
+    markers: MarkersBlock = MarkersBlock()
     extraction: ExtractionBlock = ExtractionBlock()
     figure: FigureBlock = FigureBlock()
+
+    @model_validator(mode="before")
+    @classmethod
+    def _former_c3d_block(cls, data):
+        """Configs written before the ``markers`` block (which now serves every marker
+        format) named it ``c3d`` with ``racket_marker``, ``ball_marker`` and
+        ``vertical_axis``: still read, as that block (its keys win over the markers block's
+        where both are given, e.g. ``--set c3d.ball_marker=b`` on the bundled config)."""
+        if not isinstance(data, dict) or "c3d" not in data:
+            return data
+        former, markers = data["c3d"], data.get("markers") or {}
+        if not isinstance(former, dict) or not isinstance(markers, dict):
+            return data  # validation names the key
+        renamed = {FORMER_MARKER_KEYS.get(k, k): v for k, v in former.items()}
+        return {**{k: v for k, v in data.items() if k != "c3d"},
+                "markers": {**markers, **renamed}}
 
 
 def centred_deg(theta_deg):
@@ -288,8 +328,8 @@ def run(config: ExtractConfig, options: RunOptions) -> ExperimentResult:
         summary.append(f"no data given: extracted {source} (bounce simulate-recording's "
                        "recording.csv) and compared it with its truth")
     else:
-        trials = read_recording(Path(config.data), config.columns, config.units, config.c3d,
-                                config.csv)
+        trials = read_recording(Path(config.data), config.columns, config.units,
+                                config.markers, config.csv, config.format, options.warn)
         source = config.data
         truth = read_truth(config.truth) if config.truth is not None else None
     events = None

@@ -10,12 +10,13 @@ the racket amplitude that gives that AC at the trial's period following from eqs
 ``period_factors`` (target heights, as Fig. 7's design), and each condition has its own
 velocity noise (e.g. with and without vision).
 
-Writes ``recordings/<subject>_<condition>_t<trial>.csv`` (what a lab measures), the manifest
-``study.csv`` (file, subject, condition, trial), ``truth_trials.csv`` (each trial's true racket,
-AC, alpha, g and noise, and how often it was restarted because the ball fell into sticking) and
-``truth.csv`` (every exact impact, with subject, condition and
-trial). ``damaged_files`` replaces that many recordings (the last ones) with files that cannot
-be read, to see how ``bounce study`` reports failures.
+Writes ``recordings/<subject>_<condition>_t<trial>.csv`` (what a lab measures; with
+perturbations also ``events/...csv``, the impacts' times and alpha as a virtual set-up logs
+them), the manifest ``study.csv`` (file[, events], subject, condition, trial),
+``truth_trials.csv`` (each trial's true racket, AC, alpha, g and noise, and how often it was
+restarted because the ball fell into sticking) and ``truth.csv`` (every exact impact, with
+subject, condition and trial). ``damaged_files`` replaces that many recordings (the last ones)
+with files that cannot be read, to see how ``bounce study`` reports failures.
 """
 
 from __future__ import annotations
@@ -130,8 +131,8 @@ def trial_plan(config: SimulateStudyConfig) -> pd.DataFrame:
 MAX_RESTARTS = 5
 
 
-def simulate_trial(data: dict, row) -> tuple[pd.DataFrame, pd.DataFrame, int]:
-    """(recording, exact impacts, restarts) of one trial. A trial in which the ball falls
+def simulate_trial(data: dict, row) -> tuple[pd.DataFrame, pd.DataFrame, pd.DataFrame, int]:
+    """(recording, events, exact impacts, restarts) of one trial. A trial in which the ball falls
     into sticking (the engine's ModelError) is simulated again from the next stream of its
     seed, as a subject starts a failed trial again; ``truth_trials.csv`` counts the restarts."""
     streams = np.random.SeedSequence(int(data["seed"])).spawn(MAX_RESTARTS)
@@ -142,8 +143,8 @@ def simulate_trial(data: dict, row) -> tuple[pd.DataFrame, pd.DataFrame, int]:
         except ValueError as exc:
             raise ConfigError(f"{row.subject} {row.condition} trial {row.trial}: {exc}") from None
         try:
-            recording, _, truth = session_frames(config)
-            return recording, truth, restart
+            recording, events, truth = session_frames(config)
+            return recording, events, truth, restart
         except ModelError as exc:
             failure = exc
     raise ConfigError(f"{row.subject} {row.condition} trial {row.trial}: {failure} (in each of "
@@ -152,6 +153,12 @@ def simulate_trial(data: dict, row) -> tuple[pd.DataFrame, pd.DataFrame, int]:
 
 def recording_name(row) -> str:
     return f"recordings/{row.subject}_{row.condition}_t{row.trial}.csv"
+
+
+def events_name(row) -> str:
+    """The events file of a recording (with perturbations: which impacts were perturbed is
+    known from a virtual set-up's log, not from the ball)."""
+    return f"events/{row.subject}_{row.condition}_t{row.trial}.csv"
 
 
 def run(config: SimulateStudyConfig, options: RunOptions) -> ExperimentResult:
@@ -173,17 +180,21 @@ def run(config: SimulateStudyConfig, options: RunOptions) -> ExperimentResult:
             "racket": config.racket.model_dump(),
             "perturbations": config.perturbations.model_dump(),
         }
-        recording, truth, restarts[i] = simulate_trial(data, row)
+        recording, events, truth, restarts[i] = simulate_trial(data, row)
         name = recording_name(row)
         if i in damaged:
             # what a crashed export leaves: a header and half a line
             recording = pd.DataFrame({"trial": ["1"], "t_s": ["0.0,0.1"]})
         frames[name] = recording
+        if config.perturbations.every:
+            frames[events_name(row)] = events
         truths.append(truth.assign(subject=row.subject, condition=row.condition,
                                    trial=row.trial))
         options.progress.advance()
     manifest = pd.DataFrame({
         "file": [recording_name(r) for r in plan.itertuples()],
+        **({"events": [events_name(r) for r in plan.itertuples()]}
+           if config.perturbations.every else {}),
         "subject": plan["subject"], "condition": plan["condition"], "trial": plan["trial"],
     })
     truth = pd.concat(truths, ignore_index=True)

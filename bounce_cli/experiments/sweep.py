@@ -26,7 +26,7 @@ from pydantic import Field, model_validator
 
 from .. import parallel
 from ..config import ClassifyBlock, ConfigError, ExperimentConfig, StrictModel
-from ..engine.classify import OUTCOMES, compiled_kernel_available
+from ..engine.classify import EXACT_OUTCOMES, compiled_kernel_available
 from ..engine.linear import flip_boundary_g
 from ..engine.params import ModelError, ModelParams
 from ..engine.sweep import (
@@ -245,7 +245,7 @@ def tables(axes: list[SweepAxis], points: list[ModelParams], index: np.ndarray,
 
 #: the quantities drawn, with their labels
 QUANTITIES = {
-    **{f"fraction_{o}": f"fraction {o.replace('_', ' ')}" for o in OUTCOMES},
+    **{f"fraction_{o}": f"fraction {o.replace('_', ' ')}" for o in EXACT_OUTCOMES},
     "spectral_radius": "spectral radius of the fixed point (eq. 10)",
     "basin_entropy": "basin entropy $S_b$ (nats)",
     "boundary_basin_entropy": "boundary basin entropy $S_{bb}$ (nats)",
@@ -342,8 +342,9 @@ def _draw_line(sweep: pd.DataFrame, axis, quantities: list[str]):
     fig, panels = new_figure(3 + has_exponent, 1, width=7.5, height=2.4 * (3 + has_exponent),
                              sharex=True)
     ax = panels[0, 0]
-    for o in OUTCOMES:
-        ax.plot(x, sweep[f"fraction_{o}"], "o-", ms=3, label=o.replace("_", " "))
+    for o in EXACT_OUTCOMES:  # locked and resting with exact sticking only
+        if f"fraction_{o}" in sweep:
+            ax.plot(x, sweep[f"fraction_{o}"], "o-", ms=3, label=o.replace("_", " "))
     ax.set_ylabel("fraction of the basin grid")
     ax.set_ylim(-0.02, 1.02)
     ax.legend(fontsize=8, ncol=2)

@@ -155,8 +155,11 @@ def run(config: TrajectoryConfig, options: RunOptions) -> ExperimentResult:
     if controller is not None and config.integrator != "exact":
         raise ConfigError("integrator: with model.control only the exact integrator is "
                           "implemented")
+    if controller is not None and settings.min_hop_s == 0.0:
+        raise ConfigError("sticking.min_hop_s: 0 (exact sticking) is not implemented with "
+                          "model.control; give a shortest hop > 0")
     options.progress.start(len(config.cases), f"trajectory ({config.integrator})")
-    tracks, impacts, summary = [], [], []
+    tracks, impacts, summary, accumulations = [], [], [], []
     for case in config.cases:
         if controller is None:
             traj = simulate(case.theta0, case.v0_m_s, params, config.duration_s, settings)
@@ -170,6 +173,12 @@ def run(config: TrajectoryConfig, options: RunOptions) -> ExperimentResult:
                                                 case.v0_m_s)
         tracks.append(track)
         impacts.append(imp)
+        if settings.min_hop_s == 0.0:  # exact sticking: where the chatters accumulate
+            t_acc = np.array(traj.accumulations, dtype=float)
+            accumulations.append(pd.DataFrame({
+                "case": case.name, "t_s": t_acc,
+                "theta_deg": np.degrees(wrap_phase(params.omega * t_acc)),
+                "racket_x_m": params.racket_position(params.omega * t_acc)}))
         stuck = traj.stuck_phases
         last = imp.iloc[-1]
         summary.append(
@@ -183,6 +192,8 @@ def run(config: TrajectoryConfig, options: RunOptions) -> ExperimentResult:
         "trajectory.csv": pd.concat(tracks, ignore_index=True),
         "impacts.csv": pd.concat(impacts, ignore_index=True),
     }
+    if accumulations:
+        frames["accumulations.csv"] = pd.concat(accumulations, ignore_index=True)
     frames["fixed_point.csv"] = pd.DataFrame(
         {"v_m_s": [fp.v_m_s], "theta_deg": [fp.theta_deg], "integrator": [config.integrator]}
     )
@@ -226,6 +237,12 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         for j, (a, b) in enumerate(_stuck_spans(t, (tr["state"] == "stuck").to_numpy())):
             ax_x.axvspan(a, b, color="C3", alpha=0.25, lw=0,
                          label="ball stuck on racket" if j == 0 else None)
+        if "accumulations.csv" in frames:  # exact sticking
+            acc = frames["accumulations.csv"]
+            acc = acc[acc["case"] == name]
+            if len(acc):
+                ax_x.plot(acc["t_s"], acc["racket_x_m"], "v", ms=5, color="C3", mec="k",
+                          mew=0.5, label="accumulation point (complete chatter)")
         ax_x.set_ylabel("position (m)")
         ax_x.set_title(f"{name}: $v_0$ = {imp['v_m_s'].iloc[0]:g} m/s, "
                        f"$\\theta_0$ = {imp['theta_deg'].iloc[0]:.1f} deg", fontsize=9)
@@ -242,6 +259,8 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         ax_th.legend(loc="best", fontsize=7)
         ax_x.set_xlabel("time t (s)")
     integrator = str(fixed["integrator"].iloc[0])
+    if "accumulations.csv" in frames:
+        integrator += ", exact sticking (min_hop_s 0)"
     fig.suptitle("Ball and racket trajectories (eqs. 1-4; paper Fig. 3)\n"
                  f"integrator: {integrator}; dashed: fixed point (eqs. 7, 8); "
                  "shaded: ball riding on the racket", fontsize=10)

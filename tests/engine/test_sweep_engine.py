@@ -145,3 +145,19 @@ def test_each_point_has_its_own_random_stream_whatever_runs_it(paper_params):
     assert curve["uncertain_fraction"][0] <= curve["uncertain_fraction"][-1]
     assert 0 < curve["uncertain_fraction"][-1] < 1
     assert math.isfinite(first["row"]["uncertainty_exponent"])
+
+
+def test_exact_sticking_point_counts_locked_orbits_with_their_period(paper_params):
+    """classify.min_hop_s 0 at the paper's point: the 1 ms rule's sticking fraction is the
+    locked fraction (period 1 racket cycle), the other fractions are unchanged."""
+    def task(settings):
+        return point_tasks([paper_params], Axis(0.0, 360.0, 30), Axis(0.0, 10.0, 30),
+                           settings, 5, None, 1)[0]
+
+    exact = evaluate_point(task(ClassifySettings(min_hop_s=0.0)))["row"]
+    cut = evaluate_point(task(ClassifySettings()))["row"]
+    assert exact["fraction_sticking"] == 0.0 and "fraction_locked" not in cut
+    assert exact["fraction_locked"] == cut["fraction_sticking"] > 0.3
+    assert exact["locked_cycles"] == 1 and exact["fraction_resting"] == 0.0
+    for name in ("period1", "below_racket", "undecided"):
+        assert exact[f"fraction_{name}"] == cut[f"fraction_{name}"]

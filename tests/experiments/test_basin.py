@@ -214,3 +214,26 @@ def test_canonical_axes_found_without_sorting_or_refused():
         assert found is not None
     assert basin._canonical_axes(theta.ravel()[::-1], v.ravel()[::-1]) is None  # decreasing
     assert basin._canonical_axes(np.array([0.0, 1.0, 0.0]), np.array([1.0, 1.0, 2.0])) is None
+
+
+def test_exact_sticking_basin_separates_locked_orbits_with_their_period(tmp_path, cli):
+    """classify.min_hop_s=0: the grey of Fig. 4 becomes the locked sticking solution (period
+    1 racket cycle at the paper's model), drawn and labelled with its period; redrawn from
+    the CSVs alone."""
+    out = tmp_path / "exact"
+    result = cli("basin", *SMALL, "--set", "classify.min_hop_s=0", "--jobs", 1, "--out", out,
+                 "--quiet")
+    assert result.exit_code == 0, result.output
+    fractions = pd.read_csv(out / "fractions.csv")
+    assert list(fractions.outcome) == list(basin.EXACT_OUTCOMES)
+    locked = fractions.set_index("outcome").loc["locked"]
+    assert locked["count"] > 0 and locked.period_cycles == 1
+    assert fractions.set_index("outcome").loc["sticking", "count"] == 0
+    frames = {name: pd.read_csv(out / name) for name in ("basin.csv", "markers.csv",
+                                                          "fractions.csv")}
+    assert frames["markers.csv"].set_index("marker").loc["fig3_sticking", "outcome"] == "locked"
+    figures = basin.draw(frames)
+    image = np.asarray(figures["basin.png"].axes[0].images[0].get_array())
+    assert (image == basin.EXACT_OUTCOMES.index("locked")).sum() == locked["count"]
+    labels = [t.get_text() for t in figures["basin.png"].legends[0].get_texts()]
+    assert any("locked" in t and "period 1 racket cycle" in t for t in labels)

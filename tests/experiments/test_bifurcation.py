@@ -407,3 +407,38 @@ def test_baseline_sticking_where_no_period1_orbit_exists(baseline):
     values = baseline["values.csv"]
     below = values[values.gamma < math.pi / 3]
     assert len(below) > 5 and (below.attractors == "sticking").all()
+
+
+def test_exact_sticking_sweep_resolves_the_grey_bands_into_locked_orbits(paper_params):
+    """min_hop_s 0: where the 1 ms rule stops ("sticking"), the orbit is followed through
+    its sticks and releases: a locked orbit whose period in racket cycles is the exact
+    orbit's (engine.chatter), whose recorded impacts are that orbit's, and whose Lyapunov
+    exponent is -inf; below Gamma = 1 the ball rests."""
+    from bounce_cli.engine.bifurcation import (
+        SweepSettings,
+        attractor_names,
+        iterate_sweep,
+        parameter_point,
+        sweep_parameters,
+    )
+    from bounce_cli.engine.chatter import IMPACT, RELEASE, iterate_exact_orbit, locked_period
+
+    gammas = np.array([1.426, 1.9, 0.95])
+    settings = SweepSettings(transient_impacts=300, measured_impacts=300, min_hop_s=0.0)
+    theta0, v0 = np.full(3, math.radians(43.1)), np.array([5.7, 5.0, 5.0])
+    orbits = iterate_sweep(theta0, v0, sweep_parameters(paper_params, "gamma", gammas),
+                           settings)
+    names, _ = attractor_names(orbits, settings)
+    assert list(names) == ["locked", "locked", "resting"]
+    assert np.isneginf(orbits.lyapunov[:2]).all()
+    cut = iterate_sweep(theta0[:2], v0[:2], sweep_parameters(paper_params, "gamma", gammas[:2]),
+                        SweepSettings(transient_impacts=300, measured_impacts=300))
+    assert list(attractor_names(cut, settings)[0]) == ["sticking", "sticking"]
+    for i, gamma in enumerate(gammas[:2]):
+        p = parameter_point(paper_params, "gamma", gamma)
+        exact = iterate_exact_orbit(theta0[i], v0[i], p, 700)
+        assert orbits.locked_cycles[i] == locked_period(exact) >= 1
+        releases = exact.rows(RELEASE)
+        period = [k for k in range(releases[-2], releases[-1]) if exact.event[k] == IMPACT]
+        np.testing.assert_allclose(np.sort(np.unique(np.round(orbits.v[i], 9))),
+                                   np.sort(np.unique(np.round(exact.v[period], 9))), atol=2e-9)

@@ -417,8 +417,8 @@ def test_c3d_recording_in_millimetres(simulated, tmp_path):
     path = tmp_path / "session_2.c3d"
     with open(path, "wb") as handle:
         writer.write(handle)
-    result, out = extract_cli(tmp_path, "--data", str(path), "--set", "c3d.racket_marker=Racket1",
-                              "--set", "c3d.ball_marker=Ball", "--set", "c3d.vertical_axis=y")
+    result, out = extract_cli(tmp_path, "--data", str(path), "--set", "markers.racket=Racket1",
+                              "--set", "markers.ball=Ball", "--set", "markers.vertical_axis=y")
     assert result.exit_code == 0, result.output
     impacts = pd.read_csv(out / "impacts.csv")
     assert set(impacts["trial"]) == {"session_2"}

@@ -329,3 +329,26 @@ def test_the_report_renders_in_a_browser(tiny_study, tmp_path):
     assert np.std(pixels[..., :3]) > 0.05  # figures and tables, not an empty page
     assert math.isfinite(float(pixels.mean()))
     assert Path(shot).stat().st_size > 10_000
+
+
+def test_perturbations_come_with_events_and_give_impulse_responses(tmp_path, cli_module):
+    """A perturbed study: events written and named by the manifest, impulse runs per unit,
+    group_impulse.csv averages the responses over subjects."""
+    sim = tmp_path / "sim"
+    assert cli_module("simulate-study", "--quiet", "--out", sim, "--set", "subjects.count=2",
+                      "--set", "conditions=[{name: a, velocity_noise_m_s: 0.03}]",
+                      "--set", "trials=1", "--set", "duration_s=25",
+                      "--set", "perturbations.every=8",
+                      "--set", "perturbations.alphas=[0.45, 0.55]").exit_code == 0
+    manifest = pd.read_csv(sim / "study.csv")
+    assert list(manifest.columns[:2]) == ["file", "events"]
+    out = tmp_path / "study"
+    result = cli_module("study", "--manifest", sim / "study.csv", "--out", out,
+                        "--set", "analyses=[impulse]", "--set", "report.unit_figures=false",
+                        "--set", "model.alpha=0.5", "--set", "model.g=9.81")
+    assert result.exit_code == 0, result.output
+    impulse = pd.read_csv(out / "group_impulse.csv")
+    first = impulse[(impulse["quantity"] == "v_m_s") & (impulse["k"] == 0)].set_index("direction")
+    assert first.loc["decrease", "mean"] < -0.05 < 0.05 < first.loc["increase", "mean"]
+    assert (first["units"] == 2).all()
+    assert pd.read_csv(out / "group.csv")["relax_impacts_decrease"].notna().all()

@@ -121,3 +121,42 @@ def test_case_needs_exactly_one_phase(tmp_path, cli):
     result = cli("trajectory", "--config", path, "--print-config")
     assert result.exit_code == 2
     assert "cases.0" in result.stderr and "exactly one of" in result.stderr
+
+
+def test_exact_sticking_trajectory_marks_the_accumulation_points(tmp_path, cli, user_error,
+                                                                 paper_params):
+    """sticking.min_hop_s=0: the continuous motion of Fig. 3's sticking case without a cut;
+    its accumulation points are the exact orbit's sticks (engine.chatter), the ball rides
+    from each to the release at asin(1/Gamma), and the figure marks them. rk4 cannot do this:
+    a one-line error."""
+    from bounce_cli.engine.chatter import STICK, iterate_exact_orbit
+    from bounce_cli.engine.flight import FlightSettings, simulate
+
+    out = tmp_path / "exact"
+    result = cli("trajectory", "--set", "sticking.min_hop_s=0", "--set", "duration_s=5",
+                 "--out", out, "--quiet")
+    assert result.exit_code == 0, result.output
+    acc = pd.read_csv(out / "accumulations.csv")
+    track = pd.read_csv(out / "trajectory.csv")
+    sticking = acc[acc["case"] == "sticking"]
+    assert len(sticking) >= 3 and (acc["case"] == "period-1").sum() == 0
+    theta0 = 0.752318481155386
+    t_end = theta0 / paper_params.omega + 5.0
+    orbit = iterate_exact_orbit(theta0, 5.7, paper_params, 500,
+                                until_theta=paper_params.omega * t_end)
+    expected = orbit.theta[orbit.rows(STICK)] / paper_params.omega
+    np.testing.assert_allclose(sticking.t_s, expected[expected <= t_end], rtol=0, atol=1e-12)
+    stuck = track[(track["case"] == "sticking") & (track.state == "stuck")]
+    np.testing.assert_allclose(stuck.ball_x_m, stuck.racket_x_m, atol=1e-12)
+    gamma = paper_params.racket_amplitude * paper_params.omega**2 / paper_params.g
+    # every stuck phase ends at the release phase asin(1/Gamma) (the last one at the run's end)
+    motion = simulate(theta0, 5.7, paper_params, 5.0, FlightSettings(min_hop_s=0.0))
+    assert motion.accumulations == tuple(sticking.t_s)
+    ends = [b for _, b in motion.stuck_phases[:-1]]
+    np.testing.assert_allclose(np.mod(paper_params.omega * np.array(ends), 2 * np.pi),
+                               math.asin(1 / gamma), atol=1e-9)
+    with open(out / "trajectory.png", "rb") as fh:
+        assert fh.read(4) == b"\x89PNG"
+    bad = cli("trajectory", "--set", "sticking.min_hop_s=0", "--set", "integrator=rk4",
+              "--out", tmp_path / "rk4", "--quiet")
+    user_error(bad, "exact sticking", "integrator")

@@ -4,11 +4,13 @@
   racket, ball), units in ``units`` (length m | cm | mm, time s | ms). Several trials in one
   file; a file without a trial column is one trial (``columns.trial: null``); without ball
   data set ``columns.ball: null`` (then events must give the impacts). Empty cells are gaps.
-* C3D (``.c3d``, Vicon, Qualisys, OptiTrack; read with the ``c3d`` package, ``pip install
-  'bounce-cli[c3d]'``): the racket and ball markers by their labels, the vertical axis by name
-  (``c3d`` block); the length unit from the file's own ``POINT:UNITS``, the time from
-  ``POINT:RATE``; one file is one trial (named after the file); invalid points (negative
-  residual) are gaps.
+  ``columns.racket`` may name several columns: the racket's height is their mean.
+* Marker files, by ``format`` (``auto``: C3D by the ``.c3d`` suffix, the text exports by their
+  first line): C3D (``c3d_files``; the ``c3d`` package's parts, ``pip install '.[c3d]'``),
+  Vicon Nexus CSV, Qualisys QTM TSV, OptiTrack Motive CSV (``text_exports``). The racket and
+  ball markers by their labels, the vertical axis by name (``markers`` block, ``markers.py``);
+  the length unit from the file (or ``markers.units``); one file is one trial (named after the
+  file); invalid points are gaps.
 * Events CSV (``--events``): one row per impact (trial, time, optional alpha), as a virtual
   set-up logs them, columns in ``event_columns``, time in ``units.time``.
 
@@ -17,16 +19,24 @@ Every problem is one line naming the file and the column or trial (``ConfigError
 
 from __future__ import annotations
 
-import struct
-import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 import pandas as pd
 
-from .config import ConfigError
+from ..config import ConfigError
+from .c3d_files import read_c3d_markers
+from .markers import MarkerSet, marker_heights
+from .text_exports import (
+    DEFAULT_VERTICAL,
+    check_text,
+    detect_format,
+    read_motive_csv,
+    read_qtm_tsv,
+    read_vicon_csv,
+)
 
 LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
 TIME_UNITS = {"s": 1.0, "ms": 0.001}
@@ -61,6 +71,8 @@ def read_table(path: Path, csv_format: Any = None) -> pd.DataFrame:
     decimal = "." if csv_format is None else csv_format.decimal
     skip = 0 if csv_format is None else csv_format.skip_rows
     try:
+        with open(path, "rb") as handle:
+            check_text(path, handle.read(65536))
         frame = pd.read_csv(path, sep=r"\s+" if not separator.strip() else separator,
                             decimal=decimal, skiprows=range(1, 1 + skip) if skip else None,
                             engine="c" if len(separator) == 1 else "python")
@@ -68,7 +80,11 @@ def read_table(path: Path, csv_format: Any = None) -> pd.DataFrame:
         return frame
     except FileNotFoundError:
         raise ConfigError(f"{path}: file not found") from None
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: cannot read as CSV: not UTF-8 text (byte "
+                          f"{exc.object[exc.start]:#04x} at offset {exc.start}): a binary "
+                          "file, or save it as UTF-8") from None
+    except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else "empty file"
         raise ConfigError(f"{path}: cannot read as CSV: {first}") from None
     except OSError as exc:
@@ -125,12 +141,15 @@ def check_trial(path: Path, label, t: np.ndarray, time_column: str) -> None:
 
 
 def read_csv_recording(path: Path, columns, units, csv_format=None) -> list[Trial]:
-    """Trials of a CSV recording (``columns``: trial, time, racket, ball names;
-    ``units``: length and time units; ``csv_format``: see ``read_table``)."""
+    """Trials of a CSV recording (``columns``: trial, time, racket (one name or several:
+    their mean), ball names; ``units``: length and time units; ``csv_format``: see
+    ``read_table``)."""
     frame = read_table(path, csv_format)
     length, time = LENGTH_UNITS[units.length], TIME_UNITS[units.time]
     t_all = _column(frame, path, columns.time, "columns.time") * time
-    racket_all = _column(frame, path, columns.racket, "columns.racket") * length
+    racket_names = [columns.racket] if isinstance(columns.racket, str) else columns.racket
+    racket_all = np.mean([_column(frame, path, name, "columns.racket")
+                          for name in racket_names], axis=0) * length
     ball_all = (_column(frame, path, columns.ball, "columns.ball") * length
                 if columns.ball is not None else None)
     trials = []
@@ -142,60 +161,38 @@ def read_csv_recording(path: Path, columns, units, csv_format=None) -> list[Tria
     return trials
 
 
-def read_c3d_recording(path: Path, c3d_block) -> list[Trial]:
-    """One trial from a C3D file: the racket and ball markers' vertical coordinate."""
-    try:
-        import c3d  # type: ignore[import-untyped]
-    except ImportError:
-        raise ConfigError(f"{path}: reading C3D needs the c3d package: "
-                          "pip install 'bounce-cli[c3d]'") from None
-    axis = "xyz".index(c3d_block.vertical_axis)
-    try:
-        with open(path, "rb") as handle, warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            reader = c3d.Reader(handle)
-            labels = [str(label).strip() for label in reader.point_labels]
-            units = reader.get("POINT:UNITS").string_value.strip().lower()
-            rate = float(reader.point_rate)
-            frames = [points[:, [axis, 3]].copy() for _, points, _ in reader.read_frames()]
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: file not found") from None
-    except (OSError, ValueError, AttributeError, KeyError, AssertionError, struct.error,
-            IndexError, TypeError, EOFError) as exc:
-        # the c3d reader checks its header with assert and struct: a damaged, truncated or
-        # renamed non-C3D file surfaces as any of these
-        reason = " ".join(str(exc).split()) or type(exc).__name__
-        raise ConfigError(f"{path}: cannot read as C3D (damaged or not a C3D file): "
-                          f"{reason}") from None
-    if units not in LENGTH_UNITS:
-        raise ConfigError(f"{path}: POINT:UNITS is {units!r}; expected one of "
-                          f"{', '.join(LENGTH_UNITS)}")
-    if not frames:
-        raise ConfigError(f"{path}: trial {path.stem}: no frames")
-    data = np.stack(frames)  # frame, point, (coordinate, residual)
-    coordinate = np.where(data[:, :, 1] < 0.0, np.nan, data[:, :, 0]) * LENGTH_UNITS[units]
-
-    def marker(name: str, key: str) -> np.ndarray:
-        if name not in labels:
-            raise ConfigError(f"{path}: no marker {name!r} (set {key}; the file has: "
-                              f"{', '.join(labels)})")
-        return coordinate[:, labels.index(name)].astype(float)
-
-    racket = marker(c3d_block.racket_marker, "c3d.racket_marker")
-    ball = (marker(c3d_block.ball_marker, "c3d.ball_marker")
-            if c3d_block.ball_marker is not None else None)
-    t = np.arange(len(racket)) / rate
-    check_trial(path, path.stem, t, "POINT:RATE")
-    return [Trial(path.stem, t, racket, ball)]
+#: the marker-file formats and their readers: (path, length unit or None, warn) -> MarkerSet
+MARKER_READERS: dict[str, Callable[..., MarkerSet]] = {
+    "c3d": read_c3d_markers, "vicon": read_vicon_csv, "qtm": read_qtm_tsv,
+    "motive": read_motive_csv}
 
 
-def read_recording(path: Path, columns, units, c3d_block, csv_format=None) -> list[Trial]:
-    """A CSV or (by its suffix) C3D recording."""
+def read_marker_recording(path: Path, file_format: str, markers,
+                          warn: Callable[[str], None]) -> list[Trial]:
+    """One trial (named after the file) from a marker file of ``file_format``: the racket's
+    height (the mean of ``markers.racket``'s), the ball's, along ``markers.vertical_axis``
+    (or the format's vertical axis)."""
+    found = MARKER_READERS[file_format](path, markers.units, warn)
+    racket_names = [markers.racket] if isinstance(markers.racket, str) else markers.racket
+    axis = markers.vertical_axis or DEFAULT_VERTICAL[file_format]
+    racket, ball = marker_heights(path, found, racket_names, markers.ball, axis)
+    time_source = {"c3d": "POINT:RATE", "vicon": "Frame", "qtm": "Time",
+                   "motive": "Time (Seconds)"}[file_format]
+    check_trial(path, path.stem, found.t, time_source)
+    return [Trial(path.stem, found.t, racket, ball)]
+
+
+def read_recording(path: Path, columns, units, markers, csv_format=None, file_format="auto",
+                   warn: Callable[[str], None] = lambda message: None) -> list[Trial]:
+    """A recording in ``file_format`` (``auto``: ``detect_format``): a CSV table or a marker
+    file (C3D, Vicon, QTM, Motive)."""
     path = Path(path)
-    if path.suffix.lower() == ".c3d":
-        trials = read_c3d_recording(path, c3d_block)
-    else:
+    if file_format == "auto":
+        file_format = detect_format(path)
+    if file_format == "csv":
         trials = read_csv_recording(path, columns, units, csv_format)
+    else:
+        trials = read_marker_recording(path, file_format, markers, warn)
     if not trials:
         raise ConfigError(f"{path}: no samples (a header and no rows?)")
     return trials
