@@ -343,18 +343,23 @@ def _extract_config(data: dict[str, Any], source: str):
 
 
 def read_recording(path: str | Path, columns: Mapping[str, Any] | None = None,
-                   units: Mapping[str, Any] | None = None, c3d: Mapping[str, Any] | None = None,
-                   csv: Mapping[str, Any] | None = None) -> pd.DataFrame:
-    """Read a lab's recording of racket and ball (CSV, or C3D by its suffix) into one frame.
+                   units: Mapping[str, Any] | None = None,
+                   markers: Mapping[str, Any] | None = None,
+                   csv: Mapping[str, Any] | None = None, format: str = "auto") -> pd.DataFrame:
+    """Read a lab's recording of racket and ball (CSV, C3D, a Vicon, QTM or Motive export)
+    into one frame.
 
     Parameters
     ----------
     path : str or Path
         The recording.
-    columns, units, c3d, csv : mapping, optional
+    columns, units, markers, csv : mapping, optional
         The blocks of the same names in ``bounce extract``'s config (``configs/extract.yaml``):
-        which columns hold time, trial, racket and ball; their units; a C3D file's markers;
-        the CSV dialect. None: that block's defaults.
+        which columns hold time, trial, racket and ball; their units; a marker file's racket
+        and ball markers and vertical axis; the CSV dialect. None: that block's defaults.
+    format : str, default "auto"
+        ``auto`` (by the suffix and the first line), ``csv``, ``c3d``, ``vicon``, ``qtm`` or
+        ``motive``, as ``bounce extract``'s ``format``.
 
     Returns
     -------
@@ -365,7 +370,8 @@ def read_recording(path: str | Path, columns: Mapping[str, Any] | None = None,
     Raises
     ------
     ConfigError
-        A missing file or column, a non-number, a trial too short to extract from.
+        A missing file or column, a non-number, a trial too short to extract from, a file
+        that is not of its format.
 
     Examples
     --------
@@ -383,9 +389,10 @@ def read_recording(path: str | Path, columns: Mapping[str, Any] | None = None,
 
     from .recordings import read_recording as read_trials
 
-    cfg = _extract_config({"columns": columns, "units": units, "c3d": c3d, "csv": csv},
-                          "read_recording")
-    trials = read_trials(Path(path), cfg.columns, cfg.units, cfg.c3d, cfg.csv)
+    cfg = _extract_config({"columns": columns, "units": units, "markers": markers, "csv": csv,
+                           "format": format}, "read_recording")
+    trials = read_trials(Path(path), cfg.columns, cfg.units, cfg.markers, cfg.csv, cfg.format,
+                         python_warning)
     return pd.concat([pd.DataFrame({
         "trial": [trial.label] * len(trial.t), "t_s": trial.t, "racket_x_m": trial.racket,
         "ball_x_m": trial.ball if trial.ball is not None else np.full(len(trial.t), np.nan)})
