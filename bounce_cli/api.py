@@ -26,8 +26,16 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .artifacts import RunDirectory
-from .config import ConfigError, ExperimentConfig, bundled_config_path, load_config, validate
+from .artifacts import FIGURE_DPI, RunDirectory
+from .config import (
+    DATA_MODEL_KEYS,
+    ConfigError,
+    ExperimentConfig,
+    bundled_config_path,
+    keys_set_by_user,
+    load_config,
+    validate,
+)
 from .engine import (
     FixedPoint,
     ModelError,
@@ -161,18 +169,60 @@ def warn_if_unstable(params: ModelParams, controller=None,
             f"{float(flip_boundary_g(params.alpha)):.3g} g < AC < 0, eq. 14)")
 
 
-def check_fixed_point(entry: Entry, cfg: ExperimentConfig,
-                      warn: Callable[[str], None] | None = None) -> None:
-    """Before a run about the period-1 fixed point: warn when it is unstable (with a ``data``
-    file the model is taken at the data's racket, not the config's, so nothing is checked).
-    Raises ``NoFixedPointError`` when there is none."""
-    if entry.needs_fixed_point and getattr(cfg, "data", None) is None:
+def warn_if_implausible_racket(model, warn: Callable[[str], None] | None = None) -> None:
+    """A warning per racket parameter of a ``model`` block outside what a person can do
+    (``bounce_cli.plausibility``), naming the likely unit slip (a block without a racket, such
+    as a study's, has nothing to check).
+
+    Parameters
+    ----------
+    model
+        A config's validated ``model`` block.
+    warn : callable, optional
+        Receives each one-line message; None: a Python ``UserWarning``.
+    """
+    from .plausibility import racket_warnings
+
+    if getattr(model, "racket_amplitude", None) is None or getattr(
+            model, "racket_period", None) is None:
+        return
+    say = warn if warn is not None else python_warning
+    for message in racket_warnings(model.racket_amplitude, model.racket_period,
+                                   "model.racket_amplitude", "model.racket_period"):
+        say(message)
+
+
+def check_model(entry: Entry, cfg: ExperimentConfig,
+                warn: Callable[[str], None] | None = None) -> None:
+    """Before a run: warn of an implausible racket, and, for a run about the period-1 fixed
+    point, of an unstable one (with a ``data`` file the model is taken at the data's racket,
+    not the config's, so neither is checked). Raises ``NoFixedPointError`` when there is
+    none."""
+    if getattr(cfg, "data", None) is not None:
+        return
+    warn_if_implausible_racket(cfg.model, warn)
+    if entry.needs_fixed_point:
         controller = getattr(cfg.model, "controller", lambda: None)()
         warn_if_unstable(cfg.params, controller, warn)
 
 
+def run_options(cfg: ExperimentConfig, config: Path | None, overrides: list[str],
+                **options: Any) -> RunOptions:
+    """The run's :class:`RunOptions` (``options``: jobs, warn, scheduler), with the model keys
+    the user set (their own config's and ``--set``'s) where a ``data`` analysis takes the
+    others from the data."""
+    run = RunOptions(**options)
+    if getattr(cfg, "data", None) is not None:
+        given = keys_set_by_user(config, overrides)
+        run.model_set_by_user = frozenset(
+            key for key in DATA_MODEL_KEYS if f"model.{key}" in given)
+    return run
+
+
 def open_run_directory(entry: Entry, cfg: ExperimentConfig, path: Path, *, config_given: bool,
-                       overrides: list[str], out: Path | None, force: bool) -> RunDirectory:
+                       overrides: list[str], out: Path | None, force: bool,
+                       figure_formats: tuple[str, ...] = ("png",),
+                       dpi: int = FIGURE_DPI) -> RunDirectory:
     """The run directory the results go to (default ``results/<name>``), with the manifest's
     provenance; checks that ``out`` holds no other config's results unless ``force``.
 
@@ -189,6 +239,10 @@ def open_run_directory(entry: Entry, cfg: ExperimentConfig, path: Path, *, confi
         The output folder; None: ``results/<config's stem or name>``.
     force : bool
         Replace results of a different config in ``out``.
+    figure_formats : tuple of str, default ("png",)
+        Each figure is written once in each format.
+    dpi : int
+        The PNGs' resolution.
 
     Returns
     -------
@@ -207,10 +261,12 @@ def open_run_directory(entry: Entry, cfg: ExperimentConfig, path: Path, *, confi
         seed=getattr(cfg, "seed", None) if data_file is None else None,
         data_file=data_file,
         force=force,
+        figure_formats=figure_formats,
+        dpi=dpi,
     )
 
 
-def write_result(run_dir: RunDirectory, result: ExperimentResult) -> list[Path]:
+def write_result(run_dir: RunDirectory, result: ExperimentResult, agrees=None) -> list[Path]:
     """Write a result's tables, figures and files into ``run_dir`` atomically.
 
     Parameters
@@ -219,6 +275,8 @@ def write_result(run_dir: RunDirectory, result: ExperimentResult) -> list[Path]:
         From :func:`open_run_directory`.
     result : ExperimentResult
         What the experiment returned.
+    agrees : optional
+        See ``RunDirectory.commit``.
 
     Returns
     -------
@@ -231,7 +289,7 @@ def write_result(run_dir: RunDirectory, result: ExperimentResult) -> list[Path]:
         run_dir.add_figure(name, figure)
     for name, content in result.files.items():
         run_dir.add_file(name, content)
-    return run_dir.commit()
+    return run_dir.commit(agrees)
 
 
 def python_warning(message: str) -> None:
@@ -316,13 +374,17 @@ def run(name: str, config: str | Path | None = None,
         raise ConfigError(f"jobs: {jobs} (at least 1)")
     experiment, path, cfg = load_run_config(entry, None if config is None else Path(config),
                                             overrides)
-    check_fixed_point(entry, cfg)
+    check_model(entry, cfg)
     run_dir = None
     if out is not None:  # checked before the work: a folder of another config's results
         run_dir = open_run_directory(entry, cfg, path, config_given=config is not None,
                                      overrides=overrides, out=Path(out), force=force)
     try:
-        result = experiment.run(cfg, RunOptions(jobs=int(jobs), warn=python_warning))
+        options = run_options(cfg, None if config is None else Path(config), overrides,
+                              jobs=int(jobs), warn=python_warning)
+        if run_dir is not None:
+            run_dir.record = options.record
+        result = experiment.run(cfg, options)
         if run_dir is not None:
             write_result(run_dir, result)
     except BaseException:
@@ -400,7 +462,7 @@ def read_recording(path: str | Path, columns: Mapping[str, Any] | None = None,
 
 
 def extract(recording: pd.DataFrame | str | Path, extraction: Mapping[str, Any] | None = None,
-            g: float = 9.81) -> pd.DataFrame:
+            g: float | None = None) -> pd.DataFrame:
     """The impacts table of a recording: per bounce the map's variables (paper Fig. 2).
 
     The extraction of ``bounce extract`` (its ``impacts.csv``): phase of impact theta_k, ball
@@ -414,8 +476,10 @@ def extract(recording: pd.DataFrame | str | Path, extraction: Mapping[str, Any] 
         with :func:`read_recording` first).
     extraction : mapping, optional
         The ``extraction`` block of ``configs/extract.yaml`` (windows, thresholds).
-    g : float, default 9.81
-        Gravitational acceleration, m/s^2 (the flights between impacts are parabolas in it).
+    g : float, optional
+        Gravitational acceleration, m/s^2 (the flights between impacts are parabolas in it);
+        None: measured from the flights' curvature, as ``bounce extract`` does when no g is
+        set (``extraction.g`` in ``extraction`` sets it too).
 
     Returns
     -------
@@ -444,10 +508,11 @@ def extract(recording: pd.DataFrame | str | Path, extraction: Mapping[str, Any] 
 
     import numpy as np
 
-    from .experiments.extract import extract_all
+    from .experiments.extract import extract_all, set_gravity
     from .recordings import Trial
 
-    cfg = _extract_config({"model": {"g": g}, "extraction": extraction}, "extract")
+    cfg = _extract_config({"model": None if g is None else {"g": g}, "extraction": extraction},
+                          "extract")
     if isinstance(recording, pd.DataFrame):
         frame, source = recording, "the recording frame"
     else:
@@ -464,5 +529,10 @@ def extract(recording: pd.DataFrame | str | Path, extraction: Mapping[str, Any] 
                             None if np.isnan(ball).all() else ball))
     if not trials:
         raise ConfigError(f"{source}: no samples")
-    impacts, _, _, _ = extract_all(trials, None, cfg.extraction.settings(cfg.model.g), source)
-    return impacts
+    g_set = set_gravity(cfg)
+    settings = cfg.extraction.settings(cfg.model.g if g_set is None else g_set)
+    session = extract_all(trials, None, settings, source, measure_g=g_set is None,
+                          measure_offset=cfg.extraction.ball_offset_m is None)
+    for message in session.warnings:
+        python_warning(message)
+    return session.impacts

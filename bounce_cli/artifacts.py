@@ -9,7 +9,9 @@ directory holding results of a different resolved config is refused unless ``for
 
 ``run.json`` holds what the results were made from and nothing that changes from one run to
 the next: command, config file, overrides, the resolved config, the seed (only where the
-run drew random numbers), the ``--data`` file (absolute path and SHA-256), the versions of
+run drew random numbers), the ``--data`` file (absolute path and SHA-256), what the run
+recorded beside the config (``model_at_data``: the alpha and g a ``--data`` analysis used and
+where they came from, ``bounce_cli.data_parameters``), the versions of
 the packages that shape the numbers, the files written. So rerunning an unchanged config
 rewrites it byte for byte, and ``bounce reproduce`` on a clean checkout leaves ``git status``
 clean. What does change -- start time, wall time, git commit, host -- goes to ``timing.json``
@@ -38,12 +40,15 @@ import numpy as np
 
 from . import __version__
 from .interrupts import deferred
+from .plotting import save_figure
 
 if TYPE_CHECKING:  # pandas is imported where a table is written or read (fast start-up)
     import pandas as pd
 
 MANIFEST = "run.json"
 TIMING = "timing.json"
+#: held by the run writing into a directory (``RunDirectoryLock``); removed when it ends
+LOCK_FILE = ".bounce.lock"
 #: the distributions whose versions shape the numbers and figures (run.json "versions")
 VERSIONED_PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "pydantic", "pyyaml")
 
@@ -84,7 +89,7 @@ def reserve(path: Path) -> Path:
     return tmp
 
 
-#: resolution of the PNG figures
+#: resolution of the PNG figures unless ``--dpi`` says otherwise
 FIGURE_DPI = 150
 #: zlib level of the PNGs: 1 encodes the basin's two figures in 0.5 s instead of 0.8 s, for
 #: files about a quarter larger (basin_iterations.png 480 kB instead of 370 kB)
@@ -282,8 +287,66 @@ def files_named_in(config: Any) -> set[Path]:
     return found
 
 
+class RunDirectoryLock:
+    """One run at a time in an output directory: an advisory lock (``flock``) on
+    ``<out>/.bounce.lock``, held from the directory's check until the run has committed or
+    discarded its files. A second run into the same directory refuses with one line naming
+    the holder's pid and command. The lock belongs to the open file, so a run that died
+    (SIGKILL, a crash) holds nothing: its stale lock file is taken over. Where ``fcntl`` is
+    missing (Windows) runs are not locked."""
+
+    def __init__(self, out_dir: Path) -> None:
+        self.path = Path(out_dir) / LOCK_FILE
+        self._fd: int | None = None
+
+    def acquire(self, command: str) -> None:
+        """Take the lock or raise OutputDirError (the directory exists)."""
+        try:
+            import fcntl
+        except ImportError:  # pragma: no cover - no advisory locks on this platform
+            return
+        while True:
+            with deferred():  # the file is open and known to release() in one step
+                self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o666 & ~current_umask())
+            try:
+                fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:  # held by a live run
+                holder = os.pread(self._fd, 200, 0).decode("utf-8", "replace").strip()
+                self._close()
+                raise OutputDirError(
+                    f"--out {self.path.parent}: another bounce run is writing there"
+                    + (f" ({holder})" if holder else "")
+                    + "; wait for it to finish or choose another --out") from None
+            try:  # the holder may have removed the file between our open and our lock
+                current = os.path.samestat(os.fstat(self._fd), os.stat(self.path))
+            except FileNotFoundError:
+                current = False
+            if current:
+                break
+            self._close()
+        os.ftruncate(self._fd, 0)
+        os.pwrite(self._fd, f"pid {os.getpid()}: bounce {command}\n".encode(), 0)
+
+    def release(self) -> None:
+        """Remove the lock file (while still holding it: no one else has it) and unlock."""
+        if self._fd is None:
+            return
+        with deferred():
+            try:
+                self.path.unlink()
+            except FileNotFoundError:
+                pass
+            self._close()
+
+    def _close(self) -> None:
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+
 class RunDirectory:
-    """Collects a run's outputs and commits them atomically into ``out_dir``."""
+    """Collects a run's outputs and commits them atomically into ``out_dir``, holding the
+    directory's lock (``RunDirectoryLock``) from the check until ``commit`` or ``discard``."""
 
     def __init__(
         self,
@@ -294,10 +357,13 @@ class RunDirectory:
         overrides: list[str],
         config_path: str | None,
         seed: int | None = None,
-        data_file: str | None = None,
+        data_file: str | list[str] | None = None,
         force: bool = False,
+        figure_formats: tuple[str, ...] = ("png",),
+        dpi: float = FIGURE_DPI,
     ) -> None:
         self.out_dir = Path(out_dir)
+        self.figure_formats, self.dpi = tuple(figure_formats), dpi
         self.command = command
         self.resolved_config = resolved_config
         self.overrides = list(overrides)
@@ -310,8 +376,17 @@ class RunDirectory:
         self._figures: dict[str, Any] = {}
         self._files: dict[str, bytes] = {}
         self.previous: dict[str, Any] = {}
+        #: what the run adds to run.json beside the config (``RunOptions.record``)
+        self.record: dict[str, Any] = {}
+        #: per file, after ``commit``: identical / within tolerance / kept / changed / new
+        self.comparison: dict[str, str] = {}
         self.created: list[Path] = []  # folders this run made, outermost first
-        self.check_writable(force)
+        self.lock = RunDirectoryLock(self.out_dir)
+        try:
+            self.check_writable(force)
+        except BaseException:
+            self.discard()
+            raise
 
     def check_writable(self, force: bool) -> None:
         """Before any computing: the directory can be created and written, and it does not
@@ -331,6 +406,7 @@ class RunDirectory:
                 raise
             reason = exc.strerror or type(exc).__name__
             raise OutputDirError(f"--out {self.out_dir}: cannot write there: {reason}") from None
+        self.lock.acquire(self.command)  # before reading what a concurrent run may replace
         self.previous = read_manifest(self.out_dir)
         if force or not self.previous:
             return
@@ -346,9 +422,15 @@ class RunDirectory:
                 "use --force to replace them or choose another --out"
             )
 
+    def release(self) -> None:
+        """The run is over: the directory's lock is released (``commit`` does it)."""
+        self.lock.release()
+
     def discard(self) -> None:
-        """After an error or an interrupt: remove the folders this run created, if they are
-        still empty (a previous run's folder, or one holding anything, is left alone)."""
+        """After an error or an interrupt: release the lock and remove the folders this run
+        created, if they are still empty (a previous run's folder, or one holding anything, is
+        left alone)."""
+        self.lock.release()
         for folder in reversed(self.created):
             try:
                 folder.rmdir()
@@ -361,7 +443,11 @@ class RunDirectory:
         self._frames[name] = frame
 
     def add_figure(self, name: str, figure) -> None:
-        self._figures[name] = figure
+        """A figure to write once in each of the run's figure formats: ``basin.png`` is
+        written as ``basin.png``, ``basin.pdf``, ``basin.svg`` as ``figure_formats`` say."""
+        stem = Path(name).stem
+        for kind in self.figure_formats:
+            self._figures[f"{stem}.{kind}"] = (figure, kind)
 
     def add_file(self, name: str, content: bytes) -> None:
         """Any other file, as bytes (e.g. an HTML report)."""
@@ -377,9 +463,12 @@ class RunDirectory:
             "seed": self.seed,
             "config": self.resolved_config,
         }
-        if self.data_file is not None:
-            path = Path(self.data_file).resolve()
-            manifest["data_file"] = {"path": str(path), "sha256": sha256_of(path)}
+        if self.data_file is not None:  # several --data files: a list of them
+            files = [{"path": str(Path(p).resolve()), "sha256": sha256_of(Path(p).resolve())}
+                     for p in (self.data_file if isinstance(self.data_file, list)
+                               else [self.data_file])]
+            manifest["data_file"] = files if isinstance(self.data_file, list) else files[0]
+        manifest.update(self.record)
         manifest["versions"] = versions()
         manifest["files"] = sorted([*self._frames, *self._figures, *self._files])
         return manifest
@@ -422,10 +511,17 @@ class RunDirectory:
             manifest = {**manifest, "versions": previous["versions"]}
         return json.dumps(manifest, indent=2) + "\n"
 
-    def commit(self) -> list[Path]:
+    def commit(self, agrees: Callable[[str, pd.DataFrame, pd.DataFrame], bool] | None = None,
+               ) -> list[Path]:
         """Stage every collected file under a temporary name (the slow part: CSVs, PNGs),
         then move them all into place with ``os.replace``, ``run.json`` last. Returns the
-        paths. Until the staging is complete, the previous run's files are untouched."""
+        paths written. Until the staging is complete, the previous run's files are untouched.
+
+        With ``agrees`` (``bounce reproduce``: ``agrees(table, new, previous)``, the
+        reproduction tolerance), a table whose previous file agrees with the new one is left
+        untouched, and the figures are not redrawn when every table agrees and they exist
+        (their data did not change). ``self.comparison`` then says per file: identical,
+        within tolerance, kept (a figure not redrawn), changed or new."""
         self.out_dir.mkdir(parents=True, exist_ok=True)
         writers: dict[str, Callable[[Path], object]] = {}
         written = {*self._frames, *self._figures, *self._files}
@@ -436,9 +532,10 @@ class RunDirectory:
             writers[name] = functools.partial(_write_bytes, content)
         for name, frame in self._frames.items():
             writers[name] = functools.partial(write_frame, frame, kind=frame_format(name))
-        for name, figure in self._figures.items():
-            writers[name] = functools.partial(figure.savefig, format="png", dpi=FIGURE_DPI,
-                                              pil_kwargs=PNG_OPTIONS)
+        for name, (figure, kind) in self._figures.items():
+            writers[name] = functools.partial(save_figure, figure, kind=kind, dpi=self.dpi,
+                                              source=f"bounce {self.command}",
+                                              png_options=PNG_OPTIONS)
         staged: list[tuple[Path, Path]] = []
         children: list[_ChildWriter] = []
 
@@ -451,16 +548,32 @@ class RunDirectory:
             return staged[-1][0]
 
         try:
-            for group in self._background_groups():
+            for group in self._background_groups() if agrees is None else []:
                 jobs = [(reserved(name), writers.pop(name), self.out_dir / name)
                         for name in group]
                 children.append(_ChildWriter(jobs))
                 children[-1].start()
             unchanged = True
-            for name, write in writers.items():
+            tables_agree = True
+            for name, write in writers.items():  # the tables first, then the figures
+                final = self.out_dir / name
+                if (agrees is not None and name in self._figures and tables_agree
+                        and final.is_file()):
+                    self.comparison[name] = "kept"
+                    continue
                 tmp = reserved(name)
                 write(tmp)
-                unchanged = unchanged and same_bytes(tmp, self.out_dir / name)
+                if same_bytes(tmp, final):
+                    self.comparison[name] = "identical"
+                elif (agrees is not None and name in self._frames and final.is_file()
+                      and agrees(name, read_frame(tmp), read_frame(final))):
+                    self.comparison[name] = "within tolerance"
+                    tmp.unlink()  # leave the previous file as it is
+                    staged.pop()
+                else:
+                    self.comparison[name] = "changed" if final.is_file() else "new"
+                    unchanged = False
+                    tables_agree = tables_agree and name not in self._frames
             while children:
                 unchanged &= children[0].wait()  # the child compared its files
                 children.pop(0)
@@ -486,6 +599,7 @@ class RunDirectory:
                 child.kill()
             for tmp, _ in staged:
                 tmp.unlink(missing_ok=True)
+            self.release()  # the run's files are in place (or it failed): the next may start
         return [final for _, final in staged]
 
 

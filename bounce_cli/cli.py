@@ -36,8 +36,15 @@ except ImportError:  # pragma: no cover - older typer on click
     )
 
 from . import __version__
-from .api import check_fixed_point, load_run_config, open_run_directory, write_result
-from .artifacts import OutputDirError
+from .api import (
+    check_model,
+    load_run_config,
+    open_run_directory,
+    run_options,
+    warn_if_implausible_racket,
+    write_result,
+)
+from .artifacts import FIGURE_DPI, OutputDirError
 from .config import (
     ConfigError,
     ModelOnlyConfig,
@@ -50,12 +57,29 @@ from .config import (
 )
 from .engine import ModelError, ModelParams, iterate_orbit, stability, wrap_phase
 from .engine.classify import ClassifySettings
-from .experiments.base import RunOptions
 from .interrupts import Interrupted, report as report_interrupt
 from .parallel import ClusterError
 from .registry import EXPERIMENTS, Entry
 
 USER_ERRORS = (ConfigError, ModelError, OutputDirError, ClusterError)
+
+
+def _flags_show_no_type() -> None:
+    """typer's help prints ``<bool>`` after a flag (``--quiet <bool>``), as if it took a
+    value: a flag's type column is left empty (an option taking a value keeps its type)."""
+    option = getattr(typer.core, "TyperOption", None)
+    shown = getattr(option, "display_type_rich", None)
+    if shown is None or getattr(shown, "flags_show_no_type", False):
+        return
+
+    def display_type_rich(self, ctx):
+        return None if self.is_flag else shown(self, ctx)
+
+    display_type_rich.flags_show_no_type = True  # type: ignore[attr-defined]
+    option.display_type_rich = display_type_rich  # type: ignore[union-attr]
+
+
+_flags_show_no_type()
 
 
 class BounceGroup(TyperGroup):
@@ -148,9 +172,19 @@ def output_folder(text: str) -> Path:
 
 
 OutOption = Annotated[
-    Optional[Path], typer.Option("--out", "-o", parser=output_folder, metavar="PATH",
-                                 help="Output directory (default results/<name>).")
+    Optional[list[Path]], typer.Option("--out", "-o", parser=output_folder, metavar="PATH",
+                                       help="Output directory (default results/<name>).")
 ]
+
+
+def only_once(option: str, values: list | None):
+    """The one value of an option that may be given once (typer would keep the last one of
+    several without a word); None when it is not given."""
+    values = list(values or [])
+    if len(values) > 1:
+        fail(f"{option} given {len(values)} times ({', '.join(map(str, values))}); give it "
+             "once")
+    return values[0] if values else None
 QuietOption = Annotated[bool, typer.Option("--quiet", "-q", help="No progress or summary.")]
 ForceOption = Annotated[
     bool, typer.Option("--force", help="Replace results of a different config in --out: the "
@@ -163,8 +197,34 @@ JobsOption = Annotated[
     Optional[int],
     typer.Option(
         "--jobs", "-j", min=1,
-        help="Worker processes for grid work (basin, sweep; default: all cores).",
+        help="Worker processes for the grid's points (default: all cores).",
     ),
+]
+def figure_formats(values: list[str] | None) -> list[str]:
+    """--figure-format: each value one format or a comma list of them (png, pdf, svg), in the
+    order given, each once; none given: png."""
+    from .plotting import FIGURE_FORMATS
+
+    kinds: list[str] = []
+    for text in values or ["png"]:
+        for kind in (part.strip().lower() for part in text.split(",")):
+            if kind not in FIGURE_FORMATS:
+                raise typer.BadParameter(f"{kind!r} is not a figure format; choose from "
+                                         + ", ".join(FIGURE_FORMATS))
+            if kind not in kinds:
+                kinds.append(kind)
+    return kinds
+
+
+FigureFormatOption = Annotated[
+    Optional[list[str]],
+    typer.Option("--figure-format", "-f", metavar="FORMAT", callback=figure_formats,
+                 help="Figure file format: png, pdf or svg; repeatable, or a comma list "
+                 "(--figure-format png,pdf). Default: png."),
+]
+DpiOption = Annotated[
+    int, typer.Option("--dpi", min=30, max=2400, metavar="N",
+                      help=f"Resolution of PNG figures, dots per inch (default {FIGURE_DPI}).")
 ]
 ResumeOption = Annotated[
     bool,
@@ -279,10 +339,16 @@ def run_experiment(
     jobs: int | None = None,
     resume: bool = False,
     scheduler: str | None = None,
-) -> None:
-    """Load and validate the config, run the experiment, write its files atomically. On an
+    figure_formats: tuple[str, ...] = ("png",),
+    dpi: int = FIGURE_DPI,
+    agrees=None,
+) -> dict[str, str]:
+    """Load and validate the config, run the experiment, write its files atomically (each
+    figure once in each of ``figure_formats``, PNGs at ``dpi``). On an
     error or an interrupt nothing is written and an output folder the run made is removed;
-    a resumable experiment's finished points stay in ``<out>/points/`` (``--resume``)."""
+    a resumable experiment's finished points stay in ``<out>/points/`` (``--resume``).
+    ``agrees``: see ``RunDirectory.commit``. Returns its comparison (file -> how it changed;
+    {} for ``print_config``)."""
     overrides = list(overrides or [])
     run_dir = None
     checkpoints = None
@@ -290,12 +356,15 @@ def run_experiment(
         experiment, path, cfg = load_run_config(entry, config, overrides)
         if print_config:
             typer.echo(to_yaml(cfg), nl=False)
-            return
-        check_fixed_point(entry, cfg, warn)
+            return {}
+        check_model(entry, cfg, warn)
         run_dir = open_run_directory(entry, cfg, path, config_given=config is not None,
-                                     overrides=overrides, out=out, force=force)
+                                     overrides=overrides, out=out, force=force,
+                                     figure_formats=figure_formats, dpi=dpi)
         progress = make_progress() if not quiet else None
-        options = RunOptions(jobs=jobs or os.cpu_count() or 1, warn=warn, scheduler=scheduler)
+        options = run_options(cfg, config, overrides, jobs=jobs or os.cpu_count() or 1,
+                              warn=warn, scheduler=scheduler)
+        run_dir.record = options.record
         if entry.resumable:
             from .checkpoints import PointFolder
 
@@ -311,7 +380,7 @@ def run_experiment(
         finally:
             if progress is not None:
                 progress.stop()
-        written = write_result(run_dir, result)
+        written = write_result(run_dir, result, agrees)
         if checkpoints is not None:
             checkpoints.remove()
     except BaseException as exc:
@@ -337,6 +406,7 @@ def run_experiment(
             stderr.print(line, highlight=False, markup=False, soft_wrap=not stderr.is_terminal)
     if result.exit_code:
         raise typer.Exit(result.exit_code)
+    return run_dir.comparison
 
 
 # -- engine commands ------------------------------------------------------------------------
@@ -359,6 +429,7 @@ def load_model_block(config: Path | None, overrides: list[str] | None, *,
             raise ConfigError(f"--set {'.'.join(keys)}: this command only uses the model block")
     data = apply_overrides(read_yaml(path), overrides)
     cfg = validate(ModelOnlyConfig, {"model": data.get("model") or {}}, str(path), overrides)
+    warn_if_implausible_racket(cfg.model, warn)
     if need_fixed_point:
         cfg.params.fixed_point()
     return cfg.model
@@ -388,18 +459,35 @@ def fixed_point_report(params: ModelParams) -> dict:
     }
 
 
+def no_fixed_point_report(params: ModelParams, error: Exception) -> dict:
+    """``fixed-point --json`` where eq. 8 has no solution: why, and the racket amplitude from
+    which it has one at the other parameters."""
+    return {"exists": False, "reason": str(error), "cos_theta": params.cos_theta_fixed(),
+            "min_racket_amplitude_m": params.min_racket_amplitude()}
+
+
 @app.command("fixed-point")
 def fixed_point_command(
     config: ConfigOption = None,
     overrides: SetOption = None,
     as_json: Annotated[bool, typer.Option("--json", help="Print a JSON object.")] = False,
 ) -> None:
-    """Period-1 fixed point (eqs. 7, 8), racket acceleration AC, eigenvalues (eq. 10)."""
-    params = _model_or_fail(config, overrides)
-    report = fixed_point_report(params)
+    """Period-1 fixed point (eqs. 7, 8), racket acceleration AC, eigenvalues (eq. 10).
+
+    With --json and parameters without a fixed point: {"exists": false, "reason": ...} and
+    exit status 1."""
+    from .engine import NoFixedPointError
+
+    params = _model_or_fail(config, overrides, need_fixed_point=not as_json)
     if as_json:
+        try:
+            report = {"exists": True, **fixed_point_report(params)}
+        except NoFixedPointError as exc:
+            typer.echo(json.dumps(no_fixed_point_report(params, exc), indent=2))
+            raise typer.Exit(code=1) from None
         typer.echo(json.dumps(report, indent=2))
         return
+    report = fixed_point_report(params)
     table = Table(title="Period-1 fixed point", show_header=True)
     table.add_column("quantity")
     table.add_column("value", justify="right")
@@ -485,8 +573,8 @@ def orbit_command(
 
 def controlled_orbit_output(theta0, v0, params, controller, n_impacts, min_hop_s,
                             as_csv) -> None:
-    """``bounce orbit`` with racket period control: the passive columns plus
-    ``racket_period_s`` (the period of the flight ending at each impact)."""
+    """``bounce orbit`` with racket period control: the passive columns (``event`` among
+    them) plus ``racket_period_s`` (the period of the flight ending at each impact)."""
     import pandas as pd
 
     from .engine.control import iterate_controlled_orbit
@@ -496,7 +584,9 @@ def controlled_orbit_output(theta0, v0, params, controller, n_impacts, min_hop_s
     frame = pd.DataFrame({"k": np.arange(len(orbit.theta)), "t_s": orbit.t_s,
                           "theta_rad": orbit.theta,
                           "theta_deg": np.degrees(wrap_phase(orbit.theta)), "v_m_s": orbit.v,
-                          "flight_s": orbit.flight_s, "racket_period_s": orbit.tau})
+                          "flight_s": orbit.flight_s,
+                          "event": ["start", *["impact"] * (len(orbit.theta) - 1)],
+                          "racket_period_s": orbit.tau})
     write_orbit_frame(frame, as_csv, f"Orbit with racket period control from theta0 = "
                                      f"{math.degrees(theta0):g} deg, v0 = {v0:g} m/s")
     if orbit.stop_reason == "below_racket":
@@ -614,31 +704,55 @@ def orbit_notes(orbit, params: ModelParams, min_hop_s: float) -> list[str]:
 
 @app.command("reproduce")
 def reproduce_command(
+    names: Annotated[Optional[list[str]], typer.Argument(
+        metavar="[EXPERIMENT]...", help="Only these experiments (default: every one).",
+        show_default=False)] = None,
     out: Annotated[Path, typer.Option("--out", "-o", parser=output_folder, metavar="PATH",
                                       help="Results root directory.")] = Path("results"),
     jobs: JobsOption = None,
     quiet: QuietOption = False,
     force: ForceOption = False,
+    force_regen: Annotated[bool, typer.Option(
+        "--force-regen", help="Rewrite every file, also those that agree within the "
+        "reproduction tolerance (and redraw every figure).")] = False,
 ) -> None:
     """Regenerate every figure from the bundled configs, with a gallery and the claims.
 
     Runs every bundled config into OUT/<name>/ and writes OUT/README.md: each figure with a
     caption naming the paper's figure, and the table of the paper's claims (bounce verify).
+    A table that agrees with the one in OUT within the reproduction tolerance is left as it
+    is, and an experiment's figures are redrawn only when one of its tables changed beyond
+    it (or a figure is missing); each experiment is reported identical, within tolerance or
+    changed (with the files).
     """
     from .claims import markdown_table, verify
     from .artifacts import write_text_atomic
     from .registry import reproduced
-    from .reproduce import gallery_markdown
+    from .reproduce import experiment_status, gallery_markdown, tables_agree
 
+    known = [entry.name for entry in reproduced()]
+    unknown = [name for name in names or [] if name not in known]
+    if unknown:
+        fail(f"reproduce {unknown[0]}: no such reproduced experiment (one of: "
+             f"{', '.join(known)})")
     for entry in reproduced():
+        if names and entry.name not in names:
+            continue
         if not quiet:
             stderr.print(f"[bold]bounce {entry.name}[/bold]")
-        run_experiment(entry, config=None, overrides=[], out=out / entry.name,
-                       quiet=quiet, force=force, print_config=False, jobs=jobs)
+        comparison = run_experiment(
+            entry, config=None, overrides=[], out=out / entry.name, quiet=quiet, force=force,
+            print_config=False, jobs=jobs,
+            agrees=None if force_regen else tables_agree(entry.name))
+        if not quiet:
+            print(f"{entry.name}: {experiment_status(comparison)}", flush=True)
     verdicts = verify(out)
-    write_text_atomic(out / "README.md", gallery_markdown(out, markdown_table(verdicts)))
+    gallery, text = out / "README.md", gallery_markdown(out, markdown_table(verdicts))
+    same = gallery.is_file() and gallery.read_text(encoding="utf-8") == text
+    if not same:
+        write_text_atomic(gallery, text)
     if not quiet:
-        stderr.print(f"wrote {out / 'README.md'}", highlight=False)
+        stderr.print(f"{'unchanged' if same else 'wrote'} {gallery}", highlight=False)
         print_verdicts(verdicts)
 
 
@@ -707,29 +821,46 @@ def add_experiment_command(entry: Entry) -> None:
         force: ForceOption = False,
         print_config: PrintConfigOption = False,
         jobs: JobsOption = None,
-        data: Optional[Path] = None,
-        events: Optional[Path] = None,
-        manifest: Optional[Path] = None,
+        data: Optional[list[Path]] = None,
+        events: Optional[list[Path]] = None,
+        manifest: Optional[list[Path]] = None,
         resume: ResumeOption = False,
         scheduler: SchedulerOption = None,
+        figure_format: FigureFormatOption = None,
+        dpi: DpiOption = FIGURE_DPI,
     ) -> None:
         overrides = list(overrides or [])
-        for key, path in (("data", data), ("events", events), ("manifest", manifest)):
+        out_dir = only_once("--out", out)
+        data_paths = [str(p) for p in data or []]
+        if len(data_paths) > 1:  # several files: the trials of one session, where it can be
+            from .config import accepts_several_files
+
+            if not accepts_several_files(entry.load().schema):
+                fail(f"--data given {len(data_paths)} times ({', '.join(data_paths)}): bounce "
+                     f"{entry.name} reads one file per run (several --data files are the trials "
+                     "of one session for learning, regression, acf, impulse and control)")
+            overrides.append(f"data={json.dumps(data_paths)}")
+        elif data_paths:
+            overrides.append(f"data={json.dumps(data_paths[0])}")
+        for key, paths in (("events", events), ("manifest", manifest)):
+            path = only_once(f"--{key}", paths)
             if path is not None:
                 overrides.append(f"{key}={json.dumps(str(path))}")
-        run_experiment(entry, config=config, overrides=overrides, out=out, quiet=quiet,
+        run_experiment(entry, config=config, overrides=overrides, out=out_dir, quiet=quiet,
                        force=force, print_config=print_config, jobs=jobs, resume=resume,
-                       scheduler=scheduler)
+                       scheduler=scheduler, figure_formats=tuple(figure_format or ["png"]),
+                       dpi=dpi)
 
     # the signature typer reads: annotations resolved, file options only where declared,
-    # --resume and --scheduler only for the experiments that take them
+    # --jobs, --resume and --scheduler only for the experiments that take them
     hints = typing.get_type_hints(command, include_extras=True)
     file_options = {"data": entry.data_help, "events": entry.events_help,
                     "manifest": entry.manifest_help}
     for key, help_text in file_options.items():
-        hints[key] = Annotated[Optional[Path], typer.Option(f"--{key}", help=help_text)]
+        hints[key] = Annotated[Optional[list[Path]],
+                               typer.Option(f"--{key}", help=help_text, metavar="PATH")]
     declared = {**{k: v is not None for k, v in file_options.items()},
-                "resume": entry.resumable, "scheduler": entry.cluster}
+                "resume": entry.resumable, "scheduler": entry.cluster, "jobs": entry.parallel}
     params = [p.replace(annotation=hints[p.name])
               for p in inspect.signature(command).parameters.values()
               if declared.get(p.name, True)]

@@ -7,10 +7,11 @@ Every experiment config has the common ``model`` block; an experiment module sub
 from __future__ import annotations
 
 import copy
+import difflib
 import typing
 from importlib import resources
 from pathlib import Path
-from typing import Any, Literal, Optional, TypeVar
+from typing import Any, Literal, Optional, TypeVar, Union
 
 import yaml
 from pydantic import (
@@ -252,10 +253,21 @@ def parse_override(text: str) -> tuple[list[str], Any]:
 
 def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any]:
     """Return a copy of ``data`` with each ``dotted.key=value`` set (unknown keys are caught
-    by validation, which forbids extra keys)."""
+    by validation, which forbids extra keys). A key given twice (or a key and a mapping that
+    holds it) is an error: the last one would win without a word."""
     data = copy.deepcopy(data)
+    given: dict[str, Any] = {}
     for text in overrides:
         path, value = parse_override(text)
+        dotted = ".".join(path)
+        for earlier, before in given.items():
+            if earlier == dotted:
+                raise ConfigError(f"--set {dotted}: given twice ({show_value(before)}, then "
+                                  f"{show_value(value)}); give each key once")
+            if dotted.startswith(earlier + ".") or earlier.startswith(dotted + "."):
+                raise ConfigError(f"--set {dotted}: overlaps --set {earlier}; give each key "
+                                  "once")
+        given[dotted] = value
         node = data
         for i, part in enumerate(path[:-1]):
             child = node.get(part)
@@ -269,12 +281,121 @@ def apply_overrides(data: dict[str, Any], overrides: list[str]) -> dict[str, Any
     return data
 
 
+#: the ``data`` key of the --data analyses: one file, or several (trials of one session:
+#: ``--data a.csv --data b.csv``, read as one table by ``bounce_cli.impacts.read_impacts``)
+DataFiles = Optional[Union[str, list[str]]]
+
+
+def accepts_several_files(schema: type[BaseModel]) -> bool:
+    """Whether a config's ``data`` key takes several files (``DataFiles``)."""
+    field = schema.model_fields.get("data")
+    return field is not None and field.annotation == DataFiles
+
+
+def data_files(data: Any) -> list[str]:
+    """The ``data`` key's files as a list (none for null)."""
+    if data is None:
+        return []
+    return [str(p) for p in data] if isinstance(data, (list, tuple)) else [str(data)]
+
+
+def data_text(data: Any) -> str:
+    """The ``data`` key as messages name it: the path, or the paths joined by `` + ``."""
+    return " + ".join(data_files(data))
+
+
+#: the model keys a --data analysis takes from the data unless the user sets them
+#: (``bounce_cli.data_parameters``)
+DATA_MODEL_KEYS: tuple[str, ...] = ("alpha", "g")
+
+
+def dotted_keys(data: Any, prefix: str = "") -> set[str]:
+    """Every leaf key of a nested mapping, dotted: ``{"model": {"g": 1}}`` -> ``{"model.g"}``."""
+    if not isinstance(data, dict):
+        return {prefix} if prefix else set()
+    keys: set[str] = set()
+    for key, value in data.items():
+        keys |= dotted_keys(value, f"{prefix}.{key}" if prefix else str(key))
+    return keys
+
+
+def keys_set_by_user(config_path: Path | None, overrides: list[str]) -> frozenset[str]:
+    """The dotted keys the user gave: every leaf of their own ``--config`` file (None: the
+    bundled config, whose values are not the user's) and every ``--set`` key (a mapping
+    value counts with its leaves).
+
+    Parameters
+    ----------
+    config_path : Path or None
+        The user's config file, or None when the bundled config is used.
+    overrides : list of str
+        The ``--set`` texts (``dotted.key=value``).
+
+    Returns
+    -------
+    frozenset of str
+        Dotted keys such as ``model.alpha``.
+    """
+    keys = dotted_keys(read_yaml(config_path)) if config_path is not None else set()
+    for text in overrides:
+        path, value = parse_override(text)
+        keys |= dotted_keys(value, ".".join(path)) if isinstance(value, dict) else {
+            ".".join(path)}
+    return frozenset(keys)
+
+
+def keys_at(schema: type[BaseModel], location: tuple) -> list[str]:
+    """The keys a config block accepts at ``location`` (a validation error's ``loc`` without
+    its last part): the fields of the model found by following the location from ``schema``
+    through nested models (also inside Optional, lists and dicts); [] where none is found."""
+    annotation: Any = schema
+    for part in location:
+        model = block_model(annotation)
+        if model is None:
+            return []
+        if isinstance(part, int):  # an item of a list: the list's model stays the same
+            continue
+        field = model.model_fields.get(str(part))
+        if field is None:
+            return []
+        annotation = field.annotation
+    model = block_model(annotation)
+    return list(model.model_fields) if model is not None else []
+
+
+def block_model(annotation) -> type[BaseModel] | None:
+    """The pydantic model an annotation holds (``Block``, ``Optional[Block]``,
+    ``list[Block]``, ``Annotated[Block, ...]``), or None."""
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return annotation
+    for arg in typing.get_args(annotation):
+        found = block_model(arg)
+        if found is not None:
+            return found
+    return None
+
+
+def did_you_mean(key: str, known: list[str]) -> str:
+    """`` (did you mean model.alpha?)`` for the known key closest to a misspelt one (difflib's
+    ratio at least 0.6), or ''. ``key`` is dotted; only its last part is compared."""
+    *block, last = key.split(".")
+    close = difflib.get_close_matches(last, known, n=1)
+    return f" (did you mean {'.'.join([*block, close[0]])}?)" if close else ""
+
+
 def format_validation_error(
-    exc: ValidationError, source: str, overridden: frozenset[str] = frozenset()
+    exc: ValidationError, source: str, overridden: frozenset[str] = frozenset(),
+    schema: type[BaseModel] | None = None,
 ) -> str:
     """First validation problem as one line: ``source: dotted.key: reason`` (source is
-    ``--set`` when the key was set by an override, or when a rule between keys names one)."""
-    err = exc.errors()[0]
+    ``--set`` when the key was set by an override, or when a rule between keys names one).
+    An unknown key gets the closest key ``schema`` accepts there (difflib), if any; it is
+    the problem reported when a required key of the same block is missing (a misspelt
+    required key is both)."""
+    errors = exc.errors()
+    err = next((e for e in errors if e["type"] == "extra_forbidden"
+                and any(m["type"] == "missing" and m["loc"][:-1] == e["loc"][:-1]
+                        for m in errors)), errors[0])
     loc = ".".join(str(part) for part in err["loc"]) or "(top level)"
     if any(loc == key or loc.startswith(key + ".") or key.startswith(loc + ".")
            for key in overridden):
@@ -283,6 +404,8 @@ def format_validation_error(
         source = "--set"  # a rule between keys (a model validator) names a key set by --set
     if err["type"] == "extra_forbidden":
         reason = "unknown key"
+        if schema is not None:
+            reason += did_you_mean(loc, keys_at(schema, tuple(err["loc"][:-1])))
     elif err["type"] == "missing":
         reason = "required key is missing"
     else:
@@ -314,8 +437,38 @@ def validate(
     try:
         return schema.model_validate(data)
     except ValidationError as exc:
+        belongs = other_command_of(schema, data, source)
+        if belongs:
+            raise ConfigError(f"{source}: {belongs}") from None
         overridden = frozenset(".".join(parse_override(t)[0]) for t in overrides or [])
-        raise ConfigError(format_validation_error(exc, source, overridden)) from None
+        raise ConfigError(format_validation_error(exc, source, overridden, schema)) from None
+
+
+def other_command_of(schema: type[BaseModel], data: dict[str, Any], source: str) -> str:
+    """When ``data``'s top-level blocks are not ``schema``'s but are all another command's
+    (a config of ``bounce basin`` given to ``bounce acf``): one sentence saying which command
+    it belongs to; '' otherwise (then the first problem is reported as usual). Of several
+    commands sharing a schema, the one whose bundled config has the file's name is named."""
+    from .registry import EXPERIMENTS
+
+    unknown = sorted(set(data) - set(schema.model_fields))
+    if not unknown:
+        return ""
+    owners = []
+    for entry in EXPERIMENTS:
+        other = entry.load().schema
+        if other is not schema and set(data) <= set(other.model_fields):
+            owners.append(entry)
+    named = [e for e in owners if Path(source).stem == e.config]
+    owners = named or owners
+    if not owners:
+        return ""
+    commands = " or ".join(f"bounce {e.name}" for e in owners)
+    this = [e.name for e in EXPERIMENTS if e.load().schema is schema]
+    here = f"bounce {this[0]}" if len(this) == 1 else "this command"
+    return (f"a config of {commands}, not of {here} (its keys {', '.join(unknown)} are not "
+            f"{here}'s); run bounce {owners[0].name} --config {source}, or start from "
+            f"{here} --print-config")
 
 
 def load_config(schema: type[C], path: Path, overrides: list[str] | None = None) -> C:

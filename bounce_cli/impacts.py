@@ -27,7 +27,12 @@ Columns (units in the names; phases are the racket's phase of impact, section 2,
                         velocity at t_k (optional: as ``v_in_m_s``)
 ``contact_s``           time the ball is off its free flights around the impact, s (0: an
                         instant; optional: as ``v_in_m_s``)
+``g_m_s2``              gravity of the set-up, m/s^2 (optional; ``setup.csv`` beside the table
+                        is read first)
 ======================  ==========================================================================
+
+The ``--data`` analyses take the model's alpha and g from ``alpha_measured`` (else ``alpha``)
+and ``setup.csv`` (else ``g_m_s2``) unless the user sets them (``bounce_cli.data_parameters``).
 """
 
 from __future__ import annotations
@@ -141,9 +146,41 @@ def _fail(path: Path, message: str) -> ConfigError:
     return ConfigError(f"data: {path}: {message}")
 
 
-#: where an impacts table comes from: a CSV file, or (label, table) already in memory (a
-#: simulated lab session, ``experiments.lab``)
-ImpactsSource = Union[str, Path, tuple[str, pd.DataFrame]]
+#: where an impacts table comes from: a CSV file, several (trials of one session), or (label,
+#: table) already in memory (a simulated lab session, ``experiments.lab``)
+ImpactsSource = Union[str, Path, list, tuple[str, pd.DataFrame]]
+
+
+def file_labels(paths: list[Path]) -> list[str]:
+    """A short distinct label per file: its stem (``day1``), else its folder and stem
+    (``lab1/impacts``), else its position (``1``, ``2``, ...)."""
+    for label in (lambda p: p.stem, lambda p: f"{p.parent.name}/{p.stem}"):
+        labels = [label(p) for p in paths]
+        if len(set(labels)) == len(labels):
+            return labels
+    return [str(i) for i in range(1, len(paths) + 1)]
+
+
+def read_session(paths: list) -> pd.DataFrame:
+    """Several impacts tables as the trials of one session, in the order given. Trial labels
+    stay as written unless two files share one: then every trial is labelled
+    ``<file>:<trial>`` (``file_labels``), so that trials of different files never merge."""
+    paths = [Path(p) for p in paths]
+    frames = [read_data_csv(p) for p in paths]
+    for p, f in zip(paths, frames):
+        if "trial" not in f.columns:
+            raise _fail(p, "missing column(s) trial: not an impacts table (required: trial, k, "
+                           "v_m_s, theta_rad or theta_deg)")
+    seen: dict[str, Path] = {}
+    collide = False
+    for p, f in zip(paths, frames):
+        for trial in dict.fromkeys(f["trial"].astype(str)):
+            collide |= trial in seen
+            seen.setdefault(trial, p)
+    if collide:
+        for label, f in zip(file_labels(paths), frames):
+            f["trial"] = label + ":" + f["trial"].astype(str)
+    return pd.concat(frames, ignore_index=True)
 
 
 def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: str = "",
@@ -152,12 +189,16 @@ def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: st
     the file and the column, row or trial (ConfigError). ``needs``: the optional columns the
     analysis ``command`` requires; ``min_bounces``: fewest impacts a trial may have.
     ``source`` may also be ``(label, frame)``: a table in memory, checked the same way (the
-    label stands for the file name in messages). ``optional``: columns the analysis uses
+    label stands for the file name in messages), or a list of files: the trials of one
+    session (``read_session``). ``optional``: columns the analysis uses
     when present, checked like ``needs`` then."""
     if isinstance(source, tuple):
         label, frame = source
         path = Path(label)
         frame = frame.copy()
+    elif isinstance(source, list):  # several files: one session (``read_session``)
+        frame = read_session(source)
+        path = Path(" + ".join(str(p) for p in source))
     else:
         path = Path(source)
         frame = read_data_csv(path)
@@ -247,7 +288,8 @@ def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: st
 def impacts_frame(sim, params, trial_names=None) -> pd.DataFrame:
     """An impacts table (the columns above) from the engine's synthetic lab
     (``engine.data_stats.simulate_impacts``): racket period and amplitude are the model's,
-    AC = -a_r w^2 sin(theta) / g, ball apex x_r(theta) + v^2 / 2g. Lost trials are left out."""
+    AC = -a_r w^2 sin(theta) / g, ball apex x_r(theta) + v^2 / 2g, the set-up's g (``g_m_s2``,
+    what the data analyses run the model at). Lost trials are left out."""
     from .engine.data_stats import apex_height
 
     rows = []
@@ -264,7 +306,7 @@ def impacts_frame(sim, params, trial_names=None) -> pd.DataFrame:
             "racket_period_s": params.racket_period,
             "racket_amplitude_m": params.racket_amplitude,
             "hop_s": sim.hop[i], "ball_apex_m": apex_height(params, theta, sim.v[i]),
-            "alpha": sim.alpha[i], "perturbed": sim.perturbed[i],
+            "alpha": sim.alpha[i], "perturbed": sim.perturbed[i], "g_m_s2": params.g,
         }))
     return pd.concat(rows, ignore_index=True)
 

@@ -27,7 +27,8 @@ class Entry:
     key ``events``). ``needs_fixed_point``: the run is about the period-1
     fixed point, so the CLI warns when it is unstable. ``reproduce``: part of
     ``bounce reproduce`` and of the committed ``results/``. ``resumable``: the command takes
-    ``--resume`` (the run keeps finished tasks in ``RunOptions.checkpoints``); ``cluster``:
+    ``--resume`` (the run keeps finished tasks in ``RunOptions.checkpoints``); ``parallel``:
+    it takes ``--jobs N`` (its tasks run on N local workers); ``cluster``:
     it takes ``--scheduler ADDRESS`` (its tasks can run on a Dask cluster). ``attribute``:
     the module's attribute holding the :class:`Experiment` (one module may define several).
     ``manifest_help``: the command takes ``--manifest FILE`` (config key ``manifest``);
@@ -43,6 +44,7 @@ class Entry:
     needs_fixed_point: bool = True
     reproduce: bool = True
     resumable: bool = False
+    parallel: bool = False
     cluster: bool = False
     module: str = ""
     config: str = ""
@@ -78,6 +80,7 @@ EXPERIMENTS: tuple[Entry, ...] = (
           "white period-1, grey sticking, black below the racket."),
          ("basin_iterations.png", "Section 3: number of impacts until each initial condition "
           "was classified.")),
+        parallel=True,
     ),
     Entry(
         "stability",
@@ -209,7 +212,8 @@ EXPERIMENTS: tuple[Entry, ...] = (
          ("control_fit.png", "Fit of K and c to mean perturbation responses (simulated trials "
           "of a known controller, or --data).")),
         data_help="impacts.csv with perturbation events (trial, k, theta_rad, v_m_s, "
-        "racket_period_s, perturbed; optional alpha): fit K and c to it (sets `data`).",
+        "racket_period_s, racket_amplitude_m, perturbed; optional alpha): fit K and c to it, "
+        "every result at the data's racket, alpha and g (sets `data`).",
     ),
     Entry(
         "sweep",
@@ -217,7 +221,7 @@ EXPERIMENTS: tuple[Entry, ...] = (
         (("sweep.png", "Beyond the paper (section 3's basin over section 4's plane): at each "
           "(alpha, AC) the basin's outcome fractions, the fixed point's spectral radius (eq. "
           "10), the basin entropy and boundary basin entropy; dashed: spectral radius 1."),),
-        needs_fixed_point=False, resumable=True, cluster=True,
+        needs_fixed_point=False, resumable=True, parallel=True, cluster=True,
     ),
     Entry(
         "simulate-study",
@@ -238,7 +242,8 @@ EXPERIMENTS: tuple[Entry, ...] = (
          ("group_impulse.png", "Figs. 9 and 11 per condition, averaged over subjects.")),
         manifest_help="The study's manifest CSV: one row per recording (file, subject[, "
         "condition, trial, events, extract.<key>]); sets the config key `manifest`.",
-        needs_fixed_point=False, reproduce=False, resumable=True, cluster=True, task_keys=True,
+        needs_fixed_point=False, reproduce=False, resumable=True, parallel=True, cluster=True,
+        task_keys=True,
     ),
 )
 

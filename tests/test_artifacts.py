@@ -449,3 +449,67 @@ def test_a_cell_needing_quotes_in_a_later_chunk_hands_the_table_to_pandas(tmp_pa
     artifacts.write_csv(frame, tmp_path / "fast.csv")
     frame.to_csv(tmp_path / "pandas.csv", index=False)
     assert (tmp_path / "fast.csv").read_bytes() == (tmp_path / "pandas.csv").read_bytes()
+
+
+# -- one run at a time in an output directory ---------------------------------------------------
+def test_a_second_run_into_a_directory_in_use_refuses(tmp_path):
+    """Two runs writing into one --out at once: the second refuses (before the fix both
+    committed and one run's results were lost); after the first commits the next may run."""
+    out = tmp_path / "r"
+    first = make_run(out, {"a": 1})
+    assert (out / artifacts.LOCK_FILE).is_file()
+    with pytest.raises(OutputDirError, match=r"another bounce run is writing there \(pid "):
+        make_run(out, {"a": 1})
+    first.add_csv("data.csv", pd.DataFrame({"x_m": [1.0]}))
+    first.commit()
+    assert not (out / artifacts.LOCK_FILE).exists()  # nothing left behind
+    second = make_run(out, {"a": 1})
+    second.discard()
+    assert sorted(p.name for p in out.iterdir()) == ["data.csv", "run.json", "timing.json"]
+
+
+def test_a_failed_run_releases_its_lock_and_its_folder(tmp_path):
+    out = tmp_path / "new" / "r"
+    run = make_run(out, {"a": 1})
+    run.discard()
+    assert not (tmp_path / "new").exists()  # the lock file does not keep the folder
+    make_run(out, {"a": 1}).discard()
+
+
+@pytest.mark.skipif(sys.platform == "win32", reason="advisory locks are POSIX here")
+def test_the_stale_lock_of_a_killed_run_is_taken_over(tmp_path):
+    """A run killed with SIGKILL leaves its lock file, but holds no lock: the next run takes
+    it over."""
+    import os
+    import signal
+    import subprocess
+
+    out = tmp_path / "r"
+    code = ("import sys, time; from bounce_cli.artifacts import RunDirectory; "
+            "RunDirectory(sys.argv[1], command='demo', resolved_config={}, overrides=[], "
+            "config_path=None); print('locked', flush=True); time.sleep(60)")
+    child = subprocess.Popen([sys.executable, "-c", code, str(out)], stdout=subprocess.PIPE,
+                             text=True, env={**os.environ, "PYTHONPATH": os.pathsep.join(
+                                 sys.path)})
+    try:
+        assert child.stdout.readline().strip() == "locked"
+        with pytest.raises(OutputDirError, match=f"pid {child.pid}: bounce demo"):
+            make_run(out, {})
+        child.send_signal(signal.SIGKILL)
+        child.wait(timeout=30)
+    finally:
+        child.kill()
+        child.wait()
+    assert (out / artifacts.LOCK_FILE).is_file()  # stale
+    make_run(out, {}).discard()
+    assert not (out / artifacts.LOCK_FILE).exists()
+
+
+def test_cli_refuses_an_out_another_run_is_writing(tmp_path, cli, user_error):
+    out = tmp_path / "o"
+    holder = make_run(out, {})
+    result = cli("trajectory", "--out", out, "--quiet")
+    user_error(result, f"--out {out}: another bounce run is writing there",
+               "choose another --out")
+    holder.discard()
+    assert not out.exists()  # the refused run wrote nothing, the holder's folder is gone

@@ -25,8 +25,9 @@ def test_fixed_point_json_paper_values(cli):
     result = cli("fixed-point", "--json")
     assert result.exit_code == 0, result.output
     data = json.loads(result.stdout)
-    assert set(data) == {"v_m_s", "theta_rad", "theta_deg", "ac_g", "eigenvalues",
+    assert set(data) == {"exists", "v_m_s", "theta_rad", "theta_deg", "ac_g", "eigenvalues",
                          "spectral_radius", "regime", "stable"}
+    assert data["exists"] is True
     assert round(data["v_m_s"], 3) == 4.513
     assert round(data["theta_deg"], 2) == 42.76
     assert round(data["ac_g"], 3) == -0.968
@@ -43,6 +44,22 @@ def test_fixed_point_table_and_overrides(cli):
     assert "v~" in result.stdout and "4.5126" in result.stdout  # v~ does not depend on alpha
     result = cli("fixed-point", "--json", "--set", "model.racket_period=0.5")
     assert json.loads(result.stdout)["v_m_s"] == pytest.approx(math.pi * 9.81 / (2 * math.pi / 0.5))
+
+
+def test_fixed_point_json_without_a_fixed_point_says_so_in_json_and_exits_1(cli):
+    # eq. 8: cos(theta~) = g^2 (1 - alpha) / (... a_r ...) grows as 1 / a_r: at a_r = 0.01 m
+    # it is 22.02 (> 1, no fixed point); the threshold 0.2202 m is a_r * cos(theta~)
+    result = cli("fixed-point", "--json", "--set", "model.racket_amplitude=0.01")
+    assert result.exit_code == 1, result.output
+    data = json.loads(result.stdout)
+    assert data["exists"] is False and "no period-1 fixed point" in data["reason"]
+    assert data["cos_theta"] == pytest.approx(22.02, abs=0.005)
+    assert data["min_racket_amplitude_m"] == pytest.approx(0.01 * data["cos_theta"])
+    at_threshold = cli("fixed-point", "--json", "--set",
+                       f"model.racket_amplitude={data['min_racket_amplitude_m'] * 1.0001}")
+    assert at_threshold.exit_code == 0 and json.loads(at_threshold.stdout)["exists"] is True
+    # a bad key is still a user error, not an answer
+    assert cli("fixed-point", "--json", "--set", "model.nope=1").exit_code == 2
 
 
 @pytest.mark.parametrize(

@@ -33,7 +33,7 @@ def write(tmp_path, frame, name="impacts.csv"):
 
 
 def test_simulated_table_has_the_fixed_columns_and_reads_back(table, tmp_path):
-    assert list(table.columns) == [*REQUIRED_COLUMNS, *EVENT_COLUMNS]
+    assert list(table.columns) == [*REQUIRED_COLUMNS, *EVENT_COLUMNS, "g_m_s2"]
     impacts = read_impacts(write(tmp_path, table), needs=("alpha", "perturbed", "ball_apex_m"))
     f = impacts.frame
     assert impacts.trials == ["1", "2", "3"]

@@ -166,3 +166,66 @@ def test_a_failed_run_leaves_no_folder_it_created_but_keeps_existing_ones(tmp_pa
     one_error_line(run("regression", "--set", "design.amplitude_sd_m=0.05", "--out", out,
                        "--quiet"))
     assert (tmp_path / "a").is_dir() and not (tmp_path / "a" / "b").exists()
+
+
+# -- what a new user mistypes or mixes up ------------------------------------------------------
+@pytest.mark.parametrize("command, setting, suggestion", [
+    ("fixed-point", "model.alpah=0.4", "(did you mean model.alpha?)"),
+    ("basin", "grid.v0_m_s.nun=3", "(did you mean grid.v0_m_s.num?)"),
+    ("basin", "gird.v0_m_s.num=3", "(did you mean grid?)"),
+    ("trajectory", "cases.0.v0_ms=3", None),  # cases is a list: no mapping to set a key in
+])
+def test_an_unknown_key_suggests_the_closest_known_one(command, setting, suggestion):
+    line = one_error_line(run(command, "--set", setting), setting.partition("=")[0].split(".")[0])
+    if suggestion is not None:
+        assert line.endswith(f"unknown key {suggestion}"), line
+
+
+def test_an_unknown_key_far_from_every_known_one_gets_no_suggestion():
+    line = one_error_line(run("fixed-point", "--set", "model.zzzzzz=1"), "model.zzzzzz")
+    assert line.endswith("unknown key") and "did you mean" not in line
+
+
+def test_an_unknown_key_in_a_list_item_is_compared_with_the_items_keys(tmp_path):
+    from bounce_cli.config import ConfigError
+    from bounce_cli.experiments.trajectory import EXPERIMENT as trajectory
+
+    config = tmp_path / "t.yaml"
+    config.write_text("cases:\n  - name: a\n    theta0_deg: 10\n    v0_ms: 4.8\n")
+    with pytest.raises(ConfigError, match=r"cases\.0\.v0_ms: unknown key \(did you mean "
+                                          r"cases\.0\.v0_m_s\?\)"):
+        load_config(trajectory.schema, config)
+
+
+@pytest.mark.parametrize("command, other", [("acf", "basin"), ("basin", "acf"),
+                                            ("learning-data", "acf-data")])
+def test_another_commands_config_names_the_command_it_belongs_to(command, other):
+    from bounce_cli.config import bundled_config_path
+    from bounce_cli.registry import entry
+
+    path = bundled_config_path(entry(other).config)
+    line = one_error_line(run(command, "--config", path, "--out", "unused"),
+                          f"a config of bounce {other}, not of bounce {command}",
+                          f"run bounce {other} --config {path}")
+    assert "more problem" not in line
+
+
+def test_a_config_with_a_block_no_command_has_is_reported_as_an_unknown_key(tmp_path):
+    config = tmp_path / "c.yaml"
+    config.write_text("model:\n  alpha: 0.5\nnoise_typo: 1\n")
+    one_error_line(run("acf", "--config", config), "noise_typo: unknown key")
+
+
+def test_help_shows_no_type_after_a_flag_but_the_type_of_an_option_with_a_value():
+    text = run("basin", "--help").stdout
+    assert "<bool>" not in text
+    assert "<path>" in text and "<int range>" in text
+    assert "<bool>" not in run("fixed-point", "--help").stdout
+
+
+@pytest.mark.parametrize("command", [e.name for e in EXPERIMENTS])
+def test_jobs_is_offered_only_where_it_spreads_work(command):
+    from bounce_cli.registry import entry
+
+    offered = "--jobs" in run(command, "--help").stdout
+    assert offered == (command in ("basin", "sweep")) == entry(command).parallel

@@ -34,7 +34,7 @@ Times in s, positions in m, velocities in m/s, phases in rad.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.interpolate import CubicSpline
@@ -95,6 +95,17 @@ def local_polynomial(t, x, t0: float, half_window: float, degree: int):
     (increasing powers), or None with too few samples (fewer than degree + 2).
 
     At a sample time of uniformly sampled data this is the Savitzky-Golay filter."""
+    fit = _local_design(t, x, t0, half_window, degree)
+    if fit is None:
+        return None
+    design, xx = fit
+    coef, *_ = np.linalg.lstsq(design, xx, rcond=None)
+    return coef
+
+
+def _local_design(t, x, t0: float, half_window: float, degree: int):
+    """(design matrix in s = (t - t0) / half_window, finite samples) of a local fit, or None
+    with fewer than degree + 2 finite samples."""
     lo = np.searchsorted(t, t0 - half_window * (1.0 + 1e-9), side="left")
     hi = np.searchsorted(t, t0 + half_window * (1.0 + 1e-9), side="right")
     tt, xx = t[lo:hi], x[lo:hi]
@@ -102,9 +113,51 @@ def local_polynomial(t, x, t0: float, half_window: float, degree: int):
     if np.count_nonzero(ok) < degree + 2:
         return None
     s = (tt[ok] - t0) / half_window
-    design = np.vander(s, degree + 1, increasing=True)
-    coef, *_ = np.linalg.lstsq(design, xx[ok], rcond=None)
-    return coef
+    return np.vander(s, degree + 1, increasing=True), xx[ok]
+
+
+@dataclass(frozen=True)
+class LocalFit:
+    """A local polynomial fit at t0 (``local_polynomial``) with what its residuals say: the
+    position and velocity at t0, their variances, the residual sum of squares and dof."""
+
+    x: float
+    v: float
+    var_x: float
+    var_v: float
+    rss: float
+    dof: int
+
+
+def local_fit(t, x, t0: float, half_window: float, degree: int) -> LocalFit | None:
+    """``local_polynomial`` at t0 with the variances of its value and slope there
+    (s^2 (X'X)^-1, s^2 = RSS / dof).
+
+    Parameters
+    ----------
+    t, x : array
+        Sample times (sorted, s) and positions (NaN: missing, m).
+    t0, half_window : float
+        Centre and half width of the window, s.
+    degree : int
+        Degree of the polynomial.
+
+    Returns
+    -------
+    LocalFit or None
+        None with too few samples.
+    """
+    fit = _local_design(t, x, t0, half_window, degree)
+    if fit is None:
+        return None
+    design, xx = fit
+    coef, *_ = np.linalg.lstsq(design, xx, rcond=None)
+    resid = xx - design @ coef
+    dof = len(xx) - degree - 1
+    s2 = float(resid @ resid) / dof if dof > 0 else math.nan
+    inv = np.linalg.pinv(design.T @ design)
+    return LocalFit(float(coef[0]), float(coef[1] / half_window), s2 * float(inv[0, 0]),
+                    s2 * float(inv[1, 1]) / half_window**2, float(resid @ resid), dof)
 
 
 def local_derivatives(t, x, t0: float, half_window: float, degree: int):
@@ -368,6 +421,17 @@ class FlightFit:
     t_last: float
     n: int
     rms: float
+    #: covariance of (x0, v0) from the residuals (s^2 (X'X)^-1, s^2 = RSS / (n - 2))
+    cov: tuple[tuple[float, float], tuple[float, float]] = ((math.nan, math.nan),
+                                                            (math.nan, math.nan))
+    #: the samples fitted (for the pooled gravity fit)
+    samples: tuple[np.ndarray, np.ndarray] | None = None
+
+    def position_var(self, t) -> float:
+        """Variance of the fitted position at t (g known)."""
+        d = float(t) - self.t_ref
+        (a, b), (_, c) = self.cov
+        return a + 2.0 * b * d + c * d * d
 
     def position(self, t, g):
         dt = np.asarray(t, dtype=float) - self.t_ref
@@ -387,8 +451,69 @@ def fit_flight(t, x, t_ref: float, g: float, min_samples: int) -> FlightFit | No
     design = np.column_stack([np.ones_like(dt), dt])
     coef, *_ = np.linalg.lstsq(design, xx + 0.5 * g * dt * dt, rcond=None)
     resid = xx - (coef[0] + coef[1] * dt - 0.5 * g * dt * dt)
+    s2 = float(resid @ resid) / (tt.size - 2) if tt.size > 2 else math.nan
+    inv = np.linalg.pinv(design.T @ design) * s2
+    cov = ((float(inv[0, 0]), float(inv[0, 1])), (float(inv[1, 0]), float(inv[1, 1])))
     return FlightFit(t_ref, float(coef[0]), float(coef[1]), float(tt[0]), float(tt[-1]),
-                     int(tt.size), float(np.sqrt(np.mean(resid * resid))))
+                     int(tt.size), float(np.sqrt(np.mean(resid * resid))), cov, (tt, xx))
+
+
+#: a fitted g outside this range is no set-up's (m/s^2): a unit slip (mm read as cm: 98)
+PLAUSIBLE_G_M_S2 = (1.0, 20.0)
+
+
+@dataclass(frozen=True)
+class GravityFit:
+    """g from the curvature of free flights: one parabola per flight (its own position and
+    velocity), one g for all; ``residual_sd`` the flights' residual SD (m)."""
+
+    g: float
+    se: float
+    n_flights: int
+    n_samples: int
+    residual_sd: float
+
+
+def pooled_gravity(flights) -> GravityFit | None:
+    """The least-squares g of free flights x = a_i + b_i s - g s^2 / 2 (eq. 1; s: time from
+    each flight's first sample), a_i and b_i per flight: each flight's samples are projected
+    off span{1, s}, and g is the regression of the projected x on the projected -s^2 / 2.
+
+    Parameters
+    ----------
+    flights : iterable of (t, x) arrays
+        The samples of each free flight (finite positions), s and m.
+
+    Returns
+    -------
+    GravityFit or None
+        None with no flight of at least 4 samples.
+    """
+    num = den = rss_x = 0.0
+    n_flights = n_samples = 0
+    parts = []
+    for t, x in flights:
+        t, x = np.asarray(t, dtype=float), np.asarray(x, dtype=float)
+        if t.size < 4:
+            continue
+        s_ = (t - t[0]) / max(t[-1] - t[0], 1e-12)  # scaled for conditioning
+        basis, _ = np.linalg.qr(np.column_stack([np.ones_like(s_), s_]))
+        q = -0.5 * (t - t[0]) ** 2
+        q = q - basis @ (basis.T @ q)
+        r = x - basis @ (basis.T @ x)
+        num += float(q @ r)
+        den += float(q @ q)
+        rss_x += float(r @ r)
+        parts.append((q, r))
+        n_flights += 1
+        n_samples += t.size
+    if n_flights == 0 or den <= 0.0:
+        return None
+    g = num / den
+    rss = sum(float((r - g * q) @ (r - g * q)) for q, r in parts)
+    dof = max(n_samples - 2 * n_flights - 1, 1)
+    sigma2 = rss / dof
+    return GravityFit(g, math.sqrt(sigma2 / den), n_flights, n_samples, math.sqrt(sigma2))
 
 
 # -- contacts -----------------------------------------------------------------------------------
@@ -472,6 +597,20 @@ class TrialExtraction:
     excluded: list[tuple[float, str]]
     cycles: RacketCycles
     measured_offset_m: float = math.nan
+    #: the free flights' samples (t, x), for the pooled gravity fit (``pooled_gravity``)
+    flights: list = field(default_factory=list)
+    #: per reported impact: the ball marker above the racket marker at t_k (m), and the
+    #: standard errors of v_k (m/s) and theta_k (rad) propagated from the fits' residuals
+    offsets_m: np.ndarray = field(default_factory=lambda: np.array([]))
+    se_v_m_s: np.ndarray = field(default_factory=lambda: np.array([]))
+    se_theta_rad: np.ndarray = field(default_factory=lambda: np.array([]))
+    #: the racket's local position fits at the impacts: residual sum of squares, dof
+    racket_rss: float = 0.0
+    racket_dof: int = 0
+    #: per reported impact: the contact's area and its weight (contact_s^2 = area / weight;
+    #: ``contact_duration`` pools them)
+    contact_area: np.ndarray = field(default_factory=lambda: np.array([]))
+    contact_weight: np.ndarray = field(default_factory=lambda: np.array([]))
 
 
 def _segment_fits(t, ball, long_gap, racket, lo: int, hi: int, t_after: float,
@@ -576,6 +715,15 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
 
     t_k = ct.copy()
     v_k = np.full(n, np.nan)
+    v_in = np.full(n, np.nan)  # ball velocity just before the impact (the flight before)
+    contact = np.full(n, np.nan)
+    area = np.full(n, np.nan)  # of the ball above its two flights, around the impact (m s)
+    weight = np.full(n, np.nan)  # |closing velocity| K(alpha): area / weight = contact^2
+    offset_k = np.full(n, np.nan)
+    var_t = np.zeros(n)  # variance of t_k from the flight fits (0: an event's logged time)
+    se_v = np.full(n, np.nan)
+    flights: list = []
+    met = exact.copy()  # timed where the flights meet (or logged): the marker offset shows
     apex_x = np.full(n, np.nan)  # ball height at the apex of the following flight
     reason = [""] * n
     offsets: list[float] = []
@@ -594,6 +742,10 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
             t_before = ct[j] if j < n else t[-1]
             after, before, rest_s, has_gap = _segment_fits(
                 t, ball_fit_data, ball_long, racket_f, lo, hi, t_after, t_before, s)
+            if rest_s == 0.0:  # a free flight: its curvature is g
+                flight = after if after is not None else before
+                if flight is not None and flight.samples is not None:
+                    flights.append(flight.samples)
             if j > 0:
                 afters[j - 1] = after
                 if rest_s > 0.0:
@@ -617,6 +769,7 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
                     tj = ct[j] - (after.x0 - before.x0) / (after.v0 - before.v0)
                     if abs(tj - ct[j]) <= 3.0 * _spacing(t, ci[j]) + gap_width[j]:
                         t_k[j] = tj
+                        met[j] = True
                         offsets.append(float(after.position(tj, g))
                                        - local_derivatives(t, racket_fit, tj,
                                                            s.position_half_window_s,
@@ -632,6 +785,18 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
                 reason[j] = "contact not located"
                 continue
             v_k[j] = float(after.velocity(t_k[j], g))
+            if before is not None:
+                v_in[j] = float(before.velocity(t_k[j], g))
+                area[j] = _contact_area(t, ball_fit_data, before, after, g)
+                closing = float(v_in[j] - v_k[j])
+                if not exact[j] and closing > 0.0:
+                    var_t[j] = (before.position_var(t_k[j])
+                                + after.position_var(t_k[j])) / closing**2
+            se_v[j] = math.sqrt(after.cov[1][1] + g * g * var_t[j])
+            racket_here = local_fit(t, racket_fit, t_k[j], s.position_half_window_s,
+                                    s.position_degree)
+            if racket_here is not None and met[j]:
+                offset_k[j] = float(after.position(t_k[j], g)) - racket_here.x
             x_k = float(after.position(t_k[j], g)) - s.ball_offset_m
             rise = max(v_k[j], 0.0) / g
             t_next = ct[j + 1] if j + 1 < n else t[-1]
@@ -690,6 +855,24 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
                                    s.acc_degree)[2] / g
         if not math.isfinite(acc[j]) or not math.isfinite(v_k[j]):
             reason[j] = "gap: too few racket samples around the impact"
+    # eq. 3 at t_k with the racket's velocity there (local fit), and the racket's residuals
+    alpha_measured = np.full(n, np.nan)
+    racket_v = np.full(n, np.nan)
+    racket_rss, racket_dof = 0.0, 0
+    for j in range(n):
+        if reason[j]:
+            continue
+        here = local_fit(t, racket_fit, t_k[j], s.acc_half_window_s, s.acc_degree)
+        if here is None:
+            continue
+        racket_v[j] = here.v
+        if math.isfinite(here.rss) and here.dof > 0:
+            racket_rss, racket_dof = racket_rss + here.rss, racket_dof + here.dof
+        if math.isfinite(v_in[j]) and v_in[j] < here.v:  # approaching the racket
+            alpha_measured[j] = -(v_k[j] - here.v) / (v_in[j] - here.v)
+            if 0.0 < alpha_measured[j] < 1.0 and math.isfinite(area[j]):
+                weight[j] = (here.v - v_in[j]) * contact_shape_factor(alpha_measured[j])
+                contact[j] = math.sqrt(max(area[j], 0.0) / weight[j])
     keep = np.array([not r for r in reason], dtype=bool)
     for j in np.flatnonzero(~keep).tolist():
         excluded.append((float(t_k[j]), reason[j]))
@@ -714,8 +897,114 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
     }
     if event_t is not None:
         impacts["alpha"] = alpha[keep]
+    if ball is not None:
+        impacts["v_in_m_s"] = v_in[keep]
+        impacts["alpha_measured"] = alpha_measured[keep]
+        impacts["contact_s"] = contact[keep]
     offset = float(np.median(offsets)) if offsets else math.nan
-    return TrialExtraction(impacts, excluded, cycles, offset)
+    se_theta = _phase_se(t, racket_fit, cycles, t_k, var_t, s)
+    return TrialExtraction(impacts, excluded, cycles, offset, flights, offset_k[keep],
+                           se_v[keep], se_theta[keep], racket_rss, racket_dof,
+                           area[keep], weight[keep])
+
+
+def _contact_area(t, ball, before: FlightFit, after: FlightFit, g: float) -> float:
+    """The area (m s) of the ball's positions above the higher of its two flights,
+    extrapolated, between the fits' samples: sum of the deviations times the sampling
+    interval (over a uniformly random sampling phase its mean is the integral)."""
+    lo = np.searchsorted(t, before.t_last, side="right")
+    hi = np.searchsorted(t, after.t_first, side="left")
+    if hi <= lo:
+        return math.nan
+    tt, xx = t[lo:hi], ball[lo:hi]
+    if not np.all(np.isfinite(xx)):
+        return math.nan  # a gap in the contact: its area is unknown
+    step = (after.t_first - before.t_last) / (hi - lo + 1)
+    envelope = np.maximum(before.position(tt, g), after.position(tt, g))
+    return float(np.sum(xx - envelope) * step)
+
+
+def contact_duration(areas, weights) -> tuple[float, float, int]:
+    """The session's contact duration from its impacts' areas and weights
+    (``contact_shape_factor``): T^2 = sum(area) / sum(weight), a noisy area weighing by its
+    impact's closing speed; SE by the delta method from the areas' scatter.
+
+    Parameters
+    ----------
+    areas, weights : array
+        Per impact (NaN: not measured).
+
+    Returns
+    -------
+    tuple
+        (T in s, its SE, the number of impacts).
+    """
+    a, w = np.asarray(areas, dtype=float), np.asarray(weights, dtype=float)
+    ok = np.isfinite(a) & np.isfinite(w) & (w > 0.0)
+    a, w = a[ok], w[ok]
+    if a.size == 0:
+        return math.nan, math.nan, 0
+    t2 = float(np.sum(a) / np.sum(w))
+    duration = math.sqrt(max(t2, 0.0))
+    if a.size < 2 or duration == 0.0:
+        return duration, math.nan, int(a.size)
+    resid = a - t2 * w
+    se_t2 = math.sqrt(float(np.sum(resid * resid)) * a.size / (a.size - 1)) / float(np.sum(w))
+    return duration, se_t2 / (2.0 * duration), int(a.size)
+
+
+def contact_shape_factor(alpha: float) -> float:
+    """K(alpha) of a linear spring-damper contact (restitution alpha): the area between the
+    ball's path in the contact and its two free flights extrapolated (the V they make, meeting
+    at the equivalent impact) is K |u| T^2 for closing velocity u and contact duration T.
+    On u = -1, T = 1: y(s) = -exp(-zeta omega_n s) sin(pi s) / pi against max(-s, alpha (s - 1)).
+
+    Parameters
+    ----------
+    alpha : float
+        Restitution, in (0, 1).
+
+    Returns
+    -------
+    float
+        K, dimensionless (> 0).
+    """
+    log = math.log(alpha)
+    zeta = -log / math.sqrt(math.pi**2 + log * log)
+    decay = zeta * math.pi / math.sqrt(1.0 - zeta * zeta)
+    nodes, weights = np.polynomial.legendre.leggauss(64)
+    s_eq = alpha / (1.0 + alpha)  # the flights meet: -s = alpha (s - 1)
+
+    def part(a: float, b: float, v_line) -> float:
+        s_ = 0.5 * (b - a) * nodes + 0.5 * (a + b)
+        path = -np.exp(-decay * s_) * np.sin(math.pi * s_) / math.pi
+        return float(0.5 * (b - a) * np.sum(weights * (path - v_line(s_))))
+
+    return part(0.0, s_eq, lambda s_: -s_) + part(s_eq, 1.0, lambda s_: alpha * (s_ - 1.0))
+
+
+def _phase_se(t, racket, cycles: RacketCycles, t_k, var_t, s: ExtractionSettings):
+    """Standard error of each theta_k = 2 pi (t_k - c0) / (c1 - c0): t_k's variance
+    ``var_t`` and each crossing's (the racket fit's position variance there over its slope
+    squared), independent."""
+    out = np.full(len(t_k), np.nan)
+    c, _ = cycles.locate(t_k)
+    crossing_var: dict[float, float] = {}
+
+    def var_at(tc: float) -> float:
+        if tc not in crossing_var:
+            fit = local_fit(t, racket, tc, s.position_half_window_s, s.position_degree)
+            crossing_var[tc] = (fit.var_x / fit.v**2 if fit is not None and fit.v != 0.0
+                                else math.nan)
+        return crossing_var[tc]
+
+    for j in np.flatnonzero(c >= 0).tolist():
+        c0 = float(cycles.crossings[c[j]])
+        period = float(cycles.periods[c[j]])
+        u = (t_k[j] - c0) / period
+        var = var_t[j] + (1.0 - u) ** 2 * var_at(c0) + u * u * var_at(c0 + period)
+        out[j] = TWO_PI / period * math.sqrt(var)
+    return out
 
 
 def _run_width(t, mask, i: int) -> float:

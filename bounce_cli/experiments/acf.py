@@ -11,14 +11,20 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Literal, Optional
+from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
 from pydantic import Field
 
 from .. import paper
-from ..config import ConfigError, ControllableModelBlock, ExperimentConfig, StrictModel
+from ..config import (
+    ConfigError,
+    ControllableModelBlock,
+    DataFiles,
+    ExperimentConfig,
+    StrictModel,
+)
 from ..engine.linear import jacobian, stability
 from ..engine.control import controlled_jacobian
 from ..engine.params import ModelError, ModelParams, phase_difference
@@ -33,7 +39,7 @@ from ..engine.stochastic import (
     stationary_sds,
     var1_theory,
 )
-from ..plotting import caption_figures, data_caption, new_figure
+from ..plotting import caption_figures, data_caption, integer_axis, new_figure, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 from .data_side import AcfDataBlock
 
@@ -79,7 +85,8 @@ class AcfConfig(ExperimentConfig):
     burn_in: int = Field(100, ge=0, description="bounces dropped at the start of every run")
     max_lag: int = Field(10, ge=1, description="largest lag, bounces")
     seed: int = Field(0, ge=0)
-    data: Optional[str] = Field(None, description="impacts table: the data's side (--data)")
+    data: DataFiles = Field(None, description="impacts table: the data's side (--data; "
+                            "several: one session)")
     data_analysis: AcfDataBlock = AcfDataBlock()
 
 
@@ -345,13 +352,16 @@ def summary_frame(config: AcfConfig, theory, theory_map, dv, dtheta) -> pd.DataF
 #: panel layout of Fig. 8: (row, column) -> pair
 PANELS = {(0, 0): "v_v", (0, 1): "theta_to_v", (1, 0): "v_to_theta", (1, 1): "theta_theta"}
 TITLES = {
-    "v_v": "ACF of velocity: corr(v[k+l], v[k])",
-    "theta_to_v": "phase -> velocity: corr(v[k+l], theta[k])",
-    "v_to_theta": "velocity -> phase: corr(theta[k+l], v[k])",
-    "theta_theta": "ACF of phase: corr(theta[k+l], theta[k])",
+    "v_v": r"ACF of velocity: corr($v_{k+l}$, $v_k$)",
+    "theta_to_v": r"phase $\to$ velocity: corr($v_{k+l}$, $\theta_k$)",
+    "v_to_theta": r"velocity $\to$ phase: corr($\theta_{k+l}$, $v_k$)",
+    "theta_theta": r"ACF of phase: corr($\theta_{k+l}$, $\theta_k$)",
 }
+#: the x axis of every correlation panel (Fig. 8, with data, with control)
+LAG_LABEL = "lag $l$ (bounces)"
 
 
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     if "acf_data.csv" in frames:
         return draw_data(frames)
@@ -363,10 +373,10 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         lag = d["lag"].to_numpy()
         ax.axhline(0, color="0.7", lw=0.8)
         ax.fill_between(lag, d["trial_mean"] - d["trial_sd"], d["trial_mean"] + d["trial_sd"],
-                        color="0.85", label="simulated trials, mean +- SD")
+                        color="0.85", label=r"simulated trials, mean $\pm$ SD")
         ax.plot(lag, d["trial_mean"], color="0.55", lw=1.2)
         ax.errorbar(lag, d["sample_mean"], yerr=d["sample_sd"], fmt="x", color="k", ms=7,
-                    capsize=2, lw=0.8, label="sample, long runs (mean +- SD)")
+                    capsize=2, lw=0.8, label=r"sample, long runs (mean $\pm$ SD)")
         ax.plot(lag, d["theory"], "o", mfc="none", mec="k", ms=9,
                 label="theory eq. 19 (diagonal noise)")
         if not np.allclose(d["theory"], d["theory_map"], atol=5e-3):
@@ -375,8 +385,9 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         ax.set_ylim(-1.05, 1.05)
         ax.set_title(TITLES[pair], fontsize=10)
         ax.set_ylabel("correlation")
+        integer_axis(ax)
         if r == 1:
-            ax.set_xlabel("lag l (bounces)")
+            ax.set_xlabel(LAG_LABEL)
     handles: dict[str, Any] = {}
     for ax in axes.flat:
         for handle, label in zip(*ax.get_legend_handles_labels()):
@@ -388,7 +399,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     if summary is not None:
         indexed = summary.set_index(["quantity", "source"])
         s, quoted = indexed["ours"], indexed["paper"]
-        title += (f"\nSD theory (eq. 19): v {s['sd_v', 'theory_eq19']:.3f} m/s, theta "
+        title += (f"\nSD theory (eq. 19): $v$ {s['sd_v', 'theory_eq19']:.3f} m/s, $\\theta$ "
                   f"{s['sd_theta', 'theory_eq19']:.1f} deg")
         if np.isfinite(quoted["sd_v", "theory_eq19"]):  # only at the paper's parameters
             title += (f" (paper {quoted['sd_v', 'theory_eq19']:g}, "
@@ -405,10 +416,11 @@ def run_data(config: AcfConfig, options: RunOptions, source=None) -> ExperimentR
 
     frames, lines = acf_data_run(config, options, source)
     figures = draw_data(frames)
-    caption_figures(figures, None, data_caption(config, source))
+    caption_figures(figures, None, data_caption(config, source, options.record))
     return ExperimentResult(frames=frames, figures=figures, summary=lines)
 
 
+@publication_style
 def draw_data(frames: dict[str, pd.DataFrame]) -> dict:
     from .data_side import acf_data_draw
 

@@ -18,9 +18,11 @@ What an experiment must provide (as scipy's ``OdeSolver`` documents what a solve
     are raised as ``ConfigError`` or ``ModelError`` with one line naming the key or file.
 ``draw(frames) -> dict[str, Figure]``
     Every figure of the run, drawn from the DataFrames ``run`` returned (or read back from the
-    CSVs): a figure can always be redrawn from its data. ``run`` builds its figures by calling
-    ``draw`` on its own frames, then adds the parameters it ran at to their titles
-    (:func:`bounce_cli.plotting.caption_figures`), so that two runs' figures can be told apart.
+    CSVs): a figure can always be redrawn from its data. ``draw`` is decorated with
+    :func:`bounce_cli.plotting.publication_style` (the one style of every figure). ``run``
+    builds its figures by calling ``draw`` on its own frames, then records the parameters it
+    ran at as their caption (:func:`bounce_cli.plotting.caption_figures`), which goes into
+    each figure file's metadata (not its title), so that two runs' figures can be told apart.
 
 The paper's values come from :mod:`bounce_cli.paper` (never literals in an experiment), and a
 summary line or CSV column states one only where the run is at the paper's parameters
@@ -88,18 +90,26 @@ def no_warning(message: str) -> None:
 
 @dataclass
 class RunOptions:
-    """Run-time choices that are not part of the config (they never change the results).
+    """Run-time choices that are not part of the config (apart from ``model_set_by_user``,
+    they never change the results).
 
     ``warn(message)`` tells the user something before or during the run (the CLI prints
     ``bounce: warning: <message>``); an experiment never prints itself. ``scheduler``: a
     Dask scheduler address to run the tasks on instead of ``jobs`` local workers;
-    ``checkpoints``: where an experiment that supports resuming keeps finished tasks."""
+    ``checkpoints``: where an experiment that supports resuming keeps finished tasks.
+    ``model_set_by_user``: the model keys (``alpha``, ``g``) the user set on the command
+    line or in their own config; a ``--data`` analysis takes the others from the data
+    (``bounce_cli.data_parameters``; None, library use: every config value counts as set).
+    ``record``: what the run adds to ``run.json`` beside the config (the CLI writes it), e.g.
+    ``model_at_data``, the values a ``--data`` analysis used and where they came from."""
 
     jobs: int = 1
     progress: Progress = field(default_factory=NullProgress)
     warn: Callable[[str], None] = no_warning
     scheduler: str | None = None
     checkpoints: Checkpoints = field(default_factory=NoCheckpoints)
+    model_set_by_user: frozenset[str] | None = None
+    record: dict[str, Any] = field(default_factory=dict)
 
 
 @dataclass

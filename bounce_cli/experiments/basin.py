@@ -37,6 +37,7 @@ from ..engine.classify import (
 )
 from ..engine.control import is_passive
 from ..engine.params import ModelParams
+from ..plotting import publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
 if TYPE_CHECKING:
@@ -359,7 +360,7 @@ def _draw_markers(ax, markers: pd.DataFrame, extent) -> None:
                     label="period-1 fixed point (eqs. 7, 8)")
         else:
             ax.plot(row.theta0_deg, row.v0_m_s, "X", ms=9, mfc="black", mec="white",
-                    label=f"Fig. 3: v0 = {row.v0_m_s:g} m/s ({row.outcome})")
+                    label=f"Fig. 3: $v_0$ = {row.v0_m_s:g} m/s ({row.outcome})")
 
 
 def basin_table(frames: dict[str, pd.DataFrame]) -> pd.DataFrame:
@@ -370,6 +371,7 @@ def basin_table(frames: dict[str, pd.DataFrame]) -> pd.DataFrame:
     raise KeyError("basin.csv")
 
 
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     """basin.png and basin_iterations.png, from basin.csv (or basin.npz / basin.parquet) and
     markers.csv only."""
@@ -377,7 +379,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     from matplotlib.colors import BoundaryNorm, ListedColormap
     from matplotlib.patches import Patch
 
-    from ..plotting import new_figure
+    from ..plotting import integer_axis, new_figure
 
     basin, markers = basin_table(frames), frames["markers.csv"]
     codes = pd.Categorical(basin["outcome"], categories=list(EXACT_OUTCOMES)).codes
@@ -416,7 +418,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     im = ax2.imshow(shaded, origin="lower", extent=extent, aspect="auto", cmap="viridis",
                     interpolation="nearest")
     ax2.set_facecolor("black")
-    fig2.colorbar(im, ax=ax2, label="impacts until classified")
+    integer_axis(fig2.colorbar(im, ax=ax2, label="impacts until classified").ax, which="y")
     _draw_markers(ax2, markers, extent)
     fig2.legend(
         handles=[Patch(facecolor="black", label="below the racket")]

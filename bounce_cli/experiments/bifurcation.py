@@ -38,7 +38,7 @@ from ..engine.bifurcation import (
     sweep_parameters,
 )
 from ..engine.continuation import continued_period1_thresholds
-from ..plotting import caption_figures
+from ..plotting import caption_figures, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
 Parameter = Literal["gamma", "racket_amplitude", "racket_period", "alpha"]
@@ -358,6 +358,7 @@ def _runs(mask: np.ndarray):
     return list(zip(edges[::2], edges[1::2] - 1))
 
 
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     """bifurcation.png: v after impact against the swept parameter with the closed-form
     thresholds, and the Lyapunov exponents below; from the CSVs alone."""
@@ -411,7 +412,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         paper_orbit = row.cycles == 1
         verb = "exists" if row.threshold == "existence" else "flips"
         text = (f"period-1 orbit {verb} (continuation; {row.equation})" if paper_orbit else
-                f"period-1 orbit hopping n >= 2 racket cycles {verb}")
+                f"period-1 orbit hopping $n \\geq 2$ racket cycles {verb}")
         label: str | None = None if text in labelled else text
         labelled.add(text)
         for ax in (top, bottom):

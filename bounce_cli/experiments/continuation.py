@@ -39,7 +39,7 @@ from ..engine.continuation import (
     feigenbaum_ratios,
     orbit_by_iteration,
 )
-from ..plotting import caption_figures
+from ..plotting import caption_figures, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
 Parameter = Literal["gamma", "racket_amplitude", "racket_period", "alpha"]
@@ -308,6 +308,7 @@ def summary_lines(bifurcations: pd.DataFrame, feigenbaum: pd.DataFrame,
 
 
 # -- figure ----------------------------------------------------------------------------------
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     """continuation.png: the branches' impact velocities over the brute-force diagram (stable
     solid, unstable dashed, non-physical parts omitted), the located bifurcations marked;
@@ -357,7 +358,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     bottom.axhline(1.0, color="black", lw=0.6)
     bottom.set_yscale("log")
     bottom.set_ylim(1e-2, 1e3)
-    bottom.set_ylabel("largest |multiplier|\n(of the period-p map)")
+    bottom.set_ylabel("largest $|$multiplier$|$\n(of the period-$p$ map)")
     bottom.set_xlabel(SWEEPABLE[parameter][1])
     handles, labels = top.get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncol=3, fontsize=7, frameon=False)

@@ -19,8 +19,11 @@ import numpy as np
 import pandas as pd
 from pydantic import Field
 
-from ..impacts import read_impacts as shared_read_impacts
+from ..data_parameters import model_for_data
+from ..impacts import Impacts, read_impacts as shared_read_impacts
 from ..config import (
+    DataFiles,
+    data_text,
     ClassifyBlock,
     ConfigError,
     ControlBlock,
@@ -55,6 +58,16 @@ from ..engine.control import (
     predicted_deviations,
     simulate_perturbation_trials,
 )
+from .. import paper
+from ..plotting import (
+    IMPACT_AFTER_LABEL,
+    PHASE_LABEL,
+    VELOCITY_LABEL,
+    integer_axis,
+    perturbation_title,
+    publication_style,
+)
+from .acf import LAG_LABEL, PANELS, TITLES
 from .base import Experiment, ExperimentResult, RunOptions
 from .basin import OUTCOME_COLOURS, OUTCOME_LABELS, GridAxis
 from .impulse import RelaxationBlock, ThresholdBlock
@@ -149,7 +162,7 @@ class ControlConfig(ExperimentConfig):
     basin: BasinGridBlock = BasinGridBlock()
     fit: FitBlock = FitBlock()
     correlations: CorrelationsBlock = CorrelationsBlock()
-    data: Optional[str] = Field(None, description="impacts.csv of perturbation trials to fit")
+    data: DataFiles = Field(None, description="impacts.csv of perturbation trials to fit")
 
 
 def _controllers(config: ControlConfig) -> dict:
@@ -333,7 +346,10 @@ def correlations_frame(params: ModelParams, config: ControlConfig) -> pd.DataFra
     noise2 = map_noise_covariance(params, block.q_v_m_s, block.q_theta_rad, "theta")
     noise3 = np.zeros((3, 3))
     noise3[:2, :2], noise3[2, 2] = noise2, block.q_tau_s**2
-    passive = var1_theory(jacobian(params), noise2, block.max_lag)
+    try:  # with --data the passive map at the data's parameters may be unstable: NaN then
+        passive = var1_theory(jacobian(params), noise2, block.max_lag)
+    except ModelError:
+        passive = None
     try:
         controlled = var1_theory(controlled_jacobian(params, controller), noise3, block.max_lag)
     except ModelError:  # unstable with this controller: no stationary correlations
@@ -355,16 +371,17 @@ def correlations_frame(params: ModelParams, config: ControlConfig) -> pd.DataFra
         for lag in range(block.max_lag + 1):
             rows.append({
                 "pair": name, "lag": lag,
-                "passive_theory": passive.correlations[name][lag],
+                "passive_theory": passive.correlations[name][lag] if passive else math.nan,
                 "controlled_theory": (controlled.correlations[name][lag] if controlled
                                       else math.nan),
                 "controlled_sample_mean": (sample[name][:, lag].mean() if sample else math.nan),
                 "controlled_sample_se": (sample[name][:, lag].std(ddof=1) / math.sqrt(runs)
                                          if sample else math.nan),
                 "runs": runs,
-                "passive_sd_v_m_s": passive.sd_v_m_s,
+                "passive_sd_v_m_s": passive.sd_v_m_s if passive else math.nan,
                 "controlled_sd_v_m_s": controlled.sd_v_m_s if controlled else math.nan,
-                "passive_sd_theta_deg": math.degrees(passive.sd_theta_rad),
+                "passive_sd_theta_deg": (math.degrees(passive.sd_theta_rad) if passive
+                                         else math.nan),
                 "controlled_sd_theta_deg": (math.degrees(controlled.sd_theta_rad)
                                             if controlled else math.nan),
             })
@@ -375,22 +392,25 @@ def correlations_frame(params: ModelParams, config: ControlConfig) -> pd.DataFra
 DATA_COLUMNS = ("trial", "k", "theta_rad", "v_m_s", "racket_period_s", "perturbed")
 
 
-def read_impacts(path_text: str) -> pd.DataFrame:
+def read_impacts(path_text: str | list[str]) -> Impacts:
     """An impacts table (``bounce_cli.impacts``, the data side's reader) with the columns the
-    fit needs: trial, k, theta_rad (or theta_deg), v_m_s, racket_period_s, perturbed (and
-    alpha, racket_amplitude_m if present). Problems are one-line ConfigErrors naming ``data``."""
-    impacts = shared_read_impacts(path_text, needs=("racket_period_s", "perturbed"),
-                                  command="control --data",
-                                  optional=("alpha", "racket_amplitude_m"))
-    frame = impacts.frame
-    if not frame["perturbed"].any():
+    fit and the model at the data's racket need: trial, k, theta_rad (or theta_deg), v_m_s,
+    racket_period_s, racket_amplitude_m, perturbed (and alpha if present). Problems are
+    one-line ConfigErrors naming ``data``."""
+    impacts = shared_read_impacts(path_text, needs=("racket_period_s", "racket_amplitude_m",
+                                                    "perturbed"),
+                                  command="control --data", optional=("alpha",))
+    if not impacts.frame["perturbed"].any():
         raise ConfigError(f"data: {impacts.path}: no perturbed impact (column perturbed)")
-    return frame
+    return impacts
 
 
-def fit_inputs(config: ControlConfig) -> tuple[pd.DataFrame, ModelParams, dict]:
+def fit_inputs(config: ControlConfig, options: RunOptions | None = None
+               ) -> tuple[pd.DataFrame, ModelParams, dict]:
     """The impacts to fit (a lab's ``data`` or simulated trials of the configured controller),
-    the model at their parameters, and the truth (simulated) or NaN."""
+    the model at their parameters (with data: the data's racket, alpha and g, as
+    ``data_parameters.model_for_data`` and ``fit.racket_period_s`` say), and the truth
+    (simulated) or NaN. Every result of ``control --data`` is computed at that model."""
     params = config.params
     control = config.model.control
     if config.data is None:
@@ -405,17 +425,18 @@ def fit_inputs(config: ControlConfig) -> tuple[pd.DataFrame, ModelParams, dict]:
         lost = int((per_trial < sim.impacts_per_trial).sum() + (sim.trials - len(per_trial)))
         return impacts, params, {"gain_K": control.gain, "rate_c": control.rate,
                                  "source": "simulated", "trials_lost": lost}
-    impacts = read_impacts(config.data)
-    # the model at the data's racket (section 7: "identical to the ones of the experiment");
-    # alpha_0 and g from the config
-    amplitude = (float(impacts["racket_amplitude_m"].mean()) if "racket_amplitude_m" in impacts
-                 else params.racket_amplitude)
+    table = read_impacts(config.data)
+    impacts = table.frame
+    # the model at the data's racket (section 7: "identical to the ones of the experiment"),
+    # alpha_0 and g the data's unless the user set them
+    model = model_for_data(table, config, options or RunOptions(), config.data)
     period = config.fit.racket_period_s
-    data_params = ModelParams(params.alpha, params.g, amplitude,
+    data_params = ModelParams(model.alpha.value, model.g.value,
+                              float(impacts["racket_amplitude_m"].mean()),
                               float(impacts["racket_period_s"].mean()) if period is None
                               else period)
-    return impacts, data_params, {"gain_K": math.nan, "rate_c": math.nan, "source": "data",
-                                  "trials_lost": math.nan}
+    return impacts, data_params, {"model": model, "gain_K": math.nan, "rate_c": math.nan,
+                                  "source": "data", "trials_lost": math.nan}
 
 
 def align_frame(impacts: pd.DataFrame, params: ModelParams, n_after: int) -> dict:
@@ -498,9 +519,19 @@ def fit_frames(config: ControlConfig, inputs=None) -> dict[str, pd.DataFrame]:
 
 # -- run ------------------------------------------------------------------------------------------
 def run(config: ControlConfig, options: RunOptions) -> ExperimentResult:
-    params = config.params
-    params.fixed_point()  # NoFixedPointError: one line naming model.racket_amplitude
-    fit_data = fit_inputs(config)  # a bad --data file fails before any work
+    if config.data is None:
+        config.params.fixed_point()  # NoFixedPointError: one line naming model.racket_amplitude
+    fit_data = fit_inputs(config, options)  # a bad --data file fails before any work
+    params = fit_data[1]  # with --data: the model at the data's racket, alpha and g
+    if config.data is not None:
+        data_model_text = fit_data[2]["model"].text()
+        where = (f"data: {data_text(config.data)}: the model at the data's racket a_r = "
+                 f"{params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s, "
+                 f"{data_model_text}")
+        try:
+            params.fixed_point()
+        except ModelError as exc:
+            raise ConfigError(f"{where}: {exc}") from None
     options.progress.start(6, "control: stability, impulses, thresholds, basins, fit")
     frames = radius_frames(params, config)
     options.progress.advance(1)
@@ -518,8 +549,14 @@ def run(config: ControlConfig, options: RunOptions) -> ExperimentResult:
     figures = draw(frames)
     caption_figures(figures, params, f"controller K = {config.model.control.gain:g}, "
                     f"c = {config.model.control.rate:g}"
-                    + (f"; fit to data: {config.data}" if config.data is not None else ""))
-    return ExperimentResult(frames=frames, figures=figures, summary=summary_lines(frames))
+                    + (f"; fit to data: {data_text(config.data)} (the model at the data's racket)"
+                       if config.data is not None else ""))
+    summary = summary_lines(frames)
+    if config.data is not None:
+        summary.insert(0, f"data {data_text(config.data)}: every result at the data's racket a_r = "
+                       f"{params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s; "
+                       f"{data_model_text}")
+    return ExperimentResult(frames=frames, figures=figures, summary=summary)
 
 
 def summary_lines(frames: dict[str, pd.DataFrame]) -> list[str]:
@@ -577,6 +614,45 @@ def _fmt(x: float) -> str:
 
 
 # -- figures --------------------------------------------------------------------------------------
+def passive_model(frames: dict[str, pd.DataFrame]) -> ModelParams:
+    """The model a run was made at, recovered from its tables alone (a figure is drawn from
+    its CSVs): tau from the passive impulse response's racket period, g from v~ = g tau / 2
+    (eq. 7), alpha from the passive Jacobian's determinant alpha^2 (eq. 9: the product of the
+    eigenvalues of eq. 10 is alpha^2), and a_r from theta~ (eq. 8: cos theta~ is inversely
+    proportional to a_r at the other parameters).
+
+    Parameters
+    ----------
+    frames : dict of DataFrame
+        The run's tables; ``impulse.csv`` and ``eigen.csv`` are read.
+
+    Returns
+    -------
+    ModelParams
+        alpha, g, racket amplitude and period, to within the tables' rounding.
+    """
+    impulse = frames["impulse.csv"]
+    row = impulse[(impulse.model == "passive") & (impulse.k == 0)].iloc[0]
+    tau = float(row.racket_period_s)
+    g = 2.0 * float(row.v_m_s - row.dv_m_s) / tau
+    eig = frames["eigen.csv"].set_index("model").loc["passive"]
+    alpha = math.sqrt(abs(complex(eig.lambda1_re, eig.lambda1_im)
+                          * complex(eig.lambda2_re, eig.lambda2_im)))
+    theta = math.radians(float(row.theta_deg - row.dtheta_deg))
+    amplitude = ModelParams(alpha, g, 1.0, tau).cos_theta_fixed() / math.cos(theta)
+    return ModelParams(alpha, g, amplitude, tau)
+
+
+def at_section7(frames: dict[str, pd.DataFrame]) -> bool:
+    """Whether the run's model (:func:`passive_model`) is section 7's (the paper's Figs. 3, 9
+    parameters) to 1e-6: only there are the subject's numbers (Fig. 9: about one impact to
+    relax, eigenvalues below 0.2) references for the figure."""
+    model = passive_model(frames)
+    return all(math.isclose(getattr(model, name), getattr(paper.FIG3_MODEL, name), rel_tol=1e-6)
+               for name in ("alpha", "g", "racket_amplitude", "racket_period"))
+
+
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     return {"control_stability.png": draw_stability(frames),
             "control_impulse.png": draw_impulse(frames),
@@ -589,33 +665,30 @@ def draw_acf(frames):
     from ..plotting import new_figure
 
     df = frames["acf.csv"]
-    panels = {(0, 0): ("v_v", "ACF of velocity: corr(v[k+l], v[k])"),
-              (0, 1): ("theta_to_v", "phase -> velocity: corr(v[k+l], theta[k])"),
-              (1, 0): ("v_to_theta", "velocity -> phase: corr(theta[k+l], v[k])"),
-              (1, 1): ("theta_theta", "ACF of phase: corr(theta[k+l], theta[k])")}
     fig, axes = new_figure(2, 2, width=11.0, height=7.5, sharex=True)
     first = df.iloc[0]
-    for (r, c), (pair, title) in panels.items():
+    for (r, c), pair in PANELS.items():
         ax = axes[r, c]
         d = df[df.pair == pair].sort_values("lag")
         ax.plot(d.lag, d.passive_theory, "o-", color="0.6", ms=4,
-                label=f"passive, eq. 19 (SD v {first.passive_sd_v_m_s:.3f} m/s, "
-                      f"theta {first.passive_sd_theta_deg:.2f} deg)")
+                label=f"passive, eq. 19 (SD $v$ {first.passive_sd_v_m_s:.3f} m/s, "
+                      f"$\\theta$ {first.passive_sd_theta_deg:.2f} deg)")
         ax.plot(d.lag, d.controlled_theory, "o-", color="k", ms=4,
-                label=f"controlled, eq. 19 with the 3x3 Jacobian (SD v "
-                      f"{first.controlled_sd_v_m_s:.3f} m/s, theta "
+                label=f"controlled, eq. 19 with the 3$\\times$3 Jacobian (SD $v$ "
+                      f"{first.controlled_sd_v_m_s:.3f} m/s, $\\theta$ "
                       f"{first.controlled_sd_theta_deg:.2f} deg)")
         ax.errorbar(d.lag, d.controlled_sample_mean, yerr=2 * d.controlled_sample_se, fmt="x",
                     color="tab:red", ms=6, label=f"controlled map, {int(first.runs)} runs "
-                    "(+-2 SE)")
+                    r"($\pm$2 SE)")
         ax.axhline(0.0, color="k", lw=0.6)
-        ax.set_title(title, fontsize=10)
+        ax.set_title(TITLES[pair], fontsize=10)
         ax.set_ylabel("correlation")
+        integer_axis(ax)
     for ax in axes[1]:
-        ax.set_xlabel("lag l (bounces)")
+        ax.set_xlabel(LAG_LABEL)
     axes[0, 0].legend(fontsize=7)
-    fig.suptitle("Correlation functions (paper Fig. 8) without and with racket period control, "
-                 "at the config's model")
+    fig.suptitle("Correlation functions (paper Fig. 8) without and with racket period control "
+                 "(the model's parameters below)")
     return fig
 
 
@@ -629,8 +702,8 @@ def _radius_image(ax, frame: pd.DataFrame, target: float, levels_extra=(0.5,)):
     ax.contour(gains, rates, radius, levels=[target], colors="w", linewidths=1.4)
     ax.contour(gains, rates, radius, levels=list(levels_extra), colors="w", linewidths=0.8,
                linestyles=":")
-    ax.set_xlabel("gain K (1: the period follows the ball's flight time)")
-    ax.set_ylabel("rate c (per impact; 1: immediate)")
+    ax.set_xlabel("gain $K$ (1: the period follows the ball's flight time)")
+    ax.set_ylabel("rate $c$ (per impact; 1: immediate)")
     return im
 
 
@@ -645,7 +718,7 @@ def _controller_markers(ax, eigen: pd.DataFrame, window=None):
             if not (k0 <= row.gain_K <= k1 and c0 <= row.rate_c <= c1):
                 continue
         ax.plot(row.gain_K, row.rate_c, marker, ms=10 if marker == "*" else 7, mfc=colour,
-                mec="k", label=f"{label}: K = {row.gain_K:.3f}, c = {row.rate_c:.3f}, "
+                mec="k", label=f"{label}: $K$ = {row.gain_K:.3f}, $c$ = {row.rate_c:.3f}, "
                 f"radius {row.spectral_radius:.3f}")
 
 
@@ -659,27 +732,30 @@ def draw_stability(frames):
     fig, axes = new_figure(2, 2, width=13.0, height=10.5)
     im = _radius_image(axes[0, 0], grid, target)
     _controller_markers(axes[0, 0], eigen)
-    axes[0, 0].set_title(f"Spectral radius over (K, c); white: {target:g}, dotted: 0.5")
+    axes[0, 0].set_title(f"Spectral radius over ($K$, $c$); white: {target:g}, dotted: 0.5")
     axes[0, 0].legend(fontsize=7, loc="lower left")
     _radius_image(axes[0, 1], zoom, target, levels_extra=(0.25, 0.3))
     window = ((zoom.gain_K.min(), zoom.gain_K.max()), (zoom.rate_c.min(), zoom.rate_c.max()))
     _controller_markers(axes[0, 1], eigen, window)
     axes[0, 1].set_title(f"Around the fastest: white {target:g}, dotted 0.25, 0.3")
     axes[0, 1].legend(fontsize=7, loc="lower left")
-    fig.colorbar(im, ax=axes[0, :], label="spectral radius of the 3x3 Jacobian "
-                 "(grey: >= 1, not stable)", shrink=0.9)
+    fig.colorbar(im, ax=axes[0, :], label="spectral radius of the 3$\\times$3 Jacobian "
+                 r"(grey: $\geq 1$, not stable)", shrink=0.9)
 
     ax = axes[1, 0]
     rate = line.rate_c.iloc[0]
     passive = float(eigen.set_index("model").loc["passive", "spectral_radius"])
-    ax.plot(line.gain_K, line.spectral_radius, "k-", label=f"c = {rate:g}")
-    ax.axhline(passive, color="0.5", ls="--", label=f"passive K = 0: {passive:.2f} (eq. 10)")
-    ax.axhline(target, color="tab:red", ls=":", label=f"data: < {target:g} (section 7)")
+    section7 = at_section7(frames)  # the subject's numbers are references there only
+    ax.plot(line.gain_K, line.spectral_radius, "k-", label=f"$c$ = {rate:g}")
+    ax.axhline(passive, color="0.5", ls="--", label=f"passive $K$ = 0: {passive:.2f} (eq. 10)")
+    ax.axhline(target, color="tab:red", ls=":",
+               label=f"data: < {target:g} (section 7)" if section7
+               else f"target {target:g} (radius.target_radius)")
     ax.axhline(1.0, color="k", lw=0.6)
     ax.set_ylim(0.0, 1.5)
-    ax.set_xlabel("gain K")
+    ax.set_xlabel("gain $K$")
     ax.set_ylabel("spectral radius")
-    ax.set_title(f"Linear: spectral radius along K at c = {rate:g}")
+    ax.set_title(f"Linear: spectral radius along $K$ at $c$ = {rate:g}")
     ax.legend(fontsize=8)
 
     ax = axes[1, 1]
@@ -687,12 +763,13 @@ def draw_stability(frames):
     for i, (alpha_p, part) in enumerate(relax.groupby("alpha_p")):
         n = part.relaxation_impacts.where(part.relaxation_impacts >= 0)
         ax.plot(part.gain_K, n, ["-o", "-s", "--^", "--D"][i % 4], ms=3,
-                label=f"alpha_p = {alpha_p:g}")
-    ax.axhline(1.0, color="tab:red", ls=":", label="the subject: about 1 impact (Fig. 9)")
+                label=f"$\\alpha_p$ = {alpha_p:g}")
+    if section7:
+        ax.axhline(1.0, color="tab:red", ls=":", label="the subject: about 1 impact (Fig. 9)")
     ax.set_yscale("log")
-    ax.set_xlabel("gain K")
+    ax.set_xlabel("gain $K$")
     ax.set_ylabel("impacts to relax (full map; missing: never)")
-    ax.set_title(f"Full map: section 7's perturbations along K at c = {rate:g}")
+    ax.set_title(f"Full map: perturbations along $K$ at $c$ = {rate:g}")
     ax.legend(fontsize=8)
     return fig
 
@@ -714,9 +791,9 @@ def draw_impulse(frames):
         for i, alpha_p in enumerate(group):
             for model in MODELS:
                 d = df[(df.alpha_p == alpha_p) & (df.model == model)].sort_values("k")
-                label = f"{model}, alpha_p = {alpha_p:g}"
+                label = f"{model}, $\\alpha_p$ = {alpha_p:g}"
                 if outcome.get((model, alpha_p), "period1") != "period1":
-                    label += f" ({outcome[(model, alpha_p)]})"
+                    label += f" ({outcome[(model, alpha_p)].replace('_', ' ')})"
                 kw = dict(styles[model], marker=markers[i % 4], ms=4,
                           ls="-" if i == 0 else "--", label=label)
                 axes[0, col].plot(d.k, d.v_m_s, **kw)
@@ -725,15 +802,14 @@ def draw_impulse(frames):
         axes[0, col].axhline(v_st, color="k", lw=0.8, ls=":")
         axes[1, col].axhline(th_st, color="k", lw=0.8, ls=":")
         axes[2, col].axhline(0.0, color="k", lw=0.8, ls=":")
-        axes[0, col].set_title(f"alpha_p {'<' if col == 0 else '>'} alpha_0")
-        axes[2, col].set_xlabel("impact k after the perturbation (0 = perturbed impact)")
+        axes[0, col].set_title(perturbation_title(col == 0))
+        axes[2, col].set_xlabel(IMPACT_AFTER_LABEL)
+        integer_axis(*axes[:, col])
         if group:
             axes[0, col].legend(fontsize=7)
-    axes[0, 0].set_ylabel("velocity after impact v_k (m/s)")
-    axes[1, 0].set_ylabel("phase of impact theta_k (deg)")
-    axes[2, 0].set_ylabel("racket period - tau_bar (ms)")
-    for ax in axes[1]:
-        ax.set_ylim(th_st - 180.0, th_st + 180.0)  # wrapped to theta~ +- 180 deg
+    axes[0, 0].set_ylabel(VELOCITY_LABEL)
+    axes[1, 0].set_ylabel(PHASE_LABEL)  # theta~ + the wrapped difference, axis fitted to it
+    axes[2, 0].set_ylabel(r"racket period $-\ \bar\tau$ (ms)")
     fig.suptitle("Impulse responses, passive (grey) vs period control (black): paper Fig. 9 "
                  "with the model's Fig. 11 (bottom)")
     return fig
@@ -775,9 +851,9 @@ def draw_fit(frames):
 
     curves, fit = frames["fit_responses.csv"], frames["fit.csv"].set_index("quantity")
     fig, axes = new_figure(1, 3, width=13.0, height=4.2, sharex=True)
-    columns = (("dv_m_s", "se_v_m_s", "fit_dv_m_s", "v_k - mean (m/s)"),
-               ("dtheta_deg", "se_theta_deg", "fit_dtheta_deg", "theta_k - mean (deg)"),
-               ("dtau_ms", "se_tau_ms", "fit_dtau_ms", "racket period - mean (ms)"))
+    columns = (("dv_m_s", "se_v_m_s", "fit_dv_m_s", "$v_k$ $-$ mean (m/s)"),
+               ("dtheta_deg", "se_theta_deg", "fit_dtheta_deg", r"$\theta_k$ $-$ mean (deg)"),
+               ("dtau_ms", "se_tau_ms", "fit_dtau_ms", "racket period $-$ mean (ms)"))
     colours = {"decrease": "0.55", "increase": "k"}
     for ax, (mean, se, model, label) in zip(axes[0], columns):
         for direction, part in curves.groupby("direction"):
@@ -786,17 +862,18 @@ def draw_fit(frames):
                         label=f"{direction} ({int(part.events.iloc[0])} perturbations)")
             ax.plot(part.k, part[model], "-", color=c, lw=1, label=f"fit, {direction}")
         ax.axhline(0.0, color="k", lw=0.6, ls=":")
-        ax.set_xlabel("impact k after the perturbation")
+        ax.set_xlabel(IMPACT_AFTER_LABEL)
         ax.set_ylabel(label)
+        integer_axis(ax)
     axes[0, 0].legend(fontsize=7)
     source = fit.source.iloc[0]
     k, c = fit.loc["gain_K"], fit.loc["rate_c"]
-    title = (f"Fit to {source} perturbation trials: K = {k.estimate:.3f} "
-             f"[{k.ci_low:.3f}, {k.ci_high:.3f}], c = {c.estimate:.3f} "
+    title = (f"Fit to {source} perturbation trials: $K$ = {k.estimate:.3f} "
+             f"[{k.ci_low:.3f}, {k.ci_high:.3f}], $c$ = {c.estimate:.3f} "
              f"[{c.ci_low:.3f}, {c.ci_high:.3f}], spectral radius "
              f"{fit.loc['spectral_radius', 'estimate']:.3f}")
     if source == "simulated":
-        title += f" (truth K = {k.truth:g}, c = {c.truth:g})"
+        title += f" (truth $K$ = {k.truth:g}, $c$ = {c.truth:g})"
     fig.suptitle(title, fontsize=10)
     return fig
 

@@ -3,15 +3,16 @@
 dispatch here when their config has ``data`` set to an impacts table, and draw the figures
 below from the frames these functions return.
 
-The model at the data's parameters: alpha and g from the config's ``model`` block
-(alpha is not observable from a trial), racket period and amplitude from the data's cycles
-(means over all impacts of the file).
+The model at the data's parameters: racket period and amplitude from the data's cycles
+(means over all impacts of the file), alpha and g the data's unless the user set them
+(``bounce_cli.data_parameters``).
 """
 
 from __future__ import annotations
 
 import math
-
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Annotated
 
 import numpy as np
@@ -30,9 +31,12 @@ from ..engine.data_stats import (
     settled_mask,
     trial_correlations,
 )
+from ..engine.racket_inputs import INPUT_COEFFICIENTS, racket_input_jacobian
 from ..engine.var_fit import EIGEN_QUANTITIES, J_ENTRIES, Var1Fit, fit_var1
+from ..data_parameters import DataModel, model_for_data
 from ..impacts import Impacts, ImpactsSource, circular_mean, read_impacts
-from ..plotting import new_figure
+from ..plotting import IMPACT_AFTER_LABEL, integer_axis, new_figure, perturbation_title
+from ..setup_table import SETUP_FILE, read_setup
 
 MODEL_COLUMNS = ("racket_period_s", "racket_amplitude_m")
 
@@ -45,10 +49,12 @@ class AcfDataBlock(StrictModel):
     confidence: float = Field(0.95, gt=0.0, lt=1.0, description="level of the intervals")
     jackknife: bool = Field(True, description="split-panel jackknife against the O(1/N) bias "
                                               "of removing each trial's mean")
-    measurement_sd_v_m_s: float = Field(0.03, ge=0.0, description="assumed measurement noise "
-                                        "on v for the trust study, m/s")
-    measurement_sd_theta_deg: float = Field(1.0, ge=0.0, description="assumed measurement "
-                                            "noise on theta for the trust study, deg")
+    measurement_sd_v_m_s: float = Field(0.03, ge=0.0, description="measurement noise on v "
+                                        "for the trust study, m/s, assumed when the data's "
+                                        "setup.csv does not give it")
+    measurement_sd_theta_deg: float = Field(1.0, ge=0.0, description="measurement noise on "
+                                            "theta for the trust study, deg, assumed when the "
+                                            "data's setup.csv does not give it")
     trust_bounces: list[Annotated[int, Field(ge=16)]] = Field(
         [100, 200, 400, 800, 1600, 3200], description="data-set sizes of the trust study")
     trust_repetitions: int = Field(200, ge=10, description="simulated data sets per size")
@@ -66,19 +72,22 @@ class ImpulseDataBlock(StrictModel):
                              "the last perturbation")
     relaxation_z: float = Field(2.0, gt=0.0, description="a mean within z SE of 0 counts as "
                                 "relaxed (data and model alike; the model's SE is 0)")
+    min_windows_per_impact: int = Field(
+        10, ge=2, description="impacts to relax are judged only over the impacts k that at "
+        "least this many perturbation windows reach; fewer at k = 0: 'too few perturbations'")
 
 
 # -- the model at the data's parameters ------------------------------------------------------
 def model_at_data(
     impacts: Impacts, alpha: float, g: float, need_stable: bool = True
 ) -> ModelParams:
-    """alpha, g from the config; a_r and tau the means of the data's racket cycles. A
-    one-line error when these give no (stable) period-1 fixed point."""
+    """alpha, g as given (``data_parameters.model_for_data``); a_r and tau the means of the
+    data's racket cycles. A one-line error when these give no (stable) period-1 fixed point."""
     f = impacts.frame
     tau = float(f["racket_period_s"].mean())
     a_r = float(f["racket_amplitude_m"].mean())
     where = (f"data: {impacts.path}: the model at the data's racket amplitude {a_r:.4g} m and "
-             f"period {tau:.4g} s with model.alpha = {alpha:g}, model.g = {g:g}")
+             f"period {tau:.4g} s with alpha = {alpha:g}, g = {g:g} m/s^2")
     params = ModelParams(alpha, g, a_r, tau)
     try:
         st = stability(params)
@@ -93,6 +102,12 @@ def model_at_data(
     return params
 
 
+def racket_text(params: ModelParams) -> str:
+    """``model at the data's racket a_r = 0.11 m, tau = 0.6 s``."""
+    return (f"model at the data's racket a_r = {params.racket_amplitude:.4g} m, tau = "
+            f"{params.racket_period:.4g} s")
+
+
 def relaxed_text(impacts: int, horizon: int | None = None) -> str:
     """An impacts-to-relax count in words (-1 in the CSVs: not back within the horizon)."""
     if impacts >= 0:
@@ -101,9 +116,10 @@ def relaxed_text(impacts: int, horizon: int | None = None) -> str:
 
 
 def stationary_segments(impacts: Impacts, settle: int, min_length: int):
-    """(trial, v, dtheta, theta) of each run of consecutive, unperturbed impacts: perturbed impacts
-    and the ``settle`` impacts after each are cut out (they are not the stationary state),
-    dtheta is the phase minus the trial's circular mean, wrapped to [-pi, pi)."""
+    """(trial, v, dtheta, theta, racket) of each run of consecutive, unperturbed impacts:
+    perturbed impacts and the ``settle`` impacts after each are cut out (they are not the
+    stationary state), dtheta is the phase minus the trial's circular mean, wrapped to [-pi,
+    pi), racket the (n, 2) period and amplitude of each impact's racket cycle."""
     out = []
     for trial, rows in impacts.by_trial():
         keep = (settled_mask(rows["perturbed"].to_numpy(), settle)
@@ -112,14 +128,67 @@ def stationary_segments(impacts: Impacts, settle: int, min_length: int):
         ref = circular_mean(theta[keep]) if keep.any() else 0.0
         dtheta = phase_difference(theta, ref)
         v = rows["v_m_s"].to_numpy()
+        racket = (rows[list(MODEL_COLUMNS)].to_numpy(float)
+                  if set(MODEL_COLUMNS) <= set(rows.columns) else np.full((len(rows), 2), np.nan))
         k = rows["k"].to_numpy()
         cut = np.ones(len(rows), bool)  # start of a new run
         cut[1:] = (np.diff(k) != 1) | ~keep[:-1]
         idx = np.flatnonzero(keep)
         for part in np.split(idx, np.flatnonzero(cut[idx][1:]) + 1):
             if len(part) >= min_length:
-                out.append((trial, v[part], dtheta[part], theta[part]))
+                out.append((trial, v[part], dtheta[part], theta[part], racket[part]))
     return out
+
+
+def noise_from_residual_covariance(sigma: np.ndarray) -> tuple[float, float]:
+    """(q_v, q_theta) of eqs. 16-18 from a VAR(1) residual covariance: q_theta =
+    sqrt(Sigma_tt), q_v = sqrt(Sigma_vv - Sigma_vt^2 / Sigma_tt) (the second term removes the
+    phase noise that cos(theta_{k+1}) in eq. 16 passes to v). Measurement noise inflates
+    both."""
+    q_theta = math.sqrt(max(sigma[1, 1], 0.0))
+    q_v = math.sqrt(max(sigma[0, 0] - (sigma[0, 1] ** 2 / sigma[1, 1] if sigma[1, 1] > 0
+                                       else 0.0), 0.0))
+    return q_v, q_theta
+
+
+def noise_from_trials(impacts: Impacts, settle: int, min_length: int = 8
+                      ) -> tuple[float, float, int]:
+    """The data's own noise strengths (q_v m/s, q_theta rad) and the pairs they rest on: an
+    OLS VAR(1) per trial (each trial its own J: a learning series changes the racket, so J,
+    from trial to trial) on its runs of consecutive unperturbed impacts, the residual
+    covariances pooled over trials by their degrees of freedom, then
+    :func:`noise_from_residual_covariance`. NaN when no trial has a run long enough.
+
+    Parameters
+    ----------
+    impacts : Impacts
+        The impacts table.
+    settle : int
+        Impacts after a perturbed one left out (as :func:`stationary_segments`).
+    min_length : int
+        Shortest run used.
+
+    Returns
+    -------
+    tuple
+        (q_v, q_theta, pairs).
+    """
+    by_trial: dict = {}
+    for trial, v, dtheta, _, _ in stationary_segments(impacts, settle, min_length):
+        by_trial.setdefault(trial, []).append(np.column_stack([v, dtheta]))
+    pooled, dof = np.zeros((2, 2)), 0
+    for runs in by_trial.values():
+        try:
+            fit = fit_var1(runs, "ols", jackknife=False)
+        except ModelError:
+            continue
+        d = fit.n_pairs - 2 - fit.n_trials
+        pooled += fit.noise_cov * d
+        dof += d
+    if dof <= 0:
+        return math.nan, math.nan, 0
+    q_v, q_theta = noise_from_residual_covariance(pooled / dof)
+    return q_v, q_theta, dof
 
 
 def stationary_means(runs) -> tuple[float, float]:
@@ -137,6 +206,44 @@ def implied_alpha(params: ModelParams, theta_rad: float) -> float:
 
 
 # -- acf --data (Fig. 8 and the stability measured from data) --------------------------------
+@dataclass(frozen=True)
+class MeasurementNoise:
+    """The measurement noise of a data set's v_k (m/s) and theta_k (rad), and where it comes
+    from: ``"setup.csv"`` (measured by the extraction, beside the impacts table) or
+    ``"assumed"`` (the config's data_analysis values)."""
+
+    sd_v_m_s: float
+    sd_theta_rad: float
+    source: str
+
+
+def measurement_noise(block, source: ImpactsSource | None, data_path) -> MeasurementNoise:
+    """The data's own measurement noise when its ``setup.csv`` gives both quantities
+    (``measurement_sd_v_m_s``, ``measurement_sd_theta_rad``), else the config's assumed
+    ``measurement_sd_v_m_s`` and ``measurement_sd_theta_deg``. A source that is no file
+    (the simulated lab's impacts in memory) has no setup table.
+
+    Parameters
+    ----------
+    block : AcfDataBlock
+        The config's data_analysis block (the assumed values).
+    source : ImpactsSource or None
+        The impacts given to the run (None: the file ``data_path``).
+    data_path : str or Path or None
+        The config's ``data``.
+
+    Returns
+    -------
+    MeasurementNoise
+    """
+    path = data_path if source is None else source
+    setup = read_setup(path) if isinstance(path, (str, Path)) else {}
+    v, theta = setup.get("measurement_sd_v_m_s"), setup.get("measurement_sd_theta_rad")
+    if v is not None and theta is not None:
+        return MeasurementNoise(abs(v.estimate), abs(theta.estimate), SETUP_FILE)
+    return MeasurementNoise(block.measurement_sd_v_m_s,
+                            math.radians(block.measurement_sd_theta_deg), "assumed")
+
 def acf_data_run(config, options, source: ImpactsSource | None = None
                  ) -> tuple[dict[str, pd.DataFrame], list[str]]:
     """``source``: the impacts (default: the file ``config.data``)."""
@@ -144,9 +251,12 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
     impacts = read_impacts(config.data if source is None else source, needs=MODEL_COLUMNS,
                            command="acf --data",
                            min_bounces=config.max_lag + 2)
-    params = model_at_data(impacts, config.model.alpha, config.model.g)
+    used = model_for_data(impacts, config, options, source)
+    params = model_at_data(impacts, used.alpha.value, used.g.value)
+    noise = measurement_noise(d, source, config.data)
     segments = stationary_segments(impacts, d.settle_after_perturbation, config.max_lag + 2)
     segments_means = [(s[1], s[3]) for s in segments]
+    racket = [s[4] for s in segments]
     segments = [s[:3] for s in segments]
     if not segments:
         raise ConfigError(f"data: {impacts.path}: no run of {config.max_lag + 2} consecutive "
@@ -181,10 +291,11 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
     trials = [np.column_stack([s[1], s[2]]) for s in segments]
     fits: dict[str, Var1Fit | ModelError] = {}
     for method in ("ols", "lag2"):
-        try:
-            fits[method] = fit_var1(trials, method, jackknife=d.jackknife)
-        except ModelError as exc:
-            fits[method] = exc
+        for label, exog in ((method, None), (f"varx_{method}", racket)):
+            try:
+                fits[label] = fit_var1(trials, method, jackknife=d.jackknife, exog=exog)
+            except ModelError as exc:
+                fits[label] = exc
         options.progress.advance(1)
     st = stability(params)
     fp = params.fixed_point()
@@ -201,32 +312,42 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
     for label, lam in zip(("lambda_plus", "lambda_minus"), st.eigenvalues):
         add(f"{label}_re", "1", "model_eq10", lam.real)
         add(f"{label}_im", "1", "model_eq10", lam.imag)
+    b_model = racket_input_jacobian(params).as_varx()
+    for name, value in zip(INPUT_COEFFICIENTS, b_model.ravel()):
+        add(name, "mixed", "model_racket", float(value),
+            note="d(v, theta)_{k+1} / d(period s, amplitude m) of impact k+1's (next) or k's "
+                 "(this) racket cycle: eqs. 5-6 by the implicit function theorem")
     for method, fit in fits.items():
         if isinstance(fit, ModelError):
             add("spectral_radius", "1", method, math.nan, note=str(fit))
             continue
-        source = fit.method
+        label = ("varx_" if method.startswith("varx_") else "") + fit.method
         se = fit.jacobian_se.ravel()
         z = _z(conf)
+        half = z if fit.has_interval else math.nan  # too few bounces: no interval
         for name, value, s in zip(J_ENTRIES, fit.jacobian.ravel(), se):
-            add(name, "mixed", source, float(value), float(s), value - z * s, value + z * s,
-                f"{fit.n_pairs} pairs in {fit.n_trials} runs")
+            add(name, "mixed", label, float(value), float(s), value - half * s,
+                value + half * s, f"{fit.n_pairs} pairs in {fit.n_trials} runs")
         eig = fit.eigen_summary(conf)
         for name in EIGEN_QUANTITIES:
             value, se_, low, high = eig[name]
-            add(name, "1", source, value, se_, low, high, note="delta method")
+            add(name, "1", label, value, se_, low, high, note=interval_note(fit, name))
         for (i, j), name in zip(((0, 0), (1, 1), (0, 1)), ("noise_cov_vv", "noise_cov_thetatheta",
                                                            "noise_cov_vtheta")):
-            add(name, "mixed", source, float(fit.noise_cov[i, j]), note="residual covariance")
+            add(name, "mixed", label, float(fit.noise_cov[i, j]), note="residual covariance")
+        for name, value, s_ in zip(INPUT_COEFFICIENTS, fit.exog_coef.ravel(),
+                                   fit.exog_se.ravel()):
+            add(name, "mixed", label, float(value), float(s_), value - half * s_,
+                value + half * s_, note="racket input (deviation from the run's mean)")
     add("sd_v", "m/s", "data", sd_v, note="pooled within-run SD")
     add("sd_theta", "deg", "data", math.degrees(sd_theta), note="pooled within-run SD")
     add("q_v", "m/s", noise_source, q_v, note=noise_note)
     add("q_theta", "rad", noise_source, q_theta, note=noise_note)
     if not isinstance(fits["ols"], ModelError):
-        sig = fits["ols"].noise_cov
-        add("q_theta", "rad", "ols_residual", math.sqrt(sig[1, 1]),
+        q_v_resid, q_theta_resid = noise_from_residual_covariance(fits["ols"].noise_cov)
+        add("q_theta", "rad", "ols_residual", q_theta_resid,
             note="sqrt of the VAR residual variance of theta (eq. 18's noise)")
-        add("q_v", "m/s", "ols_residual", math.sqrt(max(sig[0, 0] - sig[0, 1] ** 2 / sig[1, 1], 0)),
+        add("q_v", "m/s", "ols_residual", q_v_resid,
             note="residual variance of v given theta's (removes eq. 16's phase-noise term)")
     add("v_fixed", "m/s", "model_eq7", fp.v_m_s)
     add("theta_fixed", "deg", "model_eq8", fp.theta_deg)
@@ -235,27 +356,41 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
     add("theta_mean", "deg", "data", math.degrees(theta_mean),
         note="circular mean phase of impact (compare eq. 8)")
     add("alpha", "1", "data_eq8", implied_alpha(params, theta_mean),
-        note="the alpha for which eq. 8 puts theta~ at the data's mean phase (a check of "
-             "model.alpha)")
+        note=f"the alpha for which eq. 8 puts theta~ at the data's mean phase (a check of "
+             f"the model's alpha, {used.alpha.source})")
     add("ac", "g", "model", st.ac_g)
     add("racket_period", "s", "data", params.racket_period, note="mean over impacts")
     add("racket_amplitude", "m", "data", params.racket_amplitude, note="mean over impacts")
+    racket_sd = np.sqrt(np.mean(np.concatenate([r - r.mean(axis=0) for r in racket]) ** 2,
+                                axis=0))
+    add("racket_period_sd", "s", "data", float(racket_sd[0]),
+        note="pooled within-run SD of the cycles' periods")
+    add("racket_amplitude_sd", "m", "data", float(racket_sd[1]),
+        note="pooled within-run SD of the cycles' amplitudes")
     add("bounces", "1", "data", float(sum(len(s[1]) for s in segments)),
         note=f"in {n_seg} runs of consecutive unperturbed impacts")
+    add("measurement_sd_v", "m/s", noise.source, noise.sd_v_m_s,
+        note="measurement noise of v_k used by the trust study")
+    add("measurement_sd_theta", "deg", noise.source, math.degrees(noise.sd_theta_rad),
+        note="measurement noise of theta_k used by the trust study")
     stab = pd.DataFrame(srows)
-    trust = trust_frame(params, q_v, q_theta, config, segments, options)
-    frames = {"acf_data.csv": acf, "stability_data.csv": stab, "trust.csv": trust}
-    lines = [f"data {impacts.path}: {n_seg} runs, {len(dv_all)} bounces; model at a_r = "
-             f"{params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s (the data's), "
-             f"alpha = {params.alpha:g}, g = {params.g:g} m/s^2 (model.alpha, model.g: set "
-             f"them to your lab's): spectral radius {st.spectral_radius:.3f}"]
+    diagnostics, diagnostic_lines = var_diagnostics(fits, trials, config.max_lag)
+    trust = trust_frame(params, q_v, q_theta, config, segments, options, noise)
+    frames = {"acf_data.csv": acf, "stability_data.csv": stab, "trust.csv": trust,
+              "var_diagnostics.csv": diagnostics}
+    lines = [f"data {impacts.path}: {n_seg} runs, {len(dv_all)} bounces; {racket_text(params)}",
+             f"{used.text()}: spectral radius {st.spectral_radius:.3f}"]
     for method, fit in fits.items():
         if isinstance(fit, ModelError):
             lines.append(f"{method}: {fit}")
             continue
-        r = fit.eigen_summary(conf)["spectral_radius"]
-        lines.append(f"{fit.method}: spectral radius {r[0]:.3f} [{r[2]:.3f}, {r[3]:.3f}] "
-                     f"({conf:.0%} CI, delta method)")
+        prefix = ("VARX (each impact's racket period and amplitude as inputs) "
+                  if method.startswith("varx_") else "")
+        lines.append(f"{prefix}{fit.method}: {radius_text(fit, conf)}")
+    lines.extend(diagnostic_lines)
+    warning = racket_warning(fits, racket_sd)
+    if warning:
+        options.warn(warning)
     if noise_source == "data_sd_match":
         lines.append(f"noise from the data's SDs: q_v = {q_v:.4f} m/s, q_theta = {q_theta:.4f} "
                      "rad")
@@ -265,17 +400,105 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
                      f"m/s, q_theta = {q_theta:.4f} rad (the model's J may not be the data's)")
     lines.append(f"data's mean phase {math.degrees(theta_mean):.1f} deg vs eq. 8's "
                  f"{fp.theta_deg:.1f} deg (eq. 8 would need alpha = "
-                 f"{implied_alpha(params, theta_mean):.3f}; model.alpha = {params.alpha:g})")
+                 f"{implied_alpha(params, theta_mean):.3f}; the model's alpha = {params.alpha:g}, "
+                 f"{used.alpha.source})")
     n_data = int(sum(len(s[1]) for s in segments))
     run_length = max(int(round(np.mean([len(s[1]) for s in segments]))), 8)
+    noise_words = (f"assumed: no {SETUP_FILE} beside the data gives it" if noise.source ==
+                   "assumed" else f"the data's own, from {SETUP_FILE}")
     for method in ("ols", "lag2"):
         ok = trust[(trust.method == method) & trust.trusted.astype(bool)]
         need = f"from {int(ok.bounces.min())} bounces" if len(ok) else "at none of the sizes tried"
-        lines.append(f"trust study ({d.measurement_sd_v_m_s:g} m/s, "
-                     f"{d.measurement_sd_theta_deg:g} deg measurement noise; sizes in whole "
+        lines.append(f"trust study ({noise.sd_v_m_s:.3g} m/s, "
+                     f"{math.degrees(noise.sd_theta_rad):.3g} deg measurement noise, "
+                     f"{noise_words}; sizes in whole "
                      f"runs of the data's mean length, {run_length}): {method} trusted "
                      f"{need}; these data have {n_data}")
     return frames, lines
+
+
+def interval_note(fit: Var1Fit, quantity: str) -> str:
+    """How a fitted quantity's interval was made, or why there is none."""
+    if not fit.has_interval:
+        return (f"no interval: {fit.n_pairs} {_rows_word(fit)}, fewer than the "
+                f"{fit.min_pairs_for_interval} the {fit.method.split('+')[0]} interval needs")
+    return "delta method, log scale" if quantity == "spectral_radius" else "delta method"
+
+
+def var_diagnostics(fits: dict, trials: list[np.ndarray], max_lag: int
+                    ) -> tuple[pd.DataFrame, list[str]]:
+    """var_diagnostics.csv and its summary lines: the Ljung-Box test of the OLS fits'
+    residuals (VAR and VARX; per run, pooled) at min(max_lag, shortest run / 4) lags, and the
+    lag orders 1..min(5, shortest run / 4) by AIC and BIC beside the paper's VAR(1)."""
+    from ..engine.var_fit import lag_order_criteria, ljung_box
+
+    shortest = min(len(t) for t in trials)
+    lags = max(1, min(max_lag, shortest // 4))
+    rows, lines = [], []
+    for label in ("ols", "varx_ols"):
+        fit = fits.get(label)
+        if not isinstance(fit, Var1Fit):
+            continue
+        tests = ljung_box(fit, lags)
+        for t in tests:
+            rows.append({"diagnostic": "ljung_box", "estimator": label, "component": t.component,
+                         "lags": t.lags, "statistic": t.statistic, "df": t.df,
+                         "p_value": t.p_value, "aic": math.nan, "bic": math.nan,
+                         "preferred_by": ""})
+        verdict = ", ".join(f"{t.component} p = {t.p_value:.3g}" for t in tests)
+        white = all(t.p_value >= 0.05 for t in tests)
+        lines.append(f"Ljung-Box ({label} residuals, {lags} lags, each run's own, pooled): "
+                     f"{verdict}: {'white' if white else 'NOT white'} at 5 %")
+    orders = lag_order_criteria(trials, max(1, min(5, shortest // 4)))
+    if orders:
+        best_aic = min(orders, key=lambda o: o.aic).order
+        best_bic = min(orders, key=lambda o: o.bic).order
+        for o in orders:
+            by = ",".join(name for name, best in (("aic", best_aic), ("bic", best_bic))
+                          if best == o.order)
+            rows.append({"diagnostic": "lag_order", "estimator": "ols", "component": "",
+                         "lags": o.order, "statistic": math.nan, "df": math.nan,
+                         "p_value": math.nan, "aic": o.aic, "bic": o.bic, "preferred_by": by})
+        lines.append(f"lag order (VAR(p) by OLS, p = 1..{orders[-1].order}, on the same "
+                     f"{orders[0].n_rows} impacts): AIC prefers {best_aic}, BIC {best_bic} "
+                     "(eq. 19 is a VAR(1))")
+    columns = ["diagnostic", "estimator", "component", "lags", "statistic", "df", "p_value",
+               "aic", "bic", "preferred_by"]
+    return pd.DataFrame(rows, columns=columns), lines
+
+
+def racket_warning(fits: dict, racket_sd: np.ndarray) -> str:
+    """A warning when the racket's cycle-to-cycle variability moves the VAR(1)'s spectral
+    radius: for an estimator, VAR and VARX differ by more than the VARX's SE ("" when not)."""
+    moved = []
+    for method in ("ols", "lag2"):
+        var, varx = fits.get(method), fits.get(f"varx_{method}")
+        if not isinstance(var, Var1Fit) or not isinstance(varx, Var1Fit):
+            continue
+        r_var = var.eigen_summary()["spectral_radius"][0]
+        r_varx, se_varx = varx.eigen_summary()["spectral_radius"][:2]
+        if abs(r_var - r_varx) > se_varx:
+            moved.append(f"{method} {r_var:.3f} without, {r_varx:.3f} +- {se_varx:.3f} with")
+    if not moved:
+        return ""
+    return (f"the racket varies from cycle to cycle enough to matter (SD {1e3 * racket_sd[0]:.1f}"
+            f" ms, {1e3 * racket_sd[1]:.1f} mm per cycle): the VAR(1) spectral radius moves "
+            f"when the racket is an input ({'; '.join(moved)}): read the VARX rows")
+
+
+def _rows_word(fit: Var1Fit) -> str:
+    return "triples" if fit.method.startswith("lag2") else "pairs"
+
+
+def radius_text(fit: Var1Fit, confidence: float) -> str:
+    """The fitted spectral radius with its interval, or with the reason it has none."""
+    value, se, low, high = fit.eigen_summary(confidence)["spectral_radius"]
+    if not fit.has_interval:
+        return (f"spectral radius {value:.3f} (SE {se:.3f}): too few bounces for an interval "
+                f"({fit.n_pairs} {_rows_word(fit)}; the {fit.method.split('+')[0]} interval needs "
+                f"{fit.min_pairs_for_interval})")
+    return (f"spectral radius {value:.3f} [{low:.3f}, {high:.3f}] ({confidence:.0%} CI, delta "
+            "method on the log scale)")
 
 
 def _z(confidence: float) -> float:
@@ -284,9 +507,11 @@ def _z(confidence: float) -> float:
     return float(stats.norm.ppf(0.5 + confidence / 2.0))
 
 
-def trust_frame(params, q_v, q_theta, config, segments, options) -> pd.DataFrame:
+def trust_frame(params, q_v, q_theta, config, segments, options,
+                noise: MeasurementNoise) -> pd.DataFrame:
     """How many bounces each estimator needs: linear VAR data at the model's J (data
-    parameters) and the data's noise, plus white measurement noise of the configured SDs,
+    parameters) and the data's noise, plus white measurement noise ``noise`` (the data's own
+    from setup.csv, or the config's assumed),
     split into trials of the data's mean run length; per total size and estimator the bias,
     SD and interval coverage of the spectral radius over repetitions."""
     from ..engine.var_fit import fit_var1
@@ -295,7 +520,7 @@ def trust_frame(params, q_v, q_theta, config, segments, options) -> pd.DataFrame
     jac = jacobian(params)
     truth = stability(params).spectral_radius
     chol = np.linalg.cholesky(paper_noise_covariance(max(q_v, 1e-12), max(q_theta, 1e-12)))
-    meas = np.array([d.measurement_sd_v_m_s, math.radians(d.measurement_sd_theta_deg)])
+    meas = np.array([noise.sd_v_m_s, noise.sd_theta_rad])
     run_length = int(round(np.mean([len(s[1]) for s in segments])))
     rng = np.random.default_rng(np.random.SeedSequence(d.trust_seed))
     rows = []
@@ -312,7 +537,7 @@ def trust_frame(params, q_v, q_theta, config, segments, options) -> pd.DataFrame
         series += rng.standard_normal(series.shape) * meas
         for method in ("ols", "lag2"):
             found: list[float] = []
-            inside = 0
+            inside, with_interval = 0, 0
             for r in range(reps):
                 try:
                     fit = fit_var1(list(series[r * n_trials:(r + 1) * n_trials]), method,
@@ -321,6 +546,7 @@ def trust_frame(params, q_v, q_theta, config, segments, options) -> pd.DataFrame
                     continue
                 value, _, low, high = fit.eigen_summary(d.confidence)["spectral_radius"]
                 found.append(value)
+                with_interval += fit.has_interval
                 inside += low <= truth <= high
             est = np.array(found)
             q16, med, q84 = np.percentile(est, [16, 50, 84]) if len(est) else (math.nan,) * 3
@@ -328,9 +554,10 @@ def trust_frame(params, q_v, q_theta, config, segments, options) -> pd.DataFrame
                          "repetitions": len(est), "true_spectral_radius": truth,
                          "median_estimate": med, "median_bias": med - truth,
                          "spread_16_84": q84 - q16, "q16": q16, "q84": q84,
-                         "coverage": inside / len(est) if len(est) else math.nan,
+                         "coverage": inside / with_interval if with_interval else math.nan,
                          "measurement_sd_v_m_s": meas[0],
-                         "measurement_sd_theta_deg": d.measurement_sd_theta_deg})
+                         "measurement_sd_theta_deg": math.degrees(meas[1]),
+                         "measurement_noise": noise.source})
         options.progress.advance(1)
     frame = pd.DataFrame(rows)
     frame["trusted"] = (frame["coverage"] >= d.confidence - d.trust_coverage_slack) & (
@@ -339,7 +566,7 @@ def trust_frame(params, q_v, q_theta, config, segments, options) -> pd.DataFrame
 
 
 def acf_data_draw(frames: dict[str, pd.DataFrame]) -> dict:
-    from .acf import PANELS, TITLES  # Fig. 8's layout, shared with the model's side
+    from .acf import LAG_LABEL, PANELS, TITLES  # Fig. 8's layout, shared with the model's side
 
     acf = frames["acf_data.csv"]
     fig, axes = new_figure(2, 2, width=10, height=7.5, sharex=True)
@@ -348,14 +575,16 @@ def acf_data_draw(frames: dict[str, pd.DataFrame]) -> dict:
         d = acf[acf["pair"] == pair].sort_values("lag")
         ax.axhline(0, color="0.8", lw=0.8)
         ax.errorbar(d["lag"], d["data_mean"], yerr=d["data_sd"].fillna(0), color="0.5", lw=1.5,
-                    capsize=3, label=f"data: mean +- SD over {int(d['data_trials'].iloc[0])} runs")
+                    capsize=3,
+                    label=f"data: mean $\\pm$ SD over {int(d['data_trials'].iloc[0])} runs")
         ax.plot(d["lag"], d["theory"], "o", mfc="none", mec="k", ms=9,
                 label="model, eq. 19 at the data's parameters")
         ax.set_ylim(-1.05, 1.05)
         ax.set_title(TITLES[pair], fontsize=10)
         ax.set_ylabel("correlation")
+        integer_axis(ax)
         if r == 1:
-            ax.set_xlabel("lag l (bounces)")
+            ax.set_xlabel(LAG_LABEL)
     handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncol=2, fontsize=9)
     fig.suptitle("Fig. 8 with data: correlation functions of the data (grey) and eq. 19 (circles)")
@@ -370,16 +599,23 @@ def _stability_figure(stab: pd.DataFrame, trust: pd.DataFrame | None):
     fig, axes = new_figure(1, 2, width=11, height=4.8)
     ax = axes[0, 0]
     s = stab.set_index(["quantity", "source"])
-    styles = {"model_eq10": ("o", "k"), "ols": ("s", "tab:blue"), "lag2": ("D", "tab:red")}
+    styles = {"model_eq10": ("o", "k"), "ols": ("s", "tab:blue"), "lag2": ("D", "tab:red"),
+              "varx_ols": ("P", "tab:cyan"), "varx_lag2": ("X", "tab:orange")}
+    names = {"model_eq10": "model (eq. 10)", "ols": "VAR(1), OLS", "lag2": "VAR(1), lag 2",
+             "varx_ols": "VARX (racket inputs), OLS", "varx_lag2": "VARX (racket inputs), lag 2"}
     sources = [src for src in dict.fromkeys(stab["source"]) if src.split("+")[0] in styles]
     t = np.linspace(0, 2 * np.pi, 200)
     ax.plot(np.cos(t), np.sin(t), color="0.8", lw=0.8)
     for src in sorted(sources, key=lambda x: x == "model_eq10"):  # the model on top
         marker, colour = styles[src.split("+")[0]]
         radius = s.loc[("spectral_radius", src)]
-        label = f"{src}: radius {radius['estimate']:.3f}"
+        method, _, interval = src.partition("+")  # e.g. ols+jackknife
+        label = (f"{names[method]}{f' ({interval})' if interval else ''}: "
+                 f"radius {radius['estimate']:.3f}")
         if np.isfinite(radius["ci_low"]):
             label += f" [{radius['ci_low']:.3f}, {radius['ci_high']:.3f}]"
+        elif src != "model_eq10":
+            label += " (too few bounces for an interval)"
         for lam in ("lambda_plus", "lambda_minus"):
             try:
                 re = s.loc[(f"{lam}_re", src)]
@@ -396,10 +632,11 @@ def _stability_figure(stab: pd.DataFrame, trust: pd.DataFrame | None):
     ax.set_aspect("equal")
     ax.set_xlim(-1.1, 1.1)
     ax.set_ylim(-1.1, 1.1)
-    ax.set_xlabel("Re lambda")
-    ax.set_ylabel("Im lambda")
-    ax.set_title("eigenvalues of J (+- SE): model eq. 10 vs VAR(1) fits", fontsize=10)
-    ax.legend(fontsize=8, title="spectral radius [95 % CI]", title_fontsize=8)
+    ax.set_xlabel(r"Re $\lambda$")
+    ax.set_ylabel(r"Im $\lambda$")
+    ax.set_title(r"eigenvalues of $J$ ($\pm$ SE): model eq. 10 vs VAR(1) and VARX fits",
+                 fontsize=10)
+    ax.legend(fontsize=7, title="spectral radius [95 % CI]", title_fontsize=7, loc="center")
     ax = axes[0, 1]
     if trust is not None and len(trust):
         for method, colour in (("ols", "tab:blue"), ("lag2", "tab:red")):
@@ -407,11 +644,11 @@ def _stability_figure(stab: pd.DataFrame, trust: pd.DataFrame | None):
             ax.errorbar(d["bounces"], d["median_estimate"],
                         yerr=[d["median_estimate"] - d["q16"], d["q84"] - d["median_estimate"]],
                         fmt="-o", color=colour, capsize=2,
-                        label=f"{method}: median and 16-84 % of the estimates")
+                        label=f"{names[method]}: median and 16-84 % of the estimates")
             ok = d[d["trusted"].astype(bool)]
             if len(ok):
                 ax.plot(ok["bounces"], ok["median_estimate"], "*", color=colour, ms=13,
-                        mec="k", label=f"{method}: trusted (coverage, bias)")
+                        mec="k", label=f"{names[method]}: trusted (coverage, bias)")
         ax.axhline(trust["true_spectral_radius"].iloc[0], color="k", ls="--",
                    label="true (model at the data's parameters)")
         n_data = stab.loc[(stab.quantity == "bounces") & (stab.source == "data"), "estimate"]
@@ -422,8 +659,10 @@ def _stability_figure(stab: pd.DataFrame, trust: pd.DataFrame | None):
         ax.set_xlabel("bounces in the data set (simulated, with measurement noise)")
         ax.set_ylabel("estimated spectral radius")
         meas = trust.iloc[0]
-        ax.set_title(f"bias from measurement noise ({meas['measurement_sd_v_m_s']:g} m/s, "
-                     f"{meas['measurement_sd_theta_deg']:g} deg)", fontsize=10)
+        how = meas.get("measurement_noise", "assumed")
+        how = "assumed" if how == "assumed" else "the data's, " + str(how)
+        ax.set_title(f"bias from measurement noise ({meas['measurement_sd_v_m_s']:.3g} m/s, "
+                     f"{meas['measurement_sd_theta_deg']:.3g} deg, {how})", fontsize=10)
         ax.legend(fontsize=8)
     fig.suptitle("Stability measured from data (VAR(1) of eq. 19) beside eqs. 9-10")
     return fig
@@ -441,10 +680,11 @@ def impulse_data_run(config, options, source: ImpactsSource | None = None
     if not frame["perturbed"].any():
         raise ConfigError(f"data: {impacts.path}: column perturbed: no perturbed impact, nothing "
                           "to align (bounce impulse --data needs perturbations)")
-    params = model_at_data(impacts, config.model.alpha, config.model.g)
+    used = model_for_data(impacts, config, options, source)
+    params = model_at_data(impacts, used.alpha.value, used.g.value)
     n = config.iterations
     groups = list(impacts.by_trial())
-    alpha_0 = config.model.alpha
+    alpha_0 = params.alpha
     quantities = {"v_m_s": ("v_m_s", False, 1.0), "theta_deg": ("theta_rad", True, 180 / math.pi),
                   "racket_period_s": ("racket_period_s", False, 1.0),
                   "racket_amplitude_m": ("racket_amplitude_m", False, 1.0)}
@@ -500,25 +740,36 @@ def impulse_data_run(config, options, source: ImpactsSource | None = None
         se_v = (mv["sd"] / np.sqrt(mv["n"])).to_numpy()
         se_t = (mt["sd"] / np.sqrt(mt["n"])).to_numpy()
         tol = (rel.tolerance_v_m_s, rel.tolerance_theta_deg)
-        # both over the impacts the data's windows reach (at least 2 windows there)
-        reach = int(np.flatnonzero(mv["n"].to_numpy() >= 2).max(initial=-1)) + 1
-        shown = slice(0, max(reach, 1))
+        # both over the impacts k = 0.. that enough of the data's windows reach
+        windows = mv["n"].to_numpy()
+        reach = int(np.argmin(windows >= d.min_windows_per_impact)
+                    if not (windows >= d.min_windows_per_impact).all() else len(windows))
+        too_few = reach == 0
+        shown = slice(0, reach if not too_few else n + 1)
         relax_rows.append({
             "direction": side, "source": "data", "mean_alpha_p": ap,
             "perturbations": int(sel.sum()), "impacts_compared": reach,
-            "relaxation_impacts": relaxation_impact(
+            "relaxation_impacts": None if too_few else relaxation_impact(
                 [mv["mean"].to_numpy()[shown], mt["mean"].to_numpy()[shown]],
                 [se_v[shown], se_t[shown]], tol, d.relaxation_z),
+            "verdict": (f"too few perturbations ({int(windows[0])} < "
+                        f"data_analysis.min_windows_per_impact = {d.min_windows_per_impact})"
+                        if too_few else ""),
         })
         relax_rows.append({
             "direction": side, "source": "model", "mean_alpha_p": ap, "perturbations": 0,
-            "impacts_compared": reach,
+            "impacts_compared": reach if not too_few else n + 1,
             "relaxation_impacts": relaxation_impact(
                 [r.dv[shown], np.degrees(r.dtheta[shown])], [np.zeros(n + 1)[shown]] * 2, tol,
                 d.relaxation_z),
         })
     model = pd.DataFrame(model_rows)
     relax = pd.DataFrame(relax_rows)
+    relax["relaxation_impacts"] = relax["relaxation_impacts"].astype(float)  # NaN: no verdict
+    relax["verdict"] = [v if isinstance(v, str) and v else relaxed_text(int(k), int(h))
+                        for v, k, h in zip(relax.get("verdict", [""] * len(relax)),
+                                           relax["relaxation_impacts"].fillna(-1),
+                                           relax["impacts_compared"])]
     relax["criterion"] = (f"|mean| <= max(tol, {d.relaxation_z:g} SE) for v (tol "
                           f"{rel.tolerance_v_m_s:g} m/s) and theta (tol "
                           f"{rel.tolerance_theta_deg:g} deg) from k on")
@@ -528,13 +779,14 @@ def impulse_data_run(config, options, source: ImpactsSource | None = None
              f" decrease, {n_up} increase); {cut} windows cut short "
              "by the next perturbation, the trial's end or a gap in k (their later impacts are "
              "not averaged)",
-             f"model at a_r = {params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s"
-             f" (the data's), alpha_0 = {params.alpha:g}, g = {params.g:g} m/s^2 (model.alpha, "
-             f"model.g): v~ = {fp.v_m_s:.3f} m/s,"
+             f"{racket_text(params)}; {used.text()} (alpha_0): v~ = {fp.v_m_s:.3f} m/s,"
              f" theta~ = {fp.theta_deg:.1f} deg"]
     for row in relax.itertuples():
+        judged = (f" (judged over k < {row.impacts_compared}: the impacts at least "
+                  f"{d.min_windows_per_impact} windows reach)"
+                  if row.source == "data" and not row.verdict.startswith("too few") else "")
         lines.append(f"{row.direction} (alpha_p {row.mean_alpha_p:.3f}), {row.source}: impacts "
-                     f"to relax {relaxed_text(row.relaxation_impacts)}")
+                     f"to relax {row.verdict}{judged}")
     frames = {"aligned.csv": aligned, "model_response.csv": model, "relaxation_data.csv": relax}
     return frames, lines
 
@@ -543,24 +795,25 @@ def impulse_data_draw(frames: dict[str, pd.DataFrame]) -> dict:
     aligned, model = frames["aligned.csv"], frames["model_response.csv"]
     fig, axes = new_figure(2, 2, width=11, height=7, sharex=True)
     for col, side in enumerate(("decrease", "increase")):
-        for row, (q, mq, label) in enumerate((("v_m_s", "dv_m_s", "deviation of v_k (m/s)"),
+        for row, (q, mq, label) in enumerate((("v_m_s", "dv_m_s", "deviation of $v_k$ (m/s)"),
                                               ("theta_deg", "dtheta_deg",
-                                               "deviation of theta_k (deg)"))):
+                                               r"deviation of $\theta_k$ (deg)"))):
             ax = axes[row, col]
             ax.axhline(0, color="k", ls="--", lw=1)
             a = aligned[(aligned.quantity == q) & (aligned.direction == side)].sort_values("k")
             m = model[model.direction == side].sort_values("k")
             if len(a):
                 ax.errorbar(a["k"], a["mean"], yerr=a["sd"], fmt="-o", color="k", capsize=3,
-                            ms=4, label="data: mean +- SD")
+                            ms=4, label=r"data: mean $\pm$ SD")
             if len(m):
                 ax.plot(m["k"], m[mq], "-s", color="0.6", ms=4,
-                        label=f"model at alpha_p = {m['alpha_p'].iloc[0]:.3f}")
+                        label=f"model at $\\alpha_p$ = {m['alpha_p'].iloc[0]:.3f}")
             ax.set_ylabel(label)
+            integer_axis(ax)
             if row == 1:
-                ax.set_xlabel("impact k after the perturbation (0 = perturbed)")
+                ax.set_xlabel(IMPACT_AFTER_LABEL)
             if row == 0:
-                ax.set_title(f"alpha_p {'<' if side == 'decrease' else '>'} alpha_0")
+                ax.set_title(perturbation_title(side == "decrease"))
                 ax.legend(fontsize=8)
     fig.suptitle("Fig. 9 with data: relaxation after a perturbation (data black, model grey)")
     fig2, axes2 = new_figure(2, 1, width=7, height=7, sharex=True)
@@ -573,14 +826,15 @@ def impulse_data_draw(frames: dict[str, pd.DataFrame]) -> dict:
             a = aligned[(aligned.quantity == q) & (aligned.direction == side)].sort_values("k")
             if len(a):
                 ax.errorbar(a["k"], a["mean"] * unit_scale, yerr=a["sd"] * unit_scale, fmt="-o",
-                            color=colour, capsize=3, ms=4, label=f"alpha {side}")
+                            color=colour, capsize=3, ms=4, label=f"$\\alpha$ {side}")
         ax.set_ylabel(label)
+        integer_axis(ax)
         low, high = ax.get_ylim()
         ax.set_ylim(min(low, -1.0), max(high, 1.0))  # a constant racket shows as flat, not noise
         ax.legend(fontsize=8)
-    axes2[1, 0].set_xlabel("impact k after the perturbation (0 = perturbed)")
+    axes2[1, 0].set_xlabel(IMPACT_AFTER_LABEL)
     fig2.suptitle("Fig. 11 with data: racket period and amplitude modulation\n(difference from "
-                  "the trial's baseline, mean +- SD)")
+                  r"the trial's baseline, mean $\pm$ SD)")
     return {"impulse_data.png": fig, "modulation_data.png": fig2}
 
 
@@ -595,26 +849,25 @@ def is_impacts_table(path_text: str) -> bool:
     return {"trial", "k", "racket_period_s", "racket_amplitude_m"} <= cols and "a_r_m" not in cols
 
 
-def trial_means_from_impacts(source: ImpactsSource, alpha: float) -> pd.DataFrame:
+def trial_means_from_impacts(source: ImpactsSource, config, options
+                             ) -> tuple[pd.DataFrame, DataModel]:
     """One row per trial: mean racket amplitude (a_r_m), mean racket period (tau_s), the
-    circular mean phase of impact (theta_deg, in (-180, 180]), and the trial's alpha (the
-    median of its impacts' alpha when given: perturbed impacts do not move it)."""
+    circular mean phase of impact (theta_deg, in (-180, 180]), and the model's alpha and g
+    (``data_parameters.model_for_data``: the data's unless set by the user); and that model."""
     impacts = read_impacts(source, needs=MODEL_COLUMNS, command="regression --data",
                            min_bounces=2)
+    model = model_for_data(impacts, config, options, source)
     rows = []
     for trial, g in impacts.by_trial():
         theta = circular_mean(g["theta_rad"])
         rows.append({"trial": trial, "a_r_m": float(g["racket_amplitude_m"].mean()),
                      "tau_s": float(g["racket_period_s"].mean()),
                      "theta_deg": (math.degrees(theta) + 180.0) % 360.0 - 180.0,
-                     "alpha": float(g["alpha"].median()) if "alpha" in g.columns else alpha,
-                     "bounces": len(g)})
+                     "alpha": model.alpha.value, "g": model.g.value, "bounces": len(g)})
     frame = pd.DataFrame(rows)
     if (frame["theta_deg"].abs() >= 90).any():
         bad = frame[frame["theta_deg"].abs() >= 90].iloc[0]
         raise ConfigError(f"data: {impacts.path}: trial {bad['trial']}: mean phase of impact "
                           f"{bad['theta_deg']:.1f} deg is outside (-90, 90): eq. 15 has no "
                           "positive slope there")
-    if frame["alpha"].nunique() > 1:
-        frame["alpha"] = frame["alpha"].median()
-    return frame
+    return frame, model

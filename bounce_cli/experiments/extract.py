@@ -18,7 +18,8 @@ from __future__ import annotations
 import math
 from collections import Counter
 from pathlib import Path
-from typing import Literal, Optional, Union
+from dataclasses import replace
+from typing import Literal, NamedTuple, Optional, Union
 
 import numpy as np
 import pandas as pd
@@ -26,8 +27,16 @@ from pydantic import Field, field_validator, model_validator
 
 from ..config import ConfigError, ExperimentConfig, StrictModel
 from ..engine import ModelError
-from ..engine.extraction import ExtractionSettings, extract_trial, match_impacts
-from ..impacts import EVENT_COLUMNS, REQUIRED_COLUMNS
+from ..engine.extraction import (
+    PLAUSIBLE_G_M_S2,
+    ExtractionSettings,
+    contact_duration,
+    extract_trial,
+    match_impacts,
+    pooled_gravity,
+)
+from ..impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
+from ..setup_table import SetupQuantity, setup_frame
 from ..recordings import (
     LENGTH_UNITS,
     TIME_UNITS,
@@ -36,7 +45,7 @@ from ..recordings import (
     read_recording,
     read_table,
 )
-from ..plotting import caption_figures
+from ..plotting import caption_figures, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
 
@@ -92,6 +101,13 @@ class CsvBlock(StrictModel):
         return self
 
 
+#: what a "no bounce found" asks the user to check: a recording read in the wrong unit or axis
+#: shows no bounce at all
+NO_BOUNCE_HINT = ("; check units.length (positions in mm read as m, or cm as mm), the vertical "
+                  "axis (c3d.vertical_axis; a CSV's columns must be heights) and that "
+                  "columns.ball and columns.racket name the ball and the racket")
+
+
 class UnitsBlock(StrictModel):
     """Units of a CSV recording's and the events' columns (C3D: from the file)."""
 
@@ -120,6 +136,8 @@ RECORDING_FORMATS = ("auto", "csv", "c3d", "vicon", "qtm", "motive")
 
 
 DEFAULTS = ExtractionSettings()
+#: standard gravity, m/s^2: unit slips scale it by powers of ten
+STANDARD_GRAVITY = 9.80665
 
 
 class ExtractionBlock(StrictModel):
@@ -139,10 +157,19 @@ class ExtractionBlock(StrictModel):
     sticking_hop_s: float = Field(DEFAULTS.sticking_hop_s, ge=0.0)
     guard_samples: int = Field(DEFAULTS.guard_samples, ge=0, le=100)
     min_flight_samples: int = Field(DEFAULTS.min_flight_samples, ge=3)
-    ball_offset_m: float = DEFAULTS.ball_offset_m
+    ball_offset_m: Optional[float] = Field(None, description="ball marker above the racket "
+                                           "marker at impact, m (null: measured)")
+    g: Optional[float] = Field(None, gt=0.0, description="g of the flight fits, m/s^2 (null: "
+                               "measured from the flights; extract: model.g when set)")
 
-    def settings(self, g: float) -> ExtractionSettings:
-        return ExtractionSettings(g=g, **self.model_dump())
+    def settings(self, g: float, ball_offset_m: float = 0.0) -> ExtractionSettings:
+        """The engine's settings at gravity ``g`` and marker offset ``ball_offset_m`` (the
+        block's own where it sets them)."""
+        values = self.model_dump(exclude={"g", "ball_offset_m"})
+        return ExtractionSettings(
+            g=self.g if self.g is not None else g,
+            ball_offset_m=self.ball_offset_m if self.ball_offset_m is not None else ball_offset_m,
+            **values)
 
 
 class FigureBlock(StrictModel):
@@ -221,10 +248,22 @@ def read_truth(path: str) -> pd.DataFrame:
 
 
 # -- the tables ---------------------------------------------------------------------------------
-def extract_all(trials: list[Trial], events, settings: ExtractionSettings, source: str):
-    """(impacts, excluded, cycles frames, offsets) of every trial; a trial without a bounce
-    is a one-line error naming the file and the trial."""
-    impacts, excluded, cycles, offsets = [], [], [], []
+class SessionExtraction(NamedTuple):
+    """Every trial extracted: the tables, the set-up measured from them (``setup.csv``), the
+    settings the extraction ran at (g, marker offset: measured or set) and warnings."""
+
+    impacts: pd.DataFrame
+    excluded: pd.DataFrame
+    cycles: pd.DataFrame
+    setup: list[SetupQuantity]
+    settings: ExtractionSettings
+    warnings: list[str]
+
+
+def _extract_trials(trials: list[Trial], events, settings: ExtractionSettings, source: str):
+    """[(trial, its events, TrialExtraction)] at ``settings``; a trial without a bounce is a
+    one-line error naming the file and the trial."""
+    out = []
     for trial in trials:
         ev = events.get(str(trial.label)) if events is not None else None
         if events is not None and (ev is None or ev.t.size == 0):
@@ -237,52 +276,203 @@ def extract_all(trials: list[Trial], events, settings: ExtractionSettings, sourc
                                    None if ev is None else ev.t,
                                    None if ev is None else ev.alpha, settings)
         except ModelError as exc:
-            raise ConfigError(f"{source}: trial {trial.label}: {exc}") from None
+            hint = NO_BOUNCE_HINT if str(exc).startswith("no bounce found") else ""
+            raise ConfigError(f"{source}: trial {trial.label}: {exc}{hint}") from None
+        out.append((trial, ev, result))
+    return out
+
+
+def unit_slip_hint(g: float) -> str:
+    """What a fitted g far from any set-up's suggests (lengths scaled by a power of ten)."""
+    ratio = g / STANDARD_GRAVITY
+    for factor, slip in ((10.0, "millimetres read as centimetres, or centimetres as "
+                                "decimetres"), (100.0, "centimetres read as metres"),
+                         (1000.0, "millimetres read as metres"),
+                         (0.1, "centimetres read as millimetres"),
+                         (0.01, "metres read as centimetres"),
+                         (0.001, "metres read as millimetres")):
+        if abs(math.log10(ratio / factor)) < 0.25:
+            return (f"lengths {factor:g} times too {'large' if factor > 1 else 'small'}: "
+                    f"{slip}? (units.length; a C3D file's POINT:UNITS)")
+    return "check units.length and the vertical axis (columns.ball, c3d.vertical_axis)"
+
+
+def extract_all(trials: list[Trial], events, settings: ExtractionSettings, source: str,
+                measure_g: bool = False, measure_offset: bool = False) -> SessionExtraction:
+    """Every trial extracted, and the set-up measured from them (``setup_quantities``).
+
+    With ``measure_g`` (the user set no g) the flights are fitted at the g their pooled
+    curvature shows (``pooled_gravity``, all trials), with ``measure_offset`` at the median
+    marker offset measured at the impacts: a first pass at ``settings`` measures both, a
+    second extracts at them. A measured g outside any set-up's (PLAUSIBLE_G_M_S2) is a unit
+    slip: an error when it would be used, else a warning; a set g that the flights
+    contradict by more than 3 SE is a warning."""
+    first = _extract_trials(trials, events, settings, source)
+    gravity = pooled_gravity([f for _, _, r in first for f in r.flights])
+    warnings: list[str] = []
+    g = settings.g
+    if gravity is not None:
+        lo, hi = PLAUSIBLE_G_M_S2
+        if not lo <= gravity.g <= hi:
+            text = (f"{source}: the ball's free flights imply g = {gravity.g:.3g} m/s^2, outside "
+                    f"any set-up's {lo:g}-{hi:g} m/s^2: {unit_slip_hint(gravity.g)}")
+            if measure_g:
+                raise ConfigError(text)
+            warnings.append(text)
+        elif measure_g:
+            g = gravity.g
+        elif abs(gravity.g - settings.g) > 3.0 * gravity.se:
+            warnings.append(f"g = {settings.g:g} m/s^2 was set, but the ball's free flights "
+                            f"show {gravity.g:.4g} +- {gravity.se:.2g} m/s^2 "
+                            f"({abs(gravity.g - settings.g) / gravity.se:.0f} SE off): the "
+                            "flights are fitted at the set g (unset it to use the measured)")
+    # the marker offset is measured at the impacts of flights fitted at the right g
+    results = first if g == settings.g else _extract_trials(
+        trials, events, replace(settings, g=g), source)
+    offsets = np.concatenate([r.offsets_m for _, _, r in results])
+    offsets = offsets[np.isfinite(offsets)]
+    used = replace(settings, g=g)
+    if measure_offset and offsets.size and float(np.median(offsets)) != settings.ball_offset_m:
+        used = replace(used, ball_offset_m=float(np.median(offsets)))
+        results = _extract_trials(trials, events, used, source)
+    impacts, excluded, cycles = [], [], []
+    for trial, ev, result in results:
         frame = pd.DataFrame({"trial": trial.label, **result.impacts})
+        columns = list(REQUIRED_COLUMNS)
         if ev is not None and ev.alpha is not None:
             alpha = frame["alpha"]
             baseline = Counter(np.round(ev.alpha, 12)).most_common(1)[0][0]
             frame["perturbed"] = ~np.isclose(alpha, baseline)
-            frame = frame[list(REQUIRED_COLUMNS + EVENT_COLUMNS)]
-        else:
-            frame = frame[list(REQUIRED_COLUMNS)]
-        impacts.append(frame)
+            columns += EVENT_COLUMNS
+        if trial.ball is not None:
+            columns += MEASURED_COLUMNS
+        impacts.append(frame[columns])
         excluded += [(trial.label, t, why) for t, why in result.excluded]
         c = result.cycles
         cycles.append(pd.DataFrame({
             "trial": trial.label, "cycle": np.arange(len(c.crossings)),
             "t_start_s": c.crossings, "racket_period_s": c.periods,
             "racket_amplitude_m": c.amplitudes, "mid_position_m": c.mids}))
-        offsets.append(result.measured_offset_m)
     excluded_frame = pd.DataFrame(excluded, columns=["trial", "t_s", "reason"])
-    return (pd.concat(impacts, ignore_index=True), excluded_frame,
-            pd.concat(cycles, ignore_index=True), offsets)
+    impacts_frame = pd.concat(impacts, ignore_index=True)
+    setup = setup_quantities(impacts_frame, [r for _, _, r in results], gravity, used,
+                             measure_g, measure_offset)
+    return SessionExtraction(impacts_frame, excluded_frame, pd.concat(cycles, ignore_index=True),
+                             setup, used, warnings)
+
+
+def _mean_se(x) -> tuple[float, float, int]:
+    x = np.asarray(x, dtype=float)
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return math.nan, math.nan, 0
+    sd = float(np.std(x, ddof=1)) if x.size > 1 else math.nan
+    return float(np.mean(x)), sd / math.sqrt(x.size), int(x.size)
+
+
+def setup_quantities(impacts: pd.DataFrame, results, gravity, used: ExtractionSettings,
+                     measured_g: bool, measured_offset: bool) -> list[SetupQuantity]:
+    """The set-up measured from the extraction (``bounce_cli.setup_table``'s quantities; a
+    quantity the data cannot show is left out).
+
+    Parameters
+    ----------
+    impacts : pandas.DataFrame
+        The impacts table (``alpha_measured``, ``contact_s`` where the ball was tracked).
+    results : list of TrialExtraction
+        Each trial's extraction (flights, offsets, standard errors, racket residuals).
+    gravity : GravityFit or None
+        The pooled fit of the flights' curvature.
+    used : ExtractionSettings
+        What the extraction ran at (g, marker offset).
+    measured_g, measured_offset : bool
+        Whether those were the measured values (else set by the user).
+
+    Returns
+    -------
+    list of SetupQuantity
+    """
+    out: list[SetupQuantity] = []
+    if gravity is not None:
+        how = ("used for the flight fits" if measured_g
+               else f"the flights were fitted at the set g = {used.g:g}")
+        out.append(SetupQuantity("g_m_s2", gravity.g, gravity.se, gravity.n_flights,
+                                 f"pooled curvature of {gravity.n_flights} free flights "
+                                 f"({gravity.n_samples} samples); {how}"))
+    if "alpha_measured" in impacts.columns:
+        alpha = impacts["alpha_measured"].to_numpy(float)
+        mean, se, n = _mean_se(alpha)
+        if n:
+            out.append(SetupQuantity("alpha", mean, se, n, "eq. 3 per impact: ball velocity "
+                                     "before and after the (equivalent) impact, racket "
+                                     "velocity there"))
+        if n > 1:
+            sd = float(np.nanstd(alpha, ddof=1))
+            out.append(SetupQuantity("alpha_sd", sd, sd / math.sqrt(2.0 * (n - 1)), n,
+                                     "SD of alpha across impacts (with their measurement "
+                                     "error)"))
+        duration, se, n = contact_duration(
+            np.concatenate([r.contact_area for r in results]),
+            np.concatenate([r.contact_weight for r in results]))
+        if n:
+            out.append(SetupQuantity("contact_s", duration, se, n, "from the area of the "
+                                     "ball above its two flights around each impact, pooled "
+                                     "(a linear spring-damper contact's shape)"))
+    offsets = np.concatenate([r.offsets_m for r in results])
+    offsets = offsets[np.isfinite(offsets)]
+    if offsets.size:
+        sd = float(np.std(offsets, ddof=1)) if offsets.size > 1 else math.nan
+        out.append(SetupQuantity(
+            "ball_offset_m", float(np.median(offsets)), 1.2533 * sd / math.sqrt(offsets.size),
+            int(offsets.size), "median at the equivalent impacts; " + (
+                "used by the extraction" if measured_offset
+                else f"the extraction used the set {used.ball_offset_m:g} m")))
+    if gravity is not None:
+        out.append(SetupQuantity("position_noise_m", gravity.residual_sd, math.nan,
+                                 gravity.n_samples, "residual SD of the ball's flight fits"))
+    rss = sum(r.racket_rss for r in results)
+    dof = sum(r.racket_dof for r in results)
+    if dof > 0:
+        out.append(SetupQuantity("racket_noise_m", math.sqrt(rss / dof), math.nan, dof,
+                                 "residual SD of the racket's local fits at the impacts"))
+    for name, key, what in (("measurement_sd_v_m_s", "se_v_m_s", "v_k"),
+                            ("measurement_sd_theta_rad", "se_theta_rad", "theta_k")):
+        values = np.concatenate([getattr(r, key) for r in results])
+        values = values[np.isfinite(values)]
+        if values.size:
+            out.append(SetupQuantity(name, float(np.median(values)), math.nan,
+                                     int(values.size), f"median standard error of {what}, "
+                                     "propagated from the fits' residuals"))
+    return out
 
 
 #: accuracy.csv: quantity, its unit and how an error is measured
 ACCURACY_QUANTITIES = (
     ("theta_deg", "deg"), ("v_m_s", "m/s"), ("racket_acc_g", "g"), ("racket_period_s", "s"),
     ("racket_amplitude_m", "m"), ("hop_s", "s"), ("ball_apex_m", "m"), ("t_s", "s"),
+    ("v_in_m_s", "m/s"), ("alpha_measured", "1"), ("contact_s", "s"),
 )
 
 
 def accuracy_frame(impacts: pd.DataFrame, truth: pd.DataFrame) -> pd.DataFrame:
     """RMS and largest error of each extracted quantity against the truth, impacts matched by
     trial and time; plus how many of the truth's impacts were found."""
-    errors: dict[str, list[float]] = {q: [] for q, _ in ACCURACY_QUANTITIES}
+    quantities = [(q, unit) for q, unit in ACCURACY_QUANTITIES
+                  if q in impacts.columns and q in truth.columns]
+    errors: dict[str, list[float]] = {q: [] for q, _ in quantities}
     found = 0
     for label, tr in truth.groupby("trial", sort=False):
         ex = impacts[impacts["trial"].astype(str) == str(label)]
         idx = match_impacts(tr["t_s"].to_numpy(float), ex["t_s"].to_numpy(float))
         ok = idx >= 0
         found += int(ok.sum())
-        for q, _ in ACCURACY_QUANTITIES:
+        for q, _ in quantities:
             d = ex[q].to_numpy(float)[ok] - tr[q].to_numpy(float)[idx[ok]]
             if q == "theta_deg":
                 d = (d + 180.0) % 360.0 - 180.0
             errors[q].append(d[np.isfinite(d)])
     rows = []
-    for q, unit in ACCURACY_QUANTITIES:
+    for q, unit in quantities:
         d = np.concatenate(errors[q]) if errors[q] else np.array([])
         rows.append({"quantity": q, "unit": unit, "n": d.size,
                      "rms_error": float(np.sqrt(np.mean(d * d))) if d.size else math.nan,
@@ -316,8 +506,19 @@ def figure_samples(trials: list[Trial], impacts: pd.DataFrame, fig) -> pd.DataFr
                                       else np.full(int(sel.sum()), np.nan))})
 
 
+def set_gravity(config: ExtractConfig) -> float | None:
+    """The g the user set for the flight fits: ``extraction.g``, else ``model.g`` when the
+    config sets it; None: measured from the flights."""
+    if config.extraction.g is not None:
+        return config.extraction.g
+    return config.model.g if "g" in config.model.model_fields_set else None
+
+
 def run(config: ExtractConfig, options: RunOptions) -> ExperimentResult:
-    settings = config.extraction.settings(config.model.g)
+    g_set = set_gravity(config)
+    # without a set g a first pass runs at model.g's default (and stays there without ball
+    # data, whose flights alone show g)
+    settings = config.extraction.settings(config.model.g if g_set is None else g_set)
     summary = []
     if config.data is None:
         for key in ("events", "truth"):
@@ -337,9 +538,14 @@ def run(config: ExtractConfig, options: RunOptions) -> ExperimentResult:
         events = read_events(Path(config.events), config.event_columns, config.units, trials,
                              config.csv)
     options.progress.start(len(trials), "extract")
-    impacts, excluded, cycles, offsets = extract_all(trials, events, settings, source)
+    session = extract_all(trials, events, settings, source, measure_g=g_set is None,
+                          measure_offset=config.extraction.ball_offset_m is None)
+    impacts, excluded, cycles = session.impacts, session.excluded, session.cycles
+    for message in session.warnings:
+        options.warn(message)
     options.progress.advance(len(trials))
     frames = {"impacts.csv": impacts, "excluded.csv": excluded, "cycles.csv": cycles,
+              "setup.csv": setup_frame(session.setup),
               "fig2_samples.csv": figure_samples(trials, impacts, config.figure)}
     if truth is not None:
         frames["accuracy.csv"] = accuracy_frame(impacts, truth)
@@ -355,11 +561,7 @@ def run(config: ExtractConfig, options: RunOptions) -> ExperimentResult:
         f" m/s, mean theta = {centred_deg(impacts['theta_deg']).mean():.2f} deg, mean AC = "
         f"{impacts['racket_acc_g'].mean():.3f} g; not reported: {len(excluded)}"
         + (" (" + ", ".join(f"{n} {r}" for r, n in reasons.items()) + ")" if reasons else ""))
-    measured = [o for o in offsets if math.isfinite(o)]
-    if measured:
-        summary.append(f"ball marker above the racket marker at contact: "
-                       f"{1000 * float(np.median(measured)):.2f} mm (extraction.ball_offset_m "
-                       f"= {1000 * settings.ball_offset_m:g} mm)")
+    summary.append(setup_summary(session.setup))
     if "accuracy.csv" in frames:
         acc = frames["accuracy.csv"].set_index("quantity")
         summary.append("RMS error against the truth: " + ", ".join(
@@ -369,6 +571,35 @@ def run(config: ExtractConfig, options: RunOptions) -> ExperimentResult:
     caption_figures(figures, None, f"data: {config.data}" if config.data is not None
                     else "the bundled simulated session (no --data)")
     return ExperimentResult(frames=frames, figures=figures, summary=summary)
+
+
+def setup_summary(setup: list[SetupQuantity]) -> str:
+    """One line of the measured set-up (``setup.csv``)."""
+    q = {item.quantity: item for item in setup}
+    parts = []
+    if "g_m_s2" in q:
+        g = q["g_m_s2"]
+        parts.append(f"g {g.estimate:.3f} +- {g.se:.2g} m/s^2 ({g.n} flights)")
+    if "alpha" in q:
+        sd = f", SD {q['alpha_sd'].estimate:.3f}" if "alpha_sd" in q else ""
+        parts.append(f"alpha {q['alpha'].estimate:.3f}{sd} ({q['alpha'].n} impacts)")
+    if "contact_s" in q:
+        parts.append(f"contact {1000 * q['contact_s'].estimate:.1f} ms")
+    if "ball_offset_m" in q:
+        parts.append(f"ball marker {1000 * q['ball_offset_m'].estimate:.1f} mm above the "
+                     "racket marker at impact")
+    noise = [f"{label} {1000 * q[name].estimate:.2f} mm" for name, label in
+             (("position_noise_m", "ball"), ("racket_noise_m", "racket")) if name in q]
+    if noise:
+        parts.append("noise: " + ", ".join(noise))
+    if "measurement_sd_v_m_s" in q or "measurement_sd_theta_rad" in q:
+        sds = []
+        if "measurement_sd_v_m_s" in q:
+            sds.append(f"v {1000 * q['measurement_sd_v_m_s'].estimate:.2f} mm/s")
+        if "measurement_sd_theta_rad" in q:
+            sds.append(f"theta {math.degrees(q['measurement_sd_theta_rad'].estimate):.3f} deg")
+        parts.append("measurement SD " + ", ".join(sds))
+    return "set-up measured (setup.csv): " + ("; ".join(parts) if parts else "nothing")
 
 
 # -- Fig. 2 -------------------------------------------------------------------------------------
@@ -407,19 +638,20 @@ def draw_fig2(samples: pd.DataFrame, impacts: pd.DataFrame, title: str, bounces:
         ax.plot(t, y, "o-", ms=4, lw=0.8, color=color)
         if perturbed.any():
             ax.plot(t[perturbed], y[perturbed], "o", ms=6, color="C3",
-                    label="perturbed impact (alpha changed)")
+                    label=r"perturbed impact ($\alpha$ changed)")
             ax.legend(loc="best", fontsize=7)
         if len(y):
             ax.axhline(float(np.mean(y)), ls="--", color="0.4", lw=0.8)
         ax.set_ylabel(label_)
         for ti in t:
             ax_x.axvline(ti, color="0.85", lw=0.6, zorder=0)
-    ax_th.set_xlabel("time t (s)")
+    ax_th.set_xlabel("time $t$ (s)")
     fig.suptitle(f"Fig. 2: {title}\ntrial {label}; dashed: sample means of the bounces shown",
                  fontsize=10)
     return fig
 
 
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     samples, impacts = frames["fig2_samples.csv"], frames["impacts.csv"]
     return {"fig2.png": draw_fig2(samples, impacts, "extracted ball velocity after impact "

@@ -7,14 +7,20 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Annotated, Optional
+from typing import Annotated
 
 import numpy as np
 import pandas as pd
 from pydantic import Field
 
 from .. import paper
-from ..config import ClassifyBlock, ControllableModelBlock, ExperimentConfig, StrictModel
+from ..config import (
+    ClassifyBlock,
+    ControllableModelBlock,
+    DataFiles,
+    ExperimentConfig,
+    StrictModel,
+)
 from ..engine.impulse import (
     find_threshold,
     impulse_response_full,
@@ -26,7 +32,16 @@ from ..engine.impulse import (
 from ..engine.control import is_passive
 from ..engine.linear import stability
 from ..engine.params import ModelParams
-from ..plotting import caption_figures, data_caption
+from ..plotting import (
+    IMPACT_AFTER_LABEL,
+    PHASE_LABEL,
+    VELOCITY_LABEL,
+    caption_figures,
+    data_caption,
+    integer_axis,
+    perturbation_title,
+    publication_style,
+)
 from .base import Experiment, ExperimentResult, RunOptions
 from .data_side import ImpulseDataBlock, relaxed_text
 
@@ -55,7 +70,8 @@ class ImpulseConfig(ExperimentConfig):
     classify: ClassifyBlock = ClassifyBlock()
     relaxation: RelaxationBlock = RelaxationBlock()
     threshold: ThresholdBlock = ThresholdBlock()
-    data: Optional[str] = Field(None, description="impacts table with perturbations (--data)")
+    data: DataFiles = Field(None, description="impacts table with perturbations (--data; "
+                            "several: one session)")
     data_analysis: ImpulseDataBlock = ImpulseDataBlock()
 
 
@@ -225,15 +241,15 @@ def _layout(df: pd.DataFrame, title: str):
     fig, axes = new_figure(2, 2, width=11.0, height=7.0, sharex=True)
     v_st, th_st = _stationary(df)
     for col, side in enumerate(("lower", "higher")):
-        for row, (label, st) in enumerate((("velocity after impact v_k (m/s)", v_st),
-                                           ("phase of impact theta_k (deg, wrapped)", th_st))):
+        for row, (label, st) in enumerate(((VELOCITY_LABEL, v_st), (PHASE_LABEL, th_st))):
             ax = axes[row, col]
             ax.axhline(st, color="k", ls="--", lw=1, label="stationary value")
             ax.set_ylabel(label)
-            if row == 1:  # phases are drawn wrapped to theta~ +- 180 deg, not [0, 360)
-                ax.set_ylim(st - 180.0, st + 180.0)
-        axes[1, col].set_xlabel("iteration (impact) k; 0 = perturbed impact")
-        axes[0, col].set_title(f"alpha_p {'<' if side == 'lower' else '>'} alpha_0")
+            integer_axis(ax)
+        # phases are drawn as theta~ + their difference from it (wrapped to +- 180 deg), on an
+        # axis fitted to the responses (not fixed at +- 180 deg, which flattens them)
+        axes[1, col].set_xlabel(IMPACT_AFTER_LABEL)
+        axes[0, col].set_title(perturbation_title(side == "lower"))
     fig.suptitle(title)
     return fig, axes
 
@@ -247,6 +263,7 @@ def _side(df: pd.DataFrame) -> tuple[list[float], list[float]]:
     return ([a for a in by_size.index if dv[a] < 0], [a for a in by_size.index if dv[a] >= 0])
 
 
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     if "aligned.csv" in frames:
         return draw_data(frames)
@@ -261,7 +278,8 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         for i, ap in enumerate(group):
             d = df[(df.alpha_p == ap) & (df.model == "full")].sort_values("k")
             outcome = d.outcome.iloc[0]
-            label = f"alpha_p = {ap:g}" + ("" if outcome == "period1" else f" ({outcome})")
+            label = f"$\\alpha_p$ = {ap:g}" + ("" if outcome == "period1" else
+                                                f" ({outcome.replace('_', ' ')})")
             colour = f"{0.15 + 0.45 * i / max(len(group) - 1, 1):.2f}"
             axes[0, col].plot(d.k, d.v_m_s, styles[i % 6], color=colour, ms=4, label=label)
             axes[1, col].plot(d.k, th_st + d.dtheta_deg, styles[i % 6], color=colour, ms=4,
@@ -275,9 +293,9 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         for i, ap in enumerate(group):
             for model, colour, ls in (("full", "0.55", "-"), ("linear", "k", "--")):
                 d = df[(df.alpha_p == ap) & (df.model == model)].sort_values("k")
-                label = f"{model}, alpha_p = {ap:g}"
+                label = f"{model}, $\\alpha_p$ = {ap:g}"
                 if model == "full" and d.outcome.iloc[0] != "period1":
-                    label += f" ({d.outcome.iloc[0]})"
+                    label += f" ({d.outcome.iloc[0].replace('_', ' ')})"
                 marker = styles[i % 6][1:]
                 axes[0, col].plot(d.k, d.v_m_s, ls, marker=marker, color=colour, ms=4, label=label)
                 axes[1, col].plot(d.k, th_st + d.dtheta_deg, ls, marker=marker, color=colour, ms=4,
@@ -294,10 +312,11 @@ def run_data(config: ImpulseConfig, options: RunOptions, source=None) -> Experim
 
     frames, lines = impulse_data_run(config, options, source)
     figures = draw_data(frames)
-    caption_figures(figures, None, data_caption(config, source))
+    caption_figures(figures, None, data_caption(config, source, options.record))
     return ExperimentResult(frames=frames, figures=figures, summary=lines)
 
 
+@publication_style
 def draw_data(frames: dict[str, pd.DataFrame]) -> dict:
     from .data_side import impulse_data_draw
 

@@ -59,6 +59,9 @@ class LabBlock(StrictModel):
     min_hop_s: float = Field(0.01, gt=0.0, description="a shorter hop is sticking: an error")
     events: bool = Field(False, description="extract at the logged impact times (with alpha "
                          "and perturbed), as with --events; else detect the impacts")
+    #: extracted at the session's known set-up: the model's g and no marker offset where
+    #: ``extraction.g`` / ``extraction.ball_offset_m`` are null (``bounce extract`` measures
+    #: them from the flights)
     extraction: ExtractionBlock = ExtractionBlock()
 
 
@@ -102,7 +105,7 @@ def lab_session(lab: LabBlock, model) -> tuple[pd.DataFrame, pd.DataFrame, list[
         if lab.events:
             logged = {str(label): Events(g["t_s"].to_numpy(float), g["alpha"].to_numpy(float))
                       for label, g in events.groupby("trial", sort=False)}
-        extracted, _, _, _ = extract_all(trials, logged, settings, LAB_LABEL)
+        extracted = extract_all(trials, logged, settings, LAB_LABEL).impacts
         impacts.append(extracted)
         truths.append(truth)
     impacts_frame, truth_frame = (pd.concat(impacts, ignore_index=True),

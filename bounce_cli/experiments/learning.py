@@ -18,20 +18,20 @@ eq. 19's stationary covariance. Along the model curve alpha, g and the racket pe
 from __future__ import annotations
 
 import math
-from typing import Optional
 
 import numpy as np
 import pandas as pd
 from pydantic import Field
 
-from ..config import ConfigError, ExperimentConfig, ModelBlock, StrictModel
+from ..config import DataFiles, ConfigError, ExperimentConfig, ModelBlock, StrictModel, data_text
 from ..engine.data_stats import apex_sd_eq19, settled_mask
 from ..engine.linear import jacobian, racket_amplitude_for_ac, stability, stable_ac_range_g
 from ..engine.params import ModelError, ModelParams, phase_difference
 from ..engine.regression import ols_line
 from ..engine.stochastic import map_noise_covariance, paper_noise_covariance, stationary_covariance
+from ..data_parameters import DataModel, model_for_data
 from ..impacts import circular_mean, read_impacts
-from ..plotting import caption_figures, data_caption, new_figure
+from ..plotting import caption_figures, data_caption, integer_axis, new_figure, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
 TREND_QUANTITIES = {
@@ -57,7 +57,8 @@ class LearningConfig(ExperimentConfig):
         4, ge=0, description="with --data: impacts after a perturbed one left out of the "
                              "per-trial statistics (as acf --data)")
     confidence: float = Field(0.95, gt=0.0, lt=1.0, description="level of the trend intervals")
-    data: Optional[str] = Field(None, description="impacts table with ball_apex_m (--data)")
+    data: DataFiles = Field(None, description="impacts table with ball_apex_m (--data; "
+                            "several: one session)")
 
 
 def model_curve(alpha: float, g: float, period: float, q_v: float, q_theta: float,
@@ -82,15 +83,21 @@ def model_curve(alpha: float, g: float, period: float, q_v: float, q_theta: floa
     return pd.DataFrame(rows)
 
 
-def trial_table(config: LearningConfig, source=None) -> tuple[pd.DataFrame, float]:
+def trial_table(config: LearningConfig, options: RunOptions, source=None
+                ) -> tuple[pd.DataFrame, float, DataModel, tuple[float, float, int]]:
     """Per-trial statistics of the impacts table (``source``, default the file
-    ``config.data``), in the file's order of trials (trial_number 1, 2, ...), and the data's
-    mean racket period (NaN without that column)."""
+    ``config.data``), in the file's order of trials (trial_number 1, 2, ...), the data's
+    mean racket period (NaN without that column), the model's alpha and g (the data's
+    unless set by the user, ``data_parameters``) and the data's noise strengths (q_v, q_theta,
+    pairs) from the VAR(1) residuals of each trial (``data_side.noise_from_trials``)."""
+    from .data_side import noise_from_trials
+
     if source is None:
         assert config.data is not None
         source = config.data
     impacts = read_impacts(source, needs=("racket_acc_g", "ball_apex_m"),
                            command="learning --data", min_bounces=config.min_bounces)
+    model = model_for_data(impacts, config, options, source)
     rows = []
     for number, (trial, g) in enumerate(impacts.by_trial(), start=1):
         if "perturbed" in g.columns:  # the stationary state: not the relaxations
@@ -108,7 +115,8 @@ def trial_table(config: LearningConfig, source=None) -> tuple[pd.DataFrame, floa
         })
     period = (float(impacts.frame["racket_period_s"].mean())
               if "racket_period_s" in impacts.frame.columns else math.nan)
-    return pd.DataFrame(rows), period
+    noise = noise_from_trials(impacts, config.settle_after_perturbation)
+    return pd.DataFrame(rows), period, model, noise
 
 
 def trend_table(trials: pd.DataFrame, confidence: float) -> pd.DataFrame:
@@ -131,40 +139,55 @@ def trend_table(trials: pd.DataFrame, confidence: float) -> pd.DataFrame:
 
 def run(config: LearningConfig, options: RunOptions, source=None) -> ExperimentResult:
     """``source``: an impacts table in memory, ``(label, frame)`` (default: ``config.data``)."""
-    m = config.model
+    alpha, g = config.model.alpha, config.model.g
     frames: dict[str, pd.DataFrame] = {}
     lines = []
-    period = m.racket_period
+    period = config.model.racket_period
+    q_v, q_theta = config.noise.q_v, config.noise.q_theta
+    noise_words = "the config's noise"
     if config.data is not None or source is not None:
-        trials, data_period = trial_table(config, source)
+        trials, data_period, model, (data_q_v, data_q_theta, pairs) = trial_table(
+            config, options, source)
+        alpha, g = model.alpha.value, model.g.value
+        lines.append(model.text())
         if len(trials) < 3:
-            label = config.data if source is None else source[0]
+            label = data_text(config.data) if source is None else source[0]
             raise ConfigError(f"data: {label}: {len(trials)} trial(s); a trend over "
                               "trials needs at least 3")
         if math.isfinite(data_period):
             period = data_period
+        if math.isfinite(data_q_v) and data_q_v > 0.0:
+            q_v, q_theta = data_q_v, data_q_theta
+            noise_words = (f"the data's noise (VAR(1) residuals of each trial, {pairs} degrees "
+                           "of freedom; measurement noise inflates it)")
+        else:
+            noise_words = ("the config's noise: the data's trials have no run of 8 consecutive "
+                           "unperturbed impacts to estimate their own")
         frames["trials.csv"] = trials
         frames["trend.csv"] = trend_table(trials, config.confidence)
         for row in frames["trend.csv"].itertuples():
             lines.append(f"{row.quantity}: slope {row.slope_per_trial:.4g} per trial "
                          f"[{row.slope_ci_low:.4g}, {row.slope_ci_high:.4g}] ({row.trend})")
     try:
-        curve = model_curve(m.alpha, m.g, period, config.noise.q_v, config.noise.q_theta,
-                            config.ac_points)
+        curve = model_curve(alpha, g, period, q_v, q_theta, config.ac_points)
     except ModelError as exc:
         raise ConfigError(f"model curve at racket period {period:.4g} s: {exc}") from None
     frames["model_curve.csv"] = curve
     best = curve.loc[curve["apex_sd_m"].idxmin()]
-    lines.append(f"eq. 19 at alpha = {m.alpha:g}, tau = {period:.4g} s, q_v = "
-                 f"{config.noise.q_v:g} m/s, q_theta = {config.noise.q_theta:g} rad: SD of ball "
+    lines.append(f"eq. 19 at alpha = {alpha:g}, g = {g:g} m/s^2, tau = {period:.4g} s, q_v = "
+                 f"{q_v:.4g} m/s, q_theta = {q_theta:.4g} rad ({noise_words}): SD of ball "
                  f"amplitude smallest ({best.apex_sd_m * 100:.2f} cm) at AC = {best.ac_g:.3f} g; "
-                 f"stable AC range ({float(stable_ac_range_g(m.alpha)[0]):.3f}, 0) g (eq. 14)")
+                 f"stable AC range ({float(stable_ac_range_g(alpha)[0]):.3f}, 0) g (eq. 14)")
     figures = draw(frames)
-    caption_figures(figures, None, data_caption(config, source))
+    caption_figures(figures, None, data_caption(config, source, options.record))
     return ExperimentResult(frames=frames, figures=figures, summary=lines)
 
 
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
+    """learning.png: with trials, each trial's AC and SD of ball amplitude over the trials
+    (left; the SD's axis from 0, so that its change is seen at its size) and eq. 19's SD
+    against AC with the trials on it (right); without, the model's curve alone."""
     curve = frames["model_curve.csv"]
     trials = frames.get("trials.csv")
     alpha = float(curve["alpha"].iloc[0])
@@ -172,10 +195,12 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     if trials is not None:
         fig, axes = new_figure(1, 2, width=12, height=4.8)
         ax = axes[0, 0]
-        ax.axhspan(low, 0.0, color="0.92", label=f"stable AC range, eq. 14 (alpha = {alpha:g})")
+        ax.axhspan(low, 0.0, color="0.92",
+                   label=f"stable AC range, eq. 14 ($\\alpha$ = {alpha:g})")
         ax.errorbar(trials["trial_number"], trials["ac_mean_g"], yerr=trials["ac_sd_g"], fmt="-o",
-                    color="k", ms=4, capsize=2, label="mean AC +- SD per trial")
+                    color="k", ms=4, capsize=2, label=r"mean AC $\pm$ SD per trial")
         ax.set_xlabel("trial number")
+        integer_axis(ax)
         ax.set_ylabel("racket acceleration at impact AC (g)")
         ax.set_ylim(min(low * 1.1, float((trials["ac_mean_g"] - trials["ac_sd_g"]).min()) - 0.1),
                     max(0.3, float((trials["ac_mean_g"] + trials["ac_sd_g"]).max()) + 0.1))
@@ -183,6 +208,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         right.plot(trials["trial_number"], trials["apex_sd_m"] * 100, "-s", color="0.55", ms=4,
                    label="SD of ball amplitude")
         right.set_ylabel("SD of ball amplitude (cm)", color="0.4")
+        right.set_ylim(0.0, float(trials["apex_sd_m"].max()) * 100 * 1.15)
         h1, l1 = ax.get_legend_handles_labels()
         h2, l2 = right.get_legend_handles_labels()
         ax.legend(h1 + h2, l1 + l2, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.13),
@@ -194,21 +220,21 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         ax2 = axes[0, 0]
     ax2.axvspan(low, 0.0, color="0.92", label="stable AC range, eq. 14")
     ax2.plot(curve["ac_g"], curve["apex_sd_m"] * 100, "-", color="0.3",
-             label=f"eq. 19: q_v = {curve['q_v_m_s'].iloc[0]:g} m/s, q_theta = "
-                   f"{curve['q_theta_rad'].iloc[0]:g} rad")
+             label=f"eq. 19: $q_v$ = {curve['q_v_m_s'].iloc[0]:.3g} m/s, $q_\\theta$ = "
+                   f"{curve['q_theta_rad'].iloc[0]:.3g} rad")
     ax2.plot(curve["ac_g"], curve["apex_sd_map_m"] * 100, ":", color="0.3",
              label="eq. 19 with the noise of eqs. 16-18 as printed")
     if trials is not None:
         sc = ax2.scatter(trials["ac_mean_g"], trials["apex_sd_m"] * 100, c=trials["trial_number"],
                          cmap="viridis", s=22, zorder=3, label="data: trials")
-        fig.colorbar(sc, ax=ax2, label="trial number")
+        integer_axis(fig.colorbar(sc, ax=ax2, label="trial number").ax, which="y")
     top = float(np.nanpercentile(curve["apex_sd_m"], 90)) * 100
     if trials is not None:
         top = max(top, float(trials["apex_sd_m"].max()) * 100 * 1.1)
     ax2.set_ylim(0, top)
     ax2.set_xlabel("racket acceleration at impact AC (g)")
     ax2.set_ylabel("SD of ball amplitude (cm)")
-    ax2.set_title(f"model: SD of ball amplitude vs AC (alpha = {alpha:g}, tau = "
+    ax2.set_title(f"model: SD of ball amplitude vs AC ($\\alpha$ = {alpha:g}, $\\tau$ = "
                   f"{curve['racket_period_s'].iloc[0]:.3g} s)", fontsize=10)
     ax2.legend(fontsize=8)
     return {"learning.png": fig}

@@ -12,14 +12,22 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import numpy as np
 import pandas as pd
 from pydantic import Field
 
 from .. import paper
-from ..config import ConfigError, ExperimentConfig, StrictModel, show_value
+from ..config import (
+    ConfigError,
+    DataFiles,
+    ExperimentConfig,
+    StrictModel,
+    data_files,
+    data_text,
+    show_value,
+)
 from ..engine.linear import stability
 from ..engine.params import ModelError, ModelParams, NoFixedPointError
 from ..engine.regression import (
@@ -30,9 +38,10 @@ from ..engine.regression import (
     phase_from_slope,
     simulate_trial,
 )
-from ..plotting import caption_figures, new_figure
+from ..plotting import caption_figures, new_figure, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 from ..impacts import read_data_csv
+from ..plausibility import racket_warnings
 from .data_side import is_impacts_table, trial_means_from_impacts
 
 REQUIRED = ("a_r_m", "tau_s")
@@ -62,7 +71,8 @@ class RegressionConfig(ExperimentConfig):
     design: DesignBlock = DesignBlock()
     stochastic_map: MapNoiseBlock = MapNoiseBlock()
     confidence: float = Field(0.95, gt=0.0, lt=1.0, description="confidence level of the CIs")
-    data: Optional[str] = Field(None, description="CSV of real trials; replaces the simulation")
+    data: DataFiles = Field(None, description="CSV of real trials; replaces the simulation; "
+                            "several: one session")
     seed: int = Field(0, ge=0)
 
 
@@ -222,16 +232,25 @@ def _constant(group: pd.DataFrame, column: str, default: float, condition) -> fl
 
 def run(config: RegressionConfig, options: RunOptions, source=None) -> ExperimentResult:
     """``source``: an impacts table in memory, ``(label, frame)`` (default: ``config.data``)."""
-    data_label = config.data if source is None else source[0]  # None: simulated trials
-    if source is not None:
-        trials = trial_means_from_impacts(source, config.model.alpha)
-        described = f"{data_label} (impacts averaged per trial)"
-    elif config.data is not None and is_impacts_table(config.data):
-        trials = trial_means_from_impacts(config.data, config.model.alpha)
-        described = f"data {config.data} (impacts averaged per trial)"
-    elif config.data is not None:
-        trials = read_trials(config.data)
-        described = f"data {config.data}"
+    # None: simulated trials
+    data_label = (data_text(config.data) or None) if source is None else source[0]
+    at_model = ""  # with an impacts table: the model's alpha and g and where they came from
+    impacts_source = source if source is not None else (
+        config.data if config.data is not None and all(
+            is_impacts_table(p) for p in data_files(config.data)) else None)
+    if impacts_source is not None:
+        trials, model = trial_means_from_impacts(impacts_source, config, options)
+        described = (f"{'data ' if source is None else ''}{data_label} (impacts averaged per "
+                     f"trial); {model.text()}")
+        at_model = f"; {model.text()}"
+    elif config.data is not None:  # several trials CSVs: their trials together
+        trials = pd.concat([read_trials(p) for p in data_files(config.data)],
+                           ignore_index=True)
+        described = f"data {data_label}"
+        for message in racket_warnings(trials["a_r_m"], trials["tau_s"],
+                                       f"data: {data_label}: column a_r_m",
+                                       f"data: {data_label}: column tau_s"):
+            options.warn(message)
     else:
         trials = simulate_trials(config, options)
         described = (f"{len(trials)} simulated trials ({int(trials['lost'].sum())} lost the "
@@ -250,7 +269,7 @@ def run(config: RegressionConfig, options: RunOptions, source=None) -> Experimen
                 "trials at different racket periods, e.g. different target heights)")
     figures = draw({"trials.csv": trials, "fit.csv": fit})
     if data_label is not None:
-        caption_figures(figures, None, f"data: {data_label}")
+        caption_figures(figures, None, f"data: {data_label}{at_model}")
     else:
         caption_figures(figures, None, f"simulated trials: alpha = {config.model.alpha:g}, "
                         f"g = {config.model.g:g} m/s^2; seed {config.seed}")
@@ -271,6 +290,7 @@ def run(config: RegressionConfig, options: RunOptions, source=None) -> Experimen
                             summary=lines)
 
 
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     trials, fit = frames["trials.csv"], frames["fit.csv"]
     fig, axes = new_figure(1, 1, width=7, height=5.2)
@@ -287,19 +307,19 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         if "lost" in group.columns:
             group = group[~group["lost"].astype(bool)]
         ax.plot(group["tau_s"] ** 2, group["a_r_m"] * 100, "o", mfc="none", mec=color, ms=5,
-                label=f"{tag}trial means (n={row.n})")
+                label=f"{tag}trial means ($n$ = {row.n})")
         ax.plot(xs, (row.intercept + row.slope * xs) * 100, "-", color=color, lw=1.5,
-                label=f"{tag}OLS fit: slope {row.slope:.3f} m/s^2, intercept "
-                      f"{row.intercept * 100:.2f} cm, R^2 {row.r2:.3f}")
+                label=f"{tag}OLS fit: slope {row.slope:.3f} m/s$^2$, intercept "
+                      f"{row.intercept * 100:.2f} cm, $R^2$ = {row.r2:.3f}")
         if np.isfinite(row.predicted_slope):
             ax.plot(xs, row.predicted_slope * xs * 100, "--", color=color, lw=1.2,
                     label=f"{tag}eq. 15 at mean phase {row.mean_theta_deg:.1f} deg: slope "
-                          f"{row.predicted_slope:.3f} m/s^2")
+                          f"{row.predicted_slope:.3f} m/s$^2$")
     ax.set_xlim(0, x_max)
     ax.set_ylim(bottom=min(0.0, float(ax.get_ylim()[0])))
     ax.axhline(0, color="0.8", lw=0.8)
-    ax.set_xlabel("squared racket period tau^2 (s^2)")
-    ax.set_ylabel("racket amplitude a_r (cm)")
+    ax.set_xlabel(r"squared racket period $\tau^2$ (s$^2$)")
+    ax.set_ylabel(r"racket amplitude $a_r$ (cm)")
     ax.set_title("Fig. 7: trial means of racket amplitude vs squared period (eq. 15)")
     ax.legend(fontsize=7, loc="upper left")
     return {"regression.png": fig}

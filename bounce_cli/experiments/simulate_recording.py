@@ -23,7 +23,7 @@ from pydantic import Field, model_validator
 from ..config import ControllableModelBlock, ExperimentConfig, StrictModel
 from ..engine.recording import SessionSettings, simulate_session, truth_rows
 from ..impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
-from ..plotting import caption_figures
+from ..plotting import caption_figures, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 from .extract import centred_deg, draw_fig2
 
@@ -159,6 +159,7 @@ def run(config: RecordingConfig, options: RunOptions) -> ExperimentResult:
     return ExperimentResult(frames=frames, figures=figures, summary=summary)
 
 
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     """Fig. 2's layout for the first trial's first 10 bounces, from the exact impacts
     (perturbed ones marked)."""

@@ -30,6 +30,7 @@ from ..engine.linear import (
     stable_ac_range_g,
 )
 from ..engine.params import ModelParams
+from ..plotting import publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
 
@@ -252,6 +253,7 @@ def _limits(values: np.ndarray, pad: float) -> tuple[float, float]:
     return (low, high) if high > low else (low - pad, high + pad)
 
 
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     from matplotlib.colors import BoundaryNorm, ListedColormap
 
@@ -280,7 +282,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     ax.plot(a, bnd.ac_flip_g, color="k", lw=2, label="stability boundary, eq. 14 (flip)", **style)
     ax.plot(a, bnd.ac_fold_g, color="k", lw=2, ls="--", label="stability boundary AC = 0, eq. 14",
             **style)
-    ax.axvline(1.0, color="k", lw=2, ls=":", label="|alpha| = 1, eq. 13")
+    ax.axvline(1.0, color="k", lw=2, ls=":", label=r"$|\alpha| = 1$, eq. 13")
     ax.plot(a, bnd.ac_complex_low_g, color="0.45", lw=1.5, label="real/complex, eq. 11",
             **style)
     ax.plot(a, bnd.ac_complex_high_g, color="0.45", lw=1.5, **style)
@@ -299,7 +301,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     hi1 = min(float(np.interp(a1, a, bnd.ac_complex_high_g)), 0.0)
     ax.text(a1, hi1 / 2, "real (stable)", ha="center", va="center", fontsize=9)
     labels = [
-        ((lo + hi) / 2, "complex (stable)\n|lambda| = alpha"),
+        ((lo + hi) / 2, "complex (stable)\n" r"$|\lambda| = \alpha$"),
         ((b["ac_flip_g"] + ac.min()) / 2, "unstable"),
         ((0.0 + ac.max()) / 2, "unstable"),
     ]
@@ -310,7 +312,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         ax.annotate("real (stable)", xy=(a0, (b["ac_complex_low_g"] + b["ac_flip_g"]) / 2),
                     xytext=(a0 - 0.45 * (hi_a - lo_a), b["ac_flip_g"] - 0.35), fontsize=9,
                     arrowprops={"arrowstyle": "->", "lw": 0.8})
-    ax.set_xlabel("coefficient of restitution alpha")
+    ax.set_xlabel(r"coefficient of restitution $\alpha$")
     ax.set_ylabel("racket acceleration at impact AC (g)")
     ax.set_title("Stability diagram (paper Fig. 5, left)")
     ax.legend(loc="lower left", fontsize=7, framealpha=0.9)
@@ -327,13 +329,13 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     else:  # one alpha (or one AC): the surface is a curve (or a point)
         surf = ax3.scatter(A.ravel(), C.ravel(), Z.ravel(), c=Z.ravel(), cmap="viridis",
                            vmin=0.0, vmax=1.0)
-    ax3.set_xlabel("alpha")
+    ax3.set_xlabel(r"$\alpha$")
     ax3.set_ylabel("AC (g)")
-    ax3.set_zlabel("max |lambda|")
+    ax3.set_zlabel(r"max $|\lambda|$")
     ax3.set_zlim(0.0, 1.0)
     ax3.view_init(elev=28, azim=-130)
-    ax3.set_title("Largest |eigenvalue| where stable (paper Fig. 5, right)")
-    fig.colorbar(surf, ax=ax3, shrink=0.6, pad=0.1, label="max(|lambda+|, |lambda-|)")
+    ax3.set_title(r"Largest $|\lambda|$ where stable (paper Fig. 5, right)")
+    fig.colorbar(surf, ax=ax3, shrink=0.6, pad=0.1, label=r"$\max(|\lambda_+|, |\lambda_-|)$")
     return {"stability.png": fig}
 
 

@@ -55,6 +55,7 @@ from ..engine.group_stats import (
 from ..engine.linear import stability
 from ..engine.params import ModelError, ModelParams, phase_difference
 from ..impacts import circular_mean
+from ..plotting import publication_style
 from ..report import Section, embed_png, html_table, page
 from ..study_manifest import ManifestRow, Unit, read_manifest
 from .base import Experiment, ExperimentResult, RunOptions
@@ -603,18 +604,24 @@ def group_tables(frames: dict[str, pd.DataFrame], units: list[Unit],
         for condition in sorted(cond.unique()):
             part = group[cond == condition]
             for method in ("ols", "lag2"):
-                d = paired_difference(part[f"radius_{method}"], part["model_spectral_radius"],
-                                      conf)
+                # a unit's estimate counts only where its data were enough for an interval
+                # (acf --data gives none below its stated minimum of bounces: such an estimate
+                # can be anything, e.g. a lag-2 radius of 30 on 170 bounces)
+                radius = part[f"radius_{method}"].where(
+                    np.isfinite(part[f"radius_{method}_ci_low"]))
+                d = paired_difference(radius, part["model_spectral_radius"], conf)
                 rows.append({"condition": condition, "estimate": method, "units": d.n,
-                             "data_mean": float(part[f"radius_{method}"].mean()),
-                             "model_mean": float(part["model_spectral_radius"].mean()),
+                             "units_without_interval": int(radius.isna().sum()),
+                             "data_mean": float(radius.mean()),
+                             "model_mean": float(part.loc[radius.notna(),
+                                                          "model_spectral_radius"].mean()),
                              "difference_mean": d.mean, "difference_sd": d.sd,
                              "ci_low": d.ci_low, "ci_high": d.ci_high, "p_value": d.p_value,
                              "confidence": conf,
-                             "verdict": ("data faster than the model" if d.ci_high < 0 else
+                             "verdict": ("too few units with an interval" if d.n < 2 else
+                                         "data faster than the model" if d.ci_high < 0 else
                                          "data slower than the model" if d.ci_low > 0 else
-                                         "no difference detected" if d.n >= 2 else
-                                         "too few units")})
+                                         "no difference detected")})
         out["group_stability.csv"] = pd.DataFrame(rows)
     # Fig. 8 per condition: correlation functions averaged over units
     acf = _unit_frames(frames, units, "acf", "acf_data.csv")
@@ -658,7 +665,9 @@ def group_summary(frames: dict[str, pd.DataFrame]) -> list[str]:
     stab = frames.get("group_stability.csv")
     if stab is not None:
         for r in stab.to_dict("records"):
-            lines.append(f"stability ({r['condition']}, {r['estimate']}, {r['units']} units): "
+            lines.append(f"stability ({r['condition']}, {r['estimate']}, {r['units']} units"
+                         + (f"; {r['units_without_interval']} without an interval, left out"
+                            if r["units_without_interval"] else "") + "): "
                          f"data {r['data_mean']:.3f} vs model {r['model_mean']:.3f}, difference "
                          f"{r['difference_mean']:.3f} [{r['ci_low']:.3f}, {r['ci_high']:.3f}]: "
                          f"{r['verdict']}")
@@ -666,6 +675,7 @@ def group_summary(frames: dict[str, pd.DataFrame]) -> list[str]:
 
 
 # -- figures -------------------------------------------------------------------------------------
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     """The group figures, from the group tables."""
     from .study_figures import draw_group

@@ -38,7 +38,7 @@ from ..engine.sweep import (
     parameter_point,
     point_tasks,
 )
-from ..plotting import caption_figures
+from ..plotting import caption_figures, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 from .basin import GridAxis
 
@@ -253,6 +253,7 @@ QUANTITIES = {
 }
 
 
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     """sweep.png from sweep.csv and axes.csv: heat maps of each quantity over a 2-D sweep
     (the spectral radius 1 contour dashed on each; grey: no fixed point), lines over a 1-D."""
@@ -357,7 +358,8 @@ def _draw_line(sweep: pd.DataFrame, axis, quantities: list[str]):
     ax.plot(x, sweep["basin_entropy"], "o-", ms=3, label="basin entropy $S_b$")
     ax.plot(x, sweep["boundary_basin_entropy"], "s-", ms=3,
             label="boundary basin entropy $S_{bb}$")
-    ax.axhline(math.log(2), color="0.5", ls="--", lw=1, label="ln 2 (fractal if $S_{bb}$ above)")
+    ax.axhline(math.log(2), color="0.5", ls="--", lw=1,
+               label=r"$\ln 2$ (fractal if $S_{bb}$ above)")
     ax.set_ylabel("entropy (nats)")
     ax.legend(fontsize=8)
     if has_exponent:

@@ -17,7 +17,7 @@ from pydantic import Field, model_validator
 from ..config import ConfigError, ControllableModelBlock, ExperimentConfig, StrictModel
 from ..engine.flight import FlightSettings, simulate
 from ..engine.params import ModelParams, wrap_phase
-from ..plotting import caption_figures
+from ..plotting import caption_figures, integer_axis, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
 
@@ -217,6 +217,7 @@ def _stuck_spans(t, stuck):
     return spans
 
 
+@publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     """Fig. 3 style: per case, ball and racket position over time, then v_k and theta_k."""
     from ..plotting import new_figure
@@ -255,15 +256,13 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         ax_th.axhline(th_fp, ls="--", color="0.4", lw=0.8,
                       label=f"$\\tilde\\theta$ = {th_fp:.2f} deg")
         ax_th.set_ylabel("$\\theta_k$ (deg)")
-        ax_th.set_xlabel("bounce k")
+        ax_th.set_xlabel("bounce $k$")
+        integer_axis(ax_v, ax_th)
         ax_th.legend(loc="best", fontsize=7)
-        ax_x.set_xlabel("time t (s)")
-    integrator = str(fixed["integrator"].iloc[0])
-    if "accumulations.csv" in frames:
-        integrator += ", exact sticking (min_hop_s 0)"
+        ax_x.set_xlabel("time $t$ (s)")
     fig.suptitle("Ball and racket trajectories (eqs. 1-4; paper Fig. 3)\n"
-                 f"integrator: {integrator}; dashed: fixed point (eqs. 7, 8); "
-                 "shaded: ball riding on the racket", fontsize=10)
+                 "dashed: fixed point (eqs. 7, 8); shaded: ball riding on the racket",
+                 fontsize=10)
     return {"trajectory.png": fig}
 
 

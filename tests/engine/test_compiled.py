@@ -36,6 +36,7 @@ def assert_same(a, b):
     np.testing.assert_array_equal(a.iterations, b.iterations)
 
 
+@pytest.mark.slow
 def test_fig4_grid_same_outcomes_and_impact_counts():
     params = PARAMETERS[0]
     theta, v = np.meshgrid(np.deg2rad(np.linspace(0, 360, 150)), np.linspace(0, 10, 150))

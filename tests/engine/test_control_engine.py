@@ -400,6 +400,7 @@ def test_fit_survives_a_labs_degradations():
     assert fit.rate_ci[0] <= truth.rate <= fit.rate_ci[1]
 
 
+@pytest.mark.slow
 def test_fit_is_not_caught_in_a_local_minimum():
     """At a_r = 0.5 m a start at (K, c) = (0.5, 0.5) alone ends at K = 0.31, c = 1.55 (reduced
     chi2 ~ 4000); the grid of starts finds the truth."""

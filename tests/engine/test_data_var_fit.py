@@ -16,7 +16,11 @@ from bounce_cli.engine.var_fit import (
     fit_var1,
     fit_var1_lag2,
     fit_var1_ols,
+    MIN_PAIRS_FOR_INTERVAL,
     jacobian_coverage,
+    lag_order_criteria,
+    ljung_box,
+    log_scale_interval,
 )
 
 PAPER = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.30, racket_period=0.92)
@@ -111,14 +115,68 @@ def binomial_band(p, reps, z=3.5):
 
 @pytest.mark.parametrize("method", ["ols", "lag2"])
 def test_intervals_cover_eq9_jacobian_at_nominal_rate(method):
-    """Coverage over 400 data sets of 3 trials x 200 bounces (linear VAR at the acf config's
-    parameters): each entry of J and the spectral radius inside the 95 % interval at 95 % +-
-    3.5 binomial SE."""
+    """Coverage over 400 data sets of 4 trials x 302 bounces (1200 lag-2 triples, linear VAR at
+    the acf config's parameters): each entry of J and the spectral radius inside the 95 %
+    interval at 95 % +- 3.5 binomial SE."""
     reps = 400
-    rate, radius_rate, bias = coverage(method, ACF, 3, 200, reps, seed=4)
+    rate, radius_rate, bias = coverage(method, ACF, 4, 302, reps, seed=4)
     band = binomial_band(0.95, reps)
     assert np.all(np.abs(rate - 0.95) < band), rate
     assert abs(radius_rate - 0.95) < band, radius_rate
+
+
+@pytest.mark.parametrize("method", ["ols", "lag2"])
+def test_the_radius_interval_covers_and_never_leaves_its_range(method):
+    """200 data sets of linear VAR(1) data with eq. 9's J at section 7's parameters (radius
+    0.5), in 4 trials of twice the estimator's minimum size for an interval
+    (MIN_PAIRS_FOR_INTERVAL): the spectral radius's 95 % interval covers the truth in 95 % +-
+    3.5 binomial SE of them, and no interval reaches below 0. At the minimum size itself
+    coverage is at least 0.90 - 2 binomial SE (the stated guarantee)."""
+    reps, n_trials = 200, 4
+    per = 2 * MIN_PAIRS_FOR_INTERVAL[method] // n_trials + 2
+    rng = np.random.default_rng(41)
+    truth = stability(PAPER).spectral_radius
+    ys = var1_series(jacobian(PAPER), Q, reps * n_trials, per, rng)
+    inside = lows = symmetric_negative = 0
+    for r in range(reps):
+        fit = fit_var1(list(ys[r * n_trials:(r + 1) * n_trials]), method)
+        assert fit.has_interval
+        value, se, low, high = fit.eigen_summary()["spectral_radius"]
+        inside += low <= truth <= high
+        lows += low <= 0.0
+        symmetric_negative += value - 1.96 * se < 0.0
+        assert low < value < high
+    assert lows == 0
+    assert abs(inside / reps - 0.95) < binomial_band(0.95, reps)
+    per = MIN_PAIRS_FOR_INTERVAL[method] // n_trials + 2
+    ys = var1_series(jacobian(PAPER), Q, reps * n_trials, per, rng)
+    inside = 0
+    for r in range(reps):
+        fit = fit_var1(list(ys[r * n_trials:(r + 1) * n_trials]), method)
+        value, se, low, high = fit.eigen_summary()["spectral_radius"]
+        inside += low <= truth <= high
+        symmetric_negative += value - 1.96 * se < 0.0
+        assert 0.0 < low < value < high
+    assert inside / reps >= 0.90 - binomial_band(0.9, reps, z=2.0)
+    if method == "lag2":
+        assert symmetric_negative > 0  # the old interval left the range on these data
+
+
+def test_tiny_data_get_no_interval_and_small_data_one_inside_the_range():
+    """29 bounces (the size at which the old interval read 0.455 [-1.126, 2.036]): no
+    interval, for both estimators; the old example's estimate and SE give an asymmetric
+    interval inside (0, inf)."""
+    rng = np.random.default_rng(42)
+    tiny = list(var1_series(jacobian(PAPER), Q, 1, 29, rng))
+    for method in ("ols", "lag2"):
+        fit = fit_var1(tiny, method)
+        assert not fit.has_interval
+        value, se, low, high = fit.eigen_summary()["spectral_radius"]
+        assert math.isfinite(value) and math.isfinite(se)
+        assert math.isnan(low) and math.isnan(high)
+    low, high = log_scale_interval(0.455, 0.806, 1.96)  # the old example's SE
+    assert 0.0 < low < 0.455 < high and high / 0.455 == pytest.approx(0.455 / low)
+    assert log_scale_interval(1e-3, 10.0, 1.96)[1] < math.inf
 
 
 def test_measurement_noise_biases_ols_toward_stability_but_not_lag2():
@@ -139,7 +197,7 @@ def test_measurement_noise_biases_ols_toward_stability_but_not_lag2():
 
 def test_lag2_interval_keeps_its_coverage_under_measurement_noise():
     reps = 300
-    rate, radius_rate, _ = coverage("lag2", ACF, 3, 400, reps, seed=6,
+    rate, radius_rate, _ = coverage("lag2", ACF, 3, 402, reps, seed=6,
                                     measurement_sd=(0.02, math.radians(2.0)))
     band = binomial_band(0.95, reps)
     assert np.all(rate > 0.95 - band), rate
@@ -184,3 +242,62 @@ def test_errors_are_model_errors():
         fit_var1([np.ones((5, 2))], "ols")
     with pytest.raises(ModelError, match="NaN"):
         fit_var1_ols([np.full((10, 2), np.nan)])
+
+
+def var2_series(j1, j2, n_trials, n, rng, burn=100):
+    """y_{k+1} = J1 y_k + J2 y_{k-1} + eps_k (eps ~ N(0, Q)): (T, n, 2)."""
+    chol = np.linalg.cholesky(Q)
+    y = np.zeros((n_trials, burn + n, 2))
+    for k in range(2, burn + n):
+        y[:, k] = (y[:, k - 1] @ j1.T + y[:, k - 2] @ j2.T
+                   + rng.standard_normal((n_trials, 2)) @ chol.T)
+    return y[:, burn:]
+
+
+def ljung_box_by_hand(x, lags):
+    """Q = n (n + 2) sum_h r_h^2 / (n - h), r_h the lag-h autocorrelation of x about its mean."""
+    x = x - x.mean()
+    n = len(x)
+    r = [np.sum(x[h:] * x[:-h]) / np.sum(x * x) for h in range(1, lags + 1)]
+    return n * (n + 2) * sum(rh**2 / (n - h) for h, rh in enumerate(r, start=1))
+
+
+def test_ljung_box_is_each_trials_q_summed_and_tells_var1_from_var2():
+    """The pooled statistic is the sum of each trial's own Q (computed here by the formula,
+    not statsmodels), so no lag spans two trials; on VAR(1) data the residuals pass at 5 %
+    in at least 25 of 30 data sets (expected 28.5), on VAR(2) data fitted as a VAR(1) they
+    fail in all of them."""
+    rng = np.random.default_rng(51)
+    truth = jacobian(PAPER)
+    trials = list(var1_series(truth, Q, 3, 300, rng))
+    fit = fit_var1(trials, "ols")
+    tests = ljung_box(fit, 10)
+    for index, test in enumerate(tests):
+        assert test.statistic == pytest.approx(
+            sum(ljung_box_by_hand(r[:, index], 10) for r in fit.residuals), rel=1e-9)
+        assert test.df == 3 * 10 - 2
+    passed = failed = 0
+    lag2 = np.array([[-0.3, 0.0], [0.0, -0.3]])
+    for _ in range(30):
+        p_white = [t.p_value for t in ljung_box(fit_var1(list(var1_series(
+            truth, Q, 3, 300, rng)), "ols"), 10)]
+        passed += min(p_white) >= 0.05 / 2  # both components, Bonferroni
+        p_var2 = [t.p_value for t in ljung_box(fit_var1(list(var2_series(
+            truth * 0.5, lag2, 3, 300, rng)), "ols"), 10)]
+        failed += min(p_var2) < 0.05 / 2
+    assert passed >= 25 and failed == 30, (passed, failed)
+
+
+def test_information_criteria_pick_the_true_lag_order():
+    """BIC picks order 1 on VAR(1) data and both criteria order 2 on VAR(2) data (4 trials x
+    500, per-trial designs on the same rows for every order)."""
+    rng = np.random.default_rng(52)
+    truth = jacobian(PAPER)
+    one = lag_order_criteria(list(var1_series(truth, Q, 4, 500, rng)), 4)
+    assert [o.order for o in one] == [1, 2, 3, 4]
+    assert len({o.n_rows for o in one}) == 1 and one[0].n_rows == 4 * (500 - 4)
+    assert min(one, key=lambda o: o.bic).order == 1
+    two = lag_order_criteria(list(var2_series(truth * 0.5, np.diag([-0.3, -0.3]), 4, 500,
+                                              rng)), 4)
+    assert min(two, key=lambda o: o.aic).order == 2
+    assert min(two, key=lambda o: o.bic).order == 2

@@ -13,6 +13,7 @@ from bounce_cli.engine.reference import classify_point_brentq
 SCAN = dict(scan_step=0.01, bisection_tolerance=1e-4, alpha_p_max=0.99)
 
 
+@pytest.mark.slow
 def test_perturbed_outcome_criteria(paper_params):
     # alpha_p = alpha_0 is no perturbation: the fixed point itself, period-1 after 1 impact
     assert perturbed_outcome(paper_params, paper_params.alpha) == ("period1", 1)

@@ -78,6 +78,7 @@ def test_thousands_of_states_vectorised():
     assert np.max(np.abs(gap(s, theta, v, p))) < 1e-12
 
 
+@pytest.mark.slow
 def test_takes_the_first_of_several_roots(paper_params):
     """Short hops at the paper's parameters where G crosses zero, comes back positive (the
     racket drops away) and crosses again: a bracket such as [0, 2 pi] handed to a root finder

@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pandas as pd
+import pytest
 
 from bounce_cli.experiments import basin
 
@@ -47,6 +48,7 @@ def test_basin_cli_small_grid_jobs_independent(tmp_path, paper_params, cli):
     assert math.isclose(markers.loc["fixed_point", "v0_m_s"], paper_params.fixed_point().v_m_s)
 
 
+@pytest.mark.slow
 def test_basin_figures_redraw_from_csv(tmp_path, cli):
     out = tmp_path / "b"
     assert cli("basin", *SMALL, "--jobs", 1, "--out", out, "--quiet").exit_code == 0
@@ -123,6 +125,7 @@ def test_run_reports_progress_per_tile_and_summary():
     assert any("max impacts" in line for line in result.summary)
 
 
+@pytest.mark.slow
 def test_one_value_axes_run_and_draw(tmp_path, paper_params, cli):
     """num: 1 is linspace's one value: a basin along a line of v0 at the Fig. 3 phase, along
     a line of theta0, and at one initial condition; each agrees with the classifier run

@@ -207,6 +207,7 @@ def test_period_doubling_candidates_bridge_unsettled_values():
     assert period_doubling_candidates(periods, max_gap=3)[-1] == (5, 9, 0)
 
 
+@pytest.mark.slow
 def test_period_doubling_located_where_eq14_says():
     """Multisection on the detected period of one orbit (no closed form used, except to
     choose a bracket 3 % either side) finds the period-1 -> period-2 change within 1e-3 of
@@ -222,6 +223,7 @@ def test_period_doubling_located_where_eq14_says():
     assert loc.period1_end < flip  # the transient's bias is toward the period-1 side
 
 
+@pytest.mark.slow
 def test_period_doubling_in_the_racket_period_at_another_alpha():
     """alpha 0.3, racket period swept (a_r 0.3 m): a longer period lowers Gamma, so period 1
     lies above the flip -- the bracket is given the other way round. Started 5 % above the
@@ -236,6 +238,7 @@ def test_period_doubling_in_the_racket_period_at_another_alpha():
     assert abs(loc.value / flip - 1.0) < 1e-3
 
 
+@pytest.mark.slow
 def test_a_jump_between_coexisting_orbits_is_not_a_flip():
     """alpha 0.7, tau 0.8 s, a_r swept: from (90 deg, 7 m/s) the orbit is on the period-2
     orbit of the one-cycle family (v 3.5 / 4.4 m/s) at a_r = 0.1900 m and on the new period-1
@@ -260,6 +263,7 @@ def test_a_jump_between_coexisting_orbits_is_not_a_flip():
     assert abs(loc.value / flip - 1.0) < 1e-3
 
 
+@pytest.mark.slow
 def test_the_cli_reports_only_real_flips(tmp_path):
     """The review's sweep: the one-cycle flip within 1e-3 of eq. 14; the two-cycle orbit's
     flip either located within 1e-3 or not at all -- never the coexisting-orbit jump."""

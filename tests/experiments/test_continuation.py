@@ -19,8 +19,15 @@ SMALL = ["--set", "range.low=1.0", "--set", "range.high=1.72",
          "--set", "diagram.v0_m_s=[5]", "--set", "diagram.transient_impacts=100"]
 
 
+def small_but(*extra):
+    """SMALL, with the --set keys of ``extra`` replacing its own (a key may be given once)."""
+    keys = {e.split("=", 1)[0] for e in extra[1::2]}
+    return [a for k, v in zip(SMALL[::2], SMALL[1::2]) if v.split("=", 1)[0] not in keys
+            for a in (k, v)]
+
+
 def run_small(cli, out, *extra):
-    result = cli("continuation", *SMALL, *extra, "--out", out, "--quiet")
+    result = cli("continuation", *small_but(*extra), *extra, "--out", out, "--quiet")
     assert result.exit_code == 0, result.output
     return {p.name: pd.read_csv(p) for p in out.glob("*.csv")}
 
@@ -89,7 +96,8 @@ def test_start_found_by_iterating_gives_the_same_flips(cli, tmp_path):
     ("range.low=2.0", "low must be less than high"),
 ])
 def test_bad_starts_are_one_line_errors(cli, user_error, tmp_path, override, needle):
-    result = cli("continuation", *SMALL, "--set", override, "--out", tmp_path / "x", "--quiet")
+    result = cli("continuation", *small_but("--set", override), "--set", override, "--out",
+                 tmp_path / "x", "--quiet")
     user_error(result, needle)
     assert not (tmp_path / "x").exists()
 

@@ -49,6 +49,7 @@ def test_bundled_config_is_section7s_model():
     assert cfg.impulse.alpha_p == [0.4, 0.6, 0.35, 0.65]
 
 
+@pytest.mark.slow
 def test_frames_and_figures(result):
     assert sorted(result.figures) == sorted(png for png, _ in entry("control").figures)
     assert sorted(result.frames) == sorted([
@@ -148,6 +149,7 @@ def test_relaxation_along_gain_matches_single_responses(result, paper_params):
                                                            "relaxation_impacts"]
 
 
+@pytest.mark.slow
 def test_zero_gain_controlled_equals_passive_end_to_end():
     res = exp.run(load(["model.control.gain=0", "model.control.rate=0.4"]), RunOptions())
     for name, key in (("impulse.csv", ["alpha_p", "k"]), ("basin.csv", ["theta0_deg", "v0_m_s"]),
@@ -172,12 +174,14 @@ def impacts_csv(tmp_path, gain=0.6, rate=0.7, **drop):
         velocity_noise_sd=0.05, phase_noise_sd=0.02, period_noise_sd=0.005, seed=9))
     data["theta_deg"] = np.degrees(data.theta_rad)
     data["racket_amplitude_m"] = 0.3
+    data["g_m_s2"] = 9.81  # the set-up's gravity (the model runs at the data's)
     data = data.drop(columns=list(drop))
     path = tmp_path / "impacts.csv"
     data.to_csv(path, index=False)
     return path
 
 
+@pytest.mark.slow
 def test_cli_fits_a_labs_impacts_table(tmp_path):
     path = impacts_csv(tmp_path)
     out = tmp_path / "out"

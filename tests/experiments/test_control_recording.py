@@ -24,7 +24,11 @@ CONTROL = ["model.control.gain=0.2", "model.control.rate=0.3", "model.control.sw
 
 
 def session(overrides):
-    cfg = load_config(RecordingConfig, bundled_config_path("recording"), CONTROL + overrides)
+    """A controlled session: CONTROL with ``overrides`` replacing its keys (a key may be given
+    once to --set)."""
+    keys = {o.split("=", 1)[0] for o in overrides}
+    control = [o for o in CONTROL if o.split("=", 1)[0] not in keys]
+    cfg = load_config(RecordingConfig, bundled_config_path("recording"), control + overrides)
     return cfg, session_frames(cfg)
 
 
@@ -93,6 +97,7 @@ def fit_table(path, overrides=()):
     return control_exp.fit_frames(cfg)["fit.csv"].set_index("quantity")
 
 
+@pytest.mark.slow
 def test_without_noise_control_data_returns_k_and_c_exactly(tmp_path):
     """Section 7's protocol in the recording (alpha 0.4 / 0.6 every 8th impact from impact
     4), 4 trials of 60 s without velocity noise: on the exact impacts the fit returns K and c

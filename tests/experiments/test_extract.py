@@ -20,12 +20,14 @@ from bounce_cli.cli import app
 from bounce_cli.engine import ModelParams
 from bounce_cli.engine.extraction import (
     ExtractionSettings,
+    contact_shape_factor,
     extract_trial,
     local_derivatives,
     match_impacts,
+    pooled_gravity,
 )
 from bounce_cli.engine.recording import SessionSettings, simulate_session, truth_rows
-from bounce_cli.impacts import EVENT_COLUMNS, REQUIRED_COLUMNS
+from bounce_cli.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
 
 PAPER = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.30, racket_period=0.92)
 BASE = dict(n_trials=2, duration_s=20.0, velocity_noise_m_s=0.04, perturb_every=8,
@@ -374,7 +376,7 @@ def test_researcher_workflow_mm_ms_other_names_and_events(simulated, tmp_path):
         "--set", "columns.racket=paddle_z", "--set", "columns.ball=ball_z")
     assert result.exit_code == 0, result.output
     impacts = pd.read_csv(out / "impacts.csv")
-    assert list(impacts.columns) == [*REQUIRED_COLUMNS, *EVENT_COLUMNS]
+    assert list(impacts.columns) == [*REQUIRED_COLUMNS, *EVENT_COLUMNS, *MEASURED_COLUMNS]
     assert list(impacts["trial"].unique()) == ["A", "B", "C"]
     truth = pd.read_csv(simulated / "truth.csv")
     for label, number in (("A", 1), ("B", 2), ("C", 3)):
@@ -450,7 +452,8 @@ def test_bad_recordings_are_one_line_errors_and_write_nothing(simulated, tmp_pat
     cases["few"] = (rec[rec.trial == 1].head(20), ["trial 1", "only 20 samples"])
     resting = rec[rec.trial == 2].copy()
     resting["ball_x_m"] = resting["racket_x_m"]
-    cases["no_bounce"] = (pd.concat([rec[rec.trial == 1], resting]), ["trial 2", "no bounce"])
+    cases["no_bounce"] = (pd.concat([rec[rec.trial == 1], resting]),
+                          ["trial 2", "no bounce", "check units.length", "vertical axis"])
     text = rec.copy().astype({"racket_x_m": object})
     text.loc[7, "racket_x_m"] = "n/a?"
     cases["text"] = (text, ["racket_x_m", "row 9"])
@@ -627,3 +630,142 @@ def test_a_contact_that_cannot_be_located_is_listed_at_its_time_and_k_skips_it()
     assert abs(times["contact not located"] - t6) <= 0.01
     assert any("about 1 impact(s) lost" in reason for _, reason in result.excluded)
     assert all(math.isfinite(tt) for tt, _ in result.excluded)
+
+
+# -- the set-up measured from the data (issue 24) -------------------------------------------
+def test_pooled_gravity_is_the_curvature_of_the_flights():
+    """Flights of known g with their own positions and velocities and 0.5 mm noise: the pooled
+    fit recovers g within 3 of its SE, the SE matches the scatter of per-flight quadratic
+    fits (an independent route: np.polyfit per flight, inverse-variance mean), and the
+    residual SD is the noise."""
+    rng = np.random.default_rng(4)
+    flights, single = [], []
+    for _ in range(30):
+        t = np.arange(0.0, rng.uniform(0.3, 0.6), 0.005) + rng.uniform(0, 100)
+        s = t - t[0]
+        x = rng.uniform(0, 0.1) + rng.uniform(1.0, 2.0) * s - 0.5 * 5.8 * s * s
+        x = x + 0.0005 * rng.standard_normal(t.size)
+        flights.append((t, x))
+        c, cov = np.polyfit(s, x, 2, cov=True)
+        single.append((-2 * c[0], 4 * cov[0, 0]))
+    fit = pooled_gravity(flights)
+    assert fit.n_flights == 30 and abs(fit.g - 5.8) <= 3 * fit.se
+    g_i, var_i = np.array(single).T
+    weighted = np.sum(g_i / var_i) / np.sum(1 / var_i)
+    assert fit.g == pytest.approx(weighted, abs=2 * fit.se)
+    assert fit.se == pytest.approx(np.sqrt(1 / np.sum(1 / var_i)), rel=0.2)
+    assert fit.residual_sd == pytest.approx(0.0005, rel=0.05)
+
+
+@pytest.mark.parametrize("alpha", [0.3, 0.42, 0.7])
+def test_the_contact_shape_factor_is_the_area_between_the_path_and_its_flights(alpha):
+    """Independent route: the simulator's integrated spring-damper contact (no gravity, a still
+    racket), the V of its two straight flights meeting at the equivalent impact, the area
+    between them by the trapezoid rule: K |u| T^2."""
+    from bounce_cli.engine.recording import compliant_contact, CycleRacket
+
+    still = CycleRacket(np.array([1e9]), np.array([1.0]), np.array([0.1]))
+    u, duration = -2.0, 0.01
+    release, dy, solution = compliant_contact(0.0, u, 0.0, still, alpha, duration)
+    s = np.linspace(0.0, release, 20001)
+    v_shape = np.maximum(u * s, dy * (s - release))
+    area = np.trapezoid(solution(s)[0] - v_shape, s)
+    assert area == pytest.approx(contact_shape_factor(alpha) * abs(u) * duration**2, rel=1e-4)
+
+
+BOOM_SET_UP = {"model": {"alpha": 0.42, "g": 5.8, "racket_amplitude": 0.065,
+                         "racket_period": 0.55},
+               "seed": 11, "trials": 2, "duration_s": 30.0, "sample_rate_hz": 200.0,
+               "position_noise_m": 0.0005, "velocity_noise_m_s": 0.04,
+               "perturbations": {"every": 0}, "ball_marker_offset_m": 0.02,
+               "contact": {"duration_s": 0.01, "alpha_sd": 0.03}}
+
+
+@functools.lru_cache(maxsize=None)
+def boom_session():
+    from bounce_cli.experiments.simulate_recording import RecordingConfig, session_frames
+
+    recording, _, truth = session_frames(RecordingConfig.model_validate(BOOM_SET_UP))
+    return recording, truth
+
+
+def boom_errors(extraction, truth):
+    impacts = extraction.impacts
+    errors = {q: [] for q in ("theta_deg", "v_m_s", "alpha_measured")}
+    for label, tr in truth.groupby("trial"):
+        ex = impacts[impacts["trial"] == label]
+        idx = match_impacts(tr["t_s"].to_numpy(), ex["t_s"].to_numpy())
+        assert np.all(idx >= 0)
+        for q in errors:
+            d = ex[q].to_numpy() - tr[q].to_numpy()[idx]
+            errors[q].append((d + 180) % 360 - 180 if q == "theta_deg" else d)
+    return {q: np.concatenate(v) for q, v in errors.items()}
+
+
+@pytest.mark.slow
+def test_a_boom_set_up_is_extracted_without_being_told_its_set_up():
+    """Issue 24's done-when: g 5.8 m/s^2 (a boom), 10 ms spring-damper contacts with alpha
+    0.42 +- 0.03 per impact, the marker at the ball's centre (20 mm), 200 Hz, 0.5 mm noise,
+    extracted with nothing set: RMS theta <= 1 deg, v <= 0.03 m/s, g within 0.1 m/s^2, mean
+    alpha within 0.02, per-impact alpha RMS <= 0.05 (measured: 0.22 deg, 0.3 mm/s, 5e-5 m/s^2,
+    0.002, 0.0025 on another seed). At the default g (the old behaviour) v was 1 m/s off."""
+    from bounce_cli.experiments.extract import ExtractionBlock, extract_all, trials_from_frame
+
+    recording, truth = boom_session()
+    trials = trials_from_frame(recording)
+    block = ExtractionBlock()
+    measured = extract_all(trials, None, block.settings(9.81), "boom", measure_g=True,
+                           measure_offset=True)
+    setup = {q.quantity: q for q in measured.setup}
+    errors = boom_errors(measured, truth)
+    assert len(errors["v_m_s"]) >= len(truth) - 2 * 2
+    assert rms(errors["theta_deg"]) <= 1.0 and rms(errors["v_m_s"]) <= 0.03
+    assert abs(setup["g_m_s2"].estimate - 5.8) <= 0.1
+    assert abs(setup["g_m_s2"].estimate - 5.8) <= 4 * setup["g_m_s2"].se
+    assert measured.settings.g == setup["g_m_s2"].estimate  # the flights were fitted at it
+    assert abs(setup["alpha"].estimate - truth["alpha_measured"].mean()) <= 0.02
+    assert rms(errors["alpha_measured"]) <= 0.05
+    assert setup["alpha_sd"].estimate == pytest.approx(truth["alpha_measured"].std(), abs=0.01)
+    # the contact: 10 ms (measured 11 ms), the marker above the racket's at the equivalent
+    # impact: the radius less the compression there
+    assert setup["contact_s"].estimate == pytest.approx(0.01, abs=0.003)
+    assert 0.005 < setup["ball_offset_m"].estimate < 0.02
+    assert measured.settings.ball_offset_m == setup["ball_offset_m"].estimate
+    # the measurement SDs are the errors' size (another analysis uses them as noise)
+    assert setup["measurement_sd_v_m_s"].estimate == pytest.approx(rms(errors["v_m_s"]),
+                                                                   rel=0.5)
+    assert setup["measurement_sd_theta_rad"].estimate == pytest.approx(
+        np.radians(rms(errors["theta_deg"])), rel=0.5)
+    assert setup["position_noise_m"].estimate == pytest.approx(0.0005, rel=0.05)
+    assert setup["racket_noise_m"].estimate == pytest.approx(0.0005, rel=0.1)
+    # told the wrong g: the old result (v 1 m/s off), and a warning that the flights disagree
+    told = extract_all(trials, None, block.settings(9.81), "boom")
+    assert rms(boom_errors(told, truth)["v_m_s"]) > 0.3
+    assert any("5.8" in w and "SE off" in w for w in told.warnings)
+
+
+@pytest.mark.slow
+def test_extract_writes_the_measured_set_up_and_names_a_unit_slip(simulated, tmp_path,
+                                                                  user_error):
+    """setup.csv beside impacts.csv (read back by the analyses' reader) and the summary line;
+    millimetres read as centimetres: the flights show 98 m/s^2, an error naming the slip
+    (issue 22), nothing written."""
+    from bounce_cli.setup_table import read_setup
+
+    result, out = extract_cli(tmp_path, "--data", str(simulated / "recording.csv"))
+    assert result.exit_code == 0, result.output
+    setup = read_setup(out / "impacts.csv")
+    assert setup["g_m_s2"].estimate == pytest.approx(9.81, abs=0.01)
+    assert {"alpha", "alpha_sd", "contact_s", "ball_offset_m", "position_noise_m",
+            "racket_noise_m", "measurement_sd_v_m_s", "measurement_sd_theta_rad"} <= set(setup)
+    assert abs(setup["ball_offset_m"].estimate) < 0.001
+    impacts = pd.read_csv(out / "impacts.csv")
+    assert list(impacts.columns) == [*REQUIRED_COLUMNS, *MEASURED_COLUMNS]
+    rec = pd.read_csv(simulated / "recording.csv")
+    rec = rec[rec["trial"] == 1].copy()
+    rec[["racket_x_m", "ball_x_m"]] *= 1000.0
+    rec.to_csv(tmp_path / "mm.csv", index=False)
+    slip, slip_out = extract_cli(tmp_path / "slip", "--data", str(tmp_path / "mm.csv"),
+                                 "--set", "units.length=cm")
+    user_error(slip, "98", "millimetres read as centimetres", "units.length")
+    assert not slip_out.exists()

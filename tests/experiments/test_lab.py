@@ -47,16 +47,19 @@ def test_acf_data_recovers_eq9_and_eq10_from_extracted_impacts():
     stab = result.frames["stability_data.csv"].set_index(["quantity", "source"])
     truth_j = jacobian(config.params)
     entries = ("J_vv", "J_vtheta", "J_thetav", "J_thetatheta")
-    # the estimate white measurement noise does not bias covers every entry of eq. 9's J
+    # the estimate white measurement noise does not bias holds every entry of eq. 9's J within
+    # 1.96 SE; on these 1060 triples (fewer than the 1200 its interval needs) it gives no
+    # interval
     for name, value in zip(entries, truth_j.ravel()):
         row = stab.loc[(name, "lag2+jackknife")]
-        assert row.ci_low <= value <= row.ci_high, name
-    # both estimates' intervals hold eq. 10's spectral radius (0.42)
+        assert np.isnan(row.ci_low) and np.isnan(row.ci_high), name
+        assert abs(row.estimate - value) <= 1.96 * row.se, name
+    # OLS's interval holds eq. 10's spectral radius (0.42); both estimates within 0.03 of it
     radius = stability(config.params).spectral_radius
+    row = stab.loc[("spectral_radius", "ols+jackknife")]
+    assert row.ci_low <= radius <= row.ci_high
     for source in ("ols+jackknife", "lag2+jackknife"):
-        row = stab.loc[("spectral_radius", source)]
-        assert row.ci_low <= radius <= row.ci_high, source
-        assert abs(row.estimate - radius) < 0.03
+        assert abs(stab.loc[("spectral_radius", source)].estimate - radius) < 0.03, source
     # at lags 1 and 2, where eq. 19's correlations are large, the data's lie on them within 3 SE
     # of their mean over runs (further out single lags stray: theta ACF at lag 9 is -0.086
     # against 0, 4.8 SE, on the exact impacts as well: 11 runs make a rough SE)

@@ -110,7 +110,7 @@ def test_figure_redraws_from_csvs(small_run):
     frames = {name: pd.read_csv(small_run / name) for name in ("trials.csv", "fit.csv")}
     fig = regression.draw(frames)["regression.png"]
     ax = fig.axes[0]
-    assert "Fig. 7" in ax.get_title() and "tau^2" in ax.get_xlabel()
+    assert "Fig. 7" in ax.get_title() and r"$\tau^2$" in ax.get_xlabel()
     assert len(ax.get_lines()) >= 3
 
 

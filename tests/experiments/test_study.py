@@ -59,7 +59,7 @@ def tiny(tmp_path_factory, cli_module):
 @pytest.fixture(scope="module")
 def tiny_study(tiny, tmp_path_factory, cli_module):
     out = tmp_path_factory.mktemp("tiny-study") / "study"
-    result = cli_module("study", "--manifest", tiny / "study.csv", "--out", out,
+    result = cli_module("study", "--manifest", tiny / "study.csv", "--out", out, "--jobs", "2",
                         "--set", "analyses=[regression, learning]", *FAST)
     assert result.exit_code == 0, result.output
     return out
@@ -352,3 +352,24 @@ def test_perturbations_come_with_events_and_give_impulse_responses(tmp_path, cli
     assert first.loc["decrease", "mean"] < -0.05 < 0.05 < first.loc["increase", "mean"]
     assert (first["units"] == 2).all()
     assert pd.read_csv(out / "group.csv")["relax_impacts_decrease"].notna().all()
+
+
+def test_estimates_without_an_interval_are_left_out_of_the_paired_difference():
+    """A unit whose data were too few for an interval (its estimate can be anything) does not
+    enter the test of data against model."""
+    from bounce_cli.study_manifest import Unit
+
+    group = pd.DataFrame({
+        "subject": ["s1", "s2", "s3"], "condition": "a",
+        "model_spectral_radius": [0.5, 0.5, 0.5],
+        "radius_ols": [0.40, 0.42, 30.0], "radius_ols_ci_low": [0.3, 0.32, np.nan],
+        "radius_ols_ci_high": [0.5, 0.52, np.nan],
+        "radius_lag2": [0.4, np.nan, 9.0], "radius_lag2_ci_low": [0.2, np.nan, np.nan],
+        "radius_lag2_ci_high": [0.6, np.nan, np.nan]})
+    units = [Unit((s, "a"), ("subject", "condition")) for s in group["subject"]]
+    config = study_config(Path("unused"))
+    table = study.group_tables({"group.csv": group}, units, config)["group_stability.csv"]
+    ols = table.set_index("estimate").loc["ols"]
+    assert ols["units"] == 2 and ols["units_without_interval"] == 1
+    assert ols["difference_mean"] == pytest.approx(-0.09)
+    assert table.set_index("estimate").loc["lag2", "verdict"] == "too few units with an interval"

@@ -35,6 +35,7 @@ def run_sweep(cli, out: Path, *extra):
     return result
 
 
+@pytest.mark.slow
 def test_every_backend_writes_the_same_sweep(cli, tmp_path):
     distributed = pytest.importorskip("distributed")
     one = run_sweep(cli, tmp_path / "one", *UNCERTAINTY, "--jobs", "1")

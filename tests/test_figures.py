@@ -1,0 +1,281 @@
+"""Figures for a paper: every figure redrawn from the committed CSVs in the publication style
+(mathtext for every symbol, whole-number ticks on integer axes, honest axis ranges, paper
+references only at the paper's parameters), and a run's figures written as PNG, PDF or SVG
+at a chosen resolution, with the run's parameters in the file's metadata, not in its title."""
+
+from __future__ import annotations
+
+import io
+import json
+import math
+import re
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from bounce_cli import paper
+from bounce_cli.engine.linear import jacobian
+from bounce_cli.engine.params import ModelParams
+from bounce_cli.registry import entry, reproduced
+
+RESULTS = Path(__file__).resolve().parents[1] / "results"
+
+
+def committed_frames(name: str) -> dict[str, pd.DataFrame]:
+    return {p.name: pd.read_csv(p) for p in sorted((RESULTS / name).glob("*.csv"))}
+
+
+@pytest.fixture(scope="module")
+def figures():
+    """Every reproduced experiment's figures, drawn from its committed CSVs alone."""
+    drawn = {}
+    for e in reproduced():
+        for png, fig in e.load().draw(committed_frames(e.name)).items():
+            drawn[f"{e.name}/{png}"] = fig
+    return drawn
+
+
+def texts(fig) -> list[str]:
+    """Every text a reader sees: titles, axis and colorbar labels, legends, annotations."""
+    out = [fig.get_suptitle()]
+    for ax in fig.axes:
+        out += [ax.get_title(loc) for loc in ("left", "center", "right")]
+        out += [ax.get_xlabel(), ax.get_ylabel()]
+        if hasattr(ax, "get_zlabel"):
+            out.append(ax.get_zlabel())
+        out += [t.get_text() for t in ax.texts]
+        legend = ax.get_legend()
+        if legend is not None:
+            out += [t.get_text() for t in legend.get_texts()] + [legend.get_title().get_text()]
+    for legend in fig.legends:
+        out += [t.get_text() for t in legend.get_texts()]
+    return [t for t in out if t]
+
+
+#: symbols written as ASCII outside mathtext: m/s^2, theta[k], q_v, alpha, |lambda|, +-, >=, 3x3,
+#: v0
+ASCII_MATH = re.compile(r"\^|\[k|\b[A-Za-z]+_[A-Za-z0-9{]|\b(alpha|theta|lambda|tau|omega|Gamma)"
+                        r"\b|\+-|>=|<=|\||\b\dx\d\b|->|\b[a-z]+0\b")
+
+
+def test_no_ascii_math_in_any_figure(figures):
+    found = []
+    for name, fig in figures.items():
+        for text in texts(fig):
+            outside = re.sub(r"\$[^$]*\$", "", text)  # what mathtext does not render
+            if ASCII_MATH.search(outside):
+                found.append(f"{name}: {text!r}")
+    assert not found, "\n".join(found)
+
+
+def test_the_checker_catches_what_it_is_for():
+    for plain in ("m/s^2", "theta[k]", "q_v = 0.04", "alpha_p < alpha_0", "|lambda|",
+                  "mean +- SD", "n >= 2", "the 3x3 Jacobian", "phase -> velocity",
+                  "Fig. 3: v0 = 4.8 m/s"):
+        assert ASCII_MATH.search(plain), plain
+    for math_text in ("m/s$^2$", r"$\theta_k$", r"$q_v$ = 0.04", r"$|\lambda|$",
+                      r"mean $\pm$ SD", "racket period (s)", "lag $l$ (bounces)"):
+        assert not ASCII_MATH.search(re.sub(r"\$[^$]*\$", "", math_text)), math_text
+
+
+#: axis labels of whole-number quantities: trial, impact index, lag
+INTEGER_AXIS = re.compile(r"\btrial\b|\blag\b|impact \$k\$|bounce \$k\$|impacts until")
+
+
+def test_integer_axes_have_whole_number_ticks(figures):
+    checked = 0
+    for name, fig in figures.items():
+        for ax in fig.axes:
+            for axis, label in ((ax.xaxis, ax.get_xlabel()), (ax.yaxis, ax.get_ylabel())):
+                if not INTEGER_AXIS.search(label):
+                    continue
+                low, high = sorted(axis.get_view_interval())
+                ticks = [t for t in axis.get_majorticklocs() if low <= t <= high]
+                assert ticks and np.allclose(ticks, np.round(ticks)), (name, label, ticks)
+                checked += 1
+    assert checked >= 15  # trajectory, learning, acf, impulse, control, the data's side
+
+
+def test_impulse_phase_panels_are_fitted_to_the_responses_not_fixed_at_180(figures):
+    for name in ("impulse/impulse.png", "impulse/impulse_linear.png",
+                 "control/control_impulse.png"):
+        phase_axes = [ax for ax in figures[name].axes if "theta_k" in ax.get_ylabel()]
+        assert phase_axes, name
+        for ax in phase_axes:
+            low, high = ax.get_ylim()
+            drawn = np.concatenate([line.get_ydata() for line in ax.get_lines()])
+            # the responses (about 33 deg at section 7's model) fill the axis
+            assert high - low < 1.2 * (np.nanmax(drawn) - np.nanmin(drawn)) + 5, (name, low, high)
+
+
+def test_learning_variability_axis_starts_at_zero(figures):
+    fig = figures["learning-data/learning.png"]
+    right = [ax for ax in fig.axes if ax.get_ylabel() == "SD of ball amplitude (cm)"
+             and ax.get_xlabel() == ""]  # the twin axis of the trial panel
+    assert len(right) == 1
+    low, high = right[0].get_ylim()
+    sd = committed_frames("learning-data")["trials.csv"]["apex_sd_m"] * 100
+    assert low == 0.0 and sd.max() < high < 1.5 * sd.max()
+
+
+def legend_labels(fig) -> list[str]:
+    return [t.get_text() for ax in fig.axes if ax.get_legend() is not None
+            for t in ax.get_legend().get_texts()]
+
+
+def frames_at(params: ModelParams, frames: dict[str, pd.DataFrame]) -> dict[str, pd.DataFrame]:
+    """The committed control tables with the passive model's rows (the stationary state and
+    the Jacobian's eigenvalues, eqs. 7-10) at ``params`` instead of section 7's."""
+    frames = {k: v.copy() for k, v in frames.items()}
+    fp = params.fixed_point()
+    lam = np.linalg.eigvals(jacobian(params))
+    impulse = frames["impulse.csv"]
+    passive = impulse.model == "passive"
+    impulse.loc[passive, "v_m_s"] = fp.v_m_s + impulse.loc[passive, "dv_m_s"]
+    impulse.loc[passive, "theta_deg"] = fp.theta_deg + impulse.loc[passive, "dtheta_deg"]
+    impulse.loc[passive, "racket_period_s"] = params.racket_period
+    eigen = frames["eigen.csv"]
+    row = eigen.model == "passive"
+    for i, value in enumerate(lam, start=1):
+        eigen.loc[row, f"lambda{i}_re"], eigen.loc[row, f"lambda{i}_im"] = value.real, value.imag
+    return frames
+
+
+@pytest.mark.parametrize("params", [ModelParams(0.3, 9.81, 0.40, 0.92),
+                                    ModelParams(0.5, 5.8, 0.065, 0.55),
+                                    ModelParams(0.7, 9.81, 0.45, 0.80)])
+def test_controls_model_is_recovered_from_its_tables(params):
+    from bounce_cli.experiments.control import passive_model
+
+    recovered = passive_model(frames_at(params, committed_frames("control")))
+    for name in ("alpha", "g", "racket_amplitude", "racket_period"):
+        assert getattr(recovered, name) == pytest.approx(getattr(params, name), rel=1e-9)
+
+
+def test_control_draws_the_subjects_numbers_only_at_section_7s_model():
+    from bounce_cli.experiments.control import draw_stability
+
+    committed = committed_frames("control")
+    at_paper = legend_labels(draw_stability(committed))
+    assert any("section 7" in t for t in at_paper)
+    assert any("the subject" in t for t in at_paper)
+    other = legend_labels(draw_stability(frames_at(ModelParams(0.45, 9.81, 0.30, 0.92),
+                                                   committed)))
+    assert not any("section 7" in t or "subject" in t for t in other)
+    assert any("radius.target_radius" in t for t in other)
+
+
+# -- the run's figure files -------------------------------------------------------------------
+SMALL_STABILITY = ["--set", "grid.n_alpha=21", "--set", "grid.n_ac=21",
+                   "--set", "predictions.n_ac=101",
+                   "--set", "crosscheck.points=[{alpha: 0.5, ac_g: -0.5, racket_period: 0.92}]"]
+
+
+def png_text_chunks(data: bytes) -> dict[str, str]:
+    """The tEXt chunks of a PNG, read chunk by chunk (not by the library that wrote it)."""
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    chunks, at = {}, 8
+    while at < len(data):
+        length = int.from_bytes(data[at:at + 4], "big")
+        kind, body = data[at + 4:at + 8], data[at + 8:at + 8 + length]
+        if kind == b"tEXt":
+            key, _, value = body.partition(b"\0")
+            chunks[key.decode("latin-1")] = value.decode("latin-1")
+        elif kind == b"zTXt":
+            key, _, rest = body.partition(b"\0")
+            chunks[key.decode("latin-1")] = zlib.decompress(rest[1:]).decode("latin-1")
+        at += 12 + length
+    return chunks
+
+
+def png_size(data: bytes) -> tuple[int, int]:
+    return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+
+
+def test_figures_are_written_in_every_format_asked_for_at_the_dpi_asked_for(tmp_path, cli):
+    out = tmp_path / "r"
+    result = cli("regression", "--out", out, "--quiet", "--figure-format", "png,pdf",
+                 "--figure-format", "svg", "--dpi", 72)
+    assert result.exit_code == 0, result.output
+    png, pdf, svg = (out / f"regression.{kind}" for kind in ("png", "pdf", "svg"))
+    assert pdf.read_bytes()[:5] == b"%PDF-" and b"<svg" in svg.read_bytes()[:1000]
+    # regression.png is 7 x 5.2 in: 504 x 374 pixels at 72 dpi
+    assert png_size(png.read_bytes()) == (504, 374)
+    manifest = json.loads((out / "run.json").read_text())
+    assert {"regression.png", "regression.pdf", "regression.svg"} <= set(manifest["files"])
+    # the default: PNG only, at 150 dpi; the PDF and SVG of the run replaced are removed
+    assert cli("regression", "--out", out, "--quiet").exit_code == 0
+    assert png_size(png.read_bytes()) == (1050, 780)
+    assert not pdf.exists() and not svg.exists()
+
+
+def test_a_rerun_writes_the_same_bytes_in_every_format(tmp_path, cli):
+    runs = []
+    for name in ("a", "b"):
+        out = tmp_path / name
+        assert cli("stability", *SMALL_STABILITY, "--out", out, "--quiet",
+                   "--figure-format", "png,pdf,svg").exit_code == 0
+        runs.append({kind: (out / f"stability.{kind}").read_bytes()
+                     for kind in ("png", "pdf", "svg")})
+    for kind in ("png", "pdf", "svg"):
+        assert runs[0][kind] == runs[1][kind], kind  # no creation date, fixed SVG ids
+
+
+def test_run_metadata_goes_into_the_files_not_into_the_titles(tmp_path, cli):
+    out = tmp_path / "r"
+    result = cli("regression", "--set", "seed=7", "--out", out, "--quiet",
+                 "--figure-format", "png,pdf,svg")
+    assert result.exit_code == 0, result.output
+    caption = "simulated trials: alpha = 0.5, g = 9.81 m/s^2; seed 7"
+    chunks = png_text_chunks((out / "regression.png").read_bytes())
+    assert chunks["Description"] == caption and chunks["Source"] == "bounce regression"
+    assert chunks["Title"].startswith("Fig. 7")
+    pdf = (out / "regression.pdf").read_bytes()
+    assert b"/Subject (" + caption.encode() + b")" in pdf and b"/CreationDate" not in pdf
+    assert caption.encode() in (out / "regression.svg").read_bytes()
+    from bounce_cli.experiments.regression import EXPERIMENT as regression
+    from bounce_cli.config import bundled_config_path, load_config
+    from bounce_cli.experiments.base import RunOptions
+
+    config = load_config(regression.schema, bundled_config_path("regression"), ["seed=7"])
+    fig = regression.run(config, RunOptions()).figures["regression.png"]
+    assert not any("seed" in t or "g = 9.81" in t for t in texts(fig))
+
+
+def test_the_pdf_embeds_its_fonts_as_truetype_not_type3(tmp_path, cli):
+    out = tmp_path / "s"
+    assert cli("stability", *SMALL_STABILITY, "--out", out, "--quiet",
+               "--figure-format", "pdf").exit_code == 0
+    pdf = (out / "stability.pdf").read_bytes()
+    assert b"/CIDFontType2" in pdf and b"/Type3" not in pdf  # TrueType outlines (fonttype 42)
+
+
+@pytest.mark.parametrize("args, needles", [
+    (["--figure-format", "jpg"], ["--figure-format", "'jpg' is not a figure format", "png"]),
+    (["--figure-format", "png,"], ["--figure-format", "'' is not a figure format"]),
+    (["--dpi", "10"], ["--dpi", "30"]),
+])
+def test_a_bad_figure_option_is_one_line_and_writes_nothing(args, needles, tmp_path, cli,
+                                                            user_error):
+    out = tmp_path / "never"
+    user_error(cli("regression", "--out", out, *args), *needles)
+    assert not out.exists()
+
+
+def test_every_experiment_command_offers_the_figure_options(cli):
+    for e in reproduced():
+        text = cli(e.name, "--help").stdout
+        assert "--figure-format" in text and "--dpi" in text, e.name
+
+
+def test_a_figure_redrawn_from_csv_writes_as_pdf(tmp_path):
+    from bounce_cli.plotting import save_figure
+
+    fig = entry("impulse").load().draw(committed_frames("impulse"))["impulse.png"]
+    buffer = io.BytesIO()
+    save_figure(fig, buffer, "pdf", dpi=150, source="test")  # type: ignore[arg-type]
+    assert buffer.getvalue()[:5] == b"%PDF-"
+    assert math.isfinite(paper.FIG3_MODEL.alpha)

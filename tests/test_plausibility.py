@@ -1,0 +1,71 @@
+"""Unit slips do not pass silently: racket amplitudes and periods outside what a person can do
+(``bounce_cli.plausibility``, the one place of the ranges) are warned about, naming the slip."""
+
+import pandas as pd
+import pytest
+
+from bounce_cli.plausibility import (
+    HUMAN_RACKET_AMPLITUDE_M,
+    HUMAN_RACKET_PERIOD_S,
+    racket_warnings,
+)
+
+
+def warnings_of(result) -> list[str]:
+    return [line for line in result.stderr.splitlines() if line.startswith("bounce: warning:")]
+
+
+def test_the_paper_s_rackets_are_plausible_and_slips_are_named():
+    # sections 5-7: 0.065-0.30 m at 0.53-0.92 s, well inside
+    assert HUMAN_RACKET_AMPLITUDE_M[0] < 0.065 and 0.30 < HUMAN_RACKET_AMPLITUDE_M[1]
+    assert HUMAN_RACKET_PERIOD_S[0] < 0.53 and 0.92 < HUMAN_RACKET_PERIOD_S[1]
+    assert racket_warnings([0.065, 0.30], [0.53, 0.92], "a", "p") == []
+    (amplitude,) = racket_warnings(300.0, 0.92, "a", "p")
+    assert "millimetres (0.3 m) typed for metres?" in amplitude
+    (period,) = racket_warnings(0.3, 920.0, "a", "p")
+    assert "milliseconds (0.92 s) typed for seconds?" in period
+    (both,) = racket_warnings(30.0, 0.9, "a", "p")  # 30 mm and 30 cm are both a racket
+    assert "millimetres (0.03 m) or centimetres (0.3 m)" in both
+    (far,) = racket_warnings(1e6, 0.9, "a", "p")
+    assert far.endswith("check the units")
+
+
+def test_fixed_point_warns_of_millimetres_typed_for_metres(cli):
+    """`fixed-point --set model.racket_amplitude=300` answered AC -1426 g without a word."""
+    result = cli("fixed-point", "--set", "model.racket_amplitude=300", "--json")
+    assert result.exit_code == 0, result.output
+    (line,) = warnings_of(result)
+    assert "model.racket_amplitude: racket amplitude 300 m is outside what a person can do" in (
+        line)
+    assert "millimetres (0.3 m) typed for metres?" in line
+    assert warnings_of(cli("fixed-point", "--json")) == []
+
+
+def test_regression_warns_of_trial_amplitudes_in_mm_under_an_m_column(tmp_path, cli):
+    """a_r_m in mm gives eq. 15's slope 305 m/s^2 against 0.30: now with a warning naming it."""
+    path = tmp_path / "trials.csv"
+    pd.DataFrame({"a_r_m": [100.0, 150.0, 210.0, 280.0], "tau_s": [0.5, 0.6, 0.7, 0.8]}).to_csv(
+        path, index=False)
+    result = cli("regression", "--data", path, "--out", tmp_path / "o", "--quiet")
+    assert result.exit_code == 0, result.output
+    (line,) = warnings_of(result)
+    assert f"data: {path}: column a_r_m: racket amplitude 4 of 4 values outside" in line
+    assert "millimetres (0.28 m) typed for metres?" in line
+
+
+@pytest.mark.parametrize("column,scale,needle", [
+    ("racket_amplitude_m", 1000.0, "millimetres (0.11 m) typed for metres?"),
+    ("racket_period_s", 1000.0, "milliseconds (0.6 s) typed for seconds?"),
+])
+def test_an_impacts_table_in_the_wrong_unit_is_warned_about(tmp_path, cli, column, scale,
+                                                            needle):
+    from test_data_parameters import lab_table
+
+    path = lab_table(tmp_path)
+    frame = pd.read_csv(path)
+    frame[column] = frame[column] * scale
+    frame.to_csv(path, index=False)
+    result = cli("learning", "--data", path, "--out", tmp_path / "o", "--quiet")
+    lines = [line for line in warnings_of(result) if column in line]
+    assert len(lines) == 1, result.stderr
+    assert f"data: {path}: column {column} (trial means)" in lines[0] and needle in lines[0]
