@@ -276,32 +276,32 @@ def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures:
 def unit_parameters(pooled: pd.DataFrame, measured: dict[str, float],
                     model: dict[str, Any]) -> tuple[float, str, float, str]:
     """(alpha, where from, g, where from): the study's model block where set, else what the
-    unit's data show; a unit that shows neither is a one-line error naming both ways."""
-    alpha, alpha_source = model.get("alpha"), "set in the study's config"
-    if alpha is None:
-        unperturbed = (~pooled["perturbed"].astype(bool) if "perturbed" in pooled.columns
-                       else pd.Series(True, index=pooled.index))
-        for column, how in (("alpha_measured", "measured (eq. 3)"), ("alpha", "from events")):
-            if column in pooled.columns:
-                values = pd.to_numeric(pooled.loc[unperturbed, column], errors="coerce")
-                values = values[np.isfinite(values)]
-                if len(values):
-                    alpha, alpha_source = float(values.mean()), f"{how}, {len(values)} impacts"
-                    break
-    g, g_source = model.get("g"), "set in the study's config"
-    if g is None and "g_m_s2" in measured:
-        g, g_source = measured["g_m_s2"], "measured from the flights"
-    elif g is None and "g_m_s2" in pooled.columns:
-        values = pd.to_numeric(pooled["g_m_s2"], errors="coerce").dropna()
-        if len(values):
-            g, g_source = float(values.mean()), "from the table's g_m_s2"
+    unit's data show (:mod:`bounce_cli.data_parameters`' rules, as every ``--data`` analysis
+    applies them: ``alpha_measured``, else the events' ``alpha``; g from the extraction's
+    flights, else a ``g_m_s2`` column); a unit that shows neither is a one-line error naming
+    both ways."""
+    from ..data_parameters import ModelValue, alpha_from_data, g_from_data
+
+    alpha = (ModelValue("alpha", float(model["alpha"]), "set in the study's config")
+             if model.get("alpha") is not None else alpha_from_data(pooled))
+    if model.get("g") is not None:
+        g: ModelValue | None = ModelValue("g", float(model["g"]), "set in the study's config")
+    elif "g_m_s2" in measured:
+        g = ModelValue("g", measured["g_m_s2"], "measured", 0, "the recordings' flights")
+    else:
+        g = g_from_data(pooled, [])
     missing = [name for name, value in (("alpha", alpha), ("g", g)) if value is None]
     if missing:
         raise ConfigError(f"the data show no {' and no '.join(missing)} (no alpha_measured or "
                           f"alpha column, no setup.csv or g_m_s2 column): set "
                           f"{' and '.join('model.' + m for m in missing)} in the study's config "
                           f"(--set), or give tables that carry them")
-    return float(alpha), alpha_source, float(g), g_source  # type: ignore[arg-type]
+    assert alpha is not None and g is not None
+
+    def source(value: ModelValue) -> str:
+        return value.source if not value.detail else f"{value.source}, {value.detail}"
+
+    return alpha.value, source(alpha), g.value, source(g)
 
 
 def one_line(exc: BaseException) -> str:

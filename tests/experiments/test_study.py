@@ -345,6 +345,7 @@ def test_perturbations_come_with_events_and_give_impulse_responses(tmp_path, cli
     out = tmp_path / "study"
     result = cli_module("study", "--manifest", sim / "study.csv", "--out", out,
                         "--set", "analyses=[impulse]", "--set", "report.unit_figures=false",
+                        "--set", "settings.impulse.data_analysis.min_windows_per_impact=3",
                         "--set", "model.alpha=0.5", "--set", "model.g=9.81")
     assert result.exit_code == 0, result.output
     impulse = pd.read_csv(out / "group_impulse.csv")
