@@ -1,1 +1,98 @@
+"""bounce: the experiments of the ball bouncing map paper, from the command line or Python.
+
+In a notebook (see :mod:`bounce_cli.api`)::
+
+    import bounce_cli
+    result = bounce_cli.run("basin", set={"grid.theta0_deg.num": 40, "grid.v0_m_s.num": 30})
+    result.frames["basin.csv"], result.figures["basin.png"]
+
+The names below are imported on first use (PEP 562), so that ``bounce --help`` and a
+worker process import none of numpy, pandas or the experiments until they need them.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from typing import TYPE_CHECKING, Any
+
 __version__ = "0.1.0"
+
+if TYPE_CHECKING:  # for type checkers: the names as if imported eagerly
+    from .api import (
+        ConfigError,
+        ExperimentResult,
+        FixedPoint,
+        ModelError,
+        ModelParams,
+        Orbit,
+        Stability,
+        extract,
+        iterate_orbit,
+        map_step,
+        read_recording,
+        run,
+        stability,
+    )
+
+#: exported name -> the module it comes from, imported on first use
+_EXPORTS = {
+    "run": "api",
+    "read_recording": "api",
+    "extract": "api",
+    "ExperimentResult": "api",
+    "ModelParams": "api",
+    "FixedPoint": "api",
+    "map_step": "api",
+    "iterate_orbit": "api",
+    "Orbit": "api",
+    "stability": "api",
+    "Stability": "api",
+    "ConfigError": "api",
+    "ModelError": "api",
+}
+
+__all__ = [
+    "__version__",
+    # the notebook API (bounce_cli.api)
+    "run", "read_recording", "extract", "ExperimentResult", "ConfigError", "ModelError",
+    # the model (eqs. 5-10)
+    "ModelParams", "FixedPoint", "map_step", "iterate_orbit", "Orbit", "stability", "Stability",
+]
+
+
+def lazy_exports(package: str, exports: dict[str, str]):
+    """A package's PEP 562 ``__getattr__`` and ``__dir__`` for ``exports`` (name -> its
+    submodule, relative to ``package``): each name is imported on first use and then kept
+    in the package's namespace.
+
+    Parameters
+    ----------
+    package : str
+        The package's ``__name__``.
+    exports : dict
+        Exported name -> the submodule defining it (``"api"`` for ``package.api``).
+
+    Returns
+    -------
+    tuple
+        (``__getattr__``, ``__dir__``) to assign at the package's top level.
+    """
+    namespace = sys.modules[package].__dict__
+
+    def __getattr__(name: str) -> Any:
+        try:
+            module = exports[name]
+        except KeyError:
+            raise AttributeError(f"module {package!r} has no attribute {name!r}") from None
+        value = getattr(importlib.import_module(f".{module}", package), name)
+        namespace[name] = value
+        return value
+
+    def __dir__() -> list[str]:
+        return sorted([*namespace, *exports])
+
+    return __getattr__, __dir__
+
+
+__getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

@@ -36,15 +36,20 @@ except ImportError:  # pragma: no cover - older typer on click
     )
 
 from . import __version__
-from .artifacts import FIGURE_DPI, OutputDirError, RunDirectory
+from .api import (
+    check_model,
+    load_run_config,
+    open_run_directory,
+    run_options,
+    warn_if_implausible_racket,
+    write_result,
+)
+from .artifacts import FIGURE_DPI, OutputDirError
 from .config import (
-    DATA_MODEL_KEYS,
     ConfigError,
     ModelOnlyConfig,
     apply_overrides,
     bundled_config_path,
-    keys_set_by_user,
-    load_config,
     parse_override,
     read_yaml,
     to_yaml,
@@ -52,7 +57,6 @@ from .config import (
 )
 from .engine import ModelError, ModelParams, iterate_orbit, stability, wrap_phase
 from .engine.classify import ClassifySettings
-from .experiments.base import RunOptions
 from .interrupts import Interrupted, report as report_interrupt
 from .parallel import ClusterError
 from .registry import EXPERIMENTS, Entry
@@ -323,52 +327,6 @@ def warn(message: str) -> None:
     print(f"bounce: warning: {message}", file=sys.stderr, flush=True)
 
 
-def warn_if_implausible_racket(model) -> None:
-    """A warning per racket parameter of a ``model`` block outside what a person can do
-    (``bounce_cli.plausibility``), naming the likely unit slip (a block without a racket, such
-    as a study's, has nothing to check)."""
-    from .plausibility import racket_warnings
-
-    if getattr(model, "racket_amplitude", None) is None or getattr(
-            model, "racket_period", None) is None:
-        return
-    for message in racket_warnings(model.racket_amplitude, model.racket_period,
-                                   "model.racket_amplitude",
-                                   "model.racket_period"):
-        warn(message)
-
-
-def resolve_config_path(config: Path | None, name: str) -> Path:
-    return config if config is not None else bundled_config_path(name)
-
-
-def warn_if_unstable(params: ModelParams, controller=None) -> None:
-    """A one-line warning on stderr when the period-1 fixed point exists but is linearly
-    unstable (eq. 10; with racket period control the 3 x 3 Jacobian of engine.control): the
-    figures then describe an orbit nothing converges to.
-    Raises NoFixedPointError when there is no fixed point at all."""
-    from .engine import flip_boundary_g
-
-    if controller is not None:
-        from .engine.control import controlled_jacobian, spectral_radius_3x3
-
-        radius = float(spectral_radius_3x3(controlled_jacobian(params, controller)))
-        if not radius < 1.0:
-            print(f"bounce: warning: the period-1 fixed point is linearly unstable with this "
-                  f"racket period control (model.control: spectral radius {radius:.3g} of the "
-                  f"3 x 3 Jacobian)", file=sys.stderr)
-        return
-
-    st = stability(params)
-    if not st.stable:
-        print(
-            f"bounce: warning: the period-1 fixed point is linearly unstable at these "
-            f"parameters (spectral radius {st.spectral_radius:.3g}, AC = {st.ac_g:.3g} g; "
-            f"stable for {float(flip_boundary_g(params.alpha)):.3g} g < AC < 0, eq. 14)",
-            file=sys.stderr,
-        )
-
-
 def run_experiment(
     entry: Entry,
     *,
@@ -395,39 +353,17 @@ def run_experiment(
     run_dir = None
     checkpoints = None
     try:
-        experiment = entry.load()
-        path = resolve_config_path(config, entry.config)
-        cfg = load_config(experiment.schema, path, overrides)
+        experiment, path, cfg = load_run_config(entry, config, overrides)
         if print_config:
             typer.echo(to_yaml(cfg), nl=False)
             return {}
-        if getattr(cfg, "data", None) is None:  # with --data the model's racket is the data's
-            warn_if_implausible_racket(cfg.model)
-        if entry.needs_fixed_point and getattr(cfg, "data", None) is None:
-            # with --data the model is taken at the data's racket, not the config's
-            controller = getattr(cfg.model, "controller", lambda: None)()
-            warn_if_unstable(cfg.params, controller)
-        name = path.stem if config is not None else entry.name
-        data_file = getattr(cfg, "data", None)
-        run_dir = RunDirectory(
-            out if out is not None else Path("results") / name,
-            command=entry.name,
-            resolved_config=cfg.model_dump(mode="json"),
-            overrides=overrides,
-            config_path=str(path) if config is not None else f"bundled: configs/{path.name}",
-            # a fit to a data file draws no random numbers: its seed is not part of the run
-            seed=getattr(cfg, "seed", None) if data_file is None else None,
-            data_file=data_file,
-            force=force,
-            figure_formats=figure_formats,
-            dpi=dpi,
-        )
+        check_model(entry, cfg, warn)
+        run_dir = open_run_directory(entry, cfg, path, config_given=config is not None,
+                                     overrides=overrides, out=out, force=force,
+                                     figure_formats=figure_formats, dpi=dpi)
         progress = make_progress() if not quiet else None
-        options = RunOptions(jobs=jobs or os.cpu_count() or 1, warn=warn, scheduler=scheduler)
-        if data_file is not None:  # a --data analysis takes what the user did not set from the data
-            given = keys_set_by_user(config, overrides)
-            options.model_set_by_user = frozenset(
-                key for key in DATA_MODEL_KEYS if f"model.{key}" in given)
+        options = run_options(cfg, config, overrides, jobs=jobs or os.cpu_count() or 1,
+                              warn=warn, scheduler=scheduler)
         run_dir.record = options.record
         if entry.resumable:
             from .checkpoints import PointFolder
@@ -444,13 +380,7 @@ def run_experiment(
         finally:
             if progress is not None:
                 progress.stop()
-        for name_, frame in result.frames.items():
-            run_dir.add_csv(name_, frame)
-        for name_, figure in result.figures.items():
-            run_dir.add_figure(name_, figure)
-        for name_, content in result.files.items():
-            run_dir.add_file(name_, content)
-        written = run_dir.commit(agrees)
+        written = write_result(run_dir, result, agrees)
         if checkpoints is not None:
             checkpoints.remove()
     except BaseException as exc:
@@ -491,7 +421,7 @@ def load_model(config: Path | None, overrides: list[str] | None, *,
 def load_model_block(config: Path | None, overrides: list[str] | None, *,
                      need_fixed_point: bool = True):
     """``load_model``'s validated block, with its ``control`` (racket period control)."""
-    path = resolve_config_path(config, "model")
+    path = config if config is not None else bundled_config_path("model")
     overrides = list(overrides or [])
     for text in overrides:
         keys, _ = parse_override(text)
@@ -499,7 +429,7 @@ def load_model_block(config: Path | None, overrides: list[str] | None, *,
             raise ConfigError(f"--set {'.'.join(keys)}: this command only uses the model block")
     data = apply_overrides(read_yaml(path), overrides)
     cfg = validate(ModelOnlyConfig, {"model": data.get("model") or {}}, str(path), overrides)
-    warn_if_implausible_racket(cfg.model)
+    warn_if_implausible_racket(cfg.model, warn)
     if need_fixed_point:
         cfg.params.fixed_point()
     return cfg.model
