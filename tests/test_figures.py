@@ -195,6 +195,7 @@ def png_size(data: bytes) -> tuple[int, int]:
     return int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
 
 
+@pytest.mark.slow
 def test_figures_are_written_in_every_format_asked_for_at_the_dpi_asked_for(tmp_path, cli):
     out = tmp_path / "r"
     result = cli("regression", "--out", out, "--quiet", "--figure-format", "png,pdf",
@@ -212,6 +213,7 @@ def test_figures_are_written_in_every_format_asked_for_at_the_dpi_asked_for(tmp_
     assert not pdf.exists() and not svg.exists()
 
 
+@pytest.mark.slow
 def test_a_rerun_writes_the_same_bytes_in_every_format(tmp_path, cli):
     runs = []
     for name in ("a", "b"):
@@ -224,6 +226,7 @@ def test_a_rerun_writes_the_same_bytes_in_every_format(tmp_path, cli):
         assert runs[0][kind] == runs[1][kind], kind  # no creation date, fixed SVG ids
 
 
+@pytest.mark.slow
 def test_run_metadata_goes_into_the_files_not_into_the_titles(tmp_path, cli):
     out = tmp_path / "r"
     result = cli("regression", "--set", "seed=7", "--out", out, "--quiet",

@@ -153,6 +153,7 @@ def test_the_report_is_self_contained(tiny_study):
     assert pd.read_csv(out / "group.csv").shape[0] == 2
 
 
+@pytest.mark.slow
 def test_a_damaged_file_is_one_failure_row_and_exit_1(tmp_path, cli_module):
     """One unreadable recording: one failures.csv row, every other file and unit analysed,
     exit 1 after writing."""
@@ -268,6 +269,7 @@ def test_an_interrupted_study_resumed_gives_the_same_tables(tiny):
         pd.testing.assert_frame_equal(frame, resumed.frames[name], check_exact=True, obj=name)
 
 
+@pytest.mark.slow
 def test_a_changed_recording_reruns_only_its_unit(tiny, tmp_path):
     copy = tmp_path / "sim"
     shutil.copytree(tiny, copy)
@@ -332,6 +334,7 @@ def test_the_report_renders_in_a_browser(tiny_study, tmp_path):
     assert Path(shot).stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_perturbations_come_with_events_and_give_impulse_responses(tmp_path, cli_module):
     """A perturbed study: events written and named by the manifest, impulse runs per unit,
     group_impulse.csv averages the responses over subjects."""
