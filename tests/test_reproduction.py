@@ -247,3 +247,19 @@ def test_reproduce_refuses_an_unknown_experiment_before_running_any(cli, user_er
     result = cli("reproduce", "trajectory", "trajectry", "--out", tmp_path / "r")
     user_error(result, "reproduce trajectry", "no such reproduced experiment", "trajectory")
     assert not (tmp_path / "r").exists()
+
+
+def test_an_adaptive_table_is_compared_by_the_branches_it_traces():
+    """Continuation's branches.csv: one step more on a branch (another BLAS kernel's last bit
+    in a corrector) is the same result; a branch more or of another period is not."""
+    import pandas as pd
+
+    from bounce_cli.reproduce import table_drift
+
+    committed = pd.read_csv(RESULTS / "continuation" / "branches.csv")
+    extra = pd.concat([committed, committed.iloc[[3]]], ignore_index=True)
+    assert table_drift("continuation", "branches.csv", extra, committed) == []
+    other = committed.assign(period=committed["period"].where(committed["branch"] != 0, 3))
+    assert table_drift("continuation", "branches.csv", other, committed)
+    # elsewhere a row more is a drift
+    assert table_drift("continuation", "bifurcations.csv", extra, committed)
