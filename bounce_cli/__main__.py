@@ -1,3 +1,3 @@
-from .interrupts import main
+from .runtime.interrupts import main
 
 main()

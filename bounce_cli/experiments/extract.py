@@ -1,10 +1,10 @@
 """``bounce extract``: a recording of racket and ball -> the impacts table (paper Fig. 2).
 
-Reads a lab's recording (CSV or C3D, ``bounce_cli.recordings``), optionally its event log
+Reads a lab's recording (CSV or C3D, ``bounce_cli.data.recordings``), optionally its event log
 (``--events``: the impact times and alpha of a virtual set-up), and extracts per bounce the
 map's variables (``engine.extraction``): phase of impact theta_k, ball velocity after impact v_k
 (eq. 5's state), racket acceleration at impact AC (section 4) and the rest of
-``bounce_cli.impacts``. Writes ``impacts.csv``, ``excluded.csv`` (contacts not reported, with
+``bounce_cli.data.impacts``. Writes ``impacts.csv``, ``excluded.csv`` (contacts not reported, with
 the reason), ``cycles.csv`` (the racket cycles), ``fig2.png`` with the samples it shows
 (``fig2_samples.csv``) and, given the truth (``truth:``), ``accuracy.csv``.
 
@@ -25,9 +25,9 @@ import numpy as np
 import pandas as pd
 from pydantic import Field, field_validator, model_validator
 
-from ..config import ConfigError, ExperimentConfig, StrictModel
-from ..engine import ModelError
-from ..engine.extraction import (
+from ..runtime.config import ConfigError, ExperimentConfig, StrictModel
+from ..model.params import ModelError
+from ..data.extraction import (
     PLAUSIBLE_G_M_S2,
     ExtractionSettings,
     contact_duration,
@@ -35,9 +35,9 @@ from ..engine.extraction import (
     match_impacts,
     pooled_gravity,
 )
-from ..impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
-from ..setup_table import SetupQuantity, setup_frame
-from ..recordings import (
+from ..data.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
+from ..data.setup_table import SetupQuantity, setup_frame
+from ..data.recordings import (
     LENGTH_UNITS,
     TIME_UNITS,
     Trial,
@@ -45,7 +45,7 @@ from ..recordings import (
     read_recording,
     read_table,
 )
-from ..plotting import caption_figures, publication_style
+from .plotting import caption_figures, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
 
@@ -224,7 +224,7 @@ def centred_deg(theta_deg):
 # -- inputs -------------------------------------------------------------------------------------
 def demo_session():
     """(trials, truth frame) of the bundled simulated session, simulated in memory."""
-    from ..config import bundled_config_path, load_config
+    from ..runtime.config import bundled_config_path, load_config
     from .simulate_recording import RecordingConfig, session_frames
 
     cfg = load_config(RecordingConfig, bundled_config_path("recording"))
@@ -372,7 +372,7 @@ def _mean_se(x) -> tuple[float, float, int]:
 
 def setup_quantities(impacts: pd.DataFrame, results, gravity, used: ExtractionSettings,
                      measured_g: bool, measured_offset: bool) -> list[SetupQuantity]:
-    """The set-up measured from the extraction (``bounce_cli.setup_table``'s quantities; a
+    """The set-up measured from the extraction (``bounce_cli.data.setup_table``'s quantities; a
     quantity the data cannot show is left out).
 
     Parameters
@@ -607,7 +607,7 @@ def draw_fig2(samples: pd.DataFrame, impacts: pd.DataFrame, title: str, bounces:
     """Fig. 2: continuous trajectories on top; v_k and theta_k of the same bounces below, each
     with its sample mean dashed. Shows the first trial of ``samples``, its impacts within the
     samples' time span (at most ``bounces``); perturbed impacts (if marked) in red."""
-    from ..plotting import new_figure
+    from .plotting import new_figure
 
     label = samples["trial"].iloc[0]
     s = samples[samples["trial"].astype(str) == str(label)]
