@@ -114,7 +114,7 @@ def load_run_config(entry: Entry, config: Path | None,
     """
     experiment = entry.load()
     path = Path(config) if config is not None else bundled_config_path(entry.config)
-    return experiment, path, load_config(experiment.schema, path, overrides)
+    return experiment, path, load_config(experiment.schema, path, overrides, EXPERIMENTS)
 
 
 def warn_if_unstable(params: ModelParams, controller=None,
@@ -394,7 +394,8 @@ RECORDING_COLUMNS = ("trial", "t_s", "racket_x_m", "ball_x_m")
 def _extract_config(data: dict[str, Any], source: str):
     from .experiments.extract import ExtractConfig
 
-    return validate(ExtractConfig, {k: v for k, v in data.items() if v is not None}, source)
+    return validate(ExtractConfig, {k: v for k, v in data.items() if v is not None}, source,
+                    commands=EXPERIMENTS)
 
 
 def read_recording(path: str | Path, columns: Mapping[str, Any] | None = None,

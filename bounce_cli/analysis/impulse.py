@@ -17,16 +17,7 @@ from .classify import OUTCOMES, ClassifySettings, classify_batch
 from ..model.linear import iterate_linear, jacobian
 from ..model.maps import iterate_map
 from ..model.params import ModelParams, phase_difference
-
-
-def perturbed_velocity(params: ModelParams, alpha_p: float) -> float:
-    """v_0 = (1 + 2 alpha_p - alpha_0) / (1 + alpha_0) v~ (section 7), alpha_0 = params.alpha.
-
-    It is eq. 5 with alpha_p at the fixed point (theta_{k+1} = theta~ + 2 pi, v_k = v~):
-    (1 + alpha_p) a_r w cos(theta~) - alpha_p v~ + g alpha_p 2 pi / w.
-    """
-    alpha_0 = params.alpha
-    return (1.0 + 2.0 * alpha_p - alpha_0) / (1.0 + alpha_0) * params.fixed_point().v_m_s
+from ..model.perturbation import perturbed_velocity
 
 
 @dataclass(frozen=True)
@@ -63,16 +54,6 @@ def impulse_response_linear(
     y = iterate_linear(jacobian(params), [perturbed_velocity(params, alpha_p) - fp.v_m_s, 0.0],
                        n_impacts)
     return _response(params, fp.v_m_s + y[:, 0], y[:, 1])
-
-
-def relaxation_impacts(dv, dtheta, tol_v: float, tol_theta: float) -> int:
-    """First impact k from which |dv| <= tol_v and |dtheta| <= tol_theta at every later impact
-    of the series; -1 when the series does not end inside the tolerance (or holds NaN there)."""
-    inside = (np.abs(dv) <= tol_v) & (np.abs(dtheta) <= tol_theta)
-    if not inside[-1]:
-        return -1
-    outside = np.flatnonzero(~inside)
-    return int(outside[-1] + 1) if len(outside) else 0
 
 
 # -- where the perturbed response goes (section 3's criteria) ----------------------------------

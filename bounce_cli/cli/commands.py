@@ -802,14 +802,6 @@ def verify_command(
         raise typer.Exit(code=1)
 
 
-def main() -> None:
-    """The ``bounce`` command (see ``interrupts.main``, the console script, which installs the
-    signal handlers before this module's imports)."""
-    from ..runtime.interrupts import main as interrupts_main
-
-    interrupts_main()
-
-
 def add_experiment_command(entry: Entry) -> None:
     """Register ``bounce <name>`` for a registry entry: the common options (and the file
     options ``--data``, ``--events`` where the experiment declares them), then

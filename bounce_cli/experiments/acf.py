@@ -39,7 +39,16 @@ from ..analysis.stochastic import (
     stationary_sds,
     var1_theory,
 )
-from .plotting import caption_figures, data_caption, integer_axis, new_figure, publication_style
+from .plotting import (
+    LAG_LABEL,
+    PANELS,
+    TITLES,
+    caption_figures,
+    data_caption,
+    integer_axis,
+    new_figure,
+    publication_style,
+)
 from .base import Experiment, ExperimentResult, RunOptions
 from .data_side import AcfDataBlock
 
@@ -347,18 +356,6 @@ def summary_frame(config: AcfConfig, theory, theory_map, dv, dtheta) -> pd.DataF
     add("spectral_radius", "1", "theory", st.spectral_radius, note=f"regime {st.regime}")
     rows.extend(candidate_rows(config))
     return pd.DataFrame(rows)
-
-
-#: panel layout of Fig. 8: (row, column) -> pair
-PANELS = {(0, 0): "v_v", (0, 1): "theta_to_v", (1, 0): "v_to_theta", (1, 1): "theta_theta"}
-TITLES = {
-    "v_v": r"ACF of velocity: corr($v_{k+l}$, $v_k$)",
-    "theta_to_v": r"phase $\to$ velocity: corr($v_{k+l}$, $\theta_k$)",
-    "v_to_theta": r"velocity $\to$ phase: corr($\theta_{k+l}$, $v_k$)",
-    "theta_theta": r"ACF of phase: corr($\theta_{k+l}$, $\theta_k$)",
-}
-#: the x axis of every correlation panel (Fig. 8, with data, with control)
-LAG_LABEL = "lag $l$ (bounces)"
 
 
 @publication_style

@@ -1,9 +1,9 @@
 """The contract of an experiment, and what the CLI hands it.
 
 An experiment module ``bounce_cli/experiments/<name>.py`` provides ``EXPERIMENT``, an
-:class:`Experiment`, and is listed once in :mod:`bounce_cli.experiments.registry`. Adding an experiment
-means: one module, one bundled config ``configs/<name>.yaml``, one registry line, its tests,
-and (if it is part of ``bounce reproduce``) its baseline in ``results/<name>/``.
+:class:`Experiment`, and is listed once in :mod:`bounce_cli.experiments.registry`. Adding an
+experiment means: one module, one bundled config ``configs/<name>.yaml``, one registry line,
+its tests, and (if it is part of ``bounce reproduce``) its baseline in ``results/<name>/``.
 
 What an experiment must provide (as scipy's ``OdeSolver`` documents what a solver provides):
 
@@ -14,15 +14,17 @@ What an experiment must provide (as scipy's ``OdeSolver`` documents what a solve
     Pure with respect to files: it reads nothing but the config (and, for an experiment with a
     ``data`` key, the file the config names), writes nothing, prints nothing. It returns tidy
     DataFrames (file name -> frame, written as CSV) and figures. Numerics belong in
-    ``bounce_cli.model`` and ``bounce_cli.analysis``; an experiment turns a config into tables and figures. User errors
-    are raised as ``ConfigError`` or ``ModelError`` with one line naming the key or file.
+    ``bounce_cli.model`` and ``bounce_cli.analysis``; an experiment turns a config into tables
+    and figures. User errors are raised as ``ConfigError`` or ``ModelError`` with one line
+    naming the key or file.
 ``draw(frames) -> dict[str, Figure]``
     Every figure of the run, drawn from the DataFrames ``run`` returned (or read back from the
     CSVs): a figure can always be redrawn from its data. ``draw`` is decorated with
-    :func:`bounce_cli.experiments.plotting.publication_style` (the one style of every figure). ``run``
-    builds its figures by calling ``draw`` on its own frames, then records the parameters it
-    ran at as their caption (:func:`bounce_cli.experiments.plotting.caption_figures`), which goes into
-    each figure file's metadata (not its title), so that two runs' figures can be told apart.
+    :func:`bounce_cli.experiments.plotting.publication_style` (the one style of every figure).
+    ``run`` builds its figures by calling ``draw`` on its own frames, then records the
+    parameters it ran at as their caption (:func:`bounce_cli.experiments.plotting.caption_figures`),
+    which goes into each figure file's metadata (not its title), so that two runs' figures can
+    be told apart.
 
 The paper's values come from :mod:`bounce_cli.paper.values` (never literals in an experiment), and a
 summary line or CSV column states one only where the run is at the paper's parameters
@@ -131,8 +133,9 @@ class Experiment:
     """An experiment module's entry point: see the module docstring for the contract.
 
     ``name`` is its command and bundled config (``configs/<name>.yaml``); its one-line summary,
-    figure captions and capabilities (``--data``) are in :mod:`bounce_cli.experiments.registry`, so that
-    ``bounce --help`` need not import the experiments."""
+    figure captions and capabilities (``--data``) are in
+    :mod:`bounce_cli.experiments.registry`, so that ``bounce --help`` need not import the
+    experiments."""
 
     name: str
     schema: type[ExperimentConfig]

@@ -153,7 +153,8 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
             f"basin.csv will be about {format_bytes(csv_bytes)} ({n_points:,} rows); "
             f"--set output.format=npz writes basin.npz instead (about "
             f"{format_bytes(n_points * NPZ_BYTES_PER_ROW)}, read back with "
-            "bounce_cli.runtime.artifacts.read_frame), or reduce grid.theta0_deg.num / grid.v0_m_s.num"
+            "bounce_cli.runtime.artifacts.read_frame), or reduce grid.theta0_deg.num / "
+            "grid.v0_m_s.num"
         )
     settings = config.classify.settings()
     outcomes = outcome_names(settings)

@@ -32,7 +32,8 @@ from ..runtime.config import (
     StrictModel,
 )
 from ..analysis.classify import OUTCOMES
-from ..analysis.impulse import find_threshold, perturbed_velocity, relaxation_impacts
+from ..analysis.impulse import find_threshold
+from ..model.perturbation import perturbed_velocity, relaxation_impacts
 from ..model.linear import jacobian
 from ..model.params import ModelError, ModelParams, phase_difference
 from ..analysis.stochastic import (
@@ -61,13 +62,15 @@ from ..model.control import (
 from ..paper import values as paper
 from .plotting import (
     IMPACT_AFTER_LABEL,
+    LAG_LABEL,
+    PANELS,
     PHASE_LABEL,
+    TITLES,
     VELOCITY_LABEL,
     integer_axis,
     perturbation_title,
     publication_style,
 )
-from .acf import LAG_LABEL, PANELS, TITLES
 from .base import Experiment, ExperimentResult, RunOptions
 from .basin import OUTCOME_COLOURS, OUTCOME_LABELS, GridAxis
 from .impulse import RelaxationBlock, ThresholdBlock

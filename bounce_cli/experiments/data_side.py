@@ -35,7 +35,15 @@ from ..analysis.racket_inputs import INPUT_COEFFICIENTS, racket_input_jacobian
 from ..analysis.var_fit import EIGEN_QUANTITIES, J_ENTRIES, Var1Fit, fit_var1
 from ..data.data_parameters import DataModel, model_for_data
 from ..data.impacts import Impacts, ImpactsSource, circular_mean, read_impacts
-from .plotting import IMPACT_AFTER_LABEL, integer_axis, new_figure, perturbation_title
+from .plotting import (
+    IMPACT_AFTER_LABEL,
+    LAG_LABEL,
+    PANELS,
+    TITLES,
+    integer_axis,
+    new_figure,
+    perturbation_title,
+)
 from ..data.setup_table import SETUP_FILE, read_setup
 
 MODEL_COLUMNS = ("racket_period_s", "racket_amplitude_m")
@@ -566,7 +574,6 @@ def trust_frame(params, q_v, q_theta, config, segments, options,
 
 
 def acf_data_draw(frames: dict[str, pd.DataFrame]) -> dict:
-    from .acf import LAG_LABEL, PANELS, TITLES  # Fig. 8's layout, shared with the model's side
 
     acf = frames["acf_data.csv"]
     fig, axes = new_figure(2, 2, width=10, height=7.5, sharex=True)

@@ -26,12 +26,11 @@ from ..analysis.impulse import (
     impulse_response_full,
     impulse_response_linear,
     perturbed_outcome,
-    perturbed_velocity,
-    relaxation_impacts,
 )
 from ..model.control import is_passive
 from ..model.linear import stability
 from ..model.params import ModelParams
+from ..model.perturbation import perturbed_velocity, relaxation_impacts
 from .plotting import (
     IMPACT_AFTER_LABEL,
     PHASE_LABEL,

@@ -12,13 +12,17 @@ PDF's Subject, the SVG's Description; :func:`save_figure`), beside ``run.json``.
 from __future__ import annotations
 
 import functools
+import math
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, TypeVar
+
+import numpy as np
 
 from ..paper.values import parameters_text
 
 if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn (an experiment's module
     # can be imported, and its draw decorated, without it)
+    import pandas as pd
     from matplotlib.figure import Figure
 
     from ..model.params import ModelParams
@@ -171,3 +175,68 @@ def data_caption(config: Any, source: Any = None, record: dict | None = None) ->
         return (f"{where}; model alpha = {alpha['value']:.3g} ({alpha['source']}), "
                 f"g = {g['value']:.3g} m/s^2 ({g['source']})")
     return f"{where}; model alpha = {config.model.alpha:g}, g = {config.model.g:g} m/s^2"
+
+
+#: panel layout of Fig. 8: (row, column) -> pair
+PANELS = {(0, 0): "v_v", (0, 1): "theta_to_v", (1, 0): "v_to_theta", (1, 1): "theta_theta"}
+TITLES = {
+    "v_v": r"ACF of velocity: corr($v_{k+l}$, $v_k$)",
+    "theta_to_v": r"phase $\to$ velocity: corr($v_{k+l}$, $\theta_k$)",
+    "v_to_theta": r"velocity $\to$ phase: corr($\theta_{k+l}$, $v_k$)",
+    "theta_theta": r"ACF of phase: corr($\theta_{k+l}$, $\theta_k$)",
+}
+#: the x axis of every correlation panel (Fig. 8, with data, with control)
+LAG_LABEL = "lag $l$ (bounces)"
+
+
+def centred_deg(theta_deg):
+    """Phases in degrees mapped to [-180, 180): means and plots of phases near 0 stay
+    meaningful (the table keeps [0, 360))."""
+    return (np.asarray(theta_deg, dtype=float) + 180.0) % 360.0 - 180.0
+
+
+# -- Fig. 2 -------------------------------------------------------------------------------------
+def draw_fig2(samples: pd.DataFrame, impacts: pd.DataFrame, title: str, bounces: int = 10):
+    """Fig. 2: continuous trajectories on top; v_k and theta_k of the same bounces below, each
+    with its sample mean dashed. Shows the first trial of ``samples``, its impacts within the
+    samples' time span (at most ``bounces``); perturbed impacts (if marked) in red."""
+    label = samples["trial"].iloc[0]
+    s = samples[samples["trial"].astype(str) == str(label)]
+    t0, t1 = float(s["t_s"].min()), float(s["t_s"].max())
+    imp = impacts[(impacts["trial"].astype(str) == str(label)) & (impacts["t_s"] >= t0)
+                  & (impacts["t_s"] <= t1)].head(bounces)
+    fig, axes = new_figure(3, 1, width=7.5, height=7.0, sharex=True,
+                           gridspec_kw={"height_ratios": [2.2, 1, 1]})
+    ax_x, ax_v, ax_th = axes[0, 0], axes[1, 0], axes[2, 0]
+    if imp.empty:
+        t_hi = t1
+    else:
+        last = imp.iloc[-1]
+        t_hi = min(t1, float(last["t_s"]) + (float(last["hop_s"])
+                                              if math.isfinite(last["hop_s"]) else 0.0))
+    s = s[s["t_s"] <= t_hi]
+    ax_x.plot(s["t_s"], s["ball_x_m"], color="C0", lw=1.0, label="ball $x_b$")
+    ax_x.plot(s["t_s"], s["racket_x_m"], color="k", lw=0.9, label="racket $x_r$")
+    ax_x.set_ylabel("position (m)")
+    ax_x.legend(loc="upper right", fontsize=7, ncol=2)
+    perturbed = (imp["perturbed"].astype(str).str.lower() == "true").to_numpy() \
+        if "perturbed" in imp.columns else np.zeros(len(imp), dtype=bool)
+    for ax, column, label_, color in ((ax_v, "v_m_s", "$v_k$ (m/s)", "C0"),
+                                      (ax_th, "theta_deg", "$\\theta_k$ (deg)", "C2")):
+        t, y = imp["t_s"].to_numpy(float), imp[column].to_numpy(float)
+        if column == "theta_deg":
+            y = centred_deg(y)
+        ax.plot(t, y, "o-", ms=4, lw=0.8, color=color)
+        if perturbed.any():
+            ax.plot(t[perturbed], y[perturbed], "o", ms=6, color="C3",
+                    label=r"perturbed impact ($\alpha$ changed)")
+            ax.legend(loc="best", fontsize=7)
+        if len(y):
+            ax.axhline(float(np.mean(y)), ls="--", color="0.4", lw=0.8)
+        ax.set_ylabel(label_)
+        for ti in t:
+            ax_x.axvline(ti, color="0.85", lw=0.6, zorder=0)
+    ax_th.set_xlabel("time $t$ (s)")
+    fig.suptitle(f"Fig. 2: {title}\ntrial {label}; dashed: sample means of the bounces shown",
+                 fontsize=10)
+    return fig

@@ -23,9 +23,8 @@ from pydantic import Field, model_validator
 from ..runtime.config import ControllableModelBlock, ExperimentConfig, StrictModel
 from ..data.simulated_lab import SessionSettings, simulate_session, truth_rows
 from ..data.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
-from .plotting import caption_figures, publication_style
+from .plotting import caption_figures, centred_deg, draw_fig2, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
-from .extract import centred_deg, draw_fig2
 
 #: recorded positions are rounded to 0.1 micrometre (far below any lab's noise)
 POSITION_DECIMALS = 7

@@ -131,6 +131,7 @@ def extraction_config(config: dict[str, Any], overrides: tuple[str, ...], file: 
     """``bounce extract``'s config for one recording: the bundled one, the study's
     ``extract`` keys, the manifest row's ``extract.<key>`` columns, the file."""
     from .extract import ExtractConfig
+    from .registry import EXPERIMENTS
 
     data = read_yaml(bundled_config_path("extract"))
     data = _merged(data, config.get("extract", {}))
@@ -140,14 +141,14 @@ def extraction_config(config: dict[str, Any], overrides: tuple[str, ...], file: 
     data["data"] = None if file is None else str(file)
     data["events"] = None if events is None else str(events)
     return validate(ExtractConfig, data, "extract" if not overrides else "manifest extract.*",
-                    list(overrides))
+                    list(overrides), EXPERIMENTS)
 
 
 def analysis_config(name: str, settings: dict[str, Any], alpha: float, g: float, seed: int,
                     data: str | None):
     """The config of analysis ``name`` for a unit: its bundled config, the study's
     ``settings.<name>`` keys, the unit's alpha and g, its own seed."""
-    from .registry import entry
+    from .registry import EXPERIMENTS, entry
 
     experiment = entry(name).load()
     raw = _merged(read_yaml(bundled_config_path(entry(name).config)), settings)
@@ -155,7 +156,7 @@ def analysis_config(name: str, settings: dict[str, Any], alpha: float, g: float,
     if "seed" in experiment.schema.model_fields:
         raw["seed"] = seed
     raw["data"] = data
-    return validate(experiment.schema, raw, f"settings.{name}")
+    return validate(experiment.schema, raw, f"settings.{name}", commands=EXPERIMENTS)
 
 
 def _merged(base: dict[str, Any], extra: dict[str, Any]) -> dict[str, Any]:

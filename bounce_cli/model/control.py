@@ -57,7 +57,7 @@ import numpy as np
 from ..analysis.classify import BELOW_RACKET, PERIOD1, STICKING, UNDECIDED, Classification
 from ..analysis.classify import ClassifySettings, tile_slices
 from .impact import first_impact_phase
-from ..analysis.impulse import perturbed_velocity, relaxation_impacts
+from .perturbation import perturbed_velocity, relaxation_impacts
 from .linear import iterate_linear, jacobian, racket_acceleration_at_impact_g
 from .params import ModelError, ModelParams, phase_difference
 

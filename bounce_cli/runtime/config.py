@@ -11,7 +11,7 @@ import difflib
 import typing
 from importlib import resources
 from pathlib import Path
-from typing import Any, Literal, Optional, TypeVar, Union
+from typing import Any, Literal, Optional, Sequence, TypeVar, Union
 
 import yaml
 from pydantic import (
@@ -431,31 +431,36 @@ def show_value(value: Any) -> str:
 
 
 def validate(
-    schema: type[C], data: dict[str, Any], source: str, overrides: list[str] | None = None
+    schema: type[C], data: dict[str, Any], source: str, overrides: list[str] | None = None,
+    commands: Sequence[Any] = (),
 ) -> C:
-    """Validate ``data`` against ``schema``; a failure raises ConfigError with one line."""
+    """Validate ``data`` against ``schema``; a failure raises ConfigError with one line.
+
+    ``commands``: the registry's entries (:data:`bounce_cli.experiments.registry.EXPERIMENTS`);
+    given, a config that is another command's says so (:func:`other_command_of`)."""
     try:
         return schema.model_validate(data)
     except ValidationError as exc:
-        belongs = other_command_of(schema, data, source)
+        belongs = other_command_of(schema, data, source, commands)
         if belongs:
             raise ConfigError(f"{source}: {belongs}") from None
         overridden = frozenset(".".join(parse_override(t)[0]) for t in overrides or [])
         raise ConfigError(format_validation_error(exc, source, overridden, schema)) from None
 
 
-def other_command_of(schema: type[BaseModel], data: dict[str, Any], source: str) -> str:
+def other_command_of(schema: type[BaseModel], data: dict[str, Any], source: str,
+                     entries: Sequence[Any]) -> str:
     """When ``data``'s top-level blocks are not ``schema``'s but are all another command's
     (a config of ``bounce basin`` given to ``bounce acf``): one sentence saying which command
     it belongs to; '' otherwise (then the first problem is reported as usual). Of several
-    commands sharing a schema, the one whose bundled config has the file's name is named."""
-    from ..experiments.registry import EXPERIMENTS
-
+    commands sharing a schema, the one whose bundled config has the file's name is named.
+    ``entries``: the registry's entries (given by the caller: this module sits below the
+    registry)."""
     unknown = sorted(set(data) - set(schema.model_fields))
     if not unknown:
         return ""
     owners = []
-    for entry in EXPERIMENTS:
+    for entry in entries:
         other = entry.load().schema
         if other is not schema and set(data) <= set(other.model_fields):
             owners.append(entry)
@@ -464,17 +469,19 @@ def other_command_of(schema: type[BaseModel], data: dict[str, Any], source: str)
     if not owners:
         return ""
     commands = " or ".join(f"bounce {e.name}" for e in owners)
-    this = [e.name for e in EXPERIMENTS if e.load().schema is schema]
+    this = [e.name for e in entries if e.load().schema is schema]
     here = f"bounce {this[0]}" if len(this) == 1 else "this command"
     return (f"a config of {commands}, not of {here} (its keys {', '.join(unknown)} are not "
             f"{here}'s); run bounce {owners[0].name} --config {source}, or start from "
             f"{here} --print-config")
 
 
-def load_config(schema: type[C], path: Path, overrides: list[str] | None = None) -> C:
-    """Read ``path``, apply ``--set`` overrides, validate against ``schema``."""
+def load_config(schema: type[C], path: Path, overrides: list[str] | None = None,
+                commands: Sequence[Any] = ()) -> C:
+    """Read ``path``, apply ``--set`` overrides, validate against ``schema`` (``commands``: as
+    for :func:`validate`)."""
     data = apply_overrides(read_yaml(path), overrides or [])
-    return validate(schema, data, str(path), overrides)
+    return validate(schema, data, str(path), overrides, commands)
 
 
 def to_yaml(config: BaseModel) -> str:

@@ -231,7 +231,7 @@ def test_controlled_response_modulates_the_period_with_the_ball(paper_params):
     assert up.dtau[1] > 0 > down.dtau[1]
     tol = (0.05, math.radians(1.0))
     passive = [impulse_response_full(paper_params, a, 100) for a in (0.4, 0.6)]
-    from bounce_cli.analysis.impulse import relaxation_impacts
+    from bounce_cli.model.perturbation import relaxation_impacts
     slow = [relaxation_impacts(r.dv, r.dtheta, *tol) for r in passive]
     fast = [controlled_impulse_response(paper_params, c, a, 100).relaxation_impacts(*tol)
             for a in (0.4, 0.6)]
