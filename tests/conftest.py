@@ -10,7 +10,7 @@ matplotlib.use("Agg")
 
 from typer.testing import CliRunner  # noqa: E402
 
-from bounce_cli.paper.values import values as paper  # noqa: E402
+from bounce_cli.paper import values as paper  # noqa: E402
 from bounce_cli.cli.commands import app  # noqa: E402
 from bounce_cli.model.params import ModelParams  # noqa: E402
 

@@ -30,7 +30,7 @@ def test_bundled_configs_are_at_the_papers_parameters(name, paper_set):
     """Each bundled config's model block is the paper's parameter set of its figure, as the
     paper module records it (a config edited away from the paper fails here, not in a
     claim)."""
-    from bounce_cli.paper.values import values as paper
+    from bounce_cli.paper import values as paper
 
     cfg = load_config(ModelOnlyConfig, bundled_config_path(name)) if name == "model" else None
     if cfg is None:

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bounce_cli.paper.values import values as paper
+from bounce_cli.paper import values as paper
 from bounce_cli.model.linear import jacobian
 from bounce_cli.model.params import ModelParams
 from bounce_cli.experiments.registry import entry, reproduced

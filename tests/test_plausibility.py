@@ -1,5 +1,6 @@
 """Unit slips do not pass silently: racket amplitudes and periods outside what a person can do
-(``bounce_cli.data.plausibility``, the one place of the ranges) are warned about, naming the slip."""
+(``bounce_cli.data.plausibility``, the one place of the ranges) are warned about, naming the
+slip."""
 
 import pandas as pd
 import pytest

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from bounce_cli.paper.values import values as paper
+from bounce_cli.paper import values as paper
 from bounce_cli.model.linear import jacobian
 from bounce_cli.model.maps import map_step
 from bounce_cli.model.params import ModelError, ModelParams
