@@ -23,13 +23,14 @@ PACKAGE = Path(bounce_cli.__file__).parent
 ROOT = PACKAGE.parent
 
 #: the rooms from the ground up (docs/design.md, "Rooms"): a module imports only modules of
-#: its own room or of a room before it. The table of old paths (standard library only) and
-#: the package's face (``bounce_cli/__init__.py``: lazy exports) come first; the paper's
-#: printed values sit low, so that anything above the analyses may compare with them, while
-#: its claims and the gallery of ``bounce reproduce`` read the experiments and sit above them;
+#: its own room or of a room before it. The table of old paths and the errors (standard
+#: library only) and the package's face (``bounce_cli/__init__.py``: lazy exports) come
+#: first; the paper's printed values sit low, so that anything above the analyses may compare
+#: with them, while its claims and the gallery of ``bounce reproduce`` read the experiments and sit above them;
 #: the Python API and the command line are the top.
 ROOMS = (
     "bounce_cli.old_paths",
+    "bounce_cli.errors",
     "bounce_cli",
     "bounce_cli.model",
     "bounce_cli.analysis",
@@ -198,7 +199,8 @@ def test_imports_run_one_way_between_the_rooms():
 def test_every_module_is_in_a_room():
     top_level = {m for m in MODULES
                  if m.count(".") == 1 and not (PACKAGE / m.split(".")[1]).is_dir()}
-    assert top_level == {"bounce_cli.api", "bounce_cli.old_paths", "bounce_cli.__main__"}
+    assert top_level == {"bounce_cli.api", "bounce_cli.errors", "bounce_cli.old_paths",
+                         "bounce_cli.__main__"}
 
 
 def old_path_of(target: str, names: list[str]) -> str | None:

@@ -2,9 +2,10 @@
 engine, and write or print the result. No numerics here.
 
 User errors (bad YAML, unknown keys, out-of-range values, parameters without a fixed point,
-an output directory holding another config's results, typer's own usage errors) print ONE
-line ``bounce: error: ...`` to stderr and exit 2. An interrupt (SIGINT, SIGTERM, SIGHUP)
-prints ``bounce: interrupted`` and exits 128 + the signal number (see ``interrupts``).
+an output directory holding another config's results: every ``errors.BounceError``; typer's
+own usage errors) print ONE line ``bounce: error: ...`` to stderr and exit 2. An interrupt
+(SIGINT, SIGTERM, SIGHUP) prints ``bounce: interrupted`` and exits 128 + the signal number
+(see ``interrupts``).
 """
 
 from __future__ import annotations
@@ -44,9 +45,8 @@ from ..api import (
     warn_if_implausible_racket,
     write_result,
 )
-from ..runtime.artifacts import FIGURE_DPI, OutputDirError
+from ..runtime.artifacts import FIGURE_DPI
 from ..runtime.config import (
-    ConfigError,
     ModelOnlyConfig,
     apply_overrides,
     bundled_config_path,
@@ -55,15 +55,13 @@ from ..runtime.config import (
     to_yaml,
     validate,
 )
-from ..model.params import ModelError, ModelParams, wrap_phase
+from ..model.params import ModelParams, wrap_phase
 from ..model.maps import iterate_orbit
 from ..model.linear import stability
+from ..errors import BounceError, ConfigError, NoFixedPointError
 from ..analysis.classify import ClassifySettings
 from ..runtime.interrupts import Interrupted, report as report_interrupt
-from ..runtime.parallel import ClusterError
 from ..experiments.registry import EXPERIMENTS, Entry
-
-USER_ERRORS = (ConfigError, ModelError, OutputDirError, ClusterError)
 
 
 def _flags_show_no_type() -> None:
@@ -390,7 +388,7 @@ def run_experiment(
             checkpoints.discard_if_empty()
         if run_dir is not None:
             run_dir.discard()
-        if isinstance(exc, USER_ERRORS):
+        if isinstance(exc, BounceError):
             fail(str(exc))
         if isinstance(exc, OSError):  # e.g. the disk filled up while writing
             fail(f"writing {exc.filename or 'results'}: {exc.strerror or exc}")
@@ -441,7 +439,7 @@ def _model_or_fail(config: Path | None, overrides: list[str] | None, *,
                    need_fixed_point: bool = True) -> ModelParams:
     try:
         return load_model(config, overrides, need_fixed_point=need_fixed_point)
-    except USER_ERRORS as exc:
+    except BounceError as exc:
         fail(str(exc))
         raise  # unreachable
 
@@ -478,8 +476,6 @@ def fixed_point_command(
 
     With --json and parameters without a fixed point: {"exists": false, "reason": ...} and
     exit status 1."""
-    from ..model.params import NoFixedPointError
-
     params = _model_or_fail(config, overrides, need_fixed_point=not as_json)
     if as_json:
         try:
@@ -535,7 +531,7 @@ def orbit_command(
         params, controller = block.to_params(), block.controller()
         if controller is not None:
             params.fixed_point()  # the controller steers toward the period-1 orbit
-    except USER_ERRORS as exc:
+    except BounceError as exc:
         fail(str(exc))
     if not (math.isfinite(theta0_deg) and math.isfinite(v0)):
         fail("--theta0-deg and --v0 must be finite numbers")
