@@ -26,8 +26,8 @@ ROOT = PACKAGE.parent
 #: its own room or of a room before it. The table of old paths and the errors (standard
 #: library only) and the package's face (``bounce_cli/__init__.py``: lazy exports) come
 #: first; the paper's printed values sit low, so that anything above the analyses may compare
-#: with them, while its claims and the gallery of ``bounce reproduce`` read the experiments and sit above them;
-#: the Python API and the command line are the top.
+#: with them, while its claims and the gallery of ``bounce reproduce`` read the experiments
+#: and sit above them; the Python API and the command line are the top.
 ROOMS = (
     "bounce_cli.old_paths",
     "bounce_cli.errors",
