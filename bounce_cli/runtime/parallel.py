@@ -132,7 +132,8 @@ class _Worker:
 
     def __init__(self) -> None:
         # the workers import what this process can (as multiprocessing's spawn does)
-        package_root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+        # (the folder holding the package: this file is bounce_cli/runtime/parallel.py)
+        package_root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
         python_path = os.pathsep.join(dict.fromkeys(
             p for p in (package_root, *sys.path) if p and os.path.isdir(p)
         ))

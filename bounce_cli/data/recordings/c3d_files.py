@@ -48,7 +48,7 @@ PROCESSORS = {84: "Intel", 85: "DEC", 86: "SGI/MIPS"}
 def c3d_missing_hint() -> str:
     """How to install the ``c3d`` extra: in a source checkout ``pip install '.[c3d]'``,
     when installed from an index ``pip install 'bounce-cli[c3d]'``."""
-    root = Path(__file__).resolve().parents[2]
+    root = Path(__file__).resolve().parents[3]
     if (root / "pyproject.toml").is_file() and (root / "bounce_cli").is_dir():
         return f"pip install '{root}[c3d]' (this checkout), or pip install 'bounce-cli[c3d]'"
     return "pip install 'bounce-cli[c3d]'"
