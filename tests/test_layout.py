@@ -57,9 +57,6 @@ KNOWN_EXCEPTIONS = {
     ("bounce_cli.model.control", "bounce_cli.analysis.data_stats"),
     # the VARX's racket inputs simulate a session's racket (issue 22, "varx")
     ("bounce_cli.analysis.racket_inputs", "bounce_cli.data.simulated_lab"),
-    # a run directory writes figures with plotting's save_figure; the writing moves to
-    # runtime/ (issue 23, "layout" phase 2)
-    ("bounce_cli.runtime.artifacts", "bounce_cli.experiments.plotting"),
 }
 
 
