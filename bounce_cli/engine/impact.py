@@ -47,7 +47,10 @@ The gaps:
 
   - after an impact, Taylor to third order with |G'''| <= a:
     G(h) >= h (d + c h / 2 - a h^2 / 6), c = G''(0), positive up to the smallest positive
-    root of d + c h/2 - a h^2/6;
+    root of d + c h/2 - a h^2/6. Where c < 0 and d is tiny, (c/2 + sqrt(c^2/4 + 2ad/3)) / (a/3)
+    cancels to an absolute error of about eps |c| / (a/3); the polish corrects it unless that
+    exceeds 1e-6 s (hops below ~1e-7 rad, deep in sticking, when |c| / a is large), where
+    the hop keeps that error (kept: the map's bits are the reference);
   - after a release (exact sticking, ``engine.chatter``: the ball leaves the racket where the
     racket's acceleration reaches -g, sin theta = 1/Gamma, with the racket's velocity), where
     G = G' = G'' = 0 and that bound has no positive step: one order further,

@@ -15,6 +15,7 @@ from scipy.optimize import minimize_scalar
 
 from bounce_cli.engine.control import contact_after_crossing
 from bounce_cli.engine.impact import (
+    POLISH_LIMIT,
     ROUNDING_LEVEL,
     STEP_FLOOR,
     SinusoidGap,
@@ -45,8 +46,9 @@ def assert_first_root(gap, s: float, rounding: float, n_grid: int = 4000) -> Non
             assert found.fun > rounding, (s, found.x, found.fun)
 
 
-def assert_accurate(gap_mp, slope_mp, s: float, terms: float) -> None:
-    """The root to 40 digits (Newton from s) is within the stopping rule's accuracy of s."""
+def assert_accurate(gap_mp, slope_mp, s: float, terms: float, start_rounding=0.0) -> None:
+    """The root to 40 digits (Newton from s) is within the stopping rule's accuracy of s;
+    ``start_rounding``: the rounding of a start the polish may not correct (its limit)."""
     with mpmath.workdps(40):
         root = mpmath.mpf(s)
         for _ in range(10):
@@ -54,7 +56,8 @@ def assert_accurate(gap_mp, slope_mp, s: float, terms: float) -> None:
         assert abs(gap_mp(root)) < mpmath.mpf(10) ** -35 * (1 + terms)
         slope = abs(float(slope_mp(root)))
         error = abs(float(root - mpmath.mpf(s)))
-    assert error <= 8.0 * EPS * (terms / slope + s), (s, error, terms, slope)
+    allowance = start_rounding if start_rounding > POLISH_LIMIT * s else 0.0
+    assert error <= 8.0 * EPS * (terms / slope + s) + allowance, (s, error, terms, slope)
 
 
 def sinusoid_gap(theta, v, a, w, g, height=0.0):
@@ -79,25 +82,46 @@ def sinusoid_gap(theta, v, a, w, g, height=0.0):
     return floats, exact, exact_slope, terms
 
 
-def check_sinusoid_root(s, theta, v, a, w, g, height=0.0):
+def taylor_start_rounding(theta, v, a, w, g) -> float:
+    """The rounding of the map's first step (c/2 + sqrt(c^2/4 + 2 a d/3)) / (a/3): where
+    c < 0 and d is tiny the sum cancels, to an absolute error of about eps |c| / (a/3)."""
+    d, c = v / w - a * math.cos(theta), -g / w**2 + a * math.sin(theta)
+    return 4.0 * EPS * (abs(c) / 2.0 + math.sqrt(c * c / 4.0 + 2.0 * a * max(d, 0.0) / 3.0)) / (
+        a / 3.0)
+
+
+def check_sinusoid_root(s, theta, v, a, w, g, height=0.0, start_rounding=0.0):
     floats, exact, exact_slope, terms = sinusoid_gap(theta, v, a, w, g, height)
     assert math.isfinite(s) and s >= 0.0
     scale = terms(s) + 2.0 * a
     assert_first_root(floats, s, -4.0 * ROUNDING_LEVEL * scale)
-    assert_accurate(exact, exact_slope, s, terms(s))
+    assert_accurate(exact, exact_slope, s, terms(s), start_rounding)
 
 
 # -- the passive map's gap (eq. 6), from an impact -------------------------------------------
+def test_the_maps_start_rounding_is_the_one_allowance():
+    """The case hypothesis found: a = 0.01 m, theta = 0, 1e-8 m/s faster than the racket. The
+    first step (cancelling) lands 1.2e-6 s beyond the root, just over the polish's limit."""
+    a, w, g, theta = 0.01, 3.655671451449941, 12.0, 0.0
+    v = a * w + 1e-8
+    s = float(first_impact_phase(theta, v, a, w, g))
+    check_sinusoid_root(s, theta, v, a, w, g,
+                        start_rounding=taylor_start_rounding(theta, v, a, w, g))
+
+
 @settings(max_examples=250, deadline=None)
 @given(a=AMPLITUDE, w=OMEGA, g=GRAVITY, theta=st.floats(0.0, 2.0 * math.pi),
        log_excess=st.floats(-12.0, 1.2))
 def test_passive_gap_first_root_random_and_near_grazing(a, w, g, theta, log_excess):
     """From barely faster than the racket (hops of 1e-12 rad: near sticking) to fast balls
-    whose gap comes near 0 and rises again before the landing."""
+    whose gap comes near 0 and rises again before the landing. The map's first step keeps
+    its rounding where that exceeds the polish's limit, 1e-6 s (hops below ~1e-7 rad, deep
+    in sticking; the map's bits are the reference and stay as they are)."""
     v = a * w * math.cos(theta) + 10.0**log_excess
     s = float(first_impact_phase(theta, v, a, w, g))
     assert s > 0.0
-    check_sinusoid_root(s, theta, v, a, w, g)
+    check_sinusoid_root(s, theta, v, a, w, g,
+                        start_rounding=taylor_start_rounding(theta, v, a, w, g))
 
 
 # -- the controlled map's racket, switching its period at its mid-position crossing ----------
