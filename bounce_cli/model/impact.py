@@ -16,7 +16,7 @@ M stops holding (a racket whose motion changes from cycle to cycle: steps stop t
 caller gives the start, a point up to which G > 0 is already proved (the gaps' starts below).
 
 The stopping rule, stated once (``ROUNDING_LEVEL``, ``STEP_FLOOR``, ``LAST_STEP_LEVEL``,
-``POLISH_LIMIT``; ``engine.compiled`` uses the same constants):
+``POLISH_LIMIT``; ``model.compiled`` uses the same constants):
 
 * converged at s: G <= 8 eps (sum of |G's terms|), i.e. G is at the rounding level of its own
   evaluation, or the next step is below 4 eps s; a Newton polish -G/G' gives the root, only
@@ -51,16 +51,16 @@ The gaps:
     cancels to an absolute error of about eps |c| / (a/3); the polish corrects it unless that
     exceeds 1e-6 s (hops below ~1e-7 rad, deep in sticking, when |c| / a is large), where
     the hop keeps that error (kept: the map's bits are the reference);
-  - after a release (exact sticking, ``engine.chatter``: the ball leaves the racket where the
+  - after a release (exact sticking, ``model.chatter``: the ball leaves the racket where the
     racket's acceleration reaches -g, sin theta = 1/Gamma, with the racket's velocity), where
     G = G' = G'' = 0 and that bound has no positive step: one order further,
     G'''(0) = a cos theta > 0 and |G''''| <= a give G(h) >= h^3 (a cos theta / 6 - a h / 24),
     positive for h < 4 cos theta; the start is half that.
 
   The controlled map's racket that changes its period at its upward mid-position crossing
-  (``engine.control.contact_after_crossing``) is the same gap with theta = 0 and h >= 0 the
+  (``model.control.contact_after_crossing``) is the same gap with theta = 0 and h >= 0 the
   ball's height there, started at s = 0.
-* ``engine.recording``'s gap of a flight over the simulated lab's racket (cycles of their own
+* ``data.simulated_lab``'s gap of a flight over the simulated lab's racket (cycles of their own
   period and amplitude, a second harmonic, a drifting mid-position, the impact's
   disturbance): in time, with M per racket cycle.
 
@@ -273,14 +273,14 @@ class SinusoidGap:
 
     def at(self, s: np.ndarray) -> GapAt:
         """G, G' and the terms at s, written to compute each subexpression once
-        (``engine.compiled`` repeats these expressions in the same order)."""
+        (``model.compiled`` repeats these expressions in the same order)."""
         cos_th, sin_th, two_a = self.cos_th, self.sin_th, self.two_a
         tmp = np.empty_like(s)
         half = s / 2.0
         sin_half = np.sin(half)
         cos_half = np.cos(half, out=half)
         # cos and sin of theta + s/2 by the angle-addition formulas: two transcendental
-        # functions per step instead of three (the same expressions as engine.compiled)
+        # functions per step instead of three (the same expressions as model.compiled)
         cos_mid = cos_th * cos_half
         cos_mid -= np.multiply(sin_th, sin_half, out=tmp)
         sin_mid = np.multiply(sin_th, cos_half, out=cos_half)
@@ -376,7 +376,7 @@ def first_impact_phase(theta, v, amplitude, omega, g, *, max_steps: int = MAX_SA
     transcendental functions per state); the result is the same to the last bit.
 
     ``released``: None, or a boolean (array broadcasting with theta) marking states that
-    leave the racket at a release point of exact sticking (``engine.chatter``): there the
+    leave the racket at a release point of exact sticking (``model.chatter``): there the
     ball moves with the racket and the racket's acceleration is -g, so G'(0) and G''(0) are
     zero by construction (whatever their rounded values: they are set to 0) and the first
     step is the module docstring's fourth-order one (needs cos theta > 0, i.e. the release
@@ -384,7 +384,7 @@ def first_impact_phase(theta, v, amplitude, omega, g, *, max_steps: int = MAX_SA
     the arithmetic is the one without the argument, bit for bit.
 
     The flights are ``SinusoidGap``'s, solved by ``first_contact`` from the module
-    docstring's first step (``engine.compiled`` repeats these expressions in the same order).
+    docstring's first step (``model.compiled`` repeats these expressions in the same order).
     """
     theta, v, *given = np.broadcast_arrays(*(np.asarray(x, dtype=float)
                                              for x in (theta, v, amplitude, omega, g)))
