@@ -13,8 +13,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import minimize_scalar
 
-from bounce_cli.engine.control import contact_after_crossing
-from bounce_cli.engine.impact import (
+from bounce_cli.model.control import contact_after_crossing
+from bounce_cli.model.impact import (
     POLISH_LIMIT,
     ROUNDING_LEVEL,
     STEP_FLOOR,
