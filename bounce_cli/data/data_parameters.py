@@ -16,7 +16,7 @@ same rules (``trials_model``).
 
 "Set by the user" means given on this command line: ``--set model.alpha=...`` (or
 ``model.g``), or written under ``model:`` in the user's own ``--config`` file with a value
-other than the bundled config's (``config.keys_set_by_user``: a config printed by
+other than the bundled config's (``runtime.config.keys_set_by_user``: a config printed by
 ``--print-config`` and loaded back holds every default, which are no choice). The values of a
 bundled config (the paper's) are not set by the user: with ``--data`` they are replaced by the
 data's. A value set by the user wins over the data's. A value that is neither in the data nor
