@@ -45,10 +45,10 @@ from typing import Any, Callable, Iterable, Iterator, Literal
 
 import numpy as np
 
-from .chatter import release_fate, tail_is_summable
-from .impact import MAX_SAFE_STEPS, can_fly, first_impact_phase
-from .maps import velocity_after_impact
-from .params import FixedPoint, ModelParams, phase_difference
+from .chatter import release_fate
+from .impact import MAX_SAFE_STEPS
+from .maps import ImpactMap, PassiveMap
+from .params import FixedPoint, ModelError, ModelParams
 
 PERIOD1, STICKING, BELOW_RACKET, UNDECIDED, LOCKED, RESTING = 0, 1, 2, 3, 4, 5
 #: outcome names indexed by their integer code (section 3's, with ``min_hop_s`` > 0)
@@ -132,70 +132,67 @@ def classify_batch(theta0, v0, params: ModelParams,
                    settings: ClassifySettings = ClassifySettings(), *,
                    require_fixed_point: bool = True,
                    kernel: Literal["auto", "numpy", "compiled"] = "auto") -> Classification:
-    """Classify initial conditions (arrays broadcast) in one vectorised batch.
+    """Classify initial conditions (arrays broadcast) of the passive map in one batch.
 
     Returns a ``Classification`` with the broadcast shape. See the module docstring for the
     outcomes and the meaning of the iteration count. Without a period-1 fixed point (eq. 8)
     this raises NoFixedPointError, unless ``require_fixed_point`` is False: then no point is
     ``period1`` and the others are decided by the same iteration (parameter sweeps).
 
-    ``kernel``: "numpy" is the code below; "compiled" the same arithmetic compiled with numba
-    (``engine.compiled``: identical outcomes and iteration counts, about 3x faster per core);
-    "auto" the compiled one when ``compiled_kernel_available()``.
+    ``kernel``: "numpy" is ``classify_states``'s loop; "compiled" the same arithmetic
+    compiled with numba (``engine.compiled``: identical outcomes and iteration counts, about
+    3x faster per core); "auto" the compiled one when ``compiled_kernel_available()``.
     """
+    return classify_states(PassiveMap.of(params, require_fixed_point=require_fixed_point),
+                           theta0, v0, settings, kernel=kernel)
+
+
+def classify_states(impact_map: ImpactMap, theta0, v0,
+                    settings: ClassifySettings = ClassifySettings(), *,
+                    kernel: Literal["auto", "numpy", "compiled"] = "auto") -> Classification:
+    """Section 3's classification of initial conditions (arrays broadcast) of any map that
+    implements the step protocol (``engine.maps.ImpactMap``: the passive map, the
+    controlled one of ``engine.control``), in one vectorised batch: the one loop of the
+    module docstring. ``kernel`` as for ``classify_batch``: the compiled kernel runs where
+    the map has one (``compiled_classification``) and exact sticking is not asked for."""
     theta0, v0 = np.broadcast_arrays(np.asarray(theta0, dtype=float), np.asarray(v0, dtype=float))
     shape = theta0.shape
     theta0, v0 = theta0.ravel(), v0.ravel()
-    if require_fixed_point or params.cos_theta_fixed() <= 1.0:
-        fp = params.fixed_point()
-    else:  # a NaN target: no state is within any tolerance of it
-        fp = FixedPoint(v_m_s=math.nan, theta_rad=math.nan)
     exact = settings.min_hop_s == 0.0  # exact sticking: the numpy kernel, whatever ``kernel``
-    if not exact and (kernel == "compiled"
-                      or (kernel == "auto" and compiled_kernel_available())):
-        from .compiled import classify_arrays
-
-        codes, counts = classify_arrays(theta0, v0, params, fp, settings.max_iterations,
-                                        settings.tolerance, settings.min_hop_s,
-                                        MAX_SAFE_STEPS)
+    compiled = getattr(impact_map, "compiled_classification", None)
+    if not exact and compiled is not None and (
+            kernel == "compiled" or (kernel == "auto" and compiled_kernel_available())):
+        codes, counts = compiled(theta0, v0, settings, MAX_SAFE_STEPS)
         return Classification(codes.reshape(shape), counts.reshape(shape))
     tol = settings.tolerance
     min_hop = settings.min_hop_s
-    w = params.omega
     stick_code, stick_iterations, locked_cycles = STICKING, None, 0
     if exact:
-        stick_code, stick_iterations, locked_cycles = _exact_sticking_fate(params, settings, fp)
+        if not isinstance(impact_map, PassiveMap):
+            raise ModelError("exact sticking (min_hop_s 0) is implemented for the passive "
+                             "map only; give a shortest hop > 0")
+        stick_code, stick_iterations, locked_cycles = _exact_sticking_fate(
+            impact_map.params, settings, impact_map.target)
 
     outcome = np.full(theta0.shape, UNDECIDED, dtype=np.int8)
     iterations = np.full(theta0.shape, settings.max_iterations, dtype=np.int16)
 
-    flies = can_fly(theta0, v0, params)
+    flies = impact_map.launches(impact_map.start(theta0, v0))
     outcome[~flies] = BELOW_RACKET
     iterations[~flies] = 0
 
     idx = np.flatnonzero(flies)
-    th = np.mod(theta0[idx], TWO_PI)
-    vv = v0[idx]
-    # cos and sin of the wrapped phase, each computed once per impact: eq. 5 and the solver's
-    # start share them (the same values each would compute)
-    cos_th = np.cos(th)
-    a, g = params.racket_amplitude, params.g
+    state = impact_map.start(theta0[idx], v0[idx], wrap=True)
     for k in range(1, settings.max_iterations + 1):
         if idx.size == 0:
             break
-        hop = first_impact_phase(th, vv, a, w, g, cos_theta=cos_th, sin_theta=np.sin(th))
-        th = np.mod(th + hop, TWO_PI)
-        cos_th = np.cos(th)
-        vv = velocity_after_impact(th, vv, hop, params, cos_theta_next=cos_th)
+        step = impact_map.step(state, wrap=True)
+        state = step.state
         # NaN hop (cannot leave the racket) compares False: sticking
-        sticking = ~(hop / w >= min_hop)
+        sticking = ~(step.hop_s >= min_hop)
         if exact:  # sticks where a complete chatter's tail is summable (``engine.chatter``)
-            sticking |= tail_is_summable(th, vv - a * w * cos_th, params)
-        period1 = (
-            (np.abs(vv - fp.v_m_s) < tol)
-            & (np.abs(phase_difference(th, fp.theta_rad)) < tol)
-            & ~sticking
-        )
+            sticking |= impact_map.summable_chatter(state)  # type: ignore[attr-defined]
+        period1 = impact_map.near_fixed_point(state, tol) & ~sticking
         settled = sticking | period1
         if settled.any():
             done = idx[settled]
@@ -203,7 +200,7 @@ def classify_batch(theta0, v0, params: ModelParams,
             iterations[done] = (k if stick_iterations is None else
                                 np.where(sticking[settled], stick_iterations(k), k))
             keep = ~settled
-            idx, th, vv, cos_th = idx[keep], th[keep], vv[keep], cos_th[keep]
+            idx, state = idx[keep], state.take(keep)
     return Classification(outcome.reshape(shape), iterations.reshape(shape), locked_cycles)
 
 
@@ -229,17 +226,18 @@ def _exact_sticking_fate(params: ModelParams, settings: ClassifySettings, fp: Fi
 
 
 def classify_tile(args):
-    """One task of ``classify_grid``: (theta0, v0, params, settings, kernel) -> (outcome,
-    iterations) arrays; a module-level function, so that worker processes can receive it."""
-    theta0, v0, params, settings, kernel = args
-    result = classify_batch(theta0, v0, params, settings, kernel=kernel)
+    """One task of ``classify_grid``: (theta0, v0, impact_map, settings, kernel) -> (outcome,
+    iterations, locked cycles); a module-level function, so that worker processes can
+    receive it."""
+    theta0, v0, impact_map, settings, kernel = args
+    result = classify_states(impact_map, theta0, v0, settings, kernel=kernel)
     return result.outcome, result.iterations, result.locked_cycles
 
 
 def classify_grid(
     theta0,
     v0,
-    params: ModelParams,
+    params: ModelParams | ImpactMap,
     settings: ClassifySettings = ClassifySettings(),
     *,
     map: Callable[[Callable[[Any], Any], Iterable[Any]], Iterator[Any]] = builtins.map,
@@ -248,11 +246,13 @@ def classify_grid(
     on_tile_done: Callable[[int], None] | None = None,
     kernel: Literal["auto", "numpy", "compiled"] = "auto",
 ) -> Classification:
-    """``classify_batch`` for large arrays: cut into tiles of at most ``tile_points`` points,
-    each classified by ``map(classify_tile, tiles)`` (any ``map``-like callable that yields
-    results in task order: the built-in ``map`` in this process, or an executor's ``map``
-    running tiles on ``workers`` processes; the engine starts no processes itself).
+    """``classify_states`` for large arrays: cut into tiles of at most ``tile_points``
+    points, each classified by ``map(classify_tile, tiles)`` (any ``map``-like callable that
+    yields results in task order: the built-in ``map`` in this process, or an executor's
+    ``map`` running tiles on ``workers`` processes; the engine starts no processes itself).
 
+    ``params``: the passive map's parameters, or any map of the step protocol
+    (``engine.maps.ImpactMap``: the controlled map of ``engine.control``).
     Tiles interleave the points (tile i holds points i, i + n, i + 2n, ... of the flattened
     arrays), so every tile gets the same mix of cheap and expensive initial conditions and
     the workers stay balanced; the number of tiles is a multiple of ``workers``.
@@ -260,6 +260,7 @@ def classify_grid(
     it (for a progress bar). ``kernel`` as for ``classify_batch``. Results are identical for
     any ``map``, ``workers``, ``tile_points`` and ``kernel``.
     """
+    impact_map = PassiveMap.of(params) if isinstance(params, ModelParams) else params
     theta0, v0 = np.broadcast_arrays(np.asarray(theta0, dtype=float), np.asarray(v0, dtype=float))
     shape = theta0.shape
     theta0, v0 = theta0.ravel(), v0.ravel()
@@ -267,7 +268,7 @@ def classify_grid(
     outcome = np.empty(theta0.shape, dtype=np.int8)
     iterations = np.empty(theta0.shape, dtype=np.int16)
     # copies: contiguous arrays for a worker (and small pickles); made as tiles are sent
-    tasks = ((theta0[t].copy(), v0[t].copy(), params, settings, kernel) for t in tiles)
+    tasks = ((theta0[t].copy(), v0[t].copy(), impact_map, settings, kernel) for t in tiles)
     locked_cycles = 0  # the same in every tile: one release per parameter point
     for tile, (tile_outcome, tile_iterations, tile_cycles) in zip(
             tiles, map(classify_tile, tasks)):

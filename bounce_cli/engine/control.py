@@ -54,12 +54,12 @@ from typing import Any, Callable, Protocol, Sequence
 
 import numpy as np
 
-from .classify import BELOW_RACKET, PERIOD1, STICKING, UNDECIDED, Classification
-from .classify import ClassifySettings, tile_slices
+from .classify import Classification, ClassifySettings, classify_states
 from .impact import first_impact_phase
 from .impulse import perturbed_velocity, relaxation_impacts
 from .linear import iterate_linear, jacobian, racket_acceleration_at_impact_g
-from .params import ModelError, ModelParams, phase_difference
+from .maps import State, Step, iterate_map_orbit, iterate_states
+from .params import FixedPoint, ModelError, ModelParams, phase_difference
 
 TWO_PI = 2.0 * math.pi
 
@@ -273,22 +273,71 @@ def _step_switching_at_crossing(theta, v, tau, tau_next, params: ModelParams, al
                           omega=omega_at)
 
 
+@dataclass(frozen=True)
+class ControlledMap:
+    """The controlled map behind the step protocol (``engine.maps.ImpactMap``): states
+    (theta, v) with the racket period tau of the flight that ended at the impact as their one
+    further variable (``State.extra = (tau,)``); ``controlled_step`` is its step. Orbits,
+    batch iteration, classification and tiles (``engine.maps``, ``engine.classify``) run it
+    as they run the passive map.
+
+    ``target``: the fixed point (eqs. 7, 8) of the period-1 test (NaN: none), with tau_bar;
+    ``period_tolerance_s``: the period-1 test's tolerance on tau (None: the same number as
+    the one on v and theta, in s); ``initial_period_s``: tau_0 of a start (None: tau_bar).
+    """
+
+    params: ModelParams
+    controller: Controller
+    reference: Reference
+    target: FixedPoint = FixedPoint(math.nan, math.nan)
+    period_tolerance_s: float | None = None
+    initial_period_s: float | None = None
+
+    @classmethod
+    def of(cls, params: ModelParams, controller: Controller, *,
+           require_fixed_point: bool = False, period_tolerance_s: float | None = None,
+           initial_period_s: float | None = None) -> "ControlledMap":
+        """The map at ``params`` with ``controller``; ``require_fixed_point``: the target is
+        eqs. 7, 8's fixed point (NoFixedPointError where there is none), else NaN."""
+        target = params.fixed_point() if require_fixed_point else FixedPoint(math.nan, math.nan)
+        return cls(params, controller, Reference.of(params), target, period_tolerance_s,
+                   initial_period_s)
+
+    def start(self, theta0, v0, *, wrap: bool = False) -> State:
+        theta0, v0 = np.asarray(theta0, dtype=float), np.asarray(v0, dtype=float)
+        tau0 = self.params.racket_period if self.initial_period_s is None else \
+            float(self.initial_period_s)
+        return State(np.mod(theta0, TWO_PI) if wrap else theta0, v0,
+                     (np.full(np.shape(theta0), tau0),))
+
+    def launches(self, state: State) -> np.ndarray:
+        """The ball rises above the racket moving with the period it had (state's tau)."""
+        return can_fly_at(state.theta, state.v, self.params.racket_amplitude,
+                          2.0 * np.pi / state.extra[0], self.params.g)
+
+    def step(self, state: State, *, wrap: bool = False) -> Step:
+        out = controlled_step(state.theta, state.v, state.extra[0], self.params,
+                              self.controller, reference=self.reference, wrap=wrap)
+        return Step(State(out.theta, out.v, (out.tau,)), out.hop_phase, out.hop_seconds())
+
+    def near_fixed_point(self, state: State, tolerance: float) -> np.ndarray:
+        tol_tau = tolerance if self.period_tolerance_s is None else self.period_tolerance_s
+        return ((np.abs(state.v - self.target.v_m_s) < tolerance)
+                & (np.abs(phase_difference(state.theta, self.target.theta_rad)) < tolerance)
+                & (np.abs(state.extra[0] - self.params.racket_period) < tol_tau))
+
+
 def iterate_controlled(theta0, v0, tau0, params: ModelParams, controller: Controller,
                        n_impacts: int):
     """Iterate the controlled map n_impacts times: (theta, v, tau, hop_phase), each of shape
     (n_impacts + 1, *broadcast shape), row 0 the initial condition (hop NaN there), as
-    ``engine.maps.iterate_map``. Once a state cannot fly, it stays NaN."""
+    ``engine.maps.iterate_map`` (``iterate_states`` of the ``ControlledMap``). Once a state
+    cannot fly, it stays NaN."""
     theta0, v0, tau0 = np.broadcast_arrays(*(np.asarray(x, float) for x in (theta0, v0, tau0)))
-    reference = Reference.of(params)
-    out = {name: np.full((n_impacts + 1,) + theta0.shape, np.nan)
-           for name in ("theta", "v", "tau", "hop")}
-    out["theta"][0], out["v"][0], out["tau"][0] = theta0, v0, tau0
-    for k in range(n_impacts):
-        step = controlled_step(out["theta"][k], out["v"][k], out["tau"][k], params, controller,
-                               reference=reference)
-        out["theta"][k + 1], out["v"][k + 1] = step.theta, step.v
-        out["tau"][k + 1], out["hop"][k + 1] = step.tau, step.hop_phase
-    return out["theta"], out["v"], out["tau"], out["hop"]
+    impact_map = ControlledMap.of(params, controller)
+    history = iterate_states(impact_map, theta0, v0, n_impacts,
+                             start=State(theta0, v0, (tau0,)))
+    return history.theta, history.v, history.extra[0], history.hop_phase
 
 
 # -- fixed point and linearisation ------------------------------------------------------------
@@ -406,11 +455,13 @@ def controlled_impulse_response(params: ModelParams, controller: Controller, alp
 
 # -- classification (section 3's criteria, with the period as third state) ---------------------
 def classify_controlled(theta0, v0, params: ModelParams, controller: Controller,
-                        settings: ClassifySettings = ClassifySettings(), *, tau0=None,
+                        settings: ClassifySettings = ClassifySettings(), *,
+                        tau0: float | None = None,
                         period_tolerance_s: float | None = None) -> Classification:
-    """Section 3's classification (see ``engine.classify``) of initial conditions for the
-    controlled map, vectorised over the arrays (broadcast); the racket starts with tau0
-    (default tau_bar) and the controller sets the first flight's period from (v0, theta0).
+    """Section 3's classification (``engine.classify.classify_states``) of initial
+    conditions (arrays broadcast) for the controlled map (``ControlledMap``); the racket
+    starts with tau0 (default tau_bar) and the controller sets the first flight's period
+    from (v0, theta0).
 
     * below_racket: v0 not above the racket's velocity at theta0 with the period tau0 the
       racket had (section 3's criterion, the same region as the passive basin's);
@@ -421,48 +472,12 @@ def classify_controlled(theta0, v0, params: ModelParams, controller: Controller,
       ``period_tolerance_s`` (default: the same number as tol, in s);
     * undecided: none within ``max_iterations``.
 
-    The arithmetic is ``classify_batch``'s (phases wrapped every impact), so a controller that
+    The loop is the passive map's (phases wrapped every impact), so a controller that
     keeps the period (K = 0) gives the passive classification exactly.
     """
-    theta0, v0 = np.broadcast_arrays(np.asarray(theta0, dtype=float), np.asarray(v0, dtype=float))
-    shape = theta0.shape
-    theta0, v0 = theta0.ravel(), v0.ravel()
-    fp = params.fixed_point()
-    reference = Reference.of(params)
-    tau_bar = params.racket_period
-    tau0 = np.broadcast_to(np.asarray(tau_bar if tau0 is None else tau0, float), shape).ravel()
-    tol = settings.tolerance
-    tol_tau = tol if period_tolerance_s is None else period_tolerance_s
-
-    outcome = np.full(theta0.shape, UNDECIDED, dtype=np.int8)
-    iterations = np.full(theta0.shape, settings.max_iterations, dtype=np.int16)
-    omega0 = 2.0 * np.pi / tau0
-    flies = can_fly_at(theta0, v0, params.racket_amplitude, omega0, params.g)
-    outcome[~flies] = BELOW_RACKET
-    iterations[~flies] = 0
-    idx = np.flatnonzero(flies)
-    th, vv, tt = np.mod(theta0[idx], TWO_PI), v0[idx], tau0[idx]
-    for k in range(1, settings.max_iterations + 1):
-        if idx.size == 0:
-            break
-        step = controlled_step(th, vv, tt, params, controller, reference=reference, wrap=True)
-        hop, tt, th, vv = step.hop_phase, step.tau, step.theta, step.v
-        # NaN hop (cannot leave the racket, or no valid period) compares False: sticking
-        sticking = ~(hop / step.omega >= settings.min_hop_s)
-        period1 = (
-            (np.abs(vv - fp.v_m_s) < tol)
-            & (np.abs(phase_difference(th, fp.theta_rad)) < tol)
-            & (np.abs(tt - tau_bar) < tol_tau)
-            & ~sticking
-        )
-        settled = sticking | period1
-        if settled.any():
-            done = idx[settled]
-            outcome[done] = np.where(sticking[settled], STICKING, PERIOD1)
-            iterations[done] = k
-            keep = ~settled
-            idx, th, vv, tt = idx[keep], th[keep], vv[keep], tt[keep]
-    return Classification(outcome.reshape(shape), iterations.reshape(shape))
+    impact_map = ControlledMap.of(params, controller, require_fixed_point=True,
+                                  period_tolerance_s=period_tolerance_s, initial_period_s=tau0)
+    return classify_states(impact_map, theta0, v0, settings)
 
 
 # -- basin exit threshold of alpha_p (section 7) ----------------------------------------------
@@ -789,49 +804,14 @@ class ControlledOrbit:
 def iterate_controlled_orbit(theta0: float, v0: float, params: ModelParams,
                              controller: Controller, n_impacts: int, min_hop_s: float,
                              tau0: float | None = None) -> ControlledOrbit:
-    """``engine.maps.iterate_orbit`` for the controlled map from (theta0, v0, tau0 = tau_bar):
-    stops after a hop shorter than ``min_hop_s`` or when the ball cannot fly (also
-    when the controller asks for a period <= 0), at once when v0 is not above the racket's
-    velocity (with tau0)."""
-    reference = Reference.of(params)
-    tau0 = params.racket_period if tau0 is None else float(tau0)
-    theta, v, tau, hop = [float(theta0)], [float(v0)], [tau0], [math.nan]
-    reason = ""
-    if not can_fly_at(theta0, v0, params.racket_amplitude, TWO_PI / tau0, params.g):
-        reason = "below_racket"
-    else:
-        for _ in range(n_impacts):
-            step = controlled_step(theta[-1], v[-1], tau[-1], params, controller,
-                                   reference=reference)
-            theta.append(float(step.theta))
-            v.append(float(step.v))
-            tau.append(float(step.tau))
-            hop.append(float(step.hop_phase))
-            if not float(step.hop_seconds()) >= min_hop_s:  # NaN: cannot fly
-                reason = "sticking"
-                break
-    return ControlledOrbit(np.array(theta), np.array(v), np.array(tau), np.array(hop), reason)
-
-
-def classify_controlled_grid(theta0, v0, params: ModelParams, controller: Controller,
-                             settings: ClassifySettings = ClassifySettings(), *,
-                             tile_points: int = 1 << 15, on_tile_done=None,
-                             period_tolerance_s: float | None = None) -> Classification:
-    """``classify_controlled`` over large arrays in tiles of at most ``tile_points`` (in this
-    process; ``on_tile_done(n)`` after each, for a progress bar). A point's result does not
-    depend on the tiling."""
-    theta0, v0 = np.broadcast_arrays(np.asarray(theta0, dtype=float), np.asarray(v0, dtype=float))
-    shape = theta0.shape
-    theta0, v0 = theta0.ravel(), v0.ravel()
-    outcome = np.empty(theta0.shape, dtype=np.int8)
-    iterations = np.empty(theta0.shape, dtype=np.int16)
-    for tile in tile_slices(theta0.size, tile_points):
-        res = classify_controlled(theta0[tile], v0[tile], params, controller, settings,
-                                  period_tolerance_s=period_tolerance_s)
-        outcome[tile], iterations[tile] = res.outcome, res.iterations
-        if on_tile_done is not None:
-            on_tile_done(res.outcome.size)
-    return Classification(outcome.reshape(shape), iterations.reshape(shape))
+    """``engine.maps.iterate_orbit`` for the controlled map from (theta0, v0, tau0 = tau_bar)
+    (``iterate_map_orbit`` of the ``ControlledMap``): stops after a hop shorter than
+    ``min_hop_s`` or when the ball cannot fly (also when the controller asks for a period
+    <= 0), at once when v0 is not above the racket's velocity (with tau0)."""
+    impact_map = ControlledMap.of(params, controller, initial_period_s=tau0)
+    orbit = iterate_map_orbit(impact_map, theta0, v0, n_impacts, min_hop_s)
+    return ControlledOrbit(orbit.column("theta"), orbit.column("v"), orbit.extra(0),
+                           orbit.hop_phase, orbit.stop_reason)
 
 
 def controlled_impulse_response_linear(params: ModelParams, controller: Controller,

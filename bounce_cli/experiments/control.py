@@ -41,7 +41,9 @@ from ..engine.stochastic import (
     sample_correlations,
     var1_theory,
 )
+from .basin import classify_map_grid
 from ..engine.control import (
+    ControlledMap,
     PASSIVE,
     FastestController,
     PeriodController,
@@ -320,9 +322,11 @@ def basin_frames(params: ModelParams, config: ControlConfig,
     theta_grid, v_grid = np.meshgrid(theta_deg, v0)  # rows: v0 outer, theta0 inner
     frames, fractions = [], []
     for model, controller in _controllers(config).items():
-        res = classify_controlled(np.deg2rad(theta_grid).ravel(), v_grid.ravel(), params,
-                                  controller, config.classify.settings(),
-                                  period_tolerance_s=config.classify.period_tolerance_s)
+        impact_map = ControlledMap.of(params, controller, require_fixed_point=True,
+                                      period_tolerance_s=config.classify.period_tolerance_s)
+        # the basin command's classifier: worker processes (--jobs), compiled kernel
+        res = classify_map_grid(np.deg2rad(theta_grid).ravel(), v_grid.ravel(), impact_map,
+                                config.classify.settings(), jobs=options.jobs)
         frames.append(pd.DataFrame({"model": model, "theta0_deg": theta_grid.ravel(),
                                     "v0_m_s": v_grid.ravel(), "outcome": res.names(),
                                     "iterations": res.iterations}))

@@ -362,12 +362,14 @@ def test_flight_time_matching_returns_the_phase_in_one_impact(paper_params):
 
 
 def test_grid_tiles_and_orbit_agree_with_the_batch(paper_params):
-    from bounce_cli.engine.control import classify_controlled_grid, iterate_controlled_orbit
+    from bounce_cli.engine.classify import classify_grid
+    from bounce_cli.engine.control import ControlledMap, iterate_controlled_orbit
 
     c = PeriodController(0.6, 0.9)
     theta, v = np.meshgrid(np.linspace(0, 2 * np.pi, 50), np.linspace(0, 10, 50))
     whole = classify_controlled(theta, v, paper_params, c)
-    tiled = classify_controlled_grid(theta, v, paper_params, c, tile_points=77)
+    tiled = classify_grid(theta, v, ControlledMap.of(paper_params, c, require_fixed_point=True),
+                          tile_points=77)
     assert np.array_equal(whole.outcome, tiled.outcome)
     assert np.array_equal(whole.iterations, tiled.iterations)
     orbit = iterate_controlled_orbit(0.8, 5.3, paper_params, c, 15, 1e-3)

@@ -254,3 +254,28 @@ def test_zero_gain_correlations_are_the_passive_ones():
     frame = exp.correlations_frame(cfg.params, cfg)
     np.testing.assert_allclose(frame.controlled_theory, frame.passive_theory, rtol=1e-10,
                                atol=1e-12)
+
+
+def test_the_controlled_basin_runs_on_the_worker_pool(monkeypatch):
+    """``bounce control --jobs 2``: the passive and controlled basins on two worker processes
+    (the basin command's classifier), the same tables as in one process."""
+    from bounce_cli import parallel
+    from bounce_cli.experiments import basin
+
+    started = []
+
+    class CountedPool(parallel.LocalPool):
+        def __enter__(self):
+            started.append(self.workers)
+            return super().__enter__()
+
+    monkeypatch.setenv("BOUNCE_KERNEL", "numpy")
+    monkeypatch.setattr(parallel, "LocalPool", CountedPool)
+    cfg = load()
+    one = exp.basin_frames(cfg.params, cfg, RunOptions(jobs=1))
+    monkeypatch.setattr(basin, "POOL_MIN_POINTS", 100)
+    two = exp.basin_frames(cfg.params, cfg, RunOptions(jobs=2))
+    assert started == [2, 2]  # one pool per model (passive, controlled)
+    for name in ("basin.csv", "basin_fractions.csv"):
+        pd.testing.assert_frame_equal(one[name], two[name])
+    assert "--jobs" in runner.invoke(app, ["control", "--help"]).output
