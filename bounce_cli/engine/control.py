@@ -54,7 +54,9 @@ from typing import Any, Callable, Protocol, Sequence
 
 import numpy as np
 
+from .chatter import release_phase
 from .classify import Classification, ClassifySettings, classify_states
+from .flight import simulate_with_racket
 from .impact import first_impact_phase
 from .impulse import perturbed_velocity, relaxation_impacts
 from .linear import iterate_linear, jacobian, racket_acceleration_at_impact_g
@@ -843,83 +845,83 @@ class RacketClock:
         return self.phase_start[i] + self.omega[i] * (t - self.t_start[i]), self.omega[i]
 
 
+class ControlledRacket:
+    """The racket of the continuous motion with period control (``engine.flight.Racket``):
+    at the launch and at every impact the controller sets its period from then on
+    (``switch: impact``, the map of this module): the phase stays continuous, the racket's
+    velocity jumps. ``clock()``: its phase in time; ``periods``: the period of the flight
+    that ended at each impact (s), as ``iterate_controlled_orbit``'s tau."""
+
+    def __init__(self, params: ModelParams, controller: Controller) -> None:
+        self.params = params
+        self.controller = controller
+        self.reference = Reference.of(params)
+        self.tau = params.racket_period
+        self.omega = TWO_PI / self.tau
+        self.starts: list[float] = []
+        self.phases: list[float] = []
+        self.omegas: list[float] = []
+        self.periods: list[float] = []
+
+    def start_time(self, theta0: float) -> float:
+        self.starts, self.phases = [theta0 * self.tau / TWO_PI], [float(theta0)]
+        return self.starts[0]
+
+    def phase(self, t: float) -> float:
+        return self.phases[-1] + self.omega * (t - self.starts[-1])
+
+    def position(self, t: float) -> float:
+        return self.params.racket_amplitude * math.sin(self.phase(t))
+
+    def velocity(self, t: float) -> float:
+        return self.params.racket_amplitude * self.omega * math.cos(self.phase(t))
+
+    def can_fly(self, phase: float, v: float) -> bool:
+        return bool(can_fly_at(phase, v, self.params.racket_amplitude, self.omega,
+                               self.params.g))
+
+    def leave_time(self, t: float) -> float:
+        """When a ball riding from t leaves: the racket keeps its period meanwhile."""
+        ph = self.phase(t)
+        at_period = ModelParams(self.params.alpha, self.params.g,
+                                self.params.racket_amplitude, self.tau)
+        return t + (release_phase(ph, at_period) - ph) / self.omega
+
+    def hit_time(self, t: float, phase: float, launch_phase: float, hop: float) -> float:
+        return t + (launch_phase - phase + hop) / self.omega
+
+    def launch(self, t: float, v: float) -> None:
+        self._set_period(t, v, "at the launch")
+
+    def impact(self, t: float, v_after: float) -> None:
+        self.periods.append(self.tau)  # the period of the flight that ended at this impact
+        phase = self.phase(t)
+        self._set_period(t, v_after, f"at t = {t:.4g} s")
+        self.starts.append(t)
+        self.phases.append(phase)
+
+    def _set_period(self, t: float, v: float, where: str) -> None:
+        phase = self.phase(t)
+        tau = float(self.controller.next_period(v, phase, self.tau, self.reference))
+        if not tau > 0.0:
+            raise ModelError(f"the controller asks for a racket period <= 0 {where}")
+        self.tau, self.omega = tau, TWO_PI / tau
+        self.omegas.append(self.omega)
+
+    def clock(self) -> RacketClock:
+        return RacketClock(np.array(self.starts), np.array(self.phases), np.array(self.omegas))
+
+
 def simulate_controlled_motion(theta0: float, v0: float, params: ModelParams,
                                controller: Controller, duration_s: float, settings):
     """``engine.flight.simulate`` (exact integrator) with racket period control: the ball
-    leaves the racket at phase theta0 (t0 = theta0 / w_bar) with v0; at the launch and at
-    every impact the controller sets the racket's period from then on (``switch: impact``,
-    the map of this module: the phase stays continuous, the racket's velocity jumps). Sticking
-    as in ``engine.flight`` (a hop shorter than ``settings.min_hop_s``, or a ball that leaves no
-    faster than the racket then moves): the ball rides on the racket, which keeps its period,
-    until the racket's downward acceleration exceeds g. Returns (Trajectory, RacketClock,
-    periods): the racket's period during the flight that ended at each impact (s), as
-    ``iterate_controlled_orbit``'s tau."""
-    from .flight import LEAVE_NUDGE_PHASE, Impact, Segment, Trajectory, impact_velocity
-
-    a, g = params.racket_amplitude, params.g
-    reference = Reference.of(params)
-    tau = params.racket_period
-    t = theta0 * tau / TWO_PI
-    t0, t_end = t, t + duration_s
-    phase = float(theta0)
-    tau = float(controller.next_period(v0, theta0, tau, reference))
-    if not tau > 0.0:
-        raise ModelError("the controller asks for a racket period <= 0 at the launch")
-    starts, phases, omegas = [t], [phase], [TWO_PI / tau]
-    segments: list = []
-    impacts: list = []
-    periods: list[float] = []
-    v = float(v0)
-    omega = omegas[-1]
-
-    def racket(time):
-        ph = phases[-1] + omega * (time - starts[-1])
-        return ph, a * math.sin(ph), a * omega * math.cos(ph)
-
-    stuck = not bool(can_fly_at(phase, v, a, omega, g))
-    while t < t_end:
-        ph, x_r, v_r = racket(t)
-        if stuck:
-            ratio = g / (a * omega**2)
-            if ratio >= 1.0:
-                leave = math.inf
-            elif math.sin(ph) > ratio:
-                leave = ph
-            else:
-                leave = ph + float(np.mod(math.asin(ratio) - ph, TWO_PI))
-            t_leave = t + (leave - ph) / omega
-            segments.append(Segment("stuck", t, min(t_leave, t_end), x_r, v_r))
-            t = t_leave
-            if math.isfinite(t):
-                v = racket(t)[2]
-            stuck = False
-            continue
-        launch_ph, launch_v = ph, v
-        if v - v_r <= 0.0:  # leaving with the racket's velocity: hand over just after
-            launch_ph, launch_v = ph + LEAVE_NUDGE_PHASE, v - g * LEAVE_NUDGE_PHASE / omega
-        hop = float(first_impact_phase(launch_ph, launch_v, a, omega, g))
-        if not math.isfinite(hop):
-            raise ModelError(f"no next impact found after t = {t:.6g} s")
-        t_hit = t + (launch_ph - ph + hop) / omega
-        segments.append(Segment("flight", t, min(t_hit, t_end), x_r, v))
-        if t_hit > t_end:
-            break
-        ph_hit, _, racket_v = racket(t_hit)
-        v_before = v - g * (t_hit - t)
-        v_after = impact_velocity(v_before, racket_v, params.alpha)
-        impacts.append(Impact(t_hit, ph_hit, v_before, v_after, racket_v, t_hit - t))
-        periods.append(tau)  # the period of the flight that ended at this impact
-        tau_next = float(controller.next_period(v_after, ph_hit, tau, reference))
-        if not tau_next > 0.0:
-            raise ModelError(f"the controller asks for a racket period <= 0 at t = {t_hit:.4g} s")
-        tau, omega = tau_next, TWO_PI / tau_next
-        starts.append(t_hit)
-        phases.append(ph_hit)
-        omegas.append(omega)
-        t, v = t_hit, v_after
-        stuck = (t_hit - segments[-1].t_start < settings.min_hop_s
-                 or v - a * omega * math.cos(ph_hit) <= settings.min_relative_velocity_m_s
-                 or not bool(can_fly_at(ph_hit, v, a, omega, g)))
-    clock = RacketClock(np.array(starts), np.array(phases), np.array(omegas))
-    trajectory = Trajectory(params, t0, t_end, tuple(segments), tuple(impacts))
-    return trajectory, clock, np.array(periods)
+    leaves the racket at phase theta0 (t0 = theta0 / w_bar) with v0 against a
+    ``ControlledRacket`` (the one event loop, ``engine.flight.simulate_with_racket``).
+    Sticking as in ``engine.flight`` (a hop shorter than ``settings.min_hop_s``, or a ball that
+    leaves no faster than the racket then moves): the ball rides on the racket, which keeps
+    its period, until the racket's downward acceleration exceeds g. Returns (Trajectory,
+    RacketClock, periods): the racket's period during the flight that ended at each impact
+    (s), as ``iterate_controlled_orbit``'s tau."""
+    racket = ControlledRacket(params, controller)
+    trajectory = simulate_with_racket(racket, float(theta0), float(v0), duration_s, settings)
+    return trajectory, racket.clock(), np.array(racket.periods)
