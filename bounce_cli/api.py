@@ -3,9 +3,9 @@
 The same code path as the command line: :func:`run` loads and validates a config exactly as
 ``bounce <name>`` does (:func:`load_run_config`), runs the experiment, and, given ``out``,
 writes exactly what the command writes through the same run directory (:func:`open_run_directory`,
-:func:`write_result`). A user error raises :class:`~bounce_cli.config.ConfigError` or
-:class:`~bounce_cli.engine.params.ModelError` with the one line the command would print;
-nothing exits the interpreter.
+:func:`write_result`). A user error raises a :class:`~bounce_cli.errors.BounceError` (a
+:class:`~bounce_cli.errors.ConfigError`, :class:`~bounce_cli.errors.ModelError`, ...) with the
+one line the command would print; nothing exits the interpreter.
 
 The model's entry points (the map of eqs. 5, 6; the fixed point of eqs. 7, 8; the linear
 stability of eqs. 9-14) are re-exported here and from :mod:`bounce_cli`::

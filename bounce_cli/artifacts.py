@@ -39,6 +39,7 @@ from typing import TYPE_CHECKING, Any, Callable, Iterator
 import numpy as np
 
 from . import __version__
+from .errors import OutputDirError, RunDirectoryBusy
 from .interrupts import deferred
 from .plotting import save_figure
 
@@ -51,10 +52,6 @@ TIMING = "timing.json"
 LOCK_FILE = ".bounce.lock"
 #: the distributions whose versions shape the numbers and figures (run.json "versions")
 VERSIONED_PACKAGES = ("numpy", "scipy", "pandas", "matplotlib", "pydantic", "pyyaml")
-
-
-class OutputDirError(ValueError):
-    """The output directory cannot be used (holds another config's results, not writable)."""
 
 
 @contextlib.contextmanager
@@ -300,7 +297,8 @@ class RunDirectoryLock:
         self._fd: int | None = None
 
     def acquire(self, command: str) -> None:
-        """Take the lock or raise OutputDirError (the directory exists)."""
+        """Take the lock or raise RunDirectoryBusy, an OutputDirError (the directory
+        exists)."""
         try:
             import fcntl
         except ImportError:  # pragma: no cover - no advisory locks on this platform
@@ -313,7 +311,7 @@ class RunDirectoryLock:
             except OSError:  # held by a live run
                 holder = os.pread(self._fd, 200, 0).decode("utf-8", "replace").strip()
                 self._close()
-                raise OutputDirError(
+                raise RunDirectoryBusy(
                     f"--out {self.path.parent}: another bounce run is writing there"
                     + (f" ({holder})" if holder else "")
                     + "; wait for it to finish or choose another --out") from None

@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 
 from . import paper
+from .errors import MissingResults
 from .engine.params import ModelParams
 from .paper import Printed, number_text
 
@@ -32,10 +33,6 @@ MIN_RADIUS_TOLERANCE = 1e-6
 SYMMETRY_TOLERANCE = 1e-6
 #: a full response asymmetric "by more than this" relative difference
 ASYMMETRY_MIN = 0.1
-
-
-class MissingResults(Exception):
-    """A results file a claim needs is absent (run ``bounce reproduce`` first)."""
 
 
 @dataclass(frozen=True)

@@ -2,9 +2,10 @@
 engine, and write or print the result. No numerics here.
 
 User errors (bad YAML, unknown keys, out-of-range values, parameters without a fixed point,
-an output directory holding another config's results, typer's own usage errors) print ONE
-line ``bounce: error: ...`` to stderr and exit 2. An interrupt (SIGINT, SIGTERM, SIGHUP)
-prints ``bounce: interrupted`` and exits 128 + the signal number (see ``interrupts``).
+an output directory holding another config's results: every ``errors.BounceError``; typer's
+own usage errors) print ONE line ``bounce: error: ...`` to stderr and exit 2. An interrupt
+(SIGINT, SIGTERM, SIGHUP) prints ``bounce: interrupted`` and exits 128 + the signal number
+(see ``interrupts``).
 """
 
 from __future__ import annotations
@@ -44,9 +45,8 @@ from .api import (
     warn_if_implausible_racket,
     write_result,
 )
-from .artifacts import FIGURE_DPI, OutputDirError
+from .artifacts import FIGURE_DPI
 from .config import (
-    ConfigError,
     ModelOnlyConfig,
     apply_overrides,
     bundled_config_path,
@@ -55,13 +55,11 @@ from .config import (
     to_yaml,
     validate,
 )
-from .engine import ModelError, ModelParams, iterate_orbit, stability, wrap_phase
+from .engine import ModelParams, iterate_orbit, stability, wrap_phase
+from .errors import BounceError, ConfigError, NoFixedPointError
 from .engine.classify import ClassifySettings
 from .interrupts import Interrupted, report as report_interrupt
-from .parallel import ClusterError
 from .registry import EXPERIMENTS, Entry
-
-USER_ERRORS = (ConfigError, ModelError, OutputDirError, ClusterError)
 
 
 def _flags_show_no_type() -> None:
@@ -388,7 +386,7 @@ def run_experiment(
             checkpoints.discard_if_empty()
         if run_dir is not None:
             run_dir.discard()
-        if isinstance(exc, USER_ERRORS):
+        if isinstance(exc, BounceError):
             fail(str(exc))
         if isinstance(exc, OSError):  # e.g. the disk filled up while writing
             fail(f"writing {exc.filename or 'results'}: {exc.strerror or exc}")
@@ -439,7 +437,7 @@ def _model_or_fail(config: Path | None, overrides: list[str] | None, *,
                    need_fixed_point: bool = True) -> ModelParams:
     try:
         return load_model(config, overrides, need_fixed_point=need_fixed_point)
-    except USER_ERRORS as exc:
+    except BounceError as exc:
         fail(str(exc))
         raise  # unreachable
 
@@ -476,8 +474,6 @@ def fixed_point_command(
 
     With --json and parameters without a fixed point: {"exists": false, "reason": ...} and
     exit status 1."""
-    from .engine import NoFixedPointError
-
     params = _model_or_fail(config, overrides, need_fixed_point=not as_json)
     if as_json:
         try:
@@ -533,7 +529,7 @@ def orbit_command(
         params, controller = block.to_params(), block.controller()
         if controller is not None:
             params.fixed_point()  # the controller steers toward the period-1 orbit
-    except USER_ERRORS as exc:
+    except BounceError as exc:
         fail(str(exc))
     if not (math.isfinite(theta0_deg) and math.isfinite(v0)):
         fail("--theta0-deg and --v0 must be finite numbers")

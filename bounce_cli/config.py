@@ -25,12 +25,9 @@ from pydantic import (
 )
 
 from .engine.classify import ClassifySettings
+from .errors import ConfigError
 from .engine.params import ModelParams
 from .paper import FIG3_MODEL
-
-
-class ConfigError(ValueError):
-    """A user error in a config or an override: one line naming the key and the reason."""
 
 
 def expects_number(annotation) -> bool:

@@ -41,6 +41,7 @@ from collections import deque
 from multiprocessing.connection import Connection, wait
 from typing import Any, Callable, Iterable, Iterator, Protocol
 
+from .errors import ClusterError
 from .interrupts import deferred
 
 
@@ -272,10 +273,6 @@ class LocalPool:
         code = worker.process.wait()
         how = f"was killed by signal {-code}" if code < 0 else f"exited with status {code}"
         return f"a worker process {how} (out of memory?)"
-
-
-class ClusterError(RuntimeError):
-    """The Dask cluster cannot be used: ``distributed`` missing, scheduler unreachable."""
 
 
 class DaskCluster:

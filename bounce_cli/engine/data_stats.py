@@ -17,6 +17,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ..errors import NoPerturbedImpactError
 from .impact import next_impact_phase
 from .linear import jacobian
 from .maps import velocity_after_impact
@@ -251,8 +252,9 @@ def align(values_trials: Sequence[np.ndarray], perturbed_trials: Sequence[np.nda
     Baseline per trial: the mean over :func:`baseline_mask` impacts (for a phase, the
     circular mean, and deviations wrapped to [-pi, pi)). Windows from
     :func:`perturbation_windows` (cut at gaps in the trials' impact indices ``k_trials`` when
-    given). Raises ModelError when there is no perturbed impact or a trial has no baseline
-    impact (named by its ``labels`` entry, else by its position)."""
+    given). Raises NoPerturbedImpactError (a ModelError) when there is no perturbed impact,
+    ModelError when a trial has no baseline impact (named by its ``labels`` entry, else by
+    its position)."""
     rows, trials, starts, alphas = [], [], [], []
     ks = k_trials if k_trials is not None else [None] * len(values_trials)
     for i, (x, p, a, kk) in enumerate(zip(values_trials, perturbed_trials, alpha_trials, ks)):
@@ -279,7 +281,7 @@ def align(values_trials: Sequence[np.ndarray], perturbed_trials: Sequence[np.nda
             starts.append(start)
             alphas.append(float(np.asarray(a, float)[start]))
     if not rows:
-        raise ModelError("no perturbed impact in the data")
+        raise NoPerturbedImpactError("no perturbed impact in the data")
     return AlignedWindows(np.array(rows), np.array(trials), np.array(starts), np.array(alphas))
 
 

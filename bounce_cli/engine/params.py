@@ -11,13 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-
-class ModelError(ValueError):
-    """Parameters that the ball bouncing map cannot be evaluated with."""
-
-
-class NoFixedPointError(ModelError):
-    """The parameters admit no period-1 fixed point (|cos theta~| > 1 in eq. 8)."""
+from ..errors import ModelError, NoFixedPointError
 
 
 @dataclass(frozen=True)
