@@ -154,15 +154,15 @@ def classify_states(impact_map: ImpactMap, theta0, v0,
     implements the step protocol (``engine.maps.ImpactMap``: the passive map, the
     controlled one of ``engine.control``), in one vectorised batch: the one loop of the
     module docstring. ``kernel`` as for ``classify_batch``: the compiled kernel runs where
-    the map has one (``compiled_classification``) and exact sticking is not asked for."""
+    the map has one (``has_compiled_kernel``) and exact sticking is not asked for."""
     theta0, v0 = np.broadcast_arrays(np.asarray(theta0, dtype=float), np.asarray(v0, dtype=float))
     shape = theta0.shape
     theta0, v0 = theta0.ravel(), v0.ravel()
     exact = settings.min_hop_s == 0.0  # exact sticking: the numpy kernel, whatever ``kernel``
-    compiled = getattr(impact_map, "compiled_classification", None)
-    if not exact and compiled is not None and (
+    if not exact and has_compiled_kernel(impact_map) and (
             kernel == "compiled" or (kernel == "auto" and compiled_kernel_available())):
-        codes, counts = compiled(theta0, v0, settings, MAX_SAFE_STEPS)
+        codes, counts = impact_map.compiled_classification(  # type: ignore[attr-defined]
+            theta0, v0, settings, MAX_SAFE_STEPS)
         return Classification(codes.reshape(shape), counts.reshape(shape))
     tol = settings.tolerance
     min_hop = settings.min_hop_s
@@ -223,6 +223,12 @@ def _exact_sticking_fate(params: ModelParams, settings: ClassifySettings, fp: Fi
         return limit if fate.kind == "undecided" else k
 
     return code, iterations, fate.cycles if fate.kind == "locked" else 0
+
+
+def has_compiled_kernel(impact_map: ImpactMap) -> bool:
+    """The map has a compiled classification (``engine.compiled``; the protocol's optional
+    ``compiled_kernel`` and ``compiled_classification``)."""
+    return bool(getattr(impact_map, "compiled_kernel", False))
 
 
 def classify_tile(args):

@@ -50,17 +50,18 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Callable, Protocol, Sequence
+from typing import Any, Callable, Literal, Protocol, Sequence
 
 import numpy as np
 
+from ..errors import NoPerturbedImpactError
 from .chatter import release_phase
 from .classify import Classification, ClassifySettings, classify_states
 from .flight import simulate_with_racket
 from .impact import first_impact_phase
 from .impulse import perturbed_velocity, relaxation_impacts
 from .linear import iterate_linear, jacobian, racket_acceleration_at_impact_g
-from .maps import State, Step, iterate_map_orbit, iterate_states
+from .maps import State, Step, iterate_map_orbit, iterate_states, velocity_map
 from .params import FixedPoint, ModelError, ModelParams, phase_difference
 
 TWO_PI = 2.0 * math.pi
@@ -154,13 +155,6 @@ def can_fly_at(theta, v, amplitude, omega, g):
     slope = (np.asarray(v, dtype=float) - amplitude * omega * np.cos(theta)) / omega
     curvature = -g / omega**2 + amplitude * np.sin(theta)
     return (slope > 0.0) | ((slope == 0.0) & (curvature > 0.0))
-
-
-def velocity_map(theta_next, v, hop_phase, alpha, amplitude, omega, g):
-    """Eq. 5 with the racket's angular frequency of the flight that just ended (arrays
-    broadcast); the same arithmetic as ``engine.maps.velocity_after_impact``."""
-    return ((1.0 + alpha) * amplitude * omega * np.cos(theta_next) - alpha * v
-            + g * alpha / omega * hop_phase)
 
 
 @dataclass(frozen=True)
@@ -322,8 +316,34 @@ class ControlledMap:
                               self.controller, reference=self.reference, wrap=wrap)
         return Step(State(out.theta, out.v, (out.tau,)), out.hop_phase, out.hop_seconds())
 
+    @property
+    def compiled_kernel(self) -> bool:
+        """The compiled kernel implements this map: the period controller with one gain and
+        rate (``switch: impact``)."""
+        c = self.controller
+        return (isinstance(c, PeriodController) and c.switch == "impact"
+                and np.ndim(c.gain) == 0 and np.ndim(c.rate) == 0)
+
+    def compiled_classification(self, theta0, v0, settings: ClassifySettings, max_steps: int):
+        """(outcome, iterations) of flat arrays by the compiled kernel
+        (``engine.compiled.classify_controlled_arrays``), the numpy loop's bit for bit."""
+        from .compiled import classify_controlled_arrays
+
+        c = self.controller
+        assert isinstance(c, PeriodController)
+        tau0 = self.start(theta0, v0).extra[0]
+        return classify_controlled_arrays(
+            theta0, v0, tau0, self.params, self.target, tau_bar=self.reference.racket_period_s,
+            v_reference=self.reference.v_m_s, gain=float(c.gain), rate=float(c.rate),
+            max_iterations=settings.max_iterations, tolerance=settings.tolerance,
+            period_tolerance_s=self._period_tolerance(settings.tolerance),
+            min_hop_s=settings.min_hop_s, max_steps=max_steps)
+
+    def _period_tolerance(self, tolerance: float) -> float:
+        return tolerance if self.period_tolerance_s is None else self.period_tolerance_s
+
     def near_fixed_point(self, state: State, tolerance: float) -> np.ndarray:
-        tol_tau = tolerance if self.period_tolerance_s is None else self.period_tolerance_s
+        tol_tau = self._period_tolerance(tolerance)
         return ((np.abs(state.v - self.target.v_m_s) < tolerance)
                 & (np.abs(phase_difference(state.theta, self.target.theta_rad)) < tolerance)
                 & (np.abs(state.extra[0] - self.params.racket_period) < tol_tau))
@@ -459,7 +479,9 @@ def controlled_impulse_response(params: ModelParams, controller: Controller, alp
 def classify_controlled(theta0, v0, params: ModelParams, controller: Controller,
                         settings: ClassifySettings = ClassifySettings(), *,
                         tau0: float | None = None,
-                        period_tolerance_s: float | None = None) -> Classification:
+                        period_tolerance_s: float | None = None,
+                        kernel: Literal["auto", "numpy", "compiled"] = "numpy"
+                        ) -> Classification:
     """Section 3's classification (``engine.classify.classify_states``) of initial
     conditions (arrays broadcast) for the controlled map (``ControlledMap``); the racket
     starts with tau0 (default tau_bar) and the controller sets the first flight's period
@@ -475,11 +497,13 @@ def classify_controlled(theta0, v0, params: ModelParams, controller: Controller,
     * undecided: none within ``max_iterations``.
 
     The loop is the passive map's (phases wrapped every impact), so a controller that
-    keeps the period (K = 0) gives the passive classification exactly.
+    keeps the period (K = 0) gives the passive classification exactly. ``kernel`` as for
+    ``classify_states`` (default numpy: the few points of an impulse or a threshold do not
+    repay loading numba; the compiled kernel gives the same codes and counts).
     """
     impact_map = ControlledMap.of(params, controller, require_fixed_point=True,
                                   period_tolerance_s=period_tolerance_s, initial_period_s=tau0)
-    return classify_states(impact_map, theta0, v0, settings)
+    return classify_states(impact_map, theta0, v0, settings, kernel=kernel)
 
 
 # -- basin exit threshold of alpha_p (section 7) ----------------------------------------------
@@ -577,10 +601,8 @@ def align_perturbations(trial, k, v, theta, tau, perturbed, *, alpha=None, alpha
                          [alpha_all[g] for g in groups], n_after, settle, phase=is_phase,
                          k_trials=[k[g] for g in groups], labels=labels)
                    for x, is_phase in ((v, False), (theta, True), (tau, False))]
-    except ModelError as exc:
-        if "no perturbed impact" in str(exc):
-            return {}
-        raise
+    except NoPerturbedImpactError:
+        return {}
     values = np.stack([w.values for w in aligned], axis=1)  # (windows, 3, n_after + 1)
     complete = np.all(np.isfinite(values), axis=(1, 2))
     if alpha is not None and alpha_0 is not None:

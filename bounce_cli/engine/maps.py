@@ -36,13 +36,18 @@ def velocity_after_impact(theta_next, v, hop_phase, params: ModelParams, alpha=N
     ``cos_theta_next``: ``np.cos(theta_next)`` if the caller has it already.
     """
     alpha = params.alpha if alpha is None else alpha
-    w = params.omega
+    return velocity_map(theta_next, v, hop_phase, alpha, params.racket_amplitude,
+                        params.omega, params.g, cos_theta_next=cos_theta_next)
+
+
+def velocity_map(theta_next, v, hop_phase, alpha, amplitude, omega, g, *,
+                 cos_theta_next=None):
+    """Eq. 5 with the racket's amplitude (m), the angular frequency of the flight that just
+    ended (rad/s) and g given directly (arrays broadcast: the controlled map's flights each
+    have their own frequency); ``velocity_after_impact`` at one parameter point."""
     cos_next = np.cos(theta_next) if cos_theta_next is None else cos_theta_next
-    return (
-        (1.0 + alpha) * params.racket_amplitude * w * cos_next
-        - alpha * v
-        + params.g * alpha / w * hop_phase
-    )
+    return ((1.0 + alpha) * amplitude * omega * cos_next - alpha * v
+            + g * alpha / omega * hop_phase)
 
 
 @dataclass(frozen=True)
@@ -171,6 +176,9 @@ class PassiveMap:
     def near_fixed_point(self, state: State, tolerance: float) -> np.ndarray:
         return ((np.abs(state.v - self.target.v_m_s) < tolerance)
                 & (np.abs(phase_difference(state.theta, self.target.theta_rad)) < tolerance))
+
+    #: the compiled kernel (``engine.compiled``) implements this map
+    compiled_kernel = True
 
     def compiled_classification(self, theta0, v0, settings, max_steps: int):
         """(outcome, iterations) of flat arrays by the compiled kernel (``engine.compiled``),

@@ -33,6 +33,7 @@ from ..engine.classify import (
     classify_batch,
     classify_grid,
     compiled_kernel_available,
+    has_compiled_kernel,
     load_compiled_kernel,
     outcome_names,
 )
@@ -232,7 +233,7 @@ def classify_map_grid(theta0, v0, impact_map: ImpactMap, settings: ClassifySetti
     n_points = np.size(theta0)
     # the compiled kernel releases the GIL: threads, which cost nothing to start
     threads = (n_points >= COMPILED_MIN_POINTS and compiled_kernel_available()
-               and hasattr(impact_map, "compiled_classification"))
+               and has_compiled_kernel(impact_map))
     jobs = jobs if threads or n_points >= POOL_MIN_POINTS else 1
     with parallel.executor(jobs, threads=threads) as executor:
         classify = functools.partial(

@@ -420,3 +420,11 @@ def test_fit_is_not_caught_in_a_local_minimum():
     assert fit.gain_ci[0] <= truth.gain <= fit.gain_ci[1]
     assert fit.rate_ci[0] <= truth.rate <= fit.rate_ci[1]
     assert fit.reduced_chi2 < 3
+
+
+def test_alignment_without_a_perturbed_impact_is_empty_by_the_errors_class():
+    """No perturbed impact: no responses (decided by ``NoPerturbedImpactError``, not by the
+    message's text)."""
+    trial, k = np.zeros(20, int), np.arange(20)
+    v, theta, tau = np.full(20, 4.5), np.full(20, 0.4), np.full(20, 0.92)
+    assert align_perturbations(trial, k, v, theta, tau, np.zeros(20, bool), n_after=3) == {}
