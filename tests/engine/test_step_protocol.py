@@ -1,4 +1,4 @@
-"""The one step protocol (``engine.maps.ImpactMap``): the passive map, the controlled map and
+"""The one step protocol (``model.maps.ImpactMap``): the passive map, the controlled map and
 the cycle-switching racket run through the same orbit, batch and classification code, so
 the controlled basin gets the worker pool (and every executor) with identical results, and
 gain 0 is the passive map bit for bit on orbits and grids."""
@@ -6,15 +6,11 @@ gain 0 is the passive map bit for bit on orbits and grids."""
 import numpy as np
 import pytest
 
-from bounce_cli import parallel
-from bounce_cli.engine.classify import ClassifySettings, classify_batch, classify_grid
-from bounce_cli.engine.control import (
-    ControlledMap,
-    PeriodController,
-    classify_controlled,
-    iterate_controlled_orbit,
-)
-from bounce_cli.engine.maps import PassiveMap, iterate_map_orbit, iterate_orbit
+from bounce_cli.runtime import parallel
+from bounce_cli.analysis.classify import ClassifySettings, classify_batch, classify_grid
+from bounce_cli.model.control import ControlledMap, PeriodController, iterate_controlled_orbit
+from bounce_cli.analysis.control_design import classify_controlled
+from bounce_cli.model.maps import PassiveMap, iterate_map_orbit, iterate_orbit
 
 
 def grid(n=60):

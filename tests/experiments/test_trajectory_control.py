@@ -8,14 +8,14 @@ import math
 import numpy as np
 import pytest
 
-from bounce_cli.config import ConfigError, bundled_config_path, load_config
-from bounce_cli.engine import ModelParams
-from bounce_cli.engine.control import (
+from bounce_cli.runtime.config import ConfigError, bundled_config_path, load_config
+from bounce_cli.model.params import ModelParams
+from bounce_cli.model.control import (
     PeriodController,
     iterate_controlled_orbit,
     simulate_controlled_motion,
 )
-from bounce_cli.engine.flight import FlightSettings
+from bounce_cli.model.flight import FlightSettings
 from bounce_cli.experiments import trajectory
 from bounce_cli.experiments.base import RunOptions
 
@@ -70,7 +70,7 @@ def test_controlled_motion_sticks_and_leaves_where_the_racket_outruns_gravity(ga
     sticking start (v0 = 5.7 m/s) sticks under a weak controller too; while stuck the ball is
     the racket, and it leaves where the racket's acceleration reaches -g at the period the
     racket has then (a w^2 sin(phase) = g); with gain 0 the motion is the passive one."""
-    from bounce_cli.engine.flight import simulate
+    from bounce_cli.model.flight import simulate
 
     params = ModelParams(0.5, 9.81, 0.3, 0.92)
     theta0 = math.asin(0.205 / 0.30)

@@ -1,0 +1,330 @@
+"""The basin classifier compiled with numba: ``classify_batch``'s arithmetic, bit for bit.
+
+Optional (``pip install 'bounce-cli[fast]'``): ``classify.classify_batch`` uses this kernel
+when numba can be imported (``kernel="auto"``) and its own numpy code otherwise, with the same
+outcome and impact count for every point (tests/engine/test_compiled.py compares the two on
+grids, on random states and on the edge cases: grazing launches, balls that cannot fly,
+unconverged solves). Environment variable ``BOUNCE_KERNEL=numpy`` turns the kernel off.
+
+Why it is faster, measured on the 2-core machine the benchmarks run on (``benchmarks/``):
+the Fig. 4 grid at 1000 x 1000 takes about 12.5 M impacts at about 5 evaluations of the gap
+each (``impact.first_impact_phase``, eq. 6), each with two transcendental functions (sin and
+cos of s/2). numpy evaluates them one array function after another (np.sin 10 ns and np.cos
+12.7 ns a value) plus some thirty array passes of arithmetic: 4.6 s for the grid on one core.
+Here all points of a tile advance in lock step as in numpy (an impact, then the safe steps
+of all points still flying), but each step is three tight loops: sin and cos of the same
+argument (LLVM joins them into one ``sincos``: about 12 ns for both), the step's arithmetic
+(about 4 ns a point) and the compaction of the points still flying: 1.5 s on one core,
+0.8 s on two threads. A per-point scalar loop of the same algorithm is slower (about 35 ns a
+step: the dependent chain sin -> G -> sqrt -> next s leaves the core idle), which is why a
+first numba trial barely beat numpy.
+
+Bit-for-bit: every expression below is the numpy code's expression in the same order
+(IEEE double arithmetic, no fast-math, so no contraction into fused multiply-adds), the
+scalars derived from the parameters are computed once in Python by the numpy code's own
+expressions (``_constants``), and sin/cos/sqrt are the C library's, as numpy's are.
+The functions release the GIL: tiles of a grid run in threads (``parallel.Threads``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from .params import FixedPoint, ModelParams
+
+TWO_PI = 2.0 * math.pi
+_EPS = float(np.finfo(float).eps)
+
+_jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+
+# indices into the constants array (see _constants)
+(_A, _W, _G, _AW, _NEG_G_W2, _NEG_G_WW, _BOUND, _W_SQ, _TWO_W_SQ, _TWO_A, _TWO_BOUND,
+ _A_3, _V_COEF, _ALPHA, _G_ALPHA_W, _V_FP, _TH_FP, _TOL, _MIN_HOP, _N_CONSTANTS) = range(20)
+
+
+def _constants(params: ModelParams, fp: FixedPoint, tolerance: float,
+               min_hop: float) -> np.ndarray:
+    """The scalars of the numpy code, each by the numpy code's own expression (Python floats:
+    ``-g / w**2`` is Python's pow, ``a * w * cos`` is ``(a * w) * cos``)."""
+    a, w, g, alpha = params.racket_amplitude, params.omega, params.g, params.alpha
+    c = np.empty(_N_CONSTANTS)
+    c[_A], c[_W], c[_G] = a, w, g
+    c[_AW] = a * w  # can_fly, racket_velocity: a * w * cos
+    c[_NEG_G_W2] = -g / w**2  # can_fly's curvature
+    c[_NEG_G_WW] = -g / (w * w)  # first step's curvature
+    c[_BOUND] = g / (w * w) + a
+    c[_W_SQ] = w * w
+    c[_TWO_W_SQ] = 2.0 * w * w
+    c[_TWO_A] = 2.0 * a
+    c[_TWO_BOUND] = 2.0 * (g / (w * w) + a)
+    c[_A_3] = a / 3.0
+    c[_V_COEF] = (1.0 + alpha) * a * w  # eq. 5
+    c[_ALPHA] = alpha
+    c[_G_ALPHA_W] = g * alpha / w
+    c[_V_FP], c[_TH_FP] = fp.v_m_s, fp.theta_rad
+    c[_TOL], c[_MIN_HOP] = tolerance, min_hop
+    return c
+
+
+@_jit
+def _wrap(x):
+    """np.mod(x, 2 pi) (the identity on (0, 2 pi), where fmod is exact: no call)."""
+    return x if 0.0 < x < TWO_PI else x % TWO_PI
+
+
+@_jit
+def _first_impact(vv, cos_th, sin_th, m, c, max_steps, hop, pos, S, D0, C, SN, V, SH, CH):
+    """hop[j] = ``impact.first_impact_phase`` of state j < m (NaN where the ball cannot fly
+    or the solve did not converge in ``max_steps``); the other arrays are scratch of size m."""
+    a, w, g = c[_A], c[_W], c[_G]
+    two_a, bound, two_bound = c[_TWO_A], c[_BOUND], c[_TWO_BOUND]
+    w_sq, two_w_sq = c[_W_SQ], c[_TWO_W_SQ]
+    eps4, eps8 = 4.0 * _EPS, 8.0 * _EPS
+    q = 0
+    for j in range(m):
+        hop[j] = np.nan
+        slope = (vv[j] - c[_AW] * cos_th[j]) / w
+        curvature = c[_NEG_G_W2] + a * sin_th[j]
+        if slope > 0.0 or (slope == 0.0 and curvature > 0.0):  # can_fly
+            d0 = vv[j] / w - a * cos_th[j]
+            c0 = c[_NEG_G_WW] + a * sin_th[j]
+            d0_pos = d0 if (d0 >= 0.0 or d0 != d0) else 0.0  # np.maximum(d0, 0.0)
+            S[q] = (c0 / 2.0 + math.sqrt(c0 * c0 / 4.0 + two_a * d0_pos / 3.0)) / c[_A_3]
+            D0[q], C[q], SN[q], V[q], pos[q] = d0, cos_th[j], sin_th[j], vv[j], j
+            q += 1
+    for _ in range(max_steps):
+        if q == 0:
+            break
+        for j in range(q):  # sin and cos of one argument: one sincos call
+            half = S[j] / 2.0
+            SH[j] = math.sin(half)
+            CH[j] = math.cos(half)
+        for j in range(q):
+            s, sin_half, cos_half = S[j], SH[j], CH[j]
+            cos_mid = C[j] * cos_half - SN[j] * sin_half
+            sin_mid = SN[j] * cos_half + C[j] * sin_half
+            racket_rise = two_a * cos_mid * sin_half
+            ball = V[j] * s / w
+            g_s = g * s
+            drop = g_s * s / two_w_sq
+            G = ball - drop - racket_rise
+            d = D0[j] - g_s / w_sq + two_a * sin_mid * sin_half
+            scale = (abs(ball) + drop + abs(racket_rise)) * eps8
+            G_pos = G if (G >= 0.0 or G != G) else 0.0  # np.maximum(G, 0.0)
+            step = (math.sqrt(G_pos * two_bound + d * d) + d) / bound
+            done = (G <= scale) | (step <= eps4 * s)
+            corr = G / d if d < 0.0 else 0.0
+            corr = corr if abs(corr) < 1e-6 * s else 0.0
+            s_next = s + step
+            delta = -(bound * step + d)  # the last step (impact.first_impact_phase)
+            last = (delta > 0.0) & (two_bound * step * step <= _EPS * s_next * delta)
+            # NaN: not finished (a finished phase is finite)
+            SH[j] = s - corr if done else (s_next if last else np.nan)
+            CH[j] = s_next
+        r = 0
+        for j in range(q):
+            if SH[j] == SH[j]:
+                hop[pos[j]] = SH[j]
+            else:
+                S[r], D0[r], C[r], SN[r], V[r], pos[r] = (CH[j], D0[j], C[j], SN[j], V[j],
+                                                          pos[j])
+                r += 1
+        q = r
+
+
+@_jit
+def _classify(theta0, v0, c, max_iterations, max_steps, outcome, iterations):
+    """``classify.classify_batch`` of flat arrays into ``outcome`` / ``iterations``."""
+    n = theta0.size
+    a, w = c[_A], c[_W]
+    idx = np.empty(n, np.int64)
+    m = 0
+    for i in range(n):  # can_fly at the unwrapped initial phase
+        slope = (v0[i] - c[_AW] * math.cos(theta0[i])) / w
+        curvature = c[_NEG_G_W2] + a * math.sin(theta0[i])
+        if slope > 0.0 or (slope == 0.0 and curvature > 0.0):
+            idx[m] = i
+            m += 1
+        else:
+            outcome[i] = 2  # below_racket
+            iterations[i] = 0
+    work = np.empty((12, m))  # the states (5 rows) and the solver's scratch (7 rows)
+    th, vv, cos_th, sin_th, hop = work[0], work[1], work[2], work[3], work[4]
+    S, D0, C, SN, V, SH, CH = work[5], work[6], work[7], work[8], work[9], work[10], work[11]
+    pos = np.empty(m, np.int64)
+    for j in range(m):
+        th[j] = _wrap(theta0[idx[j]])
+        vv[j] = v0[idx[j]]
+        cos_th[j] = math.cos(th[j])
+        sin_th[j] = math.sin(th[j])
+    tol, v_fp, th_fp = c[_TOL], c[_V_FP], c[_TH_FP]
+    for k in range(1, max_iterations + 1):
+        if m == 0:
+            break
+        _first_impact(vv, cos_th, sin_th, m, c, max_steps, hop, pos, S, D0, C, SN, V, SH, CH)
+        p = 0
+        for j in range(m):
+            h = hop[j]
+            t = _wrap(th[j] + h)
+            ct = math.cos(t)
+            st = math.sin(t)
+            v = c[_V_COEF] * ct - c[_ALPHA] * vv[j] + c[_G_ALPHA_W] * h
+            if not h / w >= c[_MIN_HOP]:  # sticking (NaN hop: cannot leave the racket)
+                outcome[idx[j]] = 1
+                iterations[idx[j]] = k
+            elif (abs(v - v_fp) < tol
+                  and abs(_wrap(t - th_fp + math.pi) - math.pi) < tol):
+                outcome[idx[j]] = 0  # period1
+                iterations[idx[j]] = k
+            else:
+                idx[p], th[p], vv[p], cos_th[p], sin_th[p] = idx[j], t, v, ct, st
+                p += 1
+        m = p
+    for j in range(m):
+        outcome[idx[j]] = 3  # undecided
+        iterations[idx[j]] = max_iterations
+
+
+def classify_arrays(theta0: np.ndarray, v0: np.ndarray, params: ModelParams, fp: FixedPoint,
+                    max_iterations: int, tolerance: float, min_hop_s: float,
+                    max_steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """(outcome int8, iterations int16) of flat float arrays, as ``classify_batch``."""
+    outcome = np.empty(theta0.size, dtype=np.int8)
+    iterations = np.empty(theta0.size, dtype=np.int16)
+    _classify(np.ascontiguousarray(theta0, dtype=float), np.ascontiguousarray(v0, dtype=float),
+              _constants(params, fp, tolerance, min_hop_s), max_iterations, max_steps,
+              outcome, iterations)
+    return outcome, iterations
+
+
+# -- the controlled map (``model.control.ControlledMap``, ``switch: impact``) -----------------
+# its classification loop: each flight has its own racket frequency (the period the controller
+# set at the impact), so each state's solve gets its own constants, filled by the numpy code's
+# array expressions (``impact.first_impact_phase`` with an array of frequencies: w**2 is w*w)
+(_C_A, _C_G, _C_ALPHA, _C_TAU_BAR, _C_V_REF, _C_GAIN, _C_RATE, _C_V_FP, _C_TH_FP, _C_TOL,
+ _C_TOL_TAU, _C_MIN_HOP, _C_V_COEF_A, _C_G_ALPHA, _N_CONTROL) = range(15)
+
+
+@_jit
+def _flight_constants(a, w, g, c):
+    """The solver's constants (``_constants``'s first rows) at angular frequency w, each by
+    the numpy code's expression for arrays of frequencies."""
+    c[_A], c[_W], c[_G] = a, w, g
+    c[_AW] = a * w
+    c[_NEG_G_W2] = -g / (w * w)
+    c[_NEG_G_WW] = -g / (w * w)
+    c[_BOUND] = g / (w * w) + a
+    c[_W_SQ] = w * w
+    c[_TWO_W_SQ] = 2.0 * w * w
+    c[_TWO_A] = 2.0 * a
+    c[_TWO_BOUND] = 2.0 * (g / (w * w) + a)
+    c[_A_3] = a / 3.0
+
+
+@_jit
+def _classify_controlled(theta0, v0, tau0, k, max_iterations, max_steps, outcome, iterations):
+    """``classify.classify_states`` of a ``ControlledMap`` with a period controller
+    (``switch: impact``) into ``outcome`` / ``iterations``: ``controlled_step``'s arithmetic
+    (wrapped), one solve per state (``_first_impact`` on one state, its own frequency)."""
+    n = theta0.size
+    a, g = k[_C_A], k[_C_G]
+    idx = np.empty(n, np.int64)
+    m = 0
+    for i in range(n):  # can_fly_at at the unwrapped phase, with the period the racket had
+        w = TWO_PI / tau0[i]
+        slope = (v0[i] - a * w * math.cos(theta0[i])) / w
+        curvature = -g / (w * w) + a * math.sin(theta0[i])
+        if slope > 0.0 or (slope == 0.0 and curvature > 0.0):
+            idx[m] = i
+            m += 1
+        else:
+            outcome[i] = 2  # below_racket
+            iterations[i] = 0
+    th, vv, tt = np.empty(m), np.empty(m), np.empty(m)
+    for j in range(m):
+        th[j], vv[j], tt[j] = _wrap(theta0[idx[j]]), v0[idx[j]], tau0[idx[j]]
+    c = np.empty(_N_CONSTANTS)
+    one = np.empty((11, 1))  # one state's v, cos, sin, its hop and the solver's scratch
+    pos = np.empty(1, np.int64)
+    tau_bar, gain, rate = k[_C_TAU_BAR], k[_C_GAIN], k[_C_RATE]
+    for it in range(1, max_iterations + 1):
+        if m == 0:
+            break
+        p = 0
+        for j in range(m):
+            # the period controller: tau' = tau + c (tau_bar + K 2 (v - v~) / g - tau)
+            tau = tt[j] + rate * ((tau_bar + gain * (2.0 * (vv[j] - k[_C_V_REF]) / g)) - tt[j])
+            if not tau > 0.0:
+                tau = np.nan  # no racket has a period <= 0
+            w = TWO_PI / tau
+            _flight_constants(a, w, g, c)
+            one[0, 0], one[1, 0], one[2, 0] = vv[j], math.cos(th[j]), math.sin(th[j])
+            _first_impact(one[0], one[1], one[2], 1, c, max_steps, one[3], pos, one[4],
+                          one[5], one[6], one[7], one[8], one[9], one[10])
+            h = one[3, 0]
+            t = _wrap(th[j] + h)
+            v = k[_C_V_COEF_A] * w * math.cos(t) - k[_C_ALPHA] * vv[j] + k[_C_G_ALPHA] / w * h
+            if not h / w >= k[_C_MIN_HOP]:  # sticking (NaN: cannot leave, or no period)
+                outcome[idx[j]] = 1
+                iterations[idx[j]] = it
+            elif (abs(v - k[_C_V_FP]) < k[_C_TOL]
+                  and abs(_wrap(t - k[_C_TH_FP] + math.pi) - math.pi) < k[_C_TOL]
+                  and abs(tau - tau_bar) < k[_C_TOL_TAU]):
+                outcome[idx[j]] = 0  # period1
+                iterations[idx[j]] = it
+            else:
+                idx[p], th[p], vv[p], tt[p] = idx[j], t, v, tau
+                p += 1
+        m = p
+    for j in range(m):
+        outcome[idx[j]] = 3  # undecided
+        iterations[idx[j]] = max_iterations
+
+
+def classify_controlled_arrays(theta0: np.ndarray, v0: np.ndarray, tau0: np.ndarray,
+                               params: ModelParams, fp: FixedPoint, *, tau_bar: float,
+                               v_reference: float, gain: float, rate: float,
+                               max_iterations: int, tolerance: float,
+                               period_tolerance_s: float, min_hop_s: float,
+                               max_steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """(outcome int8, iterations int16) of flat float arrays for the controlled map with the
+    period controller (gain K, rate c; ``switch: impact``), as ``classify_states`` gives
+    them with the numpy code."""
+    a, g, alpha = params.racket_amplitude, params.g, params.alpha
+    k = np.empty(_N_CONTROL)
+    k[_C_A], k[_C_G], k[_C_ALPHA] = a, g, alpha
+    k[_C_TAU_BAR], k[_C_V_REF], k[_C_GAIN], k[_C_RATE] = tau_bar, v_reference, gain, rate
+    k[_C_V_FP], k[_C_TH_FP] = fp.v_m_s, fp.theta_rad
+    k[_C_TOL], k[_C_TOL_TAU], k[_C_MIN_HOP] = tolerance, period_tolerance_s, min_hop_s
+    k[_C_V_COEF_A] = (1.0 + alpha) * a  # eq. 5: ((1 + alpha) a) w cos(theta')
+    k[_C_G_ALPHA] = g * alpha  # eq. 5: (g alpha / w) s
+    outcome = np.empty(theta0.size, dtype=np.int8)
+    iterations = np.empty(theta0.size, dtype=np.int16)
+    _classify_controlled(np.ascontiguousarray(theta0, dtype=float),
+                         np.ascontiguousarray(v0, dtype=float),
+                         np.ascontiguousarray(tau0, dtype=float), k, max_iterations, max_steps,
+                         outcome, iterations)
+    return outcome, iterations
+
+
+def first_impact_phase(theta, v, params: ModelParams, *, max_steps: int) -> np.ndarray:
+    """``impact.first_impact_phase`` at one parameter point (flat arrays; for the tests that
+    hold the two solvers to the same bits)."""
+    th = np.mod(np.asarray(theta, dtype=float).ravel(), TWO_PI)
+    vv = np.ascontiguousarray(np.asarray(v, dtype=float).ravel())
+    m = th.size
+    fp = FixedPoint(v_m_s=math.nan, theta_rad=math.nan)
+    hop, S, D0, C, SN, V, SH, CH = (np.empty(m) for _ in range(8))
+    _first_impact(vv, np.cos(th), np.sin(th), m, _constants(params, fp, 0.0, 0.0), max_steps,
+                  hop, np.empty(m, np.int64), S, D0, C, SN, V, SH, CH)
+    return hop
+
+
+def load() -> None:
+    """Load (or compile) the kernel now: one call on one point."""
+    params = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.3, racket_period=0.92)
+    classify_arrays(np.array([1.0]), np.array([5.0]), params, params.fixed_point(), 1, 1e-3,
+                    1e-3, 10)
