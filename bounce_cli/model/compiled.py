@@ -45,15 +45,13 @@ _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
  _A_3, _V_COEF, _ALPHA, _G_ALPHA_W, _V_FP, _TH_FP, _TOL, _MIN_HOP, _N_CONSTANTS) = range(20)
 
 
-def _constants(params: ModelParams, fp: FixedPoint, tolerance: float,
-               min_hop: float) -> np.ndarray:
-    """The scalars of the numpy code, each by the numpy code's own expression (Python floats:
-    ``-g / w**2`` is Python's pow, ``a * w * cos`` is ``(a * w) * cos``)."""
-    a, w, g, alpha = params.racket_amplitude, params.omega, params.g, params.alpha
-    c = np.empty(_N_CONSTANTS)
+@_jit
+def _flight_constants(a, w, g, c):
+    """The solver's constants at angular frequency w, each by the numpy code's expression
+    (for an array of frequencies: w**2 is w * w; ``_constants`` puts Python's pow back)."""
     c[_A], c[_W], c[_G] = a, w, g
     c[_AW] = a * w  # can_fly, racket_velocity: a * w * cos
-    c[_NEG_G_W2] = -g / w**2  # can_fly's curvature
+    c[_NEG_G_W2] = -g / (w * w)  # can_fly's curvature
     c[_NEG_G_WW] = -g / (w * w)  # first step's curvature
     c[_BOUND] = g / (w * w) + a
     c[_W_SQ] = w * w
@@ -61,12 +59,34 @@ def _constants(params: ModelParams, fp: FixedPoint, tolerance: float,
     c[_TWO_A] = 2.0 * a
     c[_TWO_BOUND] = 2.0 * (g / (w * w) + a)
     c[_A_3] = a / 3.0
+
+
+def _constants(params: ModelParams, fp: FixedPoint, tolerance: float,
+               min_hop: float) -> np.ndarray:
+    """The scalars of the numpy code, each by the numpy code's own expression (Python floats:
+    ``-g / w**2`` is Python's pow, ``a * w * cos`` is ``(a * w) * cos``)."""
+    a, w, g, alpha = params.racket_amplitude, params.omega, params.g, params.alpha
+    c = np.empty(_N_CONSTANTS)
+    _flight_constants(a, w, g, c)
+    c[_NEG_G_W2] = -g / w**2  # can_fly's curvature: Python's pow, as the numpy code's scalar
     c[_V_COEF] = (1.0 + alpha) * a * w  # eq. 5
     c[_ALPHA] = alpha
     c[_G_ALPHA_W] = g * alpha / w
     c[_V_FP], c[_TH_FP] = fp.v_m_s, fp.theta_rad
     c[_TOL], c[_MIN_HOP] = tolerance, min_hop
     return c
+
+
+@_jit
+def _launch(i, slope, curvature, idx, m, outcome, iterations):
+    """can_fly of initial condition i from G'(0) and G''(0): queue it (idx[m] = i, returns
+    m + 1), or classify it below the racket (0 iterations, returns m)."""
+    if slope > 0.0 or (slope == 0.0 and curvature > 0.0):
+        idx[m] = i
+        return m + 1
+    outcome[i] = 2  # below_racket
+    iterations[i] = 0
+    return m
 
 
 @_jit
@@ -143,14 +163,8 @@ def _classify(theta0, v0, c, max_iterations, max_steps, outcome, iterations):
     idx = np.empty(n, np.int64)
     m = 0
     for i in range(n):  # can_fly at the unwrapped initial phase
-        slope = (v0[i] - c[_AW] * math.cos(theta0[i])) / w
-        curvature = c[_NEG_G_W2] + a * math.sin(theta0[i])
-        if slope > 0.0 or (slope == 0.0 and curvature > 0.0):
-            idx[m] = i
-            m += 1
-        else:
-            outcome[i] = 2  # below_racket
-            iterations[i] = 0
+        m = _launch(i, (v0[i] - c[_AW] * math.cos(theta0[i])) / w,
+                    c[_NEG_G_W2] + a * math.sin(theta0[i]), idx, m, outcome, iterations)
     work = np.empty((12, m))  # the states (5 rows) and the solver's scratch (7 rows)
     th, vv, cos_th, sin_th, hop = work[0], work[1], work[2], work[3], work[4]
     S, D0, C, SN, V, SH, CH = work[5], work[6], work[7], work[8], work[9], work[10], work[11]
@@ -209,22 +223,6 @@ def classify_arrays(theta0: np.ndarray, v0: np.ndarray, params: ModelParams, fp:
 
 
 @_jit
-def _flight_constants(a, w, g, c):
-    """The solver's constants (``_constants``'s first rows) at angular frequency w, each by
-    the numpy code's expression for arrays of frequencies."""
-    c[_A], c[_W], c[_G] = a, w, g
-    c[_AW] = a * w
-    c[_NEG_G_W2] = -g / (w * w)
-    c[_NEG_G_WW] = -g / (w * w)
-    c[_BOUND] = g / (w * w) + a
-    c[_W_SQ] = w * w
-    c[_TWO_W_SQ] = 2.0 * w * w
-    c[_TWO_A] = 2.0 * a
-    c[_TWO_BOUND] = 2.0 * (g / (w * w) + a)
-    c[_A_3] = a / 3.0
-
-
-@_jit
 def _classify_controlled(theta0, v0, tau0, k, max_iterations, max_steps, outcome, iterations):
     """``classify.classify_states`` of a ``ControlledMap`` with a period controller
     (``switch: impact``) into ``outcome`` / ``iterations``: ``controlled_step``'s arithmetic
@@ -235,14 +233,8 @@ def _classify_controlled(theta0, v0, tau0, k, max_iterations, max_steps, outcome
     m = 0
     for i in range(n):  # can_fly_at at the unwrapped phase, with the period the racket had
         w = TWO_PI / tau0[i]
-        slope = (v0[i] - a * w * math.cos(theta0[i])) / w
-        curvature = -g / (w * w) + a * math.sin(theta0[i])
-        if slope > 0.0 or (slope == 0.0 and curvature > 0.0):
-            idx[m] = i
-            m += 1
-        else:
-            outcome[i] = 2  # below_racket
-            iterations[i] = 0
+        m = _launch(i, (v0[i] - a * w * math.cos(theta0[i])) / w,
+                    -g / (w * w) + a * math.sin(theta0[i]), idx, m, outcome, iterations)
     th, vv, tt = np.empty(m), np.empty(m), np.empty(m)
     for j in range(m):
         th[j], vv[j], tt[j] = _wrap(theta0[idx[j]]), v0[idx[j]], tau0[idx[j]]
