@@ -20,10 +20,8 @@ __version__ = "0.1.0"
 
 if TYPE_CHECKING:  # for type checkers: the names as if imported eagerly
     from .api import (
-        ConfigError,
         ExperimentResult,
         FixedPoint,
-        ModelError,
         ModelParams,
         Orbit,
         Stability,
@@ -33,6 +31,15 @@ if TYPE_CHECKING:  # for type checkers: the names as if imported eagerly
         read_recording,
         run,
         stability,
+    )
+    from .errors import (
+        BounceError,
+        ClusterError,
+        ConfigError,
+        DataError,
+        ModelError,
+        NoFixedPointError,
+        OutputDirError,
     )
 
 #: exported name -> the module it comes from, imported on first use
@@ -48,14 +55,22 @@ _EXPORTS = {
     "Orbit": "api",
     "stability": "api",
     "Stability": "api",
-    "ConfigError": "api",
-    "ModelError": "api",
+    "BounceError": "errors",
+    "ConfigError": "errors",
+    "DataError": "errors",
+    "ModelError": "errors",
+    "NoFixedPointError": "errors",
+    "OutputDirError": "errors",
+    "ClusterError": "errors",
 }
 
 __all__ = [
     "__version__",
     # the notebook API (bounce_cli.api)
-    "run", "read_recording", "extract", "ExperimentResult", "ConfigError", "ModelError",
+    "run", "read_recording", "extract", "ExperimentResult",
+    # what a caller catches (bounce_cli.errors; every one a BounceError)
+    "BounceError", "ConfigError", "DataError", "ModelError", "NoFixedPointError",
+    "OutputDirError", "ClusterError",
     # the model (eqs. 5-10)
     "ModelParams", "FixedPoint", "map_step", "iterate_orbit", "Orbit", "stability", "Stability",
 ]
@@ -96,3 +111,7 @@ def lazy_exports(package: str, exports: dict[str, str]):
 
 
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
+
+from . import old_paths  # noqa: E402  (the old module paths, with a DeprecationWarning)
+
+old_paths.install()

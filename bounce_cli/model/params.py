@@ -1,0 +1,120 @@
+"""Model parameters of the ball bouncing map and the period-1 fixed point (eqs. 4, 7, 8).
+
+Units are SI throughout: ``g`` in m/s^2, ``racket_amplitude`` (a_r) in m, ``racket_period``
+(tau = 2 pi / omega_r) in s. Phases are in radians, ``theta = omega_r t`` (section 2).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import ModelError, NoFixedPointError
+
+
+@dataclass(frozen=True)
+class FixedPoint:
+    """The period-1 fixed point (v~, theta~) of eqs. 7 and 8.
+
+    ``theta_rad`` is the stable branch ``+arccos(...)`` in (0, pi/2], where the racket
+    decelerates at impact.
+    """
+
+    v_m_s: float
+    theta_rad: float
+
+    @property
+    def theta_deg(self) -> float:
+        return math.degrees(self.theta_rad)
+
+
+@dataclass(frozen=True)
+class ModelParams:
+    """Parameters of the sinusoidally driven racket (eq. 4) and the impact law (eq. 3).
+
+    alpha: coefficient of restitution, 0 <= alpha < 1.
+    g: gravitational acceleration in m/s^2, > 0.
+    racket_amplitude: a_r in m, > 0.
+    racket_period: tau in s, > 0; omega_r = 2 pi / tau.
+    """
+
+    alpha: float
+    g: float
+    racket_amplitude: float
+    racket_period: float
+
+    def __post_init__(self) -> None:
+        checks = (
+            ("alpha", 0.0 <= self.alpha < 1.0, "must satisfy 0 <= alpha < 1"),
+            ("g", self.g > 0.0, "must be > 0"),
+            ("racket_amplitude", self.racket_amplitude > 0.0, "must be > 0"),
+            ("racket_period", self.racket_period > 0.0, "must be > 0"),
+        )
+        for name, ok, reason in checks:
+            value = getattr(self, name)
+            if not (ok and math.isfinite(value)):
+                raise ModelError(f"{name} {reason} (got {value!r})")
+
+    # -- racket motion (eq. 4) ---------------------------------------------------------
+    @property
+    def omega(self) -> float:
+        """Racket angular frequency omega_r = 2 pi / tau in rad/s."""
+        return 2.0 * math.pi / self.racket_period
+
+    def racket_position(self, phase):
+        """x_r = a_r sin(theta), eq. 4, with theta = omega_r t."""
+        return self.racket_amplitude * np.sin(phase)
+
+    def racket_velocity(self, phase):
+        """v_r = a_r omega_r cos(theta)."""
+        return self.racket_amplitude * self.omega * np.cos(phase)
+
+    def racket_acceleration(self, phase):
+        """Racket acceleration -a_r omega_r^2 sin(theta) in m/s^2."""
+        return -self.racket_amplitude * self.omega**2 * np.sin(phase)
+
+    # -- fixed point (eqs. 7, 8) -----------------------------------------------------------
+    def cos_theta_fixed(self) -> float:
+        """Right-hand side of eq. 8: pi (1-alpha)/(1+alpha) g / (omega_r^2 a_r)."""
+        return (
+            math.pi
+            * (1.0 - self.alpha)
+            / (1.0 + self.alpha)
+            * self.g
+            / (self.omega**2 * self.racket_amplitude)
+        )
+
+    def min_racket_amplitude(self) -> float:
+        """Smallest a_r for which eq. 8 has a solution (cos theta~ = 1), in m."""
+        return math.pi * (1.0 - self.alpha) / (1.0 + self.alpha) * self.g / self.omega**2
+
+    def fixed_point(self) -> FixedPoint:
+        """Period-1 fixed point: v~ = pi g / omega_r (eq. 7), theta~ = arccos(eq. 8).
+
+        Raises NoFixedPointError when |cos theta~| > 1.
+        """
+        cos_theta = self.cos_theta_fixed()
+        if cos_theta > 1.0:
+            raise NoFixedPointError(
+                f"no period-1 fixed point: eq. 8 gives cos(theta~) = {cos_theta:.4g} > 1; "
+                f"the racket amplitude (model.racket_amplitude) must be >= "
+                f"{self.min_racket_amplitude():.4g} m "
+                f"at alpha={self.alpha:g}, g={self.g:g}, racket_period={self.racket_period:g}"
+            )
+        return FixedPoint(v_m_s=math.pi * self.g / self.omega, theta_rad=math.acos(cos_theta))
+
+    def with_alpha(self, alpha: float) -> "ModelParams":
+        return ModelParams(alpha, self.g, self.racket_amplitude, self.racket_period)
+
+
+def wrap_phase(theta):
+    """Phase wrapped to [0, 2 pi)."""
+    return np.mod(theta, 2.0 * np.pi)
+
+
+def phase_difference(theta, reference):
+    """theta - reference wrapped to [-pi, pi): compares a wrapped or unwrapped phase with a
+    reference without the 2 pi ambiguity."""
+    return np.mod(np.asarray(theta) - reference + np.pi, 2.0 * np.pi) - np.pi
