@@ -40,17 +40,14 @@ from ..analysis.stochastic import (
     var1_theory,
 )
 from .plotting import (
-    LAG_LABEL,
     PANELS,
-    TITLES,
     caption_figures,
-    data_caption,
-    integer_axis,
+    finish_correlation_panel,
     new_figure,
     publication_style,
 )
 from .base import Experiment, ExperimentResult, RunOptions
-from .data_side import AcfDataBlock
+from .data_side import AcfDataBlock, acf_data_draw, acf_data_run, data_side_result
 
 OBSERVED_AMPLITUDE_M, OBSERVED_PERIOD_S = paper.OBSERVED_AMPLITUDE_M, paper.OBSERVED_PERIOD_S
 
@@ -379,12 +376,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         if not np.allclose(d["theory"], d["theory_map"], atol=5e-3):
             ax.plot(lag, d["theory_map"], "s", mfc="none", mec="tab:blue", ms=5,
                     label="theory with the noise of eqs. 16-18")
-        ax.set_ylim(-1.05, 1.05)
-        ax.set_title(TITLES[pair], fontsize=10)
-        ax.set_ylabel("correlation")
-        integer_axis(ax)
-        if r == 1:
-            ax.set_xlabel(LAG_LABEL)
+        finish_correlation_panel(ax, pair, bottom=r == 1)
     handles: dict[str, Any] = {}
     for ax in axes.flat:
         for handle, label in zip(*ax.get_legend_handles_labels()):
@@ -409,19 +401,10 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
 # -- the data's side (--data impacts.csv): bounce_cli/experiments/data_side.py ----------------
 def run_data(config: AcfConfig, options: RunOptions, source=None) -> ExperimentResult:
     """The data's side; ``source``: the impacts (default: the file ``config.data``)."""
-    from .data_side import acf_data_run
-
-    frames, lines = acf_data_run(config, options, source)
-    figures = draw_data(frames)
-    caption_figures(figures, None, data_caption(config, source, options.record))
-    return ExperimentResult(frames=frames, figures=figures, summary=lines)
+    return data_side_result(acf_data_run, draw_data, config, options, source)
 
 
-@publication_style
-def draw_data(frames: dict[str, pd.DataFrame]) -> dict:
-    from .data_side import acf_data_draw
-
-    return acf_data_draw(frames)
+draw_data = publication_style(acf_data_draw)
 
 
 EXPERIMENT = Experiment(

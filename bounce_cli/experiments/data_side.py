@@ -35,11 +35,13 @@ from ..analysis.racket_inputs import INPUT_COEFFICIENTS, racket_input_jacobian
 from ..analysis.var_fit import EIGEN_QUANTITIES, J_ENTRIES, Var1Fit, fit_var1
 from ..data.data_parameters import DataModel, model_for_data
 from ..data.impacts import Impacts, ImpactsSource, circular_mean, read_impacts
+from .base import ExperimentResult
 from .plotting import (
     IMPACT_AFTER_LABEL,
-    LAG_LABEL,
     PANELS,
-    TITLES,
+    caption_figures,
+    data_caption,
+    finish_correlation_panel,
     integer_axis,
     new_figure,
     perturbation_title,
@@ -86,6 +88,17 @@ class ImpulseDataBlock(StrictModel):
     min_windows_per_impact: int = Field(
         10, ge=2, description="impacts to relax are judged only over the impacts k that at "
         "least this many perturbation windows reach; fewer at k = 0: 'too few perturbations'")
+
+
+def data_side_result(data_run, draw, config, options, source: ImpactsSource | None = None
+                     ) -> ExperimentResult:
+    """An experiment's data side (``--data``): the frames and summary lines of
+    ``data_run(config, options, source)``, and ``draw``'s figures of them, captioned with where
+    the impacts came from (``source``: the impacts; default: the file ``config.data``)."""
+    frames, lines = data_run(config, options, source)
+    figures = draw(frames)
+    caption_figures(figures, None, data_caption(config, source, options.record))
+    return ExperimentResult(frames=frames, figures=figures, summary=lines)
 
 
 # -- the model at the data's parameters ------------------------------------------------------
@@ -772,12 +785,7 @@ def acf_data_draw(frames: dict[str, pd.DataFrame]) -> dict:
                     label=f"data: mean $\\pm$ SD over {int(d['data_trials'].iloc[0])} runs")
         ax.plot(d["lag"], d["theory"], "o", mfc="none", mec="k", ms=9,
                 label="model, eq. 19 at the data's parameters")
-        ax.set_ylim(-1.05, 1.05)
-        ax.set_title(TITLES[pair], fontsize=10)
-        ax.set_ylabel("correlation")
-        integer_axis(ax)
-        if r == 1:
-            ax.set_xlabel(LAG_LABEL)
+        finish_correlation_panel(ax, pair, bottom=r == 1)
     handles, labels = axes[0, 0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncol=2, fontsize=9)
     fig.suptitle("Fig. 8 with data: correlation functions of the data (grey) and eq. 19 (circles)")

@@ -36,13 +36,18 @@ from .plotting import (
     PHASE_LABEL,
     VELOCITY_LABEL,
     caption_figures,
-    data_caption,
     integer_axis,
     perturbation_title,
     publication_style,
 )
 from .base import Experiment, ExperimentResult, RunOptions
-from .data_side import ImpulseDataBlock, relaxed_text
+from .data_side import (
+    ImpulseDataBlock,
+    data_side_result,
+    impulse_data_draw,
+    impulse_data_run,
+    relaxed_text,
+)
 
 MODELS = ("full", "linear")
 
@@ -307,19 +312,10 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
 # -- the data's side (--data impacts.csv): bounce_cli/experiments/data_side.py ----------------
 def run_data(config: ImpulseConfig, options: RunOptions, source=None) -> ExperimentResult:
     """The data's side; ``source``: the impacts (default: the file ``config.data``)."""
-    from .data_side import impulse_data_run
-
-    frames, lines = impulse_data_run(config, options, source)
-    figures = draw_data(frames)
-    caption_figures(figures, None, data_caption(config, source, options.record))
-    return ExperimentResult(frames=frames, figures=figures, summary=lines)
+    return data_side_result(impulse_data_run, draw_data, config, options, source)
 
 
-@publication_style
-def draw_data(frames: dict[str, pd.DataFrame]) -> dict:
-    from .data_side import impulse_data_draw
-
-    return impulse_data_draw(frames)
+draw_data = publication_style(impulse_data_draw)
 
 
 EXPERIMENT = Experiment(

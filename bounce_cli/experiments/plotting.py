@@ -119,6 +119,17 @@ TITLES = {
 LAG_LABEL = "lag $l$ (bounces)"
 
 
+def finish_correlation_panel(ax: Any, pair: str, bottom: bool) -> None:
+    """Dress one panel of Fig. 8 (model or data): the correlation's range and label, the
+    pair's title, whole lags, and the lag label on the ``bottom`` row."""
+    ax.set_ylim(-1.05, 1.05)
+    ax.set_title(TITLES[pair], fontsize=10)
+    ax.set_ylabel("correlation")
+    integer_axis(ax)
+    if bottom:
+        ax.set_xlabel(LAG_LABEL)
+
+
 def centred_deg(theta_deg):
     """Phases in degrees mapped to [-180, 180): means and plots of phases near 0 stay
     meaningful (the table keeps [0, 360))."""

@@ -643,35 +643,52 @@ def group_tables(frames: dict[str, pd.DataFrame], units: list[Unit],
     return out
 
 
+def _regression_line(r: dict) -> str | None:
+    """Fig. 7 of one condition (none where its fit has no slope)."""
+    if not ("slope" in r and isinstance(r["slope"], float) and math.isfinite(r["slope"])):
+        return None
+    return (f"Fig. 7 ({r['condition']}, {r['n']} trials of {r['subjects']} "
+            f"subjects): slope {r['slope']:.4f} m/s^2 [{r['slope_ci_low']:.4f}, "
+            f"{r['slope_ci_high']:.4f}] vs eq. 15 {r['predicted_slope']:.4f}; "
+            f"intercept {100 * r['intercept']:.2f} cm "
+            f"[{100 * r['intercept_ci_low']:.2f}, "
+            f"{100 * r['intercept_ci_high']:.2f}]; R^2 {r['r2']:.3f}")
+
+
+def _learning_line(r: dict) -> str | None:
+    """Fig. 6 of one condition and quantity (none where it has no trend per trial)."""
+    if not isinstance(r.get("slope_per_trial"), float):
+        return None
+    return (f"Fig. 6 ({r['condition']}): {r['quantity']} "
+            f"{r['slope_per_trial']:.4g} per trial [{r['ci_low']:.4g}, "
+            f"{r['ci_high']:.4g}] over "
+            f"{r['subjects']} subjects ({r['method']}): {r['trend']}")
+
+
+def _stability_line(r: dict) -> str:
+    """The stability of one condition and estimate, data against the model."""
+    return (f"stability ({r['condition']}, {r['estimate']}, {r['units']} units"
+            + (f"; {r['units_without_interval']} without an interval, left out"
+               if r["units_without_interval"] else "") + "): "
+            f"data {r['data_mean']:.3f} vs model {r['model_mean']:.3f}, difference "
+            f"{r['difference_mean']:.3f} [{r['ci_low']:.3f}, {r['ci_high']:.3f}]: "
+            f"{r['verdict']}")
+
+
+#: the group tables a study summarises, each with its line of a record
+GROUP_LINES: tuple[tuple[str, Callable[[dict], str | None]], ...] = (
+    ("group_regression.csv", _regression_line),
+    ("group_learning.csv", _learning_line),
+    ("group_stability.csv", _stability_line),
+)
+
+
 def group_summary(frames: dict[str, pd.DataFrame]) -> list[str]:
     lines = []
-    reg = frames.get("group_regression.csv")
-    if reg is not None:
-        for r in reg.to_dict("records"):
-            if "slope" in r and isinstance(r["slope"], float) and math.isfinite(r["slope"]):
-                lines.append(f"Fig. 7 ({r['condition']}, {r['n']} trials of {r['subjects']} "
-                             f"subjects): slope {r['slope']:.4f} m/s^2 [{r['slope_ci_low']:.4f}, "
-                             f"{r['slope_ci_high']:.4f}] vs eq. 15 {r['predicted_slope']:.4f}; "
-                             f"intercept {100 * r['intercept']:.2f} cm "
-                             f"[{100 * r['intercept_ci_low']:.2f}, "
-                             f"{100 * r['intercept_ci_high']:.2f}]; R^2 {r['r2']:.3f}")
-    learn = frames.get("group_learning.csv")
-    if learn is not None:
-        for r in learn.to_dict("records"):
-            if isinstance(r.get("slope_per_trial"), float):
-                lines.append(f"Fig. 6 ({r['condition']}): {r['quantity']} "
-                             f"{r['slope_per_trial']:.4g} per trial [{r['ci_low']:.4g}, "
-                             f"{r['ci_high']:.4g}] over "
-                             f"{r['subjects']} subjects ({r['method']}): {r['trend']}")
-    stab = frames.get("group_stability.csv")
-    if stab is not None:
-        for r in stab.to_dict("records"):
-            lines.append(f"stability ({r['condition']}, {r['estimate']}, {r['units']} units"
-                         + (f"; {r['units_without_interval']} without an interval, left out"
-                            if r["units_without_interval"] else "") + "): "
-                         f"data {r['data_mean']:.3f} vs model {r['model_mean']:.3f}, difference "
-                         f"{r['difference_mean']:.3f} [{r['ci_low']:.3f}, {r['ci_high']:.3f}]: "
-                         f"{r['verdict']}")
+    for name, line in GROUP_LINES:
+        table = frames.get(name)
+        if table is not None:
+            lines += [text for r in table.to_dict("records") if (text := line(r)) is not None]
     return lines
 
 

@@ -271,15 +271,12 @@ def claim_slope(results: Path) -> Measured:
 
 CLAIMS: tuple[Claim, ...] = (
     Claim("v_fixed", "stationary velocity v~ at the Fig. 9 parameters (Fig. 9 caption, eq. 7)",
-          claim_v_fixed, paper.FIG9_V_FIXED,
-          sources=("impulse",)),
+          claim_v_fixed, paper.FIG9_V_FIXED, sources=("impulse",)),
     Claim("theta_fixed", "stationary phase theta~ at the Fig. 9 parameters (Fig. 9 caption)",
-          claim_theta_fixed, paper.FIG9_THETA_FIXED,
-          known_discrepancy=(
+          claim_theta_fixed, paper.FIG9_THETA_FIXED, known_discrepancy=(
               "the paper's own eq. 8 gives arccos(0.7342) = 42.76 deg at these parameters "
               "(v~ = 4.5126 m/s agrees); the caption's 42 is the value truncated, not rounded"),
-          known_value=(42.763, 0.005),
-          sources=("impulse",)),
+          known_value=(42.763, 0.005), sources=("impulse",)),
     Claim("eigen_paper", "both eigenvalues 0.5 in absolute value at the Fig. 3 parameters "
           "(section 6)", claim_paper_eigenvalues, paper.EIGENVALUE_MODULUS,
           sources=("stability",)),
@@ -289,8 +286,7 @@ CLAIMS: tuple[Claim, ...] = (
           sources=("stability",)),
     Claim("stable_range", f"stable AC range at alpha = {paper.STABLE_AC_ALPHA:g}, lower end "
           "(section 5, eq. 14; the upper end must be 0)",
-          claim_stable_range, paper.STABLE_AC_LOW,
-          sources=("stability",)),
+          claim_stable_range, paper.STABLE_AC_LOW, sources=("stability",)),
     Claim("min_radius", "min over stable AC of the largest |lambda| equals alpha (section 4)",
           claim_min_radius, words="alpha", criterion=number_text(MIN_RADIUS_TOLERANCE),
           sources=("stability",)),
@@ -302,33 +298,26 @@ CLAIMS: tuple[Claim, ...] = (
           sources=("basin", "trajectory")),
     Claim("basin_no_100", f"no basin point needed the maximum of "
           f"{paper.SECTION3_CLASSIFY.max_iterations} impacts (section 3)",
-          claim_basin_iterations, words="none", criterion="0 undecided",
-          sources=("basin",)),
+          claim_basin_iterations, words="none", criterion="0 undecided", sources=("basin",)),
     Claim("sd_v", "theoretical SD of v at the Fig. 8 parameters (section 6)",
-          claim_sd_v, paper.SD_V_THEORY,
-          known_discrepancy=(
+          claim_sd_v, paper.SD_V_THEORY, known_discrepancy=(
               "eq. 19 with J of eq. 9 and diagonal noise (0.04 m/s, 0.05 rad) at the printed "
               "parameters gives 0.0695 m/s (+2 %); no single reading of the parameters "
               "reproduces both printed SDs (acf/summary.csv lists the candidates: a_r 0.0646 m "
               "would match v, 0.0676 m theta)"),
-          known_value=(0.0695, 0.0002),
-          sources=("acf",)),
+          known_value=(0.0695, 0.0002), sources=("acf",)),
     Claim("sd_theta", "theoretical SD of theta at the Fig. 8 parameters (section 6)",
-          claim_sd_theta, paper.SD_THETA_THEORY,
-          known_discrepancy=(
+          claim_sd_theta, paper.SD_THETA_THEORY, known_discrepancy=(
               "eq. 19 gives 7.89 deg (-6 %) at the printed parameters; see sd_v and "
               "acf/summary.csv for the candidate explanations, none of which fits both SDs"),
-          known_value=(7.885, 0.01),
-          sources=("acf",)),
+          known_value=(7.885, 0.01), sources=("acf",)),
     Claim("v0_perturbed", f"alpha_p = {paper.ALPHA_P_FIG3:g} gives v_0 = "
           f"{paper.V0_AT_ALPHA_P_FIG3} (section 7)",
-          claim_v0_perturbed, paper.V0_AT_ALPHA_P_FIG3,
-          sources=("impulse",)),
+          claim_v0_perturbed, paper.V0_AT_ALPHA_P_FIG3, sources=("impulse",)),
     Claim("impulse_threshold", "perturbations with alpha_p above about "
           f"{paper.ALPHA_P_THRESHOLD.text} leave the period-1 basin, the experiment's mean "
           f"{paper.ALPHA_P_EXPERIMENT[1]:g} among them (section 7)",
-          claim_threshold, paper.ALPHA_P_THRESHOLD,
-          sources=("impulse",)),
+          claim_threshold, paper.ALPHA_P_THRESHOLD, sources=("impulse",)),
     Claim("impulse_symmetry", "the linear response is symmetric in the sign of the "
           "perturbation, the full one is not (section 7, Fig. 10)",
           claim_linear_symmetric, words="symmetric / asymmetric",

@@ -4,6 +4,9 @@ A label is found as written, or, when no label is exactly it, as the part after 
 ``:`` of a ``Subject:Marker`` label (Vicon, Motive) if only one label has that part. The
 racket's height is the mean of its markers' heights (a racket face carries three or four), a
 gap wherever one of them is missing.
+
+The functions here take the file's ``path`` (for messages) and its ``markers`` (a
+:class:`MarkerSet`) first.
 """
 
 from __future__ import annotations
@@ -34,10 +37,6 @@ def marker_index(path: Path, markers: MarkerSet, name: str, key: str) -> int:
 
     Parameters
     ----------
-    path : Path
-        The file (for messages).
-    markers : MarkerSet
-        The file's markers.
     name : str
         The label asked for.
     key : str
@@ -76,10 +75,6 @@ def marker_heights(path: Path, markers: MarkerSet, racket: list[str], ball: str 
 
     Parameters
     ----------
-    path : Path
-        The file (for messages).
-    markers : MarkerSet
-        The file's markers.
     racket : list of str
         The racket's marker labels.
     ball : str or None

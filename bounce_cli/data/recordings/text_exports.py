@@ -13,6 +13,8 @@
   rigid body's marker or centre) is a point named by the Name row; empty cells are gaps.
   Motive is Y-up.
 
+Each is read by ``read_<format>(path, units, warn) -> MarkerSet``: ``units`` is the positions'
+unit if set (``markers.units``), else the file's own; ``warn`` receives one line per note.
 ``detect_format`` tells them from the first line; every problem is one line naming the file
 (``ConfigError``).
 """
@@ -116,21 +118,8 @@ def _unit(path: Path, name: str, where: str) -> float:
 
 
 def read_vicon_csv(path: Path, units: str | None, warn: Callable[[str], None]) -> MarkerSet:
-    """The ``Trajectories`` section of a Vicon Nexus CSV export (module doc).
-
-    Parameters
-    ----------
-    path : Path
-        The file.
-    units : str or None
-        The positions' unit if set (``markers.units``), else the file's units line.
-    warn : callable
-        Receives one line per note.
-
-    Returns
-    -------
-    MarkerSet
-    """
+    """The ``Trajectories`` section of a Vicon Nexus CSV export (module doc); the file's own
+    unit: its units line."""
     lines = read_text(path).splitlines()
     starts = [i for i, line in enumerate(lines) if line.split(",")[0].strip() == "Trajectories"]
     if not starts:
@@ -167,21 +156,8 @@ def read_vicon_csv(path: Path, units: str | None, warn: Callable[[str], None]) -
 
 
 def read_qtm_tsv(path: Path, units: str | None, warn: Callable[[str], None]) -> MarkerSet:
-    """A Qualisys QTM 3D TSV export (module doc).
-
-    Parameters
-    ----------
-    path : Path
-        The file.
-    units : str or None
-        The positions' unit if set (``markers.units``), else mm as QTM writes them.
-    warn : callable
-        Receives one line per note.
-
-    Returns
-    -------
-    MarkerSet
-    """
+    """A Qualisys QTM 3D TSV export (module doc); the file's own unit: mm, as QTM writes
+    them."""
     lines = read_text(path).splitlines()
     header: dict[str, list[str]] = {}
     i = 0
@@ -241,21 +217,7 @@ def read_qtm_tsv(path: Path, units: str | None, warn: Callable[[str], None]) -> 
 
 def read_motive_csv(path: Path, units: str | None, warn: Callable[[str], None]) -> MarkerSet:
     """An OptiTrack Motive CSV export (module doc): every ``Position`` X, Y, Z triple is a
-    point named by the ``Name`` row.
-
-    Parameters
-    ----------
-    path : Path
-        The file.
-    units : str or None
-        The positions' unit if set (``markers.units``), else the metadata's ``Length Units``.
-    warn : callable
-        Receives one line per note.
-
-    Returns
-    -------
-    MarkerSet
-    """
+    point named by the ``Name`` row; the file's own unit: the metadata's ``Length Units``."""
     lines = read_text(path).splitlines()
     rows = list(csv.reader(lines))
     meta_cells = rows[0] if rows else []
