@@ -30,7 +30,7 @@ from ..engine.impulse import (
     relaxation_impacts,
 )
 from ..engine.control import is_passive
-from ..engine.linear import stability
+from ..engine.linear import is_stable, stability
 from ..engine.params import ModelParams
 from ..plotting import (
     IMPACT_AFTER_LABEL,
@@ -115,7 +115,7 @@ def linear_outcome(params: ModelParams, controller=None) -> str:
         from ..engine.control import controlled_jacobian, spectral_radius_3x3
 
         radius = float(spectral_radius_3x3(controlled_jacobian(params, controller)))
-        return "period1" if radius < 1.0 else "diverges"
+        return "period1" if is_stable(radius) else "diverges"
     return "period1" if stability(params).stable else "diverges"
 
 
