@@ -42,15 +42,15 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from bounce_cli import parallel  # noqa: E402
-from bounce_cli.engine.classify import (  # noqa: E402
+from bounce_cli.runtime import parallel  # noqa: E402
+from bounce_cli.analysis.classify import (  # noqa: E402
     OUTCOMES,
     ClassifySettings,
     classify_grid,
     compiled_kernel_available,
 )
-from bounce_cli.engine.params import ModelParams  # noqa: E402
-from bounce_cli.engine.reference import classify_point_brentq  # noqa: E402
+from bounce_cli.model.params import ModelParams  # noqa: E402
+from bounce_cli.model.reference import classify_point_brentq  # noqa: E402
 from bounce_cli.experiments.basin import COMPILED_MIN_POINTS  # noqa: E402
 
 sys.path.insert(0, str(ROOT / "benchmarks"))

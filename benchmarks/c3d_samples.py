@@ -4,7 +4,7 @@
 
 For every ``*.c3d`` under the directories (e.g. the Biomechanical ToolKit's BTKData
 ``Input/C3DSamples``, which holds the c3d.org reference samples): whether bounce's reader
-(``bounce_cli.recordings.c3d_files.read_c3d_points``) reads it, with how many warnings, whether
+(``bounce_cli.data.recordings.c3d_files.read_c3d_points``) reads it, with how many warnings, whether
 ezc3d reads it (each in its own process: ezc3d can crash on a damaged file), and, where both
 read it, whether every marker agrees to float32 rounding (relative 1e-6 of the file's largest
 coordinate; gaps the same) and the labels are the same. Prints one line per file and the
@@ -64,8 +64,8 @@ def compare(ours, theirs) -> str:
 def main(directories: list[str]) -> None:
     import tempfile
 
-    from bounce_cli.config import ConfigError
-    from bounce_cli.recordings.c3d_files import read_c3d_points
+    from bounce_cli.runtime.config import ConfigError
+    from bounce_cli.data.recordings.c3d_files import read_c3d_points
 
     files = sorted(p for d in directories for p in Path(d).rglob("*")
                    if p.suffix.lower() == ".c3d")

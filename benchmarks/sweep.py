@@ -18,7 +18,7 @@ import matplotlib
 
 matplotlib.use("Agg")
 
-from bounce_cli.config import bundled_config_path, load_config  # noqa: E402
+from bounce_cli.runtime.config import bundled_config_path, load_config  # noqa: E402
 from bounce_cli.experiments import sweep  # noqa: E402
 from bounce_cli.experiments.base import RunOptions  # noqa: E402
 
@@ -79,9 +79,9 @@ def main() -> None:
 def estimate(config, job_counts) -> None:
     """Per-point CPU times, one after another in this process, and the makespan of
     LocalPool's schedule for each job count: the speed-up when every worker has a core."""
-    from bounce_cli import parallel
-    from bounce_cli.engine.linear import stability
-    from bounce_cli.engine.sweep import evaluate_point
+    from bounce_cli.runtime import parallel
+    from bounce_cli.model.linear import stability
+    from bounce_cli.analysis.sweep import evaluate_point
 
     tasks = sweep.point_tasks_of(config)
     costs = []

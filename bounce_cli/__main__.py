@@ -1,3 +1,3 @@
-from .interrupts import main
+from .cli.console import main
 
 main()

@@ -26,8 +26,8 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .artifacts import FIGURE_DPI, RunDirectory
-from .config import (
+from .runtime.artifacts import FIGURE_DPI, RunDirectory
+from .runtime.config import (
     DATA_MODEL_KEYS,
     ConfigError,
     ExperimentConfig,
@@ -36,18 +36,11 @@ from .config import (
     load_config,
     validate,
 )
-from .engine import (
-    FixedPoint,
-    ModelError,
-    ModelParams,
-    Orbit,
-    Stability,
-    iterate_orbit,
-    map_step,
-    stability,
-)
+from .model.params import FixedPoint, ModelError, ModelParams
+from .model.maps import Orbit, iterate_orbit, map_step
+from .model.linear import Stability, stability
 from .experiments.base import Experiment, ExperimentResult, RunOptions
-from .registry import EXPERIMENTS, Entry
+from .experiments.registry import EXPERIMENTS, Entry
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -71,7 +64,7 @@ def find_entry(name: str) -> Entry:
     Returns
     -------
     Entry
-        Its :class:`bounce_cli.registry.Entry`.
+        Its :class:`bounce_cli.experiments.registry.Entry`.
 
     Raises
     ------
@@ -121,7 +114,7 @@ def load_run_config(entry: Entry, config: Path | None,
     """
     experiment = entry.load()
     path = Path(config) if config is not None else bundled_config_path(entry.config)
-    return experiment, path, load_config(experiment.schema, path, overrides)
+    return experiment, path, load_config(experiment.schema, path, overrides, EXPERIMENTS)
 
 
 def warn_if_unstable(params: ModelParams, controller=None,
@@ -151,12 +144,11 @@ def warn_if_unstable(params: ModelParams, controller=None,
     >>> warn_if_unstable(unstable, warn=print)  # doctest: +ELLIPSIS
     the period-1 fixed point is linearly unstable at these parameters (spectral radius ...
     """
-    from .engine import flip_boundary_g
-    from .engine.linear import is_stable
+    from .model.linear import flip_boundary_g, is_stable
 
     say = warn if warn is not None else python_warning
     if controller is not None:
-        from .engine.control import controlled_jacobian, spectral_radius_3x3
+        from .model.control import controlled_jacobian, spectral_radius_3x3
 
         radius = float(spectral_radius_3x3(controlled_jacobian(params, controller)))
         if not is_stable(radius):
@@ -172,7 +164,7 @@ def warn_if_unstable(params: ModelParams, controller=None,
 
 def warn_if_implausible_racket(model, warn: Callable[[str], None] | None = None) -> None:
     """A warning per racket parameter of a ``model`` block outside what a person can do
-    (``bounce_cli.plausibility``), naming the likely unit slip (a block without a racket, such
+    (``bounce_cli.data.plausibility``), naming the likely unit slip (a block without a racket, such
     as a study's, has nothing to check).
 
     Parameters
@@ -182,7 +174,7 @@ def warn_if_implausible_racket(model, warn: Callable[[str], None] | None = None)
     warn : callable, optional
         Receives each one-line message; None: a Python ``UserWarning``.
     """
-    from .plausibility import racket_warnings
+    from .data.plausibility import racket_warnings
 
     if getattr(model, "racket_amplitude", None) is None or getattr(
             model, "racket_period", None) is None:
@@ -402,7 +394,8 @@ RECORDING_COLUMNS = ("trial", "t_s", "racket_x_m", "ball_x_m")
 def _extract_config(data: dict[str, Any], source: str):
     from .experiments.extract import ExtractConfig
 
-    return validate(ExtractConfig, {k: v for k, v in data.items() if v is not None}, source)
+    return validate(ExtractConfig, {k: v for k, v in data.items() if v is not None}, source,
+                    commands=EXPERIMENTS)
 
 
 def read_recording(path: str | Path, columns: Mapping[str, Any] | None = None,
@@ -450,7 +443,7 @@ def read_recording(path: str | Path, columns: Mapping[str, Any] | None = None,
     import numpy as np
     import pandas as pd
 
-    from .recordings import read_recording as read_trials
+    from .data.recordings import read_recording as read_trials
 
     cfg = _extract_config({"columns": columns, "units": units, "markers": markers, "csv": csv,
                            "format": format}, "read_recording")
@@ -485,7 +478,7 @@ def extract(recording: pd.DataFrame | str | Path, extraction: Mapping[str, Any] 
     Returns
     -------
     pandas.DataFrame
-        The impacts table (``bounce_cli.impacts``' columns: trial, k, t_s, theta_deg, v_m_s,
+        The impacts table (``bounce_cli.data.impacts``' columns: trial, k, t_s, theta_deg, v_m_s,
         racket_acc_g, ...).
 
     Raises
@@ -510,7 +503,7 @@ def extract(recording: pd.DataFrame | str | Path, extraction: Mapping[str, Any] 
     import numpy as np
 
     from .experiments.extract import extract_all, set_gravity
-    from .recordings import Trial
+    from .data.recordings import Trial
 
     cfg = _extract_config({"model": None if g is None else {"g": g}, "extraction": extraction},
                           "extract")

@@ -10,9 +10,9 @@ matplotlib.use("Agg")
 
 from typer.testing import CliRunner  # noqa: E402
 
-from bounce_cli import paper  # noqa: E402
-from bounce_cli.cli import app  # noqa: E402
-from bounce_cli.engine.params import ModelParams  # noqa: E402
+from bounce_cli.paper import values as paper  # noqa: E402
+from bounce_cli.cli.commands import app  # noqa: E402
+from bounce_cli.model.params import ModelParams  # noqa: E402
 
 _runner = CliRunner()
 

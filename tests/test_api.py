@@ -13,9 +13,9 @@ import pytest
 
 import bounce_cli
 from bounce_cli import api
-from bounce_cli.artifacts import OutputDirError
-from bounce_cli.config import ConfigError
-from bounce_cli.engine.params import NoFixedPointError
+from bounce_cli.runtime.artifacts import OutputDirError
+from bounce_cli.runtime.config import ConfigError
+from bounce_cli.model.params import NoFixedPointError
 
 #: a basin small enough to run in a test, off the paper's grid
 SMALL_BASIN = {"grid.theta0_deg.num": 9, "grid.v0_m_s.num": 7}

@@ -9,8 +9,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bounce_cli import artifacts
-from bounce_cli.artifacts import OutputDirError, RunDirectory, atomic_write
+from bounce_cli.runtime import artifacts
+from bounce_cli.runtime.artifacts import OutputDirError, RunDirectory, atomic_write
 
 
 def make_run(out, config, force=False):
@@ -178,7 +178,7 @@ def signal_on_each_new_file(monkeypatch):
     called as Python calls it, in the main thread between two bytecodes."""
     import signal
 
-    from bounce_cli import interrupts
+    from bounce_cli.runtime import interrupts
 
     monkeypatch.setattr(interrupts, "_state", {"deferring": 0, "pending": None, "raised": False})
     real = artifacts.reserve
@@ -200,7 +200,7 @@ def signal_on_each_new_file(monkeypatch):
 @pytest.mark.parametrize("background", [False, True], ids=["here", "in a child"])
 def test_a_signal_as_a_staging_file_appears_leaves_nothing(tmp_path, monkeypatch, background,
                                                           signal_on_each_new_file):
-    from bounce_cli.interrupts import Interrupted
+    from bounce_cli.runtime.interrupts import Interrupted
 
     if background and not sys.platform.startswith("linux"):
         pytest.skip("written in children on Linux")
@@ -485,7 +485,7 @@ def test_the_stale_lock_of_a_killed_run_is_taken_over(tmp_path):
     import subprocess
 
     out = tmp_path / "r"
-    code = ("import sys, time; from bounce_cli.artifacts import RunDirectory; "
+    code = ("import sys, time; from bounce_cli.runtime.artifacts import RunDirectory; "
             "RunDirectory(sys.argv[1], command='demo', resolved_config={}, overrides=[], "
             "config_path=None); print('locked', flush=True); time.sleep(60)")
     child = subprocess.Popen([sys.executable, "-c", code, str(out)], stdout=subprocess.PIPE,

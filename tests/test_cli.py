@@ -188,8 +188,8 @@ def test_orbit_iterates_where_there_is_no_fixed_point(cli, user_error):
     assert notes[0].startswith("note: no period-1 fixed point") and "22.02" in notes[0]
     assert "sticking" in notes[1]
     # the same rows as the engine's map from the same start
-    from bounce_cli.engine.maps import iterate_orbit
-    from bounce_cli.engine.params import ModelParams
+    from bounce_cli.model.maps import iterate_orbit
+    from bounce_cli.model.params import ModelParams
 
     orbit = iterate_orbit(math.radians(43.1), 4.8, ModelParams(0.5, 9.81, 0.01, 0.92), 40, 1e-3)
     assert df.v_m_s.to_numpy() == pytest.approx(orbit.v, rel=1e-12)
@@ -214,8 +214,8 @@ def test_print_config_prints_the_resolved_config_and_runs_nothing(name, tmp_path
     and --set applied), a file that loads back to the same config; nothing is written."""
     import yaml
 
-    from bounce_cli.config import bundled_config_path, load_config
-    from bounce_cli.registry import entry
+    from bounce_cli.runtime.config import bundled_config_path, load_config
+    from bounce_cli.experiments.registry import entry
 
     monkeypatch.chdir(tmp_path)
     schema = entry(name).load().schema

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from bounce_cli.config import (
+from bounce_cli.runtime.config import (
     ConfigError,
     ModelOnlyConfig,
     apply_overrides,
@@ -30,19 +30,19 @@ def test_bundled_configs_are_at_the_papers_parameters(name, paper_set):
     """Each bundled config's model block is the paper's parameter set of its figure, as the
     paper module records it (a config edited away from the paper fails here, not in a
     claim)."""
-    from bounce_cli import paper
+    from bounce_cli.paper import values as paper
 
     cfg = load_config(ModelOnlyConfig, bundled_config_path(name)) if name == "model" else None
     if cfg is None:
-        from bounce_cli.registry import entry
+        from bounce_cli.experiments.registry import entry
 
         cfg = load_config(entry(name).load().schema, bundled_config_path(name))
     assert paper.at_parameters(cfg.params, getattr(paper, paper_set))
 
 
 def test_old_name_of_the_sticking_threshold_is_still_read(tmp_path):
-    from bounce_cli.config import ClassifyBlock
-    from bounce_cli.engine.classify import ClassifySettings
+    from bounce_cli.runtime.config import ClassifyBlock
+    from bounce_cli.analysis.classify import ClassifySettings
 
     old = ClassifyBlock.model_validate({"sticking_interval_s": 0.02})
     assert old.min_hop_s == 0.02 and old.settings().min_hop_s == 0.02

@@ -9,12 +9,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bounce_cli.engine.impulse import impulse_response_full
-from bounce_cli.engine.linear import jacobian
-from bounce_cli.engine.params import ModelParams, phase_difference
-from bounce_cli.engine.regression import eq15_amplitude
-from bounce_cli.engine.stochastic import map_noise_covariance, paper_noise_covariance, var1_theory
-from bounce_cli.engine.data_stats import (
+from bounce_cli.analysis.impulse import impulse_response_full
+from bounce_cli.model.linear import jacobian
+from bounce_cli.model.params import ModelParams, phase_difference
+from bounce_cli.analysis.regression import eq15_amplitude
+from bounce_cli.analysis.stochastic import map_noise_covariance, paper_noise_covariance, var1_theory
+from bounce_cli.analysis.data_stats import (
     align,
     noise_from_sds,
     perturbation_schedule,
@@ -23,8 +23,8 @@ from bounce_cli.engine.data_stats import (
     simulate_impacts,
     trial_correlations,
 )
-from bounce_cli.engine.stochastic import stationary_covariance
-from bounce_cli.impacts import impacts_frame
+from bounce_cli.analysis.stochastic import stationary_covariance
+from bounce_cli.data.impacts import impacts_frame
 
 ACF = ModelParams(alpha=0.42, g=5.8, racket_amplitude=0.065, racket_period=0.55)
 PAPER = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.30, racket_period=0.92)
@@ -69,7 +69,7 @@ def test_noise_from_sds_inverts_eq19():
 def test_noise_strengths_from_the_var_residual_without_measurement_noise():
     """q_theta = sqrt(Sigma_tt) (eq. 18) and q_v = sqrt(Sigma_vv - Sigma_vt^2 / Sigma_tt)
     (eq. 16's own velocity noise, the phase-noise term of cos(theta_{k+1}) removed)."""
-    from bounce_cli.engine.var_fit import fit_var1
+    from bounce_cli.analysis.var_fit import fit_var1
 
     sim = simulate_impacts(ACF, 0.04, 0.05, 10, 1000, seed=12)
     fp = ACF.fixed_point()
@@ -218,7 +218,7 @@ def test_full_map_var_intervals_cover_eq9_over_seeds():
     250 bounces with measurement noise (0.01 m/s, 0.5 deg): the spectral radius of eq. 10
     inside the 95 % interval in at least 85 % of them for both estimators (measured: OLS 0.975,
     lag-2 0.90; the lag-2 estimate runs 0.01 high at this size)."""
-    from bounce_cli.engine.var_fit import fit_var1
+    from bounce_cli.analysis.var_fit import fit_var1
 
     fp = ACF.fixed_point()
     inside = {"ols": 0, "lag2": 0}
@@ -476,7 +476,7 @@ def test_varx_recovers_eq9_under_racket_jitter_in_a_simulated_session(tmp_path, 
     period and amplitude recovers the spectral radius of eq. 9's J within its interval, its
     racket coefficients are those of eqs. 5-6 within 3.5 SE (the period ones, well measured),
     and a warning says the racket matters. Measured: VARX 0.572 [0.540, 0.607]."""
-    from bounce_cli.engine.racket_inputs import INPUT_COEFFICIENTS
+    from bounce_cli.analysis.racket_inputs import INPUT_COEFFICIENTS
 
     out = tmp_path / "o"
     result = cli("acf-data", "--out", out, *LAB_JITTER)
@@ -513,7 +513,7 @@ def test_the_trust_study_runs_at_the_datas_measurement_noise(acf_data, tmp_path,
     config's assumed values and says "assumed"."""
     import shutil
 
-    from bounce_cli.setup_table import SETUP_FILE, SetupQuantity, setup_frame
+    from bounce_cli.data.setup_table import SETUP_FILE, SetupQuantity, setup_frame
 
     path, out = acf_data
     trust = pd.read_csv(out / "trust.csv")

@@ -1,14 +1,14 @@
-"""The impacts table reader (bounce_cli/impacts.py): a lab's own file or ours, checked with
+"""The impacts table reader (bounce_cli/data/impacts.py): a lab's own file or ours, checked with
 one-line errors naming the file and the column, row or trial."""
 
 import numpy as np
 import pandas as pd
 import pytest
 
-from bounce_cli.config import ConfigError
-from bounce_cli.engine.params import ModelParams
-from bounce_cli.engine.data_stats import perturbation_schedule, simulate_impacts
-from bounce_cli.impacts import (
+from bounce_cli.runtime.config import ConfigError
+from bounce_cli.model.params import ModelParams
+from bounce_cli.analysis.data_stats import perturbation_schedule, simulate_impacts
+from bounce_cli.data.impacts import (
     EVENT_COLUMNS,
     REQUIRED_COLUMNS,
     circular_mean,
@@ -107,8 +107,8 @@ def test_circular_mean_across_zero():
                                          ("fast", "got 'fast'")])
 def test_a_bad_cell_is_shown_as_the_file_holds_it(tmp_path, cell, shown):
     """Errors name the cell as written, never numpy's repr (np.float64(nan))."""
-    from bounce_cli.config import ConfigError
-    from bounce_cli.impacts import read_impacts
+    from bounce_cli.runtime.config import ConfigError
+    from bounce_cli.data.impacts import read_impacts
 
     rows = ["trial,k,t_s,theta_rad,v_m_s", "1,0,0.0,0.7,4.5", f"1,1,0.92,0.7,{cell}",
             "1,2,1.84,0.7,4.5"]

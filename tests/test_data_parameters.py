@@ -9,16 +9,16 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bounce_cli.config import bundled_config_path, keys_set_by_user, load_config
-from bounce_cli.data_parameters import alpha_from_data, data_model
-from bounce_cli.engine.control import PeriodController, simulate_perturbation_trials
-from bounce_cli.engine.data_stats import simulate_impacts
-from bounce_cli.engine.linear import stability
-from bounce_cli.engine.params import ModelParams
+from bounce_cli.runtime.config import bundled_config_path, keys_set_by_user, load_config
+from bounce_cli.data.data_parameters import alpha_from_data, data_model
+from bounce_cli.model.control import PeriodController, simulate_perturbation_trials
+from bounce_cli.analysis.data_stats import simulate_impacts
+from bounce_cli.model.linear import stability
+from bounce_cli.model.params import ModelParams
 from bounce_cli.experiments import learning, regression
 from bounce_cli.experiments.base import RunOptions
-from bounce_cli.impacts import impacts_frame, read_impacts
-from bounce_cli.setup_table import SetupQuantity, setup_frame, setup_path
+from bounce_cli.data.impacts import impacts_frame, read_impacts
+from bounce_cli.data.setup_table import SetupQuantity, setup_frame, setup_path
 
 #: a lab's set-up far from every bundled config (acf's 0.42 / 5.8, the others' 0.5 / 9.81,
 #: racket 0.30 m / 0.92 s)

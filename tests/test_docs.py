@@ -9,7 +9,7 @@ from pathlib import Path
 
 import yaml
 
-from bounce_cli.registry import EXPERIMENTS
+from bounce_cli.experiments.registry import EXPERIMENTS
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"

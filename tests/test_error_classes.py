@@ -16,14 +16,16 @@ from typer.testing import CliRunner
 
 import bounce_cli
 from bounce_cli import errors
-from bounce_cli.cli import app
+from bounce_cli.cli.commands import app
 
 PACKAGE = Path(bounce_cli.__file__).parent
 #: exception classes of the package that are deliberately not BounceErrors (errors.py says why)
 NOT_BOUNCE_ERRORS = {
-    "bounce_cli.interrupts.Interrupted",  # a BaseException: ``except Exception`` lets it by
-    "bounce_cli.parallel.WorkerError",  # a worker's traceback: a bug report, not a user error
-    "bounce_cli.config.DuplicateKeyError",  # a yaml.YAMLError, turned into a ConfigError
+    # a BaseException: ``except Exception`` lets it by
+    "bounce_cli.runtime.interrupts.Interrupted",
+    # a worker's traceback: a bug report, not a user error
+    "bounce_cli.runtime.parallel.WorkerError",
+    "bounce_cli.runtime.config.DuplicateKeyError",  # a yaml.YAMLError, turned into a ConfigError
 }
 ERROR_CLASSES = [getattr(errors, name) for name in errors.__all__]
 
@@ -58,14 +60,14 @@ def test_every_exception_class_of_the_package_is_a_bounce_error_or_says_why_not(
 
 
 @pytest.mark.parametrize("module, name", [
-    ("bounce_cli.config", "ConfigError"),
-    ("bounce_cli.engine.params", "ModelError"),
-    ("bounce_cli.engine.params", "NoFixedPointError"),
+    ("bounce_cli.runtime.config", "ConfigError"),
+    ("bounce_cli.model.params", "ModelError"),
+    ("bounce_cli.model.params", "NoFixedPointError"),
     ("bounce_cli.engine", "ModelError"),
     ("bounce_cli.engine", "NoFixedPointError"),
-    ("bounce_cli.artifacts", "OutputDirError"),
-    ("bounce_cli.parallel", "ClusterError"),
-    ("bounce_cli.claims", "MissingResults"),
+    ("bounce_cli.runtime.artifacts", "OutputDirError"),
+    ("bounce_cli.runtime.parallel", "ClusterError"),
+    ("bounce_cli.paper.claims", "MissingResults"),
     ("bounce_cli.api", "ConfigError"),
     ("bounce_cli", "BounceError"),
     ("bounce_cli", "ConfigError"),
@@ -119,7 +121,7 @@ def test_parameters_without_a_fixed_point_are_a_no_fixed_point_error():
 
 
 def test_an_unstable_linearisation_has_no_stationary_covariance():
-    from bounce_cli.engine.stochastic import stationary_covariance
+    from bounce_cli.analysis.stochastic import stationary_covariance
 
     jac = np.array([[0.5, 0.0], [0.0, -1.25]])  # spectral radius 1.25
     with pytest.raises(errors.NotStableError, match="spectral radius 1.25"):
@@ -128,7 +130,7 @@ def test_an_unstable_linearisation_has_no_stationary_covariance():
 
 
 def test_impacts_without_a_perturbed_one_are_a_no_perturbed_impact_error():
-    from bounce_cli.engine.data_stats import align
+    from bounce_cli.analysis.data_stats import align
 
     values = [np.linspace(1.0, 2.0, 12)]
     perturbed = [np.zeros(12, bool)]
@@ -140,7 +142,7 @@ def test_impacts_without_a_perturbed_one_are_a_no_perturbed_impact_error():
 
 def test_a_held_run_directory_lock_is_run_directory_busy(tmp_path):
     pytest.importorskip("fcntl")
-    from bounce_cli.artifacts import RunDirectoryLock
+    from bounce_cli.runtime.artifacts import RunDirectoryLock
 
     holder = RunDirectoryLock(tmp_path)
     holder.acquire("basin")
@@ -160,7 +162,7 @@ def test_the_cli_prints_any_bounce_error_of_an_experiment_as_one_line(monkeypatc
     def check_model(*args, **kwargs):
         raise cls("what to change")
 
-    monkeypatch.setattr("bounce_cli.cli.check_model", check_model)
+    monkeypatch.setattr("bounce_cli.cli.commands.check_model", check_model)
     result = runner.invoke(app, ["basin", "--out", str(tmp_path / "o")])
     assert result.exit_code == 2, result.output
     assert result.stderr.splitlines() == ["bounce: error: what to change"]
@@ -172,7 +174,7 @@ def test_the_cli_prints_a_bounce_error_of_an_engine_command_as_one_line(monkeypa
     def load_model(*args, **kwargs):
         raise cls("what to change")
 
-    monkeypatch.setattr("bounce_cli.cli.load_model", load_model)
+    monkeypatch.setattr("bounce_cli.cli.commands.load_model", load_model)
     result = runner.invoke(app, ["fixed-point"])
     assert result.exit_code == 2, result.output
     assert result.stderr.splitlines() == ["bounce: error: what to change"]
@@ -182,7 +184,7 @@ def test_an_error_that_is_not_a_bounce_error_is_not_dressed_as_a_user_error(monk
     def check_model(*args, **kwargs):
         raise ZeroDivisionError("a bug")
 
-    monkeypatch.setattr("bounce_cli.cli.check_model", check_model)
+    monkeypatch.setattr("bounce_cli.cli.commands.check_model", check_model)
     result = runner.invoke(app, ["basin", "--out", str(tmp_path / "o")])
     assert isinstance(result.exception, ZeroDivisionError)
     assert "bounce: error" not in result.stderr
@@ -190,7 +192,7 @@ def test_an_error_that_is_not_a_bounce_error_is_not_dressed_as_a_user_error(monk
 
 # -- no control flow on an error message's text -----------------------------------------------
 #: branches on a message's text still to be replaced by an exception class (file -> count)
-MESSAGE_BRANCHES_TO_REPLACE = {"engine/control.py": 1}
+MESSAGE_BRANCHES_TO_REPLACE = {"model/control.py": 1}
 
 
 def branches_on_message_text(tree: ast.AST) -> int:

@@ -8,9 +8,9 @@ import pytest
 import yaml
 from typer.testing import CliRunner
 
-from bounce_cli.cli import app
-from bounce_cli.config import load_config, show_value
-from bounce_cli.registry import EXPERIMENTS
+from bounce_cli.cli.commands import app
+from bounce_cli.runtime.config import load_config, show_value
+from bounce_cli.experiments.registry import EXPERIMENTS
 
 runner = CliRunner()
 
@@ -68,7 +68,7 @@ def test_a_yaml_boolean_where_a_number_is_expected_names_the_key(tmp_path, comma
 
 def test_booleans_stay_booleans_and_numbers_numbers(tmp_path):
     from bounce_cli.experiments.basin import BasinConfig
-    from bounce_cli.config import bundled_config_path
+    from bounce_cli.runtime.config import bundled_config_path
 
     cfg = load_config(BasinConfig, bundled_config_path("basin"),
                       ["model.alpha=0", "classify.max_iterations=7"])
@@ -135,7 +135,7 @@ def test_printed_config_loads_back_to_the_same_config(tmp_path, entry):
     path = tmp_path / "printed.yaml"
     path.write_text(result.stdout)
     schema = entry.load().schema
-    from bounce_cli.config import bundled_config_path
+    from bounce_cli.runtime.config import bundled_config_path
 
     assert load_config(schema, path) == load_config(schema, bundled_config_path(entry.config))
 
@@ -187,7 +187,7 @@ def test_an_unknown_key_far_from_every_known_one_gets_no_suggestion():
 
 
 def test_an_unknown_key_in_a_list_item_is_compared_with_the_items_keys(tmp_path):
-    from bounce_cli.config import ConfigError
+    from bounce_cli.runtime.config import ConfigError
     from bounce_cli.experiments.trajectory import EXPERIMENT as trajectory
 
     config = tmp_path / "t.yaml"
@@ -200,8 +200,8 @@ def test_an_unknown_key_in_a_list_item_is_compared_with_the_items_keys(tmp_path)
 @pytest.mark.parametrize("command, other", [("acf", "basin"), ("basin", "acf"),
                                             ("learning-data", "acf-data")])
 def test_another_commands_config_names_the_command_it_belongs_to(command, other):
-    from bounce_cli.config import bundled_config_path
-    from bounce_cli.registry import entry
+    from bounce_cli.runtime.config import bundled_config_path
+    from bounce_cli.experiments.registry import entry
 
     path = bundled_config_path(entry(other).config)
     line = one_error_line(run(command, "--config", path, "--out", "unused"),
@@ -225,7 +225,7 @@ def test_help_shows_no_type_after_a_flag_but_the_type_of_an_option_with_a_value(
 
 @pytest.mark.parametrize("command", [e.name for e in EXPERIMENTS])
 def test_jobs_is_offered_only_where_it_spreads_work(command):
-    from bounce_cli.registry import entry
+    from bounce_cli.experiments.registry import entry
 
     offered = "--jobs" in run(command, "--help").stdout
     assert offered == (command in ("basin", "sweep", "study")) == entry(command).parallel

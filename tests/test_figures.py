@@ -16,10 +16,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bounce_cli import paper
-from bounce_cli.engine.linear import jacobian
-from bounce_cli.engine.params import ModelParams
-from bounce_cli.registry import entry, reproduced
+from bounce_cli.paper import values as paper
+from bounce_cli.model.linear import jacobian
+from bounce_cli.model.params import ModelParams
+from bounce_cli.experiments.registry import entry, reproduced
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 
@@ -240,7 +240,7 @@ def test_run_metadata_goes_into_the_files_not_into_the_titles(tmp_path, cli):
     assert b"/Subject (" + caption.encode() + b")" in pdf and b"/CreationDate" not in pdf
     assert caption.encode() in (out / "regression.svg").read_bytes()
     from bounce_cli.experiments.regression import EXPERIMENT as regression
-    from bounce_cli.config import bundled_config_path, load_config
+    from bounce_cli.runtime.config import bundled_config_path, load_config
     from bounce_cli.experiments.base import RunOptions
 
     config = load_config(regression.schema, bundled_config_path("regression"), ["seed=7"])
@@ -275,7 +275,7 @@ def test_every_experiment_command_offers_the_figure_options(cli):
 
 
 def test_a_figure_redrawn_from_csv_writes_as_pdf(tmp_path):
-    from bounce_cli.plotting import save_figure
+    from bounce_cli.experiments.plotting import save_figure
 
     fig = entry("impulse").load().draw(committed_frames("impulse"))["impulse.png"]
     buffer = io.BytesIO()

@@ -39,7 +39,7 @@ PROCESS_POOL = {**os.environ, "BOUNCE_KERNEL": "numpy"}
 
 
 #: the worker processes' command line names this module
-WORKER_MODULE = "bounce_cli.parallel"
+WORKER_MODULE = "bounce_cli.runtime.parallel"
 
 
 def command_line(pid: int) -> str:

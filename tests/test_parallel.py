@@ -1,4 +1,4 @@
-"""The executor (bounce_cli.parallel): ordered results, whatever the executor; failures and
+"""The executor (bounce_cli.runtime.parallel): ordered results, whatever the executor; failures and
 dead workers are errors, not hangs; no worker outlives its ``with`` block."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from bounce_cli import parallel
+from bounce_cli.runtime import parallel
 
 
 def slow_square(x):
@@ -81,7 +81,7 @@ def test_a_dead_worker_is_an_error_not_a_hang():
 @pytest.mark.parametrize("pool", [parallel.LocalPool, parallel.Threads])
 def test_the_engine_classifies_through_any_executor_identically(paper_params, pool):
     np = pytest.importorskip("numpy")
-    from bounce_cli.engine import classify_grid
+    from bounce_cli.analysis.classify import classify_grid
 
     theta, v = np.meshgrid(np.linspace(0, 2 * np.pi, 30), np.linspace(0, 10, 20))
     reference = classify_grid(theta, v, paper_params)  # the built-in map

@@ -9,7 +9,7 @@ import time
 
 import pytest
 
-from bounce_cli import parallel
+from bounce_cli.runtime import parallel
 
 distributed = pytest.importorskip("distributed")
 

@@ -1,10 +1,11 @@
 """Unit slips do not pass silently: racket amplitudes and periods outside what a person can do
-(``bounce_cli.plausibility``, the one place of the ranges) are warned about, naming the slip."""
+(``bounce_cli.data.plausibility``, the one place of the ranges) are warned about, naming the
+slip."""
 
 import pandas as pd
 import pytest
 
-from bounce_cli.plausibility import (
+from bounce_cli.data.plausibility import (
     HUMAN_RACKET_AMPLITUDE_M,
     HUMAN_RACKET_PERIOD_S,
     racket_warnings,

@@ -12,9 +12,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bounce_cli.config import ConfigError
-from bounce_cli.recordings import read_recording
-from bounce_cli.recordings.c3d_files import _value, c3d_missing_hint, read_c3d_points
+from bounce_cli.runtime.config import ConfigError
+from bounce_cli.data.recordings import read_recording
+from bounce_cli.data.recordings.c3d_files import _value, c3d_missing_hint, read_c3d_points
 from bounce_cli.experiments.extract import ExtractConfig
 
 c3d = pytest.importorskip("c3d")

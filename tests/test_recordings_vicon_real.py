@@ -6,9 +6,9 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from bounce_cli.config import bundled_config_path, load_config
+from bounce_cli.runtime.config import bundled_config_path, load_config
 from bounce_cli.experiments.extract import ExtractConfig
-from bounce_cli.recordings import read_recording
+from bounce_cli.data.recordings import read_recording
 
 EXPORT = Path(__file__).parent / "data" / "vicon" / "pyomeca_markers_excerpt.csv"
 
@@ -42,7 +42,7 @@ def test_a_real_vicon_export_is_read_by_label_in_metres():
 def test_a_label_the_export_lacks_is_named():
     import pytest
 
-    from bounce_cli.config import ConfigError
+    from bounce_cli.runtime.config import ConfigError
 
     with pytest.raises(ConfigError) as info:
         read("markers.racket=paddle", "markers.ball=Daphnee:ASISr")
@@ -53,7 +53,7 @@ def test_the_former_c3d_block_is_still_read_as_markers():
     """Configs written before the markers block (c3d: racket_marker, ball_marker) still load."""
     import pytest
 
-    from bounce_cli.config import ConfigError
+    from bounce_cli.runtime.config import ConfigError
 
     old = load_config(ExtractConfig, bundled_config_path("extract"),
                       ["c3d.racket_marker=paddle", "c3d.ball_marker=b", "c3d.vertical_axis=y"])

@@ -2,7 +2,7 @@
 compared with the baseline committed in ``results/``; every figure is redrawn from the
 committed CSVs alone; ``bounce verify`` passes on the baseline and fails on drifted data.
 
-The tolerance is the one ``bounce reproduce`` uses (``bounce_cli.reproduce.table_drift``;
+The tolerance is the one ``bounce reproduce`` uses (``bounce_cli.paper.reproduce.table_drift``;
 stated there): rtol 1e-6 / atol 1e-9 for floats, categorical columns exact but for the few
 stated exceptions.
 """
@@ -16,11 +16,11 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from bounce_cli.cli import app
-from bounce_cli.config import bundled_config_path, load_config
+from bounce_cli.cli.commands import app
+from bounce_cli.runtime.config import bundled_config_path, load_config
 from bounce_cli.experiments.base import RunOptions
-from bounce_cli.registry import entry, reproduced
-from bounce_cli.reproduce import table_drift
+from bounce_cli.experiments.registry import entry, reproduced
+from bounce_cli.paper.reproduce import table_drift
 
 EXPERIMENT_NAMES = [e.name for e in reproduced()]
 #: re-runs too slow for the default suite (15-120 s each on a loaded 2-core machine): run
@@ -95,8 +95,8 @@ def test_verify_fails_on_drifted_or_missing_results(tmp_path):
 
 
 def test_reproduce_gallery_lists_every_figure_and_flags_missing_ones(tmp_path):
-    from bounce_cli.claims import markdown_table, verify
-    from bounce_cli.reproduce import gallery_markdown
+    from bounce_cli.paper.claims import markdown_table, verify
+    from bounce_cli.paper.reproduce import gallery_markdown
 
     copy = tmp_path / "results"
     shutil.copytree(RESULTS, copy, ignore=shutil.ignore_patterns("*.csv", "basin.png"))
@@ -128,8 +128,8 @@ def test_verify_refuses_results_made_from_another_config(tmp_path):
 
 
 def test_registry_is_the_one_list_the_cli_and_experiments_follow():
-    from bounce_cli.config import ExperimentConfig
-    from bounce_cli.registry import EXPERIMENTS
+    from bounce_cli.runtime.config import ExperimentConfig
+    from bounce_cli.experiments.registry import EXPERIMENTS
 
     commands = {c.name for c in app.registered_commands}
     for e in EXPERIMENTS:
@@ -211,8 +211,8 @@ def test_a_run_keeps_the_files_that_agree_within_the_reproduction_tolerance(tmp_
     is rewritten and the figures redrawn."""
     import matplotlib.pyplot as plt
 
-    from bounce_cli.artifacts import RunDirectory
-    from bounce_cli.reproduce import tables_agree
+    from bounce_cli.runtime.artifacts import RunDirectory
+    from bounce_cli.paper.reproduce import tables_agree
 
     out = tmp_path / "demo"
     reproduce_rule = tables_agree("demo")
@@ -254,7 +254,7 @@ def test_an_adaptive_table_is_compared_by_the_branches_it_traces():
     in a corrector) is the same result; a branch more or of another period is not."""
     import pandas as pd
 
-    from bounce_cli.reproduce import table_drift
+    from bounce_cli.paper.reproduce import table_drift
 
     committed = pd.read_csv(RESULTS / "continuation" / "branches.csv")
     extra = pd.concat([committed, committed.iloc[[3]]], ignore_index=True)

@@ -12,8 +12,8 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from bounce_cli import parallel
-from bounce_cli.cli import PlainProgress, app
+from bounce_cli.runtime import parallel
+from bounce_cli.cli.commands import PlainProgress, app
 from bounce_cli.experiments import basin
 from bounce_cli.experiments.base import RunOptions
 
@@ -177,7 +177,7 @@ def test_small_grids_run_in_process_large_ones_on_the_pool(monkeypatch):
 def test_the_compiled_kernel_classifies_large_grids_in_threads(monkeypatch):
     pytest.importorskip("numba")
     monkeypatch.setenv("BOUNCE_KERNEL", "auto")
-    from bounce_cli.engine import compiled
+    from bounce_cli.model import compiled
 
     calls = []
     original = compiled.classify_arrays

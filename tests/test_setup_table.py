@@ -4,8 +4,8 @@ import math
 
 import pytest
 
-from bounce_cli.config import ConfigError
-from bounce_cli.setup_table import SetupQuantity, read_setup, setup_frame, setup_path
+from bounce_cli.runtime.config import ConfigError
+from bounce_cli.data.setup_table import SetupQuantity, read_setup, setup_frame, setup_path
 
 
 def test_round_trip_beside_the_impacts_table(tmp_path):

@@ -8,9 +8,9 @@ import doctest
 import numpy as np
 import pytest
 
-from bounce_cli.engine import linear
-from bounce_cli.engine.linear import ROUNDING_MARGIN, is_stable, radius_below
-from bounce_cli.engine.params import ModelParams
+from bounce_cli.model import linear
+from bounce_cli.model.linear import ROUNDING_MARGIN, is_stable, radius_below
+from bounce_cli.model.params import ModelParams
 
 PAPER = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.30, racket_period=0.92)
 
@@ -76,7 +76,7 @@ def test_the_cli_warns_at_gain_one_whatever_the_last_bits(rate):
     """Racket period control with K = 1 has an eigenvalue 1 (a neutral direction): its radius
     is 1 +- 1 ulp depending on the rate; the warning must not depend on which."""
     from bounce_cli.api import warn_if_unstable
-    from bounce_cli.engine.control import PeriodController
+    from bounce_cli.model.control import PeriodController
 
     heard: list[str] = []
     warn_if_unstable(PAPER, PeriodController(gain=1.0, rate=float(rate)), warn=heard.append)
@@ -87,7 +87,7 @@ def test_the_cli_warns_at_gain_one_whatever_the_last_bits(rate):
 
 
 def test_no_stationary_covariance_on_the_boundary():
-    from bounce_cli.engine.stochastic import stationary_covariance
+    from bounce_cli.analysis.stochastic import stationary_covariance
     from bounce_cli.errors import NotStableError
 
     with pytest.raises(NotStableError):

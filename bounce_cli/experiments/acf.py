@@ -4,7 +4,7 @@ Theory: the linearised VAR(1) model (eq. 19) with the paper's diagonal noise cov
 with the covariance the map of eqs. 16-18 actually induces. Samples: long runs of eqs. 16-18
 (the paper's crosses) and simulated trials as the experiment recorded them (three of 40 s).
 The inverse problems behind the candidate explanations are solved by the engine
-(``engine.stochastic``); the paper's values come from :mod:`bounce_cli.paper`.
+(``engine.stochastic``); the paper's values come from :mod:`bounce_cli.paper.values`.
 """
 
 from __future__ import annotations
@@ -17,19 +17,19 @@ import numpy as np
 import pandas as pd
 from pydantic import Field
 
-from .. import paper
-from ..config import (
+from ..paper import values as paper
+from ..runtime.config import (
     ConfigError,
     ControllableModelBlock,
     DataFiles,
     ExperimentConfig,
     StrictModel,
 )
-from ..engine.linear import is_stable, jacobian, stability
-from ..engine.control import controlled_jacobian
-from ..engine.params import ModelError, ModelParams, phase_difference
+from ..model.linear import is_stable, jacobian, stability
+from ..model.control import controlled_jacobian
+from ..model.params import ModelError, ModelParams, phase_difference
 from ..errors import NotStableError
-from ..engine.stochastic import (
+from ..analysis.stochastic import (
     PAIR_NAMES,
     map_noise_covariance,
     noise_strengths_for_sds,
@@ -40,7 +40,16 @@ from ..engine.stochastic import (
     stationary_sds,
     var1_theory,
 )
-from ..plotting import caption_figures, data_caption, integer_axis, new_figure, publication_style
+from .plotting import (
+    LAG_LABEL,
+    PANELS,
+    TITLES,
+    caption_figures,
+    data_caption,
+    integer_axis,
+    new_figure,
+    publication_style,
+)
 from .base import Experiment, ExperimentResult, RunOptions
 from .data_side import AcfDataBlock
 
@@ -212,7 +221,7 @@ def controlled_runs(params: ModelParams, controller, q_v: float, q_theta: float,
     same noise, eq. 16 as printed), ``n_runs`` runs of ``n_bounces`` after ``burn_in``,
     started at the fixed point, one stream per run (spawned from ``seeds``). A run whose ball
     stops is lost (rows NaN)."""
-    from ..engine.control import simulate_perturbation_trials
+    from ..model.control import simulate_perturbation_trials
 
     n = burn_in + n_bounces + 1  # impact 0 is the start
     sim = simulate_perturbation_trials(
@@ -348,18 +357,6 @@ def summary_frame(config: AcfConfig, theory, theory_map, dv, dtheta) -> pd.DataF
     add("spectral_radius", "1", "theory", st.spectral_radius, note=f"regime {st.regime}")
     rows.extend(candidate_rows(config))
     return pd.DataFrame(rows)
-
-
-#: panel layout of Fig. 8: (row, column) -> pair
-PANELS = {(0, 0): "v_v", (0, 1): "theta_to_v", (1, 0): "v_to_theta", (1, 1): "theta_theta"}
-TITLES = {
-    "v_v": r"ACF of velocity: corr($v_{k+l}$, $v_k$)",
-    "theta_to_v": r"phase $\to$ velocity: corr($v_{k+l}$, $\theta_k$)",
-    "v_to_theta": r"velocity $\to$ phase: corr($\theta_{k+l}$, $v_k$)",
-    "theta_theta": r"ACF of phase: corr($\theta_{k+l}$, $\theta_k$)",
-}
-#: the x axis of every correlation panel (Fig. 8, with data, with control)
-LAG_LABEL = "lag $l$ (bounces)"
 
 
 @publication_style

@@ -1,38 +1,40 @@
 """The contract of an experiment, and what the CLI hands it.
 
 An experiment module ``bounce_cli/experiments/<name>.py`` provides ``EXPERIMENT``, an
-:class:`Experiment`, and is listed once in :mod:`bounce_cli.registry`. Adding an experiment
-means: one module, one bundled config ``configs/<name>.yaml``, one registry line, its tests,
-and (if it is part of ``bounce reproduce``) its baseline in ``results/<name>/``.
+:class:`Experiment`, and is listed once in :mod:`bounce_cli.experiments.registry`. Adding an
+experiment means: one module, one bundled config ``configs/<name>.yaml``, one registry line,
+its tests, and (if it is part of ``bounce reproduce``) its baseline in ``results/<name>/``.
 
 What an experiment must provide (as scipy's ``OdeSolver`` documents what a solver provides):
 
 ``schema``
-    A subclass of :class:`bounce_cli.config.ExperimentConfig` (pydantic, unknown keys
+    A subclass of :class:`bounce_cli.runtime.config.ExperimentConfig` (pydantic, unknown keys
     forbidden) describing its config; the bundled YAML must validate against it.
 ``run(config, options) -> ExperimentResult``
     Pure with respect to files: it reads nothing but the config (and, for an experiment with a
     ``data`` key, the file the config names), writes nothing, prints nothing. It returns tidy
     DataFrames (file name -> frame, written as CSV) and figures. Numerics belong in
-    ``bounce_cli.engine``; an experiment turns a config into tables and figures. User errors
-    are raised as ``ConfigError`` or ``ModelError`` with one line naming the key or file.
+    ``bounce_cli.model`` and ``bounce_cli.analysis``; an experiment turns a config into tables
+    and figures. User errors are raised as ``ConfigError`` or ``ModelError`` with one line
+    naming the key or file.
 ``draw(frames) -> dict[str, Figure]``
     Every figure of the run, drawn from the DataFrames ``run`` returned (or read back from the
     CSVs): a figure can always be redrawn from its data. ``draw`` is decorated with
-    :func:`bounce_cli.plotting.publication_style` (the one style of every figure). ``run``
-    builds its figures by calling ``draw`` on its own frames, then records the parameters it
-    ran at as their caption (:func:`bounce_cli.plotting.caption_figures`), which goes into
-    each figure file's metadata (not its title), so that two runs' figures can be told apart.
+    :func:`bounce_cli.experiments.plotting.publication_style` (the one style of every figure).
+    ``run`` builds its figures by calling ``draw`` on its own frames, then records the
+    parameters it ran at as their caption (:func:`bounce_cli.experiments.plotting.caption_figures`),
+    which goes into each figure file's metadata (not its title), so that two runs' figures can
+    be told apart.
 
-The paper's values come from :mod:`bounce_cli.paper` (never literals in an experiment), and a
+The paper's values come from :mod:`bounce_cli.paper.values` (never literals in an experiment), and a
 summary line or CSV column states one only where the run is at the paper's parameters
-(:func:`bounce_cli.paper.at_parameters`); numerics (solvers, scans, inverse problems) live in
-:mod:`bounce_cli.engine` with their own tests.
+(:func:`bounce_cli.paper.values.at_parameters`); numerics (solvers, scans, inverse problems) live in
+:mod:`bounce_cli.model` and :mod:`bounce_cli.analysis` with their own tests.
 
 What it gets: the validated config, and :class:`RunOptions` (worker count or Dask scheduler,
 a progress sink, a warning sink, a checkpoint store), which never change the numbers it
 produces. Parallel work goes through
-:mod:`bounce_cli.parallel` (a list of independent tasks handed to an executor's ``map``).
+:mod:`bounce_cli.runtime.parallel` (a list of independent tasks handed to an executor's ``map``).
 """
 
 from __future__ import annotations
@@ -40,7 +42,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Callable, Protocol
 
-from ..config import ExperimentConfig
+from ..runtime.config import ExperimentConfig
 
 if TYPE_CHECKING:  # annotations only: ``bounce --help`` does not import pandas
     import pandas as pd
@@ -99,7 +101,7 @@ class RunOptions:
     ``checkpoints``: where an experiment that supports resuming keeps finished tasks.
     ``model_set_by_user``: the model keys (``alpha``, ``g``) the user set on the command
     line or in their own config; a ``--data`` analysis takes the others from the data
-    (``bounce_cli.data_parameters``; None, library use: every config value counts as set).
+    (``bounce_cli.data.data_parameters``; None, library use: every config value counts as set).
     ``record``: what the run adds to ``run.json`` beside the config (the CLI writes it), e.g.
     ``model_at_data``, the values a ``--data`` analysis used and where they came from."""
 
@@ -131,8 +133,9 @@ class Experiment:
     """An experiment module's entry point: see the module docstring for the contract.
 
     ``name`` is its command and bundled config (``configs/<name>.yaml``); its one-line summary,
-    figure captions and capabilities (``--data``) are in :mod:`bounce_cli.registry`, so that
-    ``bounce --help`` need not import the experiments."""
+    figure captions and capabilities (``--data``) are in
+    :mod:`bounce_cli.experiments.registry`, so that ``bounce --help`` need not import the
+    experiments."""
 
     name: str
     schema: type[ExperimentConfig]

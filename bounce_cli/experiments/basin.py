@@ -17,15 +17,16 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 from pydantic import Field, model_validator
 
-from .. import paper, parallel
-from ..config import (
+from ..paper import values as paper
+from ..runtime import parallel
+from ..runtime.config import (
     ClassifyBlock,
     ConfigError,
     ControllableModelBlock,
     ExperimentConfig,
     StrictModel,
 )
-from ..engine.classify import (
+from ..analysis.classify import (
     EXACT_OUTCOMES,
     OUTCOMES,
     ClassifySettings,
@@ -35,9 +36,9 @@ from ..engine.classify import (
     load_compiled_kernel,
     outcome_names,
 )
-from ..engine.control import is_passive
-from ..engine.params import ModelParams
-from ..plotting import publication_style
+from ..model.control import is_passive
+from ..model.params import ModelParams
+from .plotting import publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
 if TYPE_CHECKING:
@@ -152,7 +153,8 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
             f"basin.csv will be about {format_bytes(csv_bytes)} ({n_points:,} rows); "
             f"--set output.format=npz writes basin.npz instead (about "
             f"{format_bytes(n_points * NPZ_BYTES_PER_ROW)}, read back with "
-            "bounce_cli.artifacts.read_frame), or reduce grid.theta0_deg.num / grid.v0_m_s.num"
+            "bounce_cli.runtime.artifacts.read_frame), or reduce grid.theta0_deg.num / "
+            "grid.v0_m_s.num"
         )
     settings = config.classify.settings()
     outcomes = outcome_names(settings)
@@ -182,14 +184,14 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
             # or worker processes, or in numpy's loops, which release the GIL)
             result = parallel.meanwhile(classify, import_output_libraries)
     else:  # racket period control (engine.control): in this process
-        from ..engine.control import classify_controlled_grid
+        from ..model.control import classify_controlled_grid
 
         result = classify_controlled_grid(theta_grid_rad.ravel(), v_grid.ravel(), params,
                                           controller, settings,
                                           on_tile_done=options.progress.advance)
     import pandas as pd
 
-    from ..plotting import caption_figures
+    from .plotting import caption_figures
 
     basin = pd.DataFrame(
         {
@@ -241,7 +243,7 @@ def import_output_libraries() -> None:
     import matplotlib.backends.backend_agg  # noqa: F401
     import pandas  # noqa: F401
 
-    import bounce_cli.plotting  # noqa: F401
+    import bounce_cli.experiments.plotting  # noqa: F401
 
 
 def format_bytes(n: float) -> str:
@@ -277,7 +279,7 @@ def marker_frame(params: ModelParams, settings: ClassifySettings, *,
     if controller is None:  # three points: numpy (no need to load the compiled kernel)
         res = classify_batch(theta, v, params, settings, kernel="numpy")
     else:
-        from ..engine.control import classify_controlled
+        from ..model.control import classify_controlled
 
         res = classify_controlled(theta, v, params, controller, settings)
     return pd.DataFrame(
@@ -379,7 +381,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     from matplotlib.colors import BoundaryNorm, ListedColormap
     from matplotlib.patches import Patch
 
-    from ..plotting import integer_axis, new_figure
+    from .plotting import integer_axis, new_figure
 
     basin, markers = basin_table(frames), frames["markers.csv"]
     codes = pd.Categorical(basin["outcome"], categories=list(EXACT_OUTCOMES)).codes

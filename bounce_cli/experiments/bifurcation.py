@@ -21,9 +21,9 @@ import numpy as np
 import pandas as pd
 from pydantic import Field, model_validator
 
-from ..config import ConfigError, ExperimentConfig, StrictModel
-from ..engine import ModelError, ModelParams
-from ..engine.bifurcation import (
+from ..runtime.config import ConfigError, ExperimentConfig, StrictModel
+from ..model.params import ModelError, ModelParams
+from ..analysis.bifurcation import (
     SWEEPABLE,
     FlipBracket,
     FlipLocation,
@@ -37,8 +37,8 @@ from ..engine.bifurcation import (
     period1_thresholds,
     sweep_parameters,
 )
-from ..engine.continuation import continued_period1_thresholds
-from ..plotting import caption_figures, publication_style
+from ..analysis.continuation import continued_period1_thresholds
+from .plotting import caption_figures, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
 Parameter = Literal["gamma", "racket_amplitude", "racket_period", "alpha"]
@@ -362,7 +362,7 @@ def _runs(mask: np.ndarray):
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     """bifurcation.png: v after impact against the swept parameter with the closed-form
     thresholds, and the Lyapunov exponents below; from the CSVs alone."""
-    from ..plotting import new_figure
+    from .plotting import new_figure
 
     bif, attractors = frames["bifurcation.csv"], frames["attractors.csv"]
     per_value, thresholds = frames["values.csv"], frames["thresholds.csv"]

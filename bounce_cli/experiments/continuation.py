@@ -22,9 +22,9 @@ import numpy as np
 import pandas as pd
 from pydantic import Field, model_validator
 
-from ..config import ConfigError, ExperimentConfig, StrictModel
-from ..engine import ModelError
-from ..engine.bifurcation import (
+from ..runtime.config import ConfigError, ExperimentConfig, StrictModel
+from ..model.params import ModelError
+from ..analysis.bifurcation import (
     SWEEPABLE,
     SweepSettings,
     iterate_sweep,
@@ -32,14 +32,14 @@ from ..engine.bifurcation import (
     period1_thresholds,
     sweep_parameters,
 )
-from ..engine.continuation import (
+from ..analysis.continuation import (
     Continuation,
     ContinuationSettings,
     eq8_orbit,
     feigenbaum_ratios,
     orbit_by_iteration,
 )
-from ..plotting import caption_figures, publication_style
+from .plotting import caption_figures, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
 Parameter = Literal["gamma", "racket_amplitude", "racket_period", "alpha"]
@@ -313,7 +313,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     """continuation.png: the branches' impact velocities over the brute-force diagram (stable
     solid, unstable dashed, non-physical parts omitted), the located bifurcations marked;
     below, the multiplier of largest modulus along each branch. From the CSVs alone."""
-    from ..plotting import new_figure
+    from .plotting import new_figure
 
     orbits, bifs = frames["orbits.csv"], frames["bifurcations.csv"]
     branches, diagram = frames["branches.csv"], frames["diagram.csv"]

@@ -19,9 +19,9 @@ import numpy as np
 import pandas as pd
 from pydantic import Field
 
-from ..data_parameters import model_for_data
-from ..impacts import Impacts, read_impacts as shared_read_impacts
-from ..config import (
+from ..data.data_parameters import model_for_data
+from ..data.impacts import Impacts, read_impacts as shared_read_impacts
+from ..runtime.config import (
     DataFiles,
     data_text,
     ClassifyBlock,
@@ -31,17 +31,18 @@ from ..config import (
     ExperimentConfig,
     StrictModel,
 )
-from ..engine.classify import OUTCOMES
-from ..engine.impulse import find_threshold, perturbed_velocity, relaxation_impacts
-from ..engine.linear import jacobian, radius_below
-from ..engine.params import ModelError, ModelParams, phase_difference
-from ..engine.stochastic import (
+from ..analysis.classify import OUTCOMES
+from ..analysis.impulse import find_threshold
+from ..model.perturbation import perturbed_velocity, relaxation_impacts
+from ..model.linear import jacobian, radius_below
+from ..model.params import ModelError, ModelParams, phase_difference
+from ..analysis.stochastic import (
     PAIR_NAMES,
     map_noise_covariance,
     sample_correlations,
     var1_theory,
 )
-from ..engine.control import (
+from ..model.control import (
     PASSIVE,
     FastestController,
     PeriodController,
@@ -58,16 +59,18 @@ from ..engine.control import (
     predicted_deviations,
     simulate_perturbation_trials,
 )
-from .. import paper
-from ..plotting import (
+from ..paper import values as paper
+from .plotting import (
     IMPACT_AFTER_LABEL,
+    LAG_LABEL,
+    PANELS,
     PHASE_LABEL,
+    TITLES,
     VELOCITY_LABEL,
     integer_axis,
     perturbation_title,
     publication_style,
 )
-from .acf import LAG_LABEL, PANELS, TITLES
 from .base import Experiment, ExperimentResult, RunOptions
 from .basin import OUTCOME_COLOURS, OUTCOME_LABELS, GridAxis
 from .impulse import RelaxationBlock, ThresholdBlock
@@ -222,7 +225,7 @@ def _region(name: str, below: float, grid: str, K, c, radius) -> dict:
     times cell area), extent, and whether it touches the grid's edge (then it is cut).
 
     A point whose radius equals ``below`` to within rounding is on the boundary, not inside
-    (``engine.linear.radius_below``: at K = 1 and at c = 0 an eigenvalue is on the unit
+    (``model.linear.radius_below``: at K = 1 and at c = 0 an eigenvalue is on the unit
     circle exactly)."""
     inside = radius_below(radius, below)
     cell = (K[0, 1] - K[0, 0]) * (c[1, 0] - c[0, 0])
@@ -388,7 +391,7 @@ DATA_COLUMNS = ("trial", "k", "theta_rad", "v_m_s", "racket_period_s", "perturbe
 
 
 def read_impacts(path_text: str | list[str]) -> Impacts:
-    """An impacts table (``bounce_cli.impacts``, the data side's reader) with the columns the
+    """An impacts table (``bounce_cli.data.impacts``, the data side's reader) with the columns the
     fit and the model at the data's racket need: trial, k, theta_rad (or theta_deg), v_m_s,
     racket_period_s, racket_amplitude_m, perturbed (and alpha if present). Problems are
     one-line ConfigErrors naming ``data``."""
@@ -539,7 +542,7 @@ def run(config: ControlConfig, options: RunOptions) -> ExperimentResult:
     frames["acf.csv"] = correlations_frame(params, config)
     frames.update(fit_frames(config, fit_data))
     options.progress.advance(1)
-    from ..plotting import caption_figures
+    from .plotting import caption_figures
 
     figures = draw(frames)
     caption_figures(figures, params, f"controller K = {config.model.control.gain:g}, "
@@ -657,7 +660,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
 
 
 def draw_acf(frames):
-    from ..plotting import new_figure
+    from .plotting import new_figure
 
     df = frames["acf.csv"]
     fig, axes = new_figure(2, 2, width=11.0, height=7.5, sharex=True)
@@ -718,7 +721,7 @@ def _controller_markers(ax, eigen: pd.DataFrame, window=None):
 
 
 def draw_stability(frames):
-    from ..plotting import new_figure
+    from .plotting import new_figure
 
     grid, zoom = frames["radius_map.csv"], frames["radius_zoom.csv"]
     line = frames["radius_gain.csv"]
@@ -770,7 +773,7 @@ def draw_stability(frames):
 
 
 def draw_impulse(frames):
-    from ..plotting import new_figure
+    from .plotting import new_figure
 
     df = frames["impulse.csv"]
     outcome = frames["relaxation.csv"].set_index(["model", "alpha_p"]).outcome
@@ -814,7 +817,7 @@ def draw_basin(frames):
     from matplotlib.colors import BoundaryNorm, ListedColormap
     from matplotlib.patches import Patch
 
-    from ..plotting import new_figure
+    from .plotting import new_figure
 
     basin, frac = frames["basin.csv"], frames["basin_fractions.csv"]
     fig, axes = new_figure(1, 2, width=12.0, height=5.6, sharey=True)
@@ -842,7 +845,7 @@ def draw_basin(frames):
 
 
 def draw_fit(frames):
-    from ..plotting import new_figure
+    from .plotting import new_figure
 
     curves, fit = frames["fit_responses.csv"], frames["fit.csv"].set_index("quantity")
     fig, axes = new_figure(1, 3, width=13.0, height=4.2, sharex=True)

@@ -5,7 +5,7 @@ below from the frames these functions return.
 
 The model at the data's parameters: racket period and amplitude from the data's cycles
 (means over all impacts of the file), alpha and g the data's unless the user set them
-(``bounce_cli.data_parameters``).
+(``bounce_cli.data.data_parameters``).
 """
 
 from __future__ import annotations
@@ -19,24 +19,32 @@ import numpy as np
 import pandas as pd
 from pydantic import Field
 
-from ..config import ConfigError, StrictModel
-from ..engine.impulse import impulse_response_full
-from ..engine.linear import jacobian, stability
-from ..engine.params import ModelError, ModelParams, phase_difference
-from ..engine.stochastic import PAIR_NAMES, paper_noise_covariance, var1_theory
-from ..engine.data_stats import (
+from ..runtime.config import ConfigError, StrictModel
+from ..analysis.impulse import impulse_response_full
+from ..model.linear import jacobian, stability
+from ..model.params import ModelError, ModelParams, phase_difference
+from ..analysis.stochastic import PAIR_NAMES, paper_noise_covariance, var1_theory
+from ..analysis.data_stats import (
     align,
     noise_from_sds,
     relaxation_impact,
     settled_mask,
     trial_correlations,
 )
-from ..engine.racket_inputs import INPUT_COEFFICIENTS, racket_input_jacobian
-from ..engine.var_fit import EIGEN_QUANTITIES, J_ENTRIES, Var1Fit, fit_var1
-from ..data_parameters import DataModel, model_for_data
-from ..impacts import Impacts, ImpactsSource, circular_mean, read_impacts
-from ..plotting import IMPACT_AFTER_LABEL, integer_axis, new_figure, perturbation_title
-from ..setup_table import SETUP_FILE, read_setup
+from ..analysis.racket_inputs import INPUT_COEFFICIENTS, racket_input_jacobian
+from ..analysis.var_fit import EIGEN_QUANTITIES, J_ENTRIES, Var1Fit, fit_var1
+from ..data.data_parameters import DataModel, model_for_data
+from ..data.impacts import Impacts, ImpactsSource, circular_mean, read_impacts
+from .plotting import (
+    IMPACT_AFTER_LABEL,
+    LAG_LABEL,
+    PANELS,
+    TITLES,
+    integer_axis,
+    new_figure,
+    perturbation_title,
+)
+from ..data.setup_table import SETUP_FILE, read_setup
 
 MODEL_COLUMNS = ("racket_period_s", "racket_amplitude_m")
 
@@ -430,7 +438,7 @@ def var_diagnostics(fits: dict, trials: list[np.ndarray], max_lag: int
     """var_diagnostics.csv and its summary lines: the Ljung-Box test of the OLS fits'
     residuals (VAR and VARX; per run, pooled) at min(max_lag, shortest run / 4) lags, and the
     lag orders 1..min(5, shortest run / 4) by AIC and BIC beside the paper's VAR(1)."""
-    from ..engine.var_fit import lag_order_criteria, ljung_box
+    from ..analysis.var_fit import lag_order_criteria, ljung_box
 
     shortest = min(len(t) for t in trials)
     lags = max(1, min(max_lag, shortest // 4))
@@ -514,7 +522,7 @@ def trust_frame(params, q_v, q_theta, config, segments, options,
     from setup.csv, or the config's assumed),
     split into trials of the data's mean run length; per total size and estimator the bias,
     SD and interval coverage of the spectral radius over repetitions."""
-    from ..engine.var_fit import fit_var1
+    from ..analysis.var_fit import fit_var1
 
     d = config.data_analysis
     jac = jacobian(params)
@@ -566,7 +574,6 @@ def trust_frame(params, q_v, q_theta, config, segments, options,
 
 
 def acf_data_draw(frames: dict[str, pd.DataFrame]) -> dict:
-    from .acf import LAG_LABEL, PANELS, TITLES  # Fig. 8's layout, shared with the model's side
 
     acf = frames["acf_data.csv"]
     fig, axes = new_figure(2, 2, width=10, height=7.5, sharex=True)

@@ -1,10 +1,10 @@
 """``bounce extract``: a recording of racket and ball -> the impacts table (paper Fig. 2).
 
-Reads a lab's recording (CSV or C3D, ``bounce_cli.recordings``), optionally its event log
+Reads a lab's recording (CSV or C3D, ``bounce_cli.data.recordings``), optionally its event log
 (``--events``: the impact times and alpha of a virtual set-up), and extracts per bounce the
 map's variables (``engine.extraction``): phase of impact theta_k, ball velocity after impact v_k
 (eq. 5's state), racket acceleration at impact AC (section 4) and the rest of
-``bounce_cli.impacts``. Writes ``impacts.csv``, ``excluded.csv`` (contacts not reported, with
+``bounce_cli.data.impacts``. Writes ``impacts.csv``, ``excluded.csv`` (contacts not reported, with
 the reason), ``cycles.csv`` (the racket cycles), ``fig2.png`` with the samples it shows
 (``fig2_samples.csv``) and, given the truth (``truth:``), ``accuracy.csv``.
 
@@ -25,9 +25,9 @@ import numpy as np
 import pandas as pd
 from pydantic import Field, field_validator, model_validator
 
-from ..config import ConfigError, ExperimentConfig, StrictModel
-from ..engine import ModelError
-from ..engine.extraction import (
+from ..runtime.config import ConfigError, ExperimentConfig, StrictModel
+from ..model.params import ModelError
+from ..data.extraction import (
     PLAUSIBLE_G_M_S2,
     ExtractionSettings,
     contact_duration,
@@ -35,9 +35,9 @@ from ..engine.extraction import (
     match_impacts,
     pooled_gravity,
 )
-from ..impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
-from ..setup_table import SetupQuantity, setup_frame
-from ..recordings import (
+from ..data.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
+from ..data.setup_table import SetupQuantity, setup_frame
+from ..data.recordings import (
     LENGTH_UNITS,
     TIME_UNITS,
     Trial,
@@ -45,7 +45,7 @@ from ..recordings import (
     read_recording,
     read_table,
 )
-from ..plotting import caption_figures, publication_style
+from .plotting import caption_figures, centred_deg, draw_fig2, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
 
@@ -215,16 +215,10 @@ class ExtractConfig(ExperimentConfig):
                 "markers": {**markers, **renamed}}
 
 
-def centred_deg(theta_deg):
-    """Phases in degrees mapped to [-180, 180): means and plots of phases near 0 stay
-    meaningful (the table keeps [0, 360))."""
-    return (np.asarray(theta_deg, dtype=float) + 180.0) % 360.0 - 180.0
-
-
 # -- inputs -------------------------------------------------------------------------------------
 def demo_session():
     """(trials, truth frame) of the bundled simulated session, simulated in memory."""
-    from ..config import bundled_config_path, load_config
+    from ..runtime.config import bundled_config_path, load_config
     from .simulate_recording import RecordingConfig, session_frames
 
     cfg = load_config(RecordingConfig, bundled_config_path("recording"))
@@ -372,7 +366,7 @@ def _mean_se(x) -> tuple[float, float, int]:
 
 def setup_quantities(impacts: pd.DataFrame, results, gravity, used: ExtractionSettings,
                      measured_g: bool, measured_offset: bool) -> list[SetupQuantity]:
-    """The set-up measured from the extraction (``bounce_cli.setup_table``'s quantities; a
+    """The set-up measured from the extraction (``bounce_cli.data.setup_table``'s quantities; a
     quantity the data cannot show is left out).
 
     Parameters
@@ -600,55 +594,6 @@ def setup_summary(setup: list[SetupQuantity]) -> str:
             sds.append(f"theta {math.degrees(q['measurement_sd_theta_rad'].estimate):.3f} deg")
         parts.append("measurement SD " + ", ".join(sds))
     return "set-up measured (setup.csv): " + ("; ".join(parts) if parts else "nothing")
-
-
-# -- Fig. 2 -------------------------------------------------------------------------------------
-def draw_fig2(samples: pd.DataFrame, impacts: pd.DataFrame, title: str, bounces: int = 10):
-    """Fig. 2: continuous trajectories on top; v_k and theta_k of the same bounces below, each
-    with its sample mean dashed. Shows the first trial of ``samples``, its impacts within the
-    samples' time span (at most ``bounces``); perturbed impacts (if marked) in red."""
-    from ..plotting import new_figure
-
-    label = samples["trial"].iloc[0]
-    s = samples[samples["trial"].astype(str) == str(label)]
-    t0, t1 = float(s["t_s"].min()), float(s["t_s"].max())
-    imp = impacts[(impacts["trial"].astype(str) == str(label)) & (impacts["t_s"] >= t0)
-                  & (impacts["t_s"] <= t1)].head(bounces)
-    fig, axes = new_figure(3, 1, width=7.5, height=7.0, sharex=True,
-                           gridspec_kw={"height_ratios": [2.2, 1, 1]})
-    ax_x, ax_v, ax_th = axes[0, 0], axes[1, 0], axes[2, 0]
-    if imp.empty:
-        t_hi = t1
-    else:
-        last = imp.iloc[-1]
-        t_hi = min(t1, float(last["t_s"]) + (float(last["hop_s"])
-                                              if math.isfinite(last["hop_s"]) else 0.0))
-    s = s[s["t_s"] <= t_hi]
-    ax_x.plot(s["t_s"], s["ball_x_m"], color="C0", lw=1.0, label="ball $x_b$")
-    ax_x.plot(s["t_s"], s["racket_x_m"], color="k", lw=0.9, label="racket $x_r$")
-    ax_x.set_ylabel("position (m)")
-    ax_x.legend(loc="upper right", fontsize=7, ncol=2)
-    perturbed = (imp["perturbed"].astype(str).str.lower() == "true").to_numpy() \
-        if "perturbed" in imp.columns else np.zeros(len(imp), dtype=bool)
-    for ax, column, label_, color in ((ax_v, "v_m_s", "$v_k$ (m/s)", "C0"),
-                                      (ax_th, "theta_deg", "$\\theta_k$ (deg)", "C2")):
-        t, y = imp["t_s"].to_numpy(float), imp[column].to_numpy(float)
-        if column == "theta_deg":
-            y = centred_deg(y)
-        ax.plot(t, y, "o-", ms=4, lw=0.8, color=color)
-        if perturbed.any():
-            ax.plot(t[perturbed], y[perturbed], "o", ms=6, color="C3",
-                    label=r"perturbed impact ($\alpha$ changed)")
-            ax.legend(loc="best", fontsize=7)
-        if len(y):
-            ax.axhline(float(np.mean(y)), ls="--", color="0.4", lw=0.8)
-        ax.set_ylabel(label_)
-        for ti in t:
-            ax_x.axvline(ti, color="0.85", lw=0.6, zorder=0)
-    ax_th.set_xlabel("time $t$ (s)")
-    fig.suptitle(f"Fig. 2: {title}\ntrial {label}; dashed: sample means of the bounces shown",
-                 fontsize=10)
-    return fig
 
 
 @publication_style

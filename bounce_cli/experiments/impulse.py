@@ -13,26 +13,25 @@ import numpy as np
 import pandas as pd
 from pydantic import Field
 
-from .. import paper
-from ..config import (
+from ..paper import values as paper
+from ..runtime.config import (
     ClassifyBlock,
     ControllableModelBlock,
     DataFiles,
     ExperimentConfig,
     StrictModel,
 )
-from ..engine.impulse import (
+from ..analysis.impulse import (
     find_threshold,
     impulse_response_full,
     impulse_response_linear,
     perturbed_outcome,
-    perturbed_velocity,
-    relaxation_impacts,
 )
-from ..engine.control import is_passive
-from ..engine.linear import is_stable, stability
-from ..engine.params import ModelParams
-from ..plotting import (
+from ..model.control import is_passive
+from ..model.linear import is_stable, stability
+from ..model.params import ModelParams
+from ..model.perturbation import perturbed_velocity, relaxation_impacts
+from .plotting import (
     IMPACT_AFTER_LABEL,
     PHASE_LABEL,
     VELOCITY_LABEL,
@@ -112,7 +111,7 @@ def linear_outcome(params: ModelParams, controller=None) -> str:
     """The linear map y_{k+1} = J y_k returns to the fixed point iff J is stable (with a
     controller: the 3 x 3 Jacobian of ``engine.control``)."""
     if controller is not None:
-        from ..engine.control import controlled_jacobian, spectral_radius_3x3
+        from ..model.control import controlled_jacobian, spectral_radius_3x3
 
         radius = float(spectral_radius_3x3(controlled_jacobian(params, controller)))
         return "period1" if is_stable(radius) else "diverges"
@@ -122,7 +121,7 @@ def linear_outcome(params: ModelParams, controller=None) -> str:
 # -- tables ---------------------------------------------------------------------------------
 def responses(params: ModelParams, alpha_p: float, n: int, controller=None):
     if controller is not None:  # racket period control (model.control)
-        from ..engine.control import (
+        from ..model.control import (
             controlled_impulse_response,
             controlled_impulse_response_linear,
         )
@@ -236,7 +235,7 @@ def _stationary(df: pd.DataFrame) -> tuple[float, float]:
 
 
 def _layout(df: pd.DataFrame, title: str):
-    from ..plotting import new_figure
+    from .plotting import new_figure
 
     fig, axes = new_figure(2, 2, width=11.0, height=7.0, sharex=True)
     v_st, th_st = _stationary(df)

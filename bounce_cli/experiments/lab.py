@@ -25,8 +25,8 @@ import numpy as np
 import pandas as pd
 from pydantic import Field, ValidationError, model_validator
 
-from ..config import ConfigError, StrictModel, format_validation_error
-from ..recordings import Events
+from ..runtime.config import ConfigError, StrictModel, format_validation_error
+from ..data.recordings import Events
 from .base import Experiment, ExperimentResult, RunOptions
 from .extract import ExtractionBlock, extract_all, trials_from_frame
 from .simulate_recording import PerturbationBlock, RacketBlock, RecordingConfig, session_frames

@@ -23,15 +23,26 @@ import numpy as np
 import pandas as pd
 from pydantic import Field
 
-from ..config import DataFiles, ConfigError, ExperimentConfig, ModelBlock, StrictModel, data_text
-from ..engine.data_stats import apex_sd_eq19, settled_mask
-from ..engine.linear import jacobian, racket_amplitude_for_ac, stability, stable_ac_range_g
-from ..engine.params import ModelError, ModelParams, phase_difference
-from ..engine.regression import ols_line
-from ..engine.stochastic import map_noise_covariance, paper_noise_covariance, stationary_covariance
-from ..data_parameters import DataModel, model_for_data
-from ..impacts import circular_mean, read_impacts
-from ..plotting import caption_figures, data_caption, integer_axis, new_figure, publication_style
+from ..runtime.config import (
+    ConfigError,
+    DataFiles,
+    ExperimentConfig,
+    ModelBlock,
+    StrictModel,
+    data_text,
+)
+from ..analysis.data_stats import apex_sd_eq19, settled_mask
+from ..model.linear import jacobian, racket_amplitude_for_ac, stability, stable_ac_range_g
+from ..model.params import ModelError, ModelParams, phase_difference
+from ..analysis.regression import ols_line
+from ..analysis.stochastic import (
+    map_noise_covariance,
+    paper_noise_covariance,
+    stationary_covariance,
+)
+from ..data.data_parameters import DataModel, model_for_data
+from ..data.impacts import circular_mean, read_impacts
+from .plotting import caption_figures, data_caption, integer_axis, new_figure, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
 TREND_QUANTITIES = {

@@ -18,8 +18,8 @@ import numpy as np
 import pandas as pd
 from pydantic import Field
 
-from .. import paper
-from ..config import (
+from ..paper import values as paper
+from ..runtime.config import (
     ConfigError,
     DataFiles,
     ExperimentConfig,
@@ -28,9 +28,9 @@ from ..config import (
     data_text,
     show_value,
 )
-from ..engine.linear import stability
-from ..engine.params import ModelError, ModelParams, NoFixedPointError
-from ..engine.regression import (
+from ..model.linear import stability
+from ..model.params import ModelError, ModelParams, NoFixedPointError
+from ..analysis.regression import (
     eq15_amplitude,
     eq15_slope,
     ols_line,
@@ -38,10 +38,10 @@ from ..engine.regression import (
     phase_from_slope,
     simulate_trial,
 )
-from ..plotting import caption_figures, new_figure, publication_style
+from .plotting import caption_figures, new_figure, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
-from ..impacts import read_data_csv
-from ..plausibility import racket_warnings
+from ..data.impacts import read_data_csv
+from ..data.plausibility import racket_warnings
 from .data_side import is_impacts_table, trial_means_from_impacts
 
 REQUIRED = ("a_r_m", "tau_s")

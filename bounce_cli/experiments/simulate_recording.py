@@ -5,7 +5,7 @@ law eq. 3 with eq. 16's velocity noise q_v after each impact, per-cycle racket p
 amplitude, perturbations of alpha as in section 7) and samples both positions like a motion
 capture system. Writes ``recording.csv`` (what a lab measures), ``events.csv`` (every impact's
 time and alpha, as a virtual set-up logs them), ``truth.csv`` (the exact impacts in the columns
-of ``bounce_cli.impacts``, with ``v_in_m_s, alpha_measured, contact_s``) and ``recording.png``
+of ``bounce_cli.data.impacts``, with ``v_in_m_s, alpha_measured, contact_s``) and ``recording.png``
 (Fig. 2's layout drawn from the truth).
 
 A physical set-up (``contact:``, ``racket.harmonic2_m``, ``racket.disturbance_*``, the marker
@@ -20,12 +20,11 @@ import numpy as np
 import pandas as pd
 from pydantic import Field, model_validator
 
-from ..config import ControllableModelBlock, ExperimentConfig, StrictModel
-from ..engine.recording import SessionSettings, simulate_session, truth_rows
-from ..impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
-from ..plotting import caption_figures, publication_style
+from ..runtime.config import ControllableModelBlock, ExperimentConfig, StrictModel
+from ..data.simulated_lab import SessionSettings, simulate_session, truth_rows
+from ..data.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
+from .plotting import caption_figures, centred_deg, draw_fig2, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
-from .extract import centred_deg, draw_fig2
 
 #: recorded positions are rounded to 0.1 micrometre (far below any lab's noise)
 POSITION_DECIMALS = 7

@@ -27,9 +27,9 @@ import numpy as np
 import pandas as pd
 from pydantic import Field, model_validator
 
-from ..config import ConfigError, ExperimentConfig, ModelBlock, StrictModel
-from ..engine.linear import stable_ac_range_g
-from ..engine.params import ModelError
+from ..runtime.config import ConfigError, ExperimentConfig, ModelBlock, StrictModel
+from ..model.linear import stable_ac_range_g
+from ..model.params import ModelError
 from .base import Experiment, ExperimentResult, RunOptions
 from .simulate_recording import PerturbationBlock, RacketBlock, RecordingConfig, session_frames
 

@@ -14,9 +14,9 @@ import numpy as np
 import pandas as pd
 from pydantic import Field, model_validator
 
-from .. import paper
-from ..config import ExperimentConfig, StrictModel
-from ..engine.linear import (
+from ..paper import values as paper
+from ..runtime.config import ExperimentConfig, StrictModel
+from ..model.linear import (
     complex_boundaries_g,
     eigenvalues,
     empirical_contraction_rate,
@@ -30,8 +30,8 @@ from ..engine.linear import (
     stability,
     stable_ac_range_g,
 )
-from ..engine.params import ModelParams
-from ..plotting import publication_style
+from ..model.params import ModelParams
+from .plotting import publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
 
@@ -258,7 +258,7 @@ def _limits(values: np.ndarray, pad: float) -> tuple[float, float]:
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     from matplotlib.colors import BoundaryNorm, ListedColormap
 
-    from ..plotting import new_figure
+    from .plotting import new_figure
 
     eig = frames["eigen.csv"]
     bnd = frames["boundaries.csv"].sort_values("alpha")

@@ -1,6 +1,6 @@
 """``bounce study --manifest study.csv``: a lab's whole study in one command.
 
-The manifest (:mod:`bounce_cli.study_manifest`) lists the recordings, one row each, with their
+The manifest (:mod:`bounce_cli.data.study_manifest`) lists the recordings, one row each, with their
 subject, condition and other factors. The study groups them into units (default subject x
 condition), and for each unit: extracts every recording (``bounce extract``'s engine, with the
 study's ``extract:`` settings and the row's own ``extract.<key>`` columns; an impacts table is
@@ -36,8 +36,8 @@ import numpy as np
 import pandas as pd
 from pydantic import Field, field_validator, model_validator
 
-from .. import parallel
-from ..config import (
+from ..runtime import parallel
+from ..runtime.config import (
     ConfigError,
     ExperimentConfig,
     StrictModel,
@@ -46,18 +46,18 @@ from ..config import (
     read_yaml,
     validate,
 )
-from ..engine.group_stats import (
+from ..analysis.group_stats import (
     across_units,
     eq15_prediction,
     mixed_trend,
     paired_difference,
 )
-from ..engine.linear import stability
-from ..engine.params import ModelError, ModelParams, phase_difference
-from ..impacts import circular_mean
-from ..plotting import publication_style
-from ..report import Section, embed_png, html_table, page
-from ..study_manifest import ManifestRow, Unit, read_manifest
+from ..model.linear import stability
+from ..model.params import ModelError, ModelParams, phase_difference
+from ..data.impacts import circular_mean
+from .plotting import publication_style
+from .report import Section, embed_png, html_table, page
+from ..data.study_manifest import ManifestRow, Unit, read_manifest
 from .base import Experiment, ExperimentResult, RunOptions
 
 #: the analyses a study can run, in the paper's order
@@ -131,6 +131,7 @@ def extraction_config(config: dict[str, Any], overrides: tuple[str, ...], file: 
     """``bounce extract``'s config for one recording: the bundled one, the study's
     ``extract`` keys, the manifest row's ``extract.<key>`` columns, the file."""
     from .extract import ExtractConfig
+    from .registry import EXPERIMENTS
 
     data = read_yaml(bundled_config_path("extract"))
     data = _merged(data, config.get("extract", {}))
@@ -140,14 +141,14 @@ def extraction_config(config: dict[str, Any], overrides: tuple[str, ...], file: 
     data["data"] = None if file is None else str(file)
     data["events"] = None if events is None else str(events)
     return validate(ExtractConfig, data, "extract" if not overrides else "manifest extract.*",
-                    list(overrides))
+                    list(overrides), EXPERIMENTS)
 
 
 def analysis_config(name: str, settings: dict[str, Any], alpha: float, g: float, seed: int,
                     data: str | None):
     """The config of analysis ``name`` for a unit: its bundled config, the study's
     ``settings.<name>`` keys, the unit's alpha and g, its own seed."""
-    from ..registry import entry
+    from .registry import EXPERIMENTS, entry
 
     experiment = entry(name).load()
     raw = _merged(read_yaml(bundled_config_path(entry(name).config)), settings)
@@ -155,7 +156,7 @@ def analysis_config(name: str, settings: dict[str, Any], alpha: float, g: float,
     if "seed" in experiment.schema.model_fields:
         raw["seed"] = seed
     raw["data"] = data
-    return validate(experiment.schema, raw, f"settings.{name}")
+    return validate(experiment.schema, raw, f"settings.{name}", commands=EXPERIMENTS)
 
 
 def _merged(base: dict[str, Any], extra: dict[str, Any]) -> dict[str, Any]:
@@ -224,8 +225,8 @@ def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures:
                       summary: list[str]) -> tuple[pd.DataFrame | None, dict[str, float]]:
     """Extract (or read) every recording of the unit; its pooled impacts table and what the
     extraction measured of the set-up (``setup.csv`` quantities, pooled over files)."""
-    from ..impacts import read_impacts
-    from ..setup_table import read_setup
+    from ..data.impacts import read_impacts
+    from ..data.setup_table import read_setup
     from . import extract
     from .data_side import is_impacts_table
 
@@ -276,11 +277,11 @@ def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures:
 def unit_parameters(pooled: pd.DataFrame, measured: dict[str, float],
                     model: dict[str, Any]) -> tuple[float, str, float, str]:
     """(alpha, where from, g, where from): the study's model block where set, else what the
-    unit's data show (:mod:`bounce_cli.data_parameters`' rules, as every ``--data`` analysis
+    unit's data show (:mod:`bounce_cli.data.data_parameters`' rules, as every ``--data`` analysis
     applies them: ``alpha_measured``, else the events' ``alpha``; g from the extraction's
     flights, else a ``g_m_s2`` column); a unit that shows neither is a one-line error naming
     both ways."""
-    from ..data_parameters import ModelValue, alpha_from_data, g_from_data
+    from ..data.data_parameters import ModelValue, alpha_from_data, g_from_data
 
     alpha = (ModelValue("alpha", float(model["alpha"]), "set in the study's config")
              if model.get("alpha") is not None else alpha_from_data(pooled))
@@ -540,7 +541,7 @@ def group_tables(frames: dict[str, pd.DataFrame], units: list[Unit],
         trials = trials.assign(condition=condition_of(trials))
         alpha_g = group.set_index(group["subject"].astype(str) + "/" + condition_of(group))
         rows = []
-        from ..engine.regression import ols_line
+        from ..analysis.regression import ols_line
 
         for condition, part in trials.groupby("condition", sort=True):
             key = part["subject"].astype(str) + "/" + str(condition)
@@ -686,7 +687,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
 def draw_units(frames: dict[str, pd.DataFrame], units: list[Unit]) -> dict:
     """Each unit's figures, drawn by each analysis's own ``draw`` from the unit's tables, and
     Fig. 2 of its first extracted recording."""
-    from ..registry import entry
+    from .registry import entry
 
     figures = {}
     for unit in units:
@@ -721,7 +722,7 @@ def _first_extract(frames: dict[str, pd.DataFrame], unit: Unit) -> str | None:
 
 # -- the report ----------------------------------------------------------------------------------
 def png_bytes(fig) -> bytes:
-    from ..artifacts import FIGURE_DPI
+    from ..runtime.artifacts import FIGURE_DPI
 
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=FIGURE_DPI)

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.ticker import MaxNLocator
 
-from ..plotting import new_figure
+from .plotting import new_figure
 
 COLORS = ["k", "tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange"]
 PAIRS = (("v_v", "$v \\to v$"), ("theta_to_v", "$\\theta \\to v$"),

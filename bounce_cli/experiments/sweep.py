@@ -24,12 +24,12 @@ import numpy as np
 import pandas as pd
 from pydantic import Field, model_validator
 
-from .. import parallel
-from ..config import ClassifyBlock, ConfigError, ExperimentConfig, StrictModel
-from ..engine.classify import EXACT_OUTCOMES, compiled_kernel_available
-from ..engine.linear import flip_boundary_g, radius_below
-from ..engine.params import ModelError, ModelParams
-from ..engine.sweep import (
+from ..runtime import parallel
+from ..runtime.config import ClassifyBlock, ConfigError, ExperimentConfig, StrictModel
+from ..analysis.classify import EXACT_OUTCOMES, compiled_kernel_available
+from ..model.linear import flip_boundary_g, radius_below
+from ..model.params import ModelError, ModelParams
+from ..analysis.sweep import (
     MODEL_FIELDS,
     SWEEP_PARAMETERS,
     Axis,
@@ -38,7 +38,7 @@ from ..engine.sweep import (
     parameter_point,
     point_tasks,
 )
-from ..plotting import caption_figures, publication_style
+from .plotting import caption_figures, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 from .basin import GridAxis
 
@@ -269,7 +269,7 @@ def _axis_values(axis) -> np.ndarray:
 
 
 def _draw_plane(sweep: pd.DataFrame, axes: pd.DataFrame, quantities: list[str]):
-    from ..plotting import new_figure
+    from .plotting import new_figure
 
     x_axis, y_axis = axes.iloc[0], axes.iloc[1]
     xs, ys = _axis_values(x_axis), _axis_values(y_axis)
@@ -336,7 +336,7 @@ def _edges(values: np.ndarray) -> tuple[float, float]:
 
 
 def _draw_line(sweep: pd.DataFrame, axis, quantities: list[str]):
-    from ..plotting import new_figure
+    from .plotting import new_figure
 
     x = _axis_values(axis)[sweep["ix"].to_numpy()]
     has_exponent = "uncertainty_exponent" in quantities

@@ -14,10 +14,10 @@ import numpy as np
 import pandas as pd
 from pydantic import Field, model_validator
 
-from ..config import ConfigError, ControllableModelBlock, ExperimentConfig, StrictModel
-from ..engine.flight import FlightSettings, simulate
-from ..engine.params import ModelParams, wrap_phase
-from ..plotting import caption_figures, integer_axis, publication_style
+from ..runtime.config import ConfigError, ControllableModelBlock, ExperimentConfig, StrictModel
+from ..model.flight import FlightSettings, simulate
+from ..model.params import ModelParams, wrap_phase
+from .plotting import caption_figures, integer_axis, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
 
@@ -146,7 +146,7 @@ def controlled_case_frames(name: str, traj, clock, periods, params: ModelParams,
 
 
 def run(config: TrajectoryConfig, options: RunOptions) -> ExperimentResult:
-    from ..engine.control import simulate_controlled_motion
+    from ..model.control import simulate_controlled_motion
 
     params = config.params
     fp = params.fixed_point()
@@ -220,7 +220,7 @@ def _stuck_spans(t, stuck):
 @publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     """Fig. 3 style: per case, ball and racket position over time, then v_k and theta_k."""
-    from ..plotting import new_figure
+    from .plotting import new_figure
 
     track, impacts = frames["trajectory.csv"], frames["impacts.csv"]
     fixed = frames["fixed_point.csv"]

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from bounce_cli.engine.basin_measures import basin_entropy, uncertainty_exponent
+from bounce_cli.analysis.basin_measures import basin_entropy, uncertainty_exponent
 
 
 def test_one_outcome_has_zero_entropy():

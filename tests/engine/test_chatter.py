@@ -8,7 +8,7 @@ import mpmath as mp
 import numpy as np
 import pytest
 
-from bounce_cli.engine.chatter import (
+from bounce_cli.model.chatter import (
     RELEASE,
     STICK,
     chatter_tail,
@@ -18,9 +18,9 @@ from bounce_cli.engine.chatter import (
     release_fate,
     release_phase,
 )
-from bounce_cli.engine.classify import OUTCOMES, ClassifySettings, classify_batch, outcome_names
-from bounce_cli.engine.impact import first_impact_phase
-from bounce_cli.engine.params import ModelParams
+from bounce_cli.analysis.classify import OUTCOMES, ClassifySettings, classify_batch, outcome_names
+from bounce_cli.model.impact import first_impact_phase
+from bounce_cli.model.params import ModelParams
 
 DIGITS = 40
 

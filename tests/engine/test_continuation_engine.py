@@ -8,14 +8,14 @@ import math
 import numpy as np
 import pytest
 
-from bounce_cli.engine.bifurcation import (
+from bounce_cli.analysis.bifurcation import (
     SweepSettings,
     locate_period_doubling,
     parameter_point,
     period1_thresholds,
     threshold_gamma,
 )
-from bounce_cli.engine.continuation import (
+from bounce_cli.analysis.continuation import (
     Continuation,
     ContinuationSettings,
     continued_period1_thresholds,
@@ -27,10 +27,10 @@ from bounce_cli.engine.continuation import (
     parameter_derivative,
     period1_flip,
 )
-from bounce_cli.engine.impact import gap, next_impact_phase
-from bounce_cli.engine.linear import flip_boundary_g
-from bounce_cli.engine.maps import map_step
-from bounce_cli.engine.params import ModelError, ModelParams
+from bounce_cli.model.impact import gap, next_impact_phase
+from bounce_cli.model.linear import flip_boundary_g
+from bounce_cli.model.maps import map_step
+from bounce_cli.model.params import ModelError, ModelParams
 
 BASE = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.30, racket_period=0.92)
 PARAMETERS = ("gamma", "racket_amplitude", "racket_period", "alpha")

@@ -12,12 +12,12 @@ import math
 import numpy as np
 import pytest
 
-from bounce_cli.engine.classify import ClassifySettings, classify_batch
-from bounce_cli.engine.impulse import find_threshold, impulse_response_full
-from bounce_cli.engine.linear import eigenvalues, jacobian, racket_acceleration_at_impact_g
-from bounce_cli.engine.maps import iterate_map, map_step
-from bounce_cli.engine.params import ModelParams
-from bounce_cli.engine.control import (
+from bounce_cli.analysis.classify import ClassifySettings, classify_batch
+from bounce_cli.analysis.impulse import find_threshold, impulse_response_full
+from bounce_cli.model.linear import eigenvalues, jacobian, racket_acceleration_at_impact_g
+from bounce_cli.model.maps import iterate_map, map_step
+from bounce_cli.model.params import ModelParams
+from bounce_cli.model.control import (
     PASSIVE,
     PeriodController,
     Reference,
@@ -231,7 +231,7 @@ def test_controlled_response_modulates_the_period_with_the_ball(paper_params):
     assert up.dtau[1] > 0 > down.dtau[1]
     tol = (0.05, math.radians(1.0))
     passive = [impulse_response_full(paper_params, a, 100) for a in (0.4, 0.6)]
-    from bounce_cli.engine.impulse import relaxation_impacts
+    from bounce_cli.model.perturbation import relaxation_impacts
     slow = [relaxation_impacts(r.dv, r.dtheta, *tol) for r in passive]
     fast = [controlled_impulse_response(paper_params, c, a, 100).relaxation_impacts(*tol)
             for a in (0.4, 0.6)]
@@ -239,7 +239,7 @@ def test_controlled_response_modulates_the_period_with_the_ball(paper_params):
 
 
 def test_zero_gain_threshold_is_bounce_impulse_threshold(paper_params):
-    from bounce_cli.config import bundled_config_path, load_config
+    from bounce_cli.runtime.config import bundled_config_path, load_config
     from bounce_cli.experiments import impulse as exp
 
     cfg = load_config(exp.ImpulseConfig, bundled_config_path("impulse"),
@@ -362,7 +362,7 @@ def test_flight_time_matching_returns_the_phase_in_one_impact(paper_params):
 
 
 def test_grid_tiles_and_orbit_agree_with_the_batch(paper_params):
-    from bounce_cli.engine.control import classify_controlled_grid, iterate_controlled_orbit
+    from bounce_cli.model.control import classify_controlled_grid, iterate_controlled_orbit
 
     c = PeriodController(0.6, 0.9)
     theta, v = np.meshgrid(np.linspace(0, 2 * np.pi, 50), np.linspace(0, 10, 50))

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from bounce_cli.engine.classify import (
+from bounce_cli.analysis.classify import (
     BELOW_RACKET,
     OUTCOMES,
     PERIOD1,
@@ -16,8 +16,8 @@ from bounce_cli.engine.classify import (
     classify_grid,
     ClassifySettings,
 )
-from bounce_cli.engine.maps import iterate_orbit, map_step
-from bounce_cli.engine.reference import classify_point_brentq, first_impact_brentq
+from bounce_cli.model.maps import iterate_orbit, map_step
+from bounce_cli.model.reference import classify_point_brentq, first_impact_brentq
 
 FIG3_THETA0 = math.asin(0.205 / 0.30)  # section 3: x_b(0) = 0.205 m, ball on the racket
 
@@ -136,7 +136,7 @@ def test_tolerance_and_sticking_interval_are_used(paper_params):
 
 @pytest.mark.parametrize("jobs, tile_points", [(1, 7), (1, 333), (2, 250), (2, 10_000)])
 def test_grid_results_independent_of_tiles_and_jobs(paper_params, jobs, tile_points):
-    from bounce_cli import parallel
+    from bounce_cli.runtime import parallel
 
     theta, v = paper_grid(40, 25)
     direct = classify_batch(theta, v, paper_params)

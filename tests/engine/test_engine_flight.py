@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from bounce_cli.engine.flight import FlightSettings, leave_phase, simulate
-from bounce_cli.engine.maps import iterate_orbit
-from bounce_cli.engine.params import ModelError, ModelParams, phase_difference
+from bounce_cli.model.flight import FlightSettings, leave_phase, simulate
+from bounce_cli.model.maps import iterate_orbit
+from bounce_cli.model.params import ModelError, ModelParams, phase_difference
 
 THETA0 = math.asin(0.205 / 0.30)  # x_b(0) = 0.205 m on the racket (section 3)
 PERIOD1_V0, STICKING_V0 = 4.8, 5.7  # Fig. 3 top and bottom

@@ -6,9 +6,10 @@ import math
 
 import pytest
 
-from bounce_cli.engine.classify import ClassifySettings
-from bounce_cli.engine.impulse import find_threshold, perturbed_outcome, perturbed_velocity
-from bounce_cli.engine.reference import classify_point_brentq
+from bounce_cli.analysis.classify import ClassifySettings
+from bounce_cli.analysis.impulse import find_threshold, perturbed_outcome
+from bounce_cli.model.perturbation import perturbed_velocity
+from bounce_cli.model.reference import classify_point_brentq
 
 SCAN = dict(scan_step=0.01, bisection_tolerance=1e-4, alpha_p_max=0.99)
 

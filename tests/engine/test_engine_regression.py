@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from bounce_cli.engine.params import ModelError, ModelParams
-from bounce_cli.engine.regression import (
+from bounce_cli.model.params import ModelError, ModelParams
+from bounce_cli.analysis.regression import (
     eq15_amplitude,
     eq15_slope,
     ols_line,

@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from bounce_cli.engine.linear import jacobian
-from bounce_cli.engine.params import ModelParams
-from bounce_cli.engine.roots import nearest_root
-from bounce_cli.engine.stochastic import (
+from bounce_cli.model.linear import jacobian
+from bounce_cli.model.params import ModelParams
+from bounce_cli.analysis.roots import nearest_root
+from bounce_cli.analysis.stochastic import (
     noise_strengths_for_sds,
     paper_noise_covariance,
     racket_amplitude_for_sd,

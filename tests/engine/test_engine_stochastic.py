@@ -5,11 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from bounce_cli import paper
-from bounce_cli.engine.linear import jacobian
-from bounce_cli.engine.maps import map_step
-from bounce_cli.engine.params import ModelError, ModelParams
-from bounce_cli.engine.stochastic import (
+from bounce_cli.paper import values as paper
+from bounce_cli.model.linear import jacobian
+from bounce_cli.model.maps import map_step
+from bounce_cli.model.params import ModelError, ModelParams
+from bounce_cli.analysis.stochastic import (
     PAIR_NAMES,
     map_noise_covariance,
     paper_noise_covariance,

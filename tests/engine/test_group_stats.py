@@ -8,13 +8,13 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from bounce_cli.engine.group_stats import (
+from bounce_cli.analysis.group_stats import (
     across_units,
     eq15_prediction,
     mixed_trend,
     paired_difference,
 )
-from bounce_cli.engine.regression import eq15_slope
+from bounce_cli.analysis.regression import eq15_slope
 
 
 def learning_frame(rng, subjects=10, trials=8, slope=-0.04, slope_sd=0.01, noise=0.02):

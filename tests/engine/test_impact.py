@@ -8,8 +8,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.optimize import brentq, minimize_scalar
 
-from bounce_cli.engine.impact import gap, gap_slope, next_impact_phase
-from bounce_cli.engine.params import ModelParams
+from bounce_cli.model.impact import gap, gap_slope, next_impact_phase
+from bounce_cli.model.params import ModelParams
 
 PARAMS = st.builds(
     ModelParams,
@@ -137,7 +137,7 @@ def test_result_independent_of_unwrapping(paper_params):
 def test_array_parameters_give_each_state_its_own_racket():
     """first_impact_phase with arrays of (a, w, g) equals a scalar call per state, and a
     scalar given as an array of one value takes the same arithmetic (same bits)."""
-    from bounce_cli.engine.impact import first_impact_phase
+    from bounce_cli.model.impact import first_impact_phase
 
     rng = np.random.default_rng(3)
     n = 200
@@ -158,7 +158,7 @@ def test_each_state_is_solved_alone_to_the_last_bit(paper_params):
     """The solver carries finished states along until an eighth of a batch has finished, and
     takes cos/sin of the phase from a caller that has them: neither may change a bit of any
     state's result, whatever batch it shares (the basin's results depend on it)."""
-    from bounce_cli.engine.impact import first_impact_phase
+    from bounce_cli.model.impact import first_impact_phase
 
     rng = np.random.default_rng(11)
     n = 3000

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from bounce_cli.engine.linear import (
+from bounce_cli.model.linear import (
     complex_boundaries_g,
     eigenvalues,
     finite_difference_jacobian,
@@ -16,7 +16,7 @@ from bounce_cli.engine.linear import (
     spectral_radius,
     stability,
 )
-from bounce_cli.engine.params import ModelParams, NoFixedPointError
+from bounce_cli.model.params import ModelParams, NoFixedPointError
 
 
 def random_params_with_fixed_point(seed, n):

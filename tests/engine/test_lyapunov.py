@@ -8,11 +8,11 @@ import math
 import numpy as np
 import pytest
 
-from bounce_cli.engine.linear import jacobian, stability
-from bounce_cli.engine.maps import map_step
-from bounce_cli.engine.params import ModelParams
-from bounce_cli.engine.bifurcation import SweepSettings, iterate_sweep, sweep_parameters
-from bounce_cli.engine.lyapunov import advance_tangent, initial_tangent, map_jacobian
+from bounce_cli.model.linear import jacobian, stability
+from bounce_cli.model.maps import map_step
+from bounce_cli.model.params import ModelParams
+from bounce_cli.analysis.bifurcation import SweepSettings, iterate_sweep, sweep_parameters
+from bounce_cli.analysis.lyapunov import advance_tangent, initial_tangent, map_jacobian
 
 
 def random_flying_states(rng, n):

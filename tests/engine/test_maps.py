@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from bounce_cli.engine.impact import gap
-from bounce_cli.engine.maps import iterate_map, iterate_orbit, map_step
-from bounce_cli.engine.params import ModelParams, phase_difference
+from bounce_cli.model.impact import gap
+from bounce_cli.model.maps import iterate_map, iterate_orbit, map_step
+from bounce_cli.model.params import ModelParams, phase_difference
 
 FIG3_THETA0 = math.asin(0.205 / 0.30)  # section 3: x_b(0) = 0.205 m on the racket
 

@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from bounce_cli.engine.linear import racket_acceleration_at_impact_g
-from bounce_cli.engine.params import (
+from bounce_cli.model.linear import racket_acceleration_at_impact_g
+from bounce_cli.model.params import (
     ModelError,
     ModelParams,
     NoFixedPointError,

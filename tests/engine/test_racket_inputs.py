@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from bounce_cli.engine.linear import jacobian, stability
-from bounce_cli.engine.params import ModelParams
-from bounce_cli.engine.racket_inputs import cycle_map_step, racket_input_jacobian
-from bounce_cli.engine.var_fit import fit_var1
+from bounce_cli.model.linear import jacobian, stability
+from bounce_cli.model.params import ModelParams
+from bounce_cli.analysis.racket_inputs import cycle_map_step, racket_input_jacobian
+from bounce_cli.analysis.var_fit import fit_var1
 
 LAB = ModelParams(alpha=0.55, g=9.81, racket_amplitude=0.11, racket_period=0.60)
 ACF = ModelParams(alpha=0.42, g=5.8, racket_amplitude=0.065, racket_period=0.55)

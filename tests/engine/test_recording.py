@@ -7,9 +7,10 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from bounce_cli.cli import app
-from bounce_cli.engine import FlightSettings, ModelError, ModelParams, simulate
-from bounce_cli.engine.recording import (
+from bounce_cli.cli.commands import app
+from bounce_cli.model.flight import FlightSettings, simulate
+from bounce_cli.model.params import ModelError, ModelParams
+from bounce_cli.data.simulated_lab import (
     CycleRacket,
     SessionSettings,
     compliant_contact,
@@ -17,7 +18,7 @@ from bounce_cli.engine.recording import (
     simulate_session,
     truth_rows,
 )
-from bounce_cli.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
+from bounce_cli.data.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
 
 PAPER = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.30, racket_period=0.92)
 VARIED = SessionSettings(n_trials=2, duration_s=20.0, velocity_noise_m_s=0.03,

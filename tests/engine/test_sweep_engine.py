@@ -9,12 +9,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bounce_cli.engine.basin_measures import basin_entropy
-from bounce_cli.engine.classify import OUTCOMES, ClassifySettings, classify_batch
-from bounce_cli.engine.linear import flip_boundary_g, racket_acceleration_at_impact_g, stability
-from bounce_cli.engine.maps import iterate_orbit
-from bounce_cli.engine.params import ModelError, NoFixedPointError
-from bounce_cli.engine.sweep import (
+from bounce_cli.analysis.basin_measures import basin_entropy
+from bounce_cli.analysis.classify import OUTCOMES, ClassifySettings, classify_batch
+from bounce_cli.model.linear import flip_boundary_g, racket_acceleration_at_impact_g, stability
+from bounce_cli.model.maps import iterate_orbit
+from bounce_cli.model.params import ModelError, NoFixedPointError
+from bounce_cli.analysis.sweep import (
     Axis,
     UncertaintySettings,
     classify_points,

@@ -5,7 +5,7 @@ is the passive run byte for byte."""
 import numpy as np
 import pytest
 
-from bounce_cli.config import ConfigError, bundled_config_path, load_config
+from bounce_cli.runtime.config import ConfigError, bundled_config_path, load_config
 from bounce_cli.experiments import acf
 from bounce_cli.experiments.base import RunOptions
 

@@ -130,7 +130,7 @@ def test_one_value_axes_run_and_draw(tmp_path, paper_params, cli):
     """num: 1 is linspace's one value: a basin along a line of v0 at the Fig. 3 phase, along
     a line of theta0, and at one initial condition; each agrees with the classifier run
     directly on those points, and its figures hold one row / column / cell."""
-    from bounce_cli.engine.classify import classify_batch
+    from bounce_cli.analysis.classify import classify_batch
 
     theta0 = math.degrees(math.asin(0.205 / 0.30))
     cases = {
@@ -179,7 +179,7 @@ def test_binary_tables_hold_what_the_csv_holds_and_redraw(tmp_path, cli, user_er
                                                           monkeypatch):
     """output.format npz / parquet: basin.npz / basin.parquet instead of basin.csv, the same
     rows and values read back (artifacts.read_frame), and the figures redraw from them."""
-    from bounce_cli import artifacts
+    from bounce_cli.runtime import artifacts
 
     small = ["--set", "grid.theta0_deg.num=30", "--set", "grid.v0_m_s.num=20", "--quiet"]
     assert cli("basin", *small, "--out", tmp_path / "csv").exit_code == 0

@@ -10,11 +10,11 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from bounce_cli.cli import app
-from bounce_cli.engine.impact import next_impact_phase
-from bounce_cli.engine.linear import flip_boundary_g, racket_acceleration_at_impact_g, stability
-from bounce_cli.engine.params import ModelError, ModelParams
-from bounce_cli.engine.bifurcation import (
+from bounce_cli.cli.commands import app
+from bounce_cli.model.impact import next_impact_phase
+from bounce_cli.model.linear import flip_boundary_g, racket_acceleration_at_impact_g, stability
+from bounce_cli.model.params import ModelError, ModelParams
+from bounce_cli.analysis.bifurcation import (
     ParameterArrays,
     SweepSettings,
     attractor_names,
@@ -418,14 +418,14 @@ def test_exact_sticking_sweep_resolves_the_grey_bands_into_locked_orbits(paper_p
     its sticks and releases: a locked orbit whose period in racket cycles is the exact
     orbit's (engine.chatter), whose recorded impacts are that orbit's, and whose Lyapunov
     exponent is -inf; below Gamma = 1 the ball rests."""
-    from bounce_cli.engine.bifurcation import (
+    from bounce_cli.analysis.bifurcation import (
         SweepSettings,
         attractor_names,
         iterate_sweep,
         parameter_point,
         sweep_parameters,
     )
-    from bounce_cli.engine.chatter import IMPACT, RELEASE, iterate_exact_orbit, locked_period
+    from bounce_cli.model.chatter import IMPACT, RELEASE, iterate_exact_orbit, locked_period
 
     gammas = np.array([1.426, 1.9, 0.95])
     settings = SweepSettings(transient_impacts=300, measured_impacts=300, min_hop_s=0.0)

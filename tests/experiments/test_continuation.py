@@ -8,8 +8,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bounce_cli.engine.bifurcation import period1_thresholds
-from bounce_cli.engine.params import ModelParams
+from bounce_cli.analysis.bifurcation import period1_thresholds
+from bounce_cli.model.params import ModelParams
 from bounce_cli.experiments.bifurcation import draw as draw_bifurcation
 from bounce_cli.experiments.continuation import draw
 

@@ -12,10 +12,10 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from bounce_cli.cli import app
-from bounce_cli.config import bundled_config_path, load_config
-from bounce_cli.engine.params import ModelParams
-from bounce_cli.engine.control import (
+from bounce_cli.cli.commands import app
+from bounce_cli.runtime.config import bundled_config_path, load_config
+from bounce_cli.model.params import ModelParams
+from bounce_cli.model.control import (
     PeriodController,
     controlled_jacobian,
     period_control_radius,
@@ -23,7 +23,7 @@ from bounce_cli.engine.control import (
 )
 from bounce_cli.experiments import control as exp
 from bounce_cli.experiments.base import RunOptions
-from bounce_cli.registry import entry
+from bounce_cli.experiments.registry import entry
 
 RESULTS = Path(__file__).resolve().parents[2] / "results"
 FAST = ["basin.theta0_deg.num=40", "basin.v0_m_s.num=40", "radius.gain.num=41",
@@ -134,7 +134,7 @@ def test_relaxation_along_gain_matches_single_responses(result, paper_params):
     passive relaxation of relaxation.csv)."""
     import math
 
-    from bounce_cli.engine.control import controlled_impulse_response
+    from bounce_cli.model.control import controlled_impulse_response
 
     scan = result.frames["relaxation_gain.csv"]
     relax = result.frames["relaxation.csv"].set_index(["model", "alpha_p"])

@@ -9,8 +9,8 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from bounce_cli.cli import app
-from bounce_cli.config import ModelOnlyConfig, bundled_config_path, load_config
+from bounce_cli.cli.commands import app
+from bounce_cli.runtime.config import ModelOnlyConfig, bundled_config_path, load_config
 from bounce_cli.experiments import basin, impulse
 from bounce_cli.experiments.base import RunOptions
 
@@ -120,7 +120,7 @@ def test_fit_to_passive_data_says_no_control_is_detected(tmp_path):
 
     from typer.testing import CliRunner
 
-    from bounce_cli.cli import app
+    from bounce_cli.cli.commands import app
 
     data = Path(__file__).resolve().parents[2] / "results" / "impulse-data" / "impacts.csv"
     result = CliRunner().invoke(app, ["control", "--data", str(data), "--out",

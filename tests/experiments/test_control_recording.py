@@ -7,9 +7,9 @@ extract`` (the data side's reader and alignment) returns the controller's K and 
 import numpy as np
 import pytest
 
-from bounce_cli.config import ConfigError, bundled_config_path, load_config
-from bounce_cli.engine import ModelParams
-from bounce_cli.engine.control import (
+from bounce_cli.runtime.config import ConfigError, bundled_config_path, load_config
+from bounce_cli.model.params import ModelParams
+from bounce_cli.model.control import (
     PeriodController,
     controlled_jacobian,
     controlled_step,
@@ -18,7 +18,7 @@ from bounce_cli.engine.control import (
 from bounce_cli.experiments import control as control_exp
 from bounce_cli.experiments.extract import ExtractionBlock, extract_all, trials_from_frame
 from bounce_cli.experiments.simulate_recording import RecordingConfig, session_frames
-from bounce_cli.recordings import Events
+from bounce_cli.data.recordings import Events
 
 CONTROL = ["model.control.gain=0.2", "model.control.rate=0.3", "model.control.switch=cycle"]
 

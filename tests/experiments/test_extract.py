@@ -16,9 +16,9 @@ import pytest
 from scipy.signal import savgol_filter
 from typer.testing import CliRunner
 
-from bounce_cli.cli import app
-from bounce_cli.engine import ModelParams
-from bounce_cli.engine.extraction import (
+from bounce_cli.cli.commands import app
+from bounce_cli.model.params import ModelParams
+from bounce_cli.data.extraction import (
     ExtractionSettings,
     contact_shape_factor,
     extract_trial,
@@ -26,8 +26,8 @@ from bounce_cli.engine.extraction import (
     match_impacts,
     pooled_gravity,
 )
-from bounce_cli.engine.recording import SessionSettings, simulate_session, truth_rows
-from bounce_cli.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
+from bounce_cli.data.simulated_lab import SessionSettings, simulate_session, truth_rows
+from bounce_cli.data.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
 
 PAPER = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.30, racket_period=0.92)
 BASE = dict(n_trials=2, duration_s=20.0, velocity_noise_m_s=0.04, perturb_every=8,
@@ -662,7 +662,7 @@ def test_the_contact_shape_factor_is_the_area_between_the_path_and_its_flights(a
     """Independent route: the simulator's integrated spring-damper contact (no gravity, a still
     racket), the V of its two straight flights meeting at the equivalent impact, the area
     between them by the trapezoid rule: K |u| T^2."""
-    from bounce_cli.engine.recording import compliant_contact, CycleRacket
+    from bounce_cli.data.simulated_lab import compliant_contact, CycleRacket
 
     still = CycleRacket(np.array([1e9]), np.array([1.0]), np.array([0.1]))
     u, duration = -2.0, 0.01
@@ -750,7 +750,7 @@ def test_extract_writes_the_measured_set_up_and_names_a_unit_slip(simulated, tmp
     """setup.csv beside impacts.csv (read back by the analyses' reader) and the summary line;
     millimetres read as centimetres: the flights show 98 m/s^2, an error naming the slip
     (issue 22), nothing written."""
-    from bounce_cli.setup_table import read_setup
+    from bounce_cli.data.setup_table import read_setup
 
     result, out = extract_cli(tmp_path, "--data", str(simulated / "recording.csv"))
     assert result.exit_code == 0, result.output

@@ -10,11 +10,11 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from bounce_cli.cli import app
-from bounce_cli.config import ConfigError
+from bounce_cli.cli.commands import app
+from bounce_cli.runtime.config import ConfigError
 from bounce_cli.experiments.extract import ExtractConfig
-from bounce_cli.recordings import read_recording
-from bounce_cli.recordings.text_exports import detect_format
+from bounce_cli.data.recordings import read_recording
+from bounce_cli.data.recordings.text_exports import detect_format
 
 runner = CliRunner()
 RATE = 200.0

@@ -8,16 +8,12 @@ import pytest
 
 from typer.testing import CliRunner
 
-from bounce_cli.cli import app
-from bounce_cli.config import bundled_config_path, load_config
-from bounce_cli.engine.impulse import (
-    impulse_response_full,
-    impulse_response_linear,
-    perturbed_velocity,
-    relaxation_impacts,
-)
-from bounce_cli.engine.linear import jacobian
-from bounce_cli.engine.maps import map_step, velocity_after_impact
+from bounce_cli.cli.commands import app
+from bounce_cli.runtime.config import bundled_config_path, load_config
+from bounce_cli.analysis.impulse import impulse_response_full, impulse_response_linear
+from bounce_cli.model.perturbation import perturbed_velocity, relaxation_impacts
+from bounce_cli.model.linear import jacobian
+from bounce_cli.model.maps import map_step, velocity_after_impact
 from bounce_cli.experiments import impulse as exp
 from bounce_cli.experiments.base import RunOptions
 

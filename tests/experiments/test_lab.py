@@ -11,14 +11,14 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bounce_cli.config import ConfigError, bundled_config_path, load_config
-from bounce_cli.engine import ModelParams
-from bounce_cli.engine.data_stats import apex_sd_eq19
-from bounce_cli.engine.linear import jacobian, racket_acceleration_at_impact_g, stability
+from bounce_cli.runtime.config import ConfigError, bundled_config_path, load_config
+from bounce_cli.model.params import ModelParams
+from bounce_cli.analysis.data_stats import apex_sd_eq19
+from bounce_cli.model.linear import jacobian, racket_acceleration_at_impact_g, stability
 from bounce_cli.experiments import acf, impulse
 from bounce_cli.experiments.base import RunOptions
 from bounce_cli.experiments.lab import EXPERIMENTS, lab_session
-from bounce_cli.registry import entry
+from bounce_cli.experiments.registry import entry
 
 FAST_TRUST = ["data_analysis.trust_repetitions=10", "data_analysis.trust_bounces=[100]"]
 

@@ -6,11 +6,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bounce_cli.engine.linear import flip_boundary_g, racket_amplitude_for_ac, stability
-from bounce_cli.engine.params import ModelParams
-from bounce_cli.engine.data_stats import apex_height, apex_sd_eq19, simulate_impacts
+from bounce_cli.model.linear import flip_boundary_g, racket_amplitude_for_ac, stability
+from bounce_cli.model.params import ModelParams
+from bounce_cli.analysis.data_stats import apex_height, apex_sd_eq19, simulate_impacts
 from bounce_cli.experiments import learning
-from bounce_cli.impacts import impacts_frame
+from bounce_cli.data.impacts import impacts_frame
 
 AC_START, AC_END, TRIALS = -0.25, -0.8, 12
 
@@ -31,7 +31,7 @@ def test_model_curve_spans_the_stable_range_and_sets_ac():
 def test_apex_sd_of_long_simulations_matches_eq19_with_the_maps_noise():
     """Eq. 19's apex SD (with the printed map's noise covariance) against 20 x 1000 bounces
     of eqs. 16-18: within 3 %."""
-    from bounce_cli.engine.stochastic import map_noise_covariance
+    from bounce_cli.analysis.stochastic import map_noise_covariance
 
     for ac in (-0.3, -0.7):
         a_r = float(racket_amplitude_for_ac(0.5, ac, 9.81, 0.92))

@@ -7,9 +7,9 @@ import pandas as pd
 import pytest
 from typer.testing import CliRunner
 
-from bounce_cli.cli import app
-from bounce_cli.config import bundled_config_path, load_config
-from bounce_cli.engine.linear import (
+from bounce_cli.cli.commands import app
+from bounce_cli.runtime.config import bundled_config_path, load_config
+from bounce_cli.model.linear import (
     ac_explicit_g,
     characteristic_c,
     empirical_contraction_rate,
@@ -22,7 +22,7 @@ from bounce_cli.engine.linear import (
     spectral_radius,
     stability,
 )
-from bounce_cli.engine.params import ModelParams
+from bounce_cli.model.params import ModelParams
 from bounce_cli.experiments import stability as exp
 from bounce_cli.experiments.base import RunOptions
 

@@ -11,8 +11,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bounce_cli.artifacts import read_frames
-from bounce_cli.config import load_config
+from bounce_cli.runtime.artifacts import read_frames
+from bounce_cli.runtime.config import load_config
 from bounce_cli.experiments import study
 from bounce_cli.experiments.base import RunOptions
 
@@ -38,7 +38,7 @@ def simulated(tmp_path_factory, cli_module):
 def cli_module():
     from typer.testing import CliRunner
 
-    from bounce_cli.cli import app
+    from bounce_cli.cli.commands import app
 
     runner = CliRunner()
     return lambda *args: runner.invoke(app, [str(a) for a in args])
@@ -248,7 +248,7 @@ class StopAfter:
 
 
 def study_config(simulated, *overrides):
-    from bounce_cli.config import bundled_config_path
+    from bounce_cli.runtime.config import bundled_config_path
 
     return load_config(study.StudyConfig, bundled_config_path("study"),
                        [f"manifest={simulated / 'study.csv'}", "model.alpha=0.5",
@@ -362,7 +362,7 @@ def test_perturbations_come_with_events_and_give_impulse_responses(tmp_path, cli
 def test_estimates_without_an_interval_are_left_out_of_the_paired_difference():
     """A unit whose data were too few for an interval (its estimate can be anything) does not
     enter the test of data against model."""
-    from bounce_cli.study_manifest import Unit
+    from bounce_cli.data.study_manifest import Unit
 
     group = pd.DataFrame({
         "subject": ["s1", "s2", "s3"], "condition": "a",

@@ -17,10 +17,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bounce_cli import checkpoints
-from bounce_cli.engine.params import ModelParams
+from bounce_cli.runtime import checkpoints
+from bounce_cli.model.params import ModelParams
 from bounce_cli.experiments import sweep as sweep_experiment
-from bounce_cli.interrupts import Interrupted
+from bounce_cli.runtime.interrupts import Interrupted
 
 SMALL = ("--set", "sweep.x.num=3", "--set", "sweep.y.num=2",
          "--set", "basin.theta0_deg.num=10", "--set", "basin.v0_m_s.num=10",
@@ -237,7 +237,7 @@ def test_a_service_that_is_not_a_scheduler_is_one_line(cli, user_error, tmp_path
     for minutes (its timeout did not apply) with signals held; an HTTP server's reply, read
     as a frame length, asked numpy for 3 EiB (a traceback)."""
     pytest.importorskip("distributed")
-    from bounce_cli import parallel
+    from bounce_cli.runtime import parallel
 
     monkeypatch.setattr(parallel, "CONNECT_TIMEOUT_S", 1.0)
     monkeypatch.setattr(parallel, "CONNECT_GRACE_S", 0.5)
@@ -279,7 +279,7 @@ def test_only_sweep_takes_resume_and_scheduler(cli):
 
 
 def test_the_bundled_sweep_runs_in_the_library_without_files(paper_params):
-    from bounce_cli.config import bundled_config_path, load_config
+    from bounce_cli.runtime.config import bundled_config_path, load_config
     from bounce_cli.experiments.base import RunOptions
 
     config = load_config(sweep_experiment.SweepConfig, bundled_config_path("sweep"),
@@ -332,7 +332,7 @@ def test_the_committed_atlas_agrees_with_eq14_and_with_the_bifurcation_diagram()
     the Jacobian of eq. 9 at each point, the boundary from its closed form), and at alpha 0.5,
     AC -1.6 g (Gamma 1.91) the basin all but sticks, as results/bifurcation's orbits do there
     (2000 impacts each, an independent route to the attractor)."""
-    from bounce_cli.engine.linear import flip_boundary_g
+    from bounce_cli.model.linear import flip_boundary_g
 
     atlas = pd.read_csv(RESULTS / "sweep" / "sweep.csv")
     stable = atlas.spectral_radius < 1

@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from bounce_cli.config import bundled_config_path, load_config
+from bounce_cli.runtime.config import bundled_config_path, load_config
 from bounce_cli.experiments import trajectory
 from bounce_cli.experiments.base import RunOptions
 
@@ -129,8 +129,8 @@ def test_exact_sticking_trajectory_marks_the_accumulation_points(tmp_path, cli, 
     its accumulation points are the exact orbit's sticks (engine.chatter), the ball rides
     from each to the release at asin(1/Gamma), and the figure marks them. rk4 cannot do this:
     a one-line error."""
-    from bounce_cli.engine.chatter import STICK, iterate_exact_orbit
-    from bounce_cli.engine.flight import FlightSettings, simulate
+    from bounce_cli.model.chatter import STICK, iterate_exact_orbit
+    from bounce_cli.model.flight import FlightSettings, simulate
 
     out = tmp_path / "exact"
     result = cli("trajectory", "--set", "sticking.min_hop_s=0", "--set", "duration_s=5",

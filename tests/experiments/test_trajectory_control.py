@@ -8,14 +8,14 @@ import math
 import numpy as np
 import pytest
 
-from bounce_cli.config import ConfigError, bundled_config_path, load_config
-from bounce_cli.engine import ModelParams
-from bounce_cli.engine.control import (
+from bounce_cli.runtime.config import ConfigError, bundled_config_path, load_config
+from bounce_cli.model.params import ModelParams
+from bounce_cli.model.control import (
     PeriodController,
     iterate_controlled_orbit,
     simulate_controlled_motion,
 )
-from bounce_cli.engine.flight import FlightSettings
+from bounce_cli.model.flight import FlightSettings
 from bounce_cli.experiments import trajectory
 from bounce_cli.experiments.base import RunOptions
 

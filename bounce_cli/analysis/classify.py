@@ -1,0 +1,290 @@
+"""Classification of initial conditions for the basin of attraction (section 3, Fig. 4).
+
+Each initial condition (theta0, v0) -- the ball leaves the racket at phase theta0 (rad) with
+velocity v0 (m/s) -- is iterated with the map (eqs. 5, 6) until one of section 3's stopping
+conditions occurs:
+
+* ``below_racket``: v0 is not above the racket's velocity at theta0 (``can_fly`` false at
+  k = 0), so the ball cannot leave the racket; 0 iterations.
+* ``sticking``: a hop (time between two impacts) lasts less than ``min_hop_s``.
+  A ball that cannot leave the racket after an impact (grazing, possible only for alpha = 0)
+  is sticking too.
+* ``period1``: after an impact both ``|v - v~| < tolerance`` (m/s) and
+  ``|wrap(theta) - theta~| < tolerance`` (rad, the wrapped phase difference).
+* ``undecided``: none of these within ``max_iterations`` impacts.
+
+With ``min_hop_s`` 0 (exact sticking, ``engine.chatter``) a point sticks where a complete
+chatter's tail is summable instead; since every orbit that sticks is released in the same
+state, it takes the released ball's one fate: ``locked`` (the periodic sticking solution,
+``Classification.locked_cycles`` racket cycles), ``resting`` (Gamma <= 1), or ``period1`` /
+``undecided`` when the released ball goes there. The compiled kernel does not implement it:
+the numpy code runs whatever ``kernel`` says.
+
+The iteration count is the number of impacts computed until the point was classified
+(1..max_iterations for period1 / sticking, max_iterations for undecided, 0 for below_racket).
+The initial state itself is NOT compared with the fixed point: the first check is after
+impact 1, so even the fixed point itself is ``period1`` after 1 iteration. At each impact
+the sticking test comes first (a hop that short is never near the fixed point anyway).
+
+All points of a batch advance together: one vectorised first-impact solve
+(``impact.first_impact_phase``) per impact on the still-active subset; settled points are
+dropped. Phases are kept wrapped in [0, 2 pi). The result of a point does not depend on
+which other points share its batch, so ``classify_grid`` gives identical results for any
+tile size and number of worker processes.
+"""
+
+from __future__ import annotations
+
+import builtins
+import functools
+import importlib.util
+import math
+import os
+from dataclasses import dataclass
+from typing import Any, Callable, Iterable, Iterator, Literal
+
+import numpy as np
+
+from ..model.chatter import release_fate, tail_is_summable
+from ..model.impact import MAX_SAFE_STEPS, can_fly, first_impact_phase
+from ..model.maps import velocity_after_impact
+from ..model.params import FixedPoint, ModelParams, phase_difference
+
+PERIOD1, STICKING, BELOW_RACKET, UNDECIDED, LOCKED, RESTING = 0, 1, 2, 3, 4, 5
+#: outcome names indexed by their integer code (section 3's, with ``min_hop_s`` > 0)
+OUTCOMES = ("period1", "sticking", "below_racket", "undecided")
+#: with exact sticking (``min_hop_s`` 0: ``engine.chatter``) "sticking" never occurs; an orbit
+#: that sticks is "locked" (its release repeats: periodic, superstable) or "resting" (Gamma
+#: <= 1: never released), or takes the fate of the released ball (period1, undecided)
+EXACT_OUTCOMES = OUTCOMES + ("locked", "resting")
+
+
+def outcome_names(settings: "ClassifySettings") -> tuple[str, ...]:
+    """The outcomes a classification with ``settings`` can give: ``OUTCOMES``, or
+    ``EXACT_OUTCOMES`` with exact sticking (min_hop_s 0)."""
+    return EXACT_OUTCOMES if settings.min_hop_s == 0.0 else OUTCOMES
+
+TWO_PI = 2.0 * math.pi
+#: default number of grid points per tile (memory per tile: a few tens of MB)
+DEFAULT_TILE_POINTS = 1 << 15
+
+
+@dataclass(frozen=True)
+class ClassifySettings:
+    """Stopping conditions of section 3, the paper's values by default (the one place these
+    defaults live: the config's ``classify`` block and the reference classifier take them from
+    here).
+
+    max_iterations: impacts at most (section 3: 100).
+    tolerance: period-1 when |v - v~| < tolerance (m/s) and the wrapped |theta - theta~| <
+    tolerance (rad) (section 3: 1e-3).
+    min_hop_s: sticking when a hop lasts less than this, s (section 3: 1e-3 s).
+    """
+
+    max_iterations: int = 100
+    tolerance: float = 1e-3
+    min_hop_s: float = 1e-3
+
+
+@dataclass(frozen=True)
+class Classification:
+    """Outcome codes (index into ``EXACT_OUTCOMES``, int8) and iteration counts (int16);
+    ``locked_cycles``: with exact sticking, the period in racket cycles of the locked orbit
+    that every orbit that sticks ends on (0: none at these parameters)."""
+
+    outcome: np.ndarray
+    iterations: np.ndarray
+    locked_cycles: int = 0
+
+    def names(self) -> np.ndarray:
+        return np.asarray(EXACT_OUTCOMES, dtype=object)[self.outcome]
+
+
+def compiled_kernel_available() -> bool:
+    """True when the compiled kernel (``engine.compiled``, numba) can be used: the
+    environment variable ``BOUNCE_KERNEL`` is not ``numpy``, numba is installed and the
+    kernel's module imports (numba may refuse, e.g. with no writable cache directory: then
+    the numpy kernel runs, with the same results)."""
+    if os.environ.get("BOUNCE_KERNEL", "auto").strip().lower() == "numpy":
+        return False
+    return importlib.util.find_spec("numba") is not None and _compiled_module_imports()
+
+
+@functools.lru_cache(maxsize=None)
+def _compiled_module_imports() -> bool:
+    try:
+        from ..model import compiled  # noqa: F401
+    except Exception:
+        return False
+    return True
+
+
+def load_compiled_kernel() -> None:
+    """Import numba and load the compiled kernel (from numba's cache: about 0.35 s; the
+    first time ever, compile it: a few seconds), so that later calls start at once."""
+    if compiled_kernel_available():
+        from ..model.compiled import load
+
+        load()
+
+
+def classify_batch(theta0, v0, params: ModelParams,
+                   settings: ClassifySettings = ClassifySettings(), *,
+                   require_fixed_point: bool = True,
+                   kernel: Literal["auto", "numpy", "compiled"] = "auto") -> Classification:
+    """Classify initial conditions (arrays broadcast) in one vectorised batch.
+
+    Returns a ``Classification`` with the broadcast shape. See the module docstring for the
+    outcomes and the meaning of the iteration count. Without a period-1 fixed point (eq. 8)
+    this raises NoFixedPointError, unless ``require_fixed_point`` is False: then no point is
+    ``period1`` and the others are decided by the same iteration (parameter sweeps).
+
+    ``kernel``: "numpy" is the code below; "compiled" the same arithmetic compiled with numba
+    (``engine.compiled``: identical outcomes and iteration counts, about 3x faster per core);
+    "auto" the compiled one when ``compiled_kernel_available()``.
+    """
+    theta0, v0 = np.broadcast_arrays(np.asarray(theta0, dtype=float), np.asarray(v0, dtype=float))
+    shape = theta0.shape
+    theta0, v0 = theta0.ravel(), v0.ravel()
+    if require_fixed_point or params.cos_theta_fixed() <= 1.0:
+        fp = params.fixed_point()
+    else:  # a NaN target: no state is within any tolerance of it
+        fp = FixedPoint(v_m_s=math.nan, theta_rad=math.nan)
+    exact = settings.min_hop_s == 0.0  # exact sticking: the numpy kernel, whatever ``kernel``
+    if not exact and (kernel == "compiled"
+                      or (kernel == "auto" and compiled_kernel_available())):
+        from ..model.compiled import classify_arrays
+
+        codes, counts = classify_arrays(theta0, v0, params, fp, settings.max_iterations,
+                                        settings.tolerance, settings.min_hop_s,
+                                        MAX_SAFE_STEPS)
+        return Classification(codes.reshape(shape), counts.reshape(shape))
+    tol = settings.tolerance
+    min_hop = settings.min_hop_s
+    w = params.omega
+    stick_code, stick_iterations, locked_cycles = STICKING, None, 0
+    if exact:
+        stick_code, stick_iterations, locked_cycles = _exact_sticking_fate(params, settings, fp)
+
+    outcome = np.full(theta0.shape, UNDECIDED, dtype=np.int8)
+    iterations = np.full(theta0.shape, settings.max_iterations, dtype=np.int16)
+
+    flies = can_fly(theta0, v0, params)
+    outcome[~flies] = BELOW_RACKET
+    iterations[~flies] = 0
+
+    idx = np.flatnonzero(flies)
+    th = np.mod(theta0[idx], TWO_PI)
+    vv = v0[idx]
+    # cos and sin of the wrapped phase, each computed once per impact: eq. 5 and the solver's
+    # start share them (the same values each would compute)
+    cos_th = np.cos(th)
+    a, g = params.racket_amplitude, params.g
+    for k in range(1, settings.max_iterations + 1):
+        if idx.size == 0:
+            break
+        hop = first_impact_phase(th, vv, a, w, g, cos_theta=cos_th, sin_theta=np.sin(th))
+        th = np.mod(th + hop, TWO_PI)
+        cos_th = np.cos(th)
+        vv = velocity_after_impact(th, vv, hop, params, cos_theta_next=cos_th)
+        # NaN hop (cannot leave the racket) compares False: sticking
+        sticking = ~(hop / w >= min_hop)
+        if exact:  # sticks where a complete chatter's tail is summable (``engine.chatter``)
+            sticking |= tail_is_summable(th, vv - a * w * cos_th, params)
+        period1 = (
+            (np.abs(vv - fp.v_m_s) < tol)
+            & (np.abs(phase_difference(th, fp.theta_rad)) < tol)
+            & ~sticking
+        )
+        settled = sticking | period1
+        if settled.any():
+            done = idx[settled]
+            outcome[done] = np.where(sticking[settled], stick_code, PERIOD1)
+            iterations[done] = (k if stick_iterations is None else
+                                np.where(sticking[settled], stick_iterations(k), k))
+            keep = ~settled
+            idx, th, vv, cos_th = idx[keep], th[keep], vv[keep], cos_th[keep]
+    return Classification(outcome.reshape(shape), iterations.reshape(shape), locked_cycles)
+
+
+def _exact_sticking_fate(params: ModelParams, settings: ClassifySettings, fp: FixedPoint):
+    """With exact sticking (min_hop_s 0): every orbit that sticks is released in the same
+    state, so it takes the one fate of the released ball (``chatter.release_fate``): locked
+    (its period in racket cycles), resting, or, when the released ball reaches the fixed point
+    or nothing within ``max_iterations``, period1 (iterations: the impacts to the stick plus
+    the released ball's) or undecided. Returns (outcome code of a sticking orbit, its
+    iterations as a function of the impact k at which it stuck, locked period in cycles)."""
+    fate = release_fate(params, settings.max_iterations, settings.tolerance,
+                        None if math.isnan(fp.v_m_s) else fp)
+    code = {"locked": LOCKED, "resting": RESTING, "period1": PERIOD1,
+            "undecided": UNDECIDED}[fate.kind]
+    limit = settings.max_iterations
+
+    def iterations(k: int) -> int:
+        if fate.kind == "period1":
+            return min(k + fate.impacts, limit)
+        return limit if fate.kind == "undecided" else k
+
+    return code, iterations, fate.cycles if fate.kind == "locked" else 0
+
+
+def classify_tile(args):
+    """One task of ``classify_grid``: (theta0, v0, params, settings, kernel) -> (outcome,
+    iterations) arrays; a module-level function, so that worker processes can receive it."""
+    theta0, v0, params, settings, kernel = args
+    result = classify_batch(theta0, v0, params, settings, kernel=kernel)
+    return result.outcome, result.iterations, result.locked_cycles
+
+
+def classify_grid(
+    theta0,
+    v0,
+    params: ModelParams,
+    settings: ClassifySettings = ClassifySettings(),
+    *,
+    map: Callable[[Callable[[Any], Any], Iterable[Any]], Iterator[Any]] = builtins.map,
+    workers: int = 1,
+    tile_points: int = DEFAULT_TILE_POINTS,
+    on_tile_done: Callable[[int], None] | None = None,
+    kernel: Literal["auto", "numpy", "compiled"] = "auto",
+) -> Classification:
+    """``classify_batch`` for large arrays: cut into tiles of at most ``tile_points`` points,
+    each classified by ``map(classify_tile, tiles)`` (any ``map``-like callable that yields
+    results in task order: the built-in ``map`` in this process, or an executor's ``map``
+    running tiles on ``workers`` processes; the engine starts no processes itself).
+
+    Tiles interleave the points (tile i holds points i, i + n, i + 2n, ... of the flattened
+    arrays), so every tile gets the same mix of cheap and expensive initial conditions and
+    the workers stay balanced; the number of tiles is a multiple of ``workers``.
+    ``on_tile_done(n_points)`` is called once per finished tile with the number of points in
+    it (for a progress bar). ``kernel`` as for ``classify_batch``. Results are identical for
+    any ``map``, ``workers``, ``tile_points`` and ``kernel``.
+    """
+    theta0, v0 = np.broadcast_arrays(np.asarray(theta0, dtype=float), np.asarray(v0, dtype=float))
+    shape = theta0.shape
+    theta0, v0 = theta0.ravel(), v0.ravel()
+    tiles = tile_slices(theta0.size, tile_points, workers)
+    outcome = np.empty(theta0.shape, dtype=np.int8)
+    iterations = np.empty(theta0.shape, dtype=np.int16)
+    # copies: contiguous arrays for a worker (and small pickles); made as tiles are sent
+    tasks = ((theta0[t].copy(), v0[t].copy(), params, settings, kernel) for t in tiles)
+    locked_cycles = 0  # the same in every tile: one release per parameter point
+    for tile, (tile_outcome, tile_iterations, tile_cycles) in zip(
+            tiles, map(classify_tile, tasks)):
+        outcome[tile], iterations[tile] = tile_outcome, tile_iterations
+        locked_cycles = tile_cycles
+        if on_tile_done is not None:
+            on_tile_done(tile_outcome.size)
+    return Classification(outcome.reshape(shape), iterations.reshape(shape), locked_cycles)
+
+
+def tile_slices(size: int, tile_points: int, workers: int = 1) -> list[slice]:
+    """Interleaved tiles [slice(i, None, n) for i < n] covering range(size), each of at most
+    ``tile_points`` points; n is rounded up to a multiple of ``workers``."""
+    if tile_points < 1:
+        raise ValueError("tile_points must be >= 1")
+    n = max(1, -(-size // tile_points))
+    if workers > 1:
+        n = workers * -(-n // workers)
+    n = min(n, max(size, 1))
+    return [slice(i, None, n) for i in range(n)]

@@ -1,0 +1,194 @@
+"""The model's alpha and g for a ``--data`` analysis: the data's own, unless the user set them.
+
+Every ``--data`` analysis (``learning``, ``regression``, ``acf``, ``impulse``, ``control``)
+runs the model at the data's racket (the mean period and amplitude of the impacts) and at the
+data's alpha and g:
+
+* alpha (eq. 3): the mean of the impacts table's ``alpha_measured`` column (per impact, from
+  the ball's velocities around it), else the median of its ``alpha`` column (logged by a
+  virtual set-up's events); over the unperturbed impacts when the table has ``perturbed``.
+* g: ``g_m_s2`` of the ``setup.csv`` beside the table (``bounce_cli.data.setup_table``, measured
+  from the ball's free flights), else the mean of a ``g_m_s2`` column.
+
+"Set by the user" means given on this command line: ``--set model.alpha=...`` (or
+``model.g``), or written under ``model:`` in the user's own ``--config`` file. The values of a
+bundled config (the paper's) are not set by the user: with ``--data`` they are replaced by the
+data's. A value set by the user wins over the data's. A value that is neither in the data nor
+set is a one-line error naming both ways to give it. Library use (``RunOptions`` without
+``model_set_by_user``, and the simulated lab sessions, whose config's model made the data)
+counts every config value as set.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..runtime.config import DATA_MODEL_KEYS, ConfigError
+from .plausibility import racket_warnings
+from .setup_table import SETUP_FILE, read_setup
+
+
+@dataclass(frozen=True)
+class ModelValue:
+    """One model parameter and where it came from: ``source`` is ``set`` (by the user),
+    ``config`` (library use: the config's value), ``measured`` (per impact,
+    ``alpha_measured``; or ``setup.csv``), ``events`` (the ``alpha`` column) or ``column``
+    (a ``g_m_s2`` column); ``n`` the observations it rests on."""
+
+    name: str
+    value: float
+    source: str
+    n: int = 0
+    detail: str = ""
+
+    def text(self, unit: str = "") -> str:
+        """``alpha 0.49 (measured, 438 impacts)`` or ``g 5.80 m/s^2 (set)``."""
+        shown = f"{self.value:.2f}" if self.name == "g" else f"{self.value:.3g}"
+        how = self.source if not self.detail else f"{self.source}, {self.detail}"
+        return f"{self.name} {shown}{' ' + unit if unit else ''} ({how})"
+
+    def record(self) -> dict[str, Any]:
+        """The entry of ``run.json``'s ``model_at_data``."""
+        return {"value": self.value, "source": self.source, "n": self.n,
+                "detail": self.detail}
+
+
+@dataclass(frozen=True)
+class DataModel:
+    """alpha and g of the model a --data analysis runs at, with their sources."""
+
+    alpha: ModelValue
+    g: ModelValue
+
+    def text(self) -> str:
+        """``model at the data's alpha 0.49 (measured, 438 impacts), g 5.80 m/s^2 (measured)``
+        (library use: ``model at the config's alpha 0.5 (config), ...``)."""
+        whose = "config's" if "config" in (self.alpha.source, self.g.source) else "data's"
+        return f"model at the {whose} {self.alpha.text()}, {self.g.text('m/s^2')}"
+
+    def record(self) -> dict[str, Any]:
+        return {"alpha": self.alpha.record(), "g": self.g.record()}
+
+
+def _unperturbed(frame) -> Any:
+    if "perturbed" in frame.columns:
+        return frame[~frame["perturbed"].astype(bool)]
+    return frame
+
+
+def _finite(values) -> np.ndarray:
+    x = np.asarray(values, dtype=float)
+    return x[np.isfinite(x)]
+
+
+def alpha_from_data(frame) -> ModelValue | None:
+    """The data's alpha: the mean of ``alpha_measured`` (per impact), else the median of the
+    ``alpha`` column (events), over the unperturbed impacts; None when the table has neither."""
+    rows = _unperturbed(frame)
+    if "alpha_measured" in frame.columns:
+        values = _finite(rows["alpha_measured"])
+        if len(values):
+            return ModelValue("alpha", float(values.mean()), "measured", len(values),
+                              f"{len(values)} impacts")
+    if "alpha" in frame.columns:
+        values = _finite(rows["alpha"])
+        if len(values):
+            return ModelValue("alpha", float(np.median(values)), "events", len(values),
+                              f"median of {len(values)} impacts")
+    return None
+
+
+def g_from_data(frame, paths: list) -> ModelValue | None:
+    """The data's g: ``g_m_s2`` of each file's ``setup.csv`` (several files: their mean
+    weighted by flights), else the mean of a ``g_m_s2`` column; None when neither is there."""
+    measured = [q for q in (read_setup(p).get("g_m_s2") for p in paths) if q is not None]
+    if measured and len(measured) == len(paths):
+        weights = np.array([max(q.n, 1) for q in measured], float)
+        value = float(np.average([q.estimate for q in measured], weights=weights))
+        n = int(sum(q.n for q in measured))
+        where = SETUP_FILE if len(paths) == 1 else f"{len(paths)} {SETUP_FILE} files"
+        return ModelValue("g", value, "measured", n, where)
+    if "g_m_s2" in frame.columns:
+        values = _finite(frame["g_m_s2"])
+        if len(values):
+            return ModelValue("g", float(values.mean()), "column", len(values), "g_m_s2")
+    return None
+
+
+def data_model(impacts, model, set_by_user: frozenset[str] | None,
+               paths: list | None = None) -> DataModel:
+    """alpha and g for the model at the data's parameters (module docstring).
+
+    Parameters
+    ----------
+    impacts : bounce_cli.data.impacts.Impacts
+        The checked impacts table (its ``path`` names it in messages).
+    model : ModelBlock
+        The config's ``model`` block.
+    set_by_user : frozenset of str or None
+        The model keys (``alpha``, ``g``) the user set; None: every config value counts as set.
+    paths : list of path, optional
+        The files the table was read from (their ``setup.csv`` give g); none for a table in
+        memory.
+
+    Returns
+    -------
+    DataModel
+        The values and their sources.
+
+    Raises
+    ------
+    ConfigError
+        When a value is neither in the data nor set by the user (one line naming both ways).
+    """
+    given = frozenset(DATA_MODEL_KEYS) if set_by_user is None else set_by_user
+    how = "config" if set_by_user is None else "set"
+    alpha = (ModelValue("alpha", float(model.alpha), how) if "alpha" in given
+             else alpha_from_data(impacts.frame))
+    g = (ModelValue("g", float(model.g), how) if "g" in given
+         else g_from_data(impacts.frame, list(paths or [])))
+    missing = []
+    if alpha is None:
+        missing.append("alpha (no alpha_measured or alpha column in the table)")
+    if g is None:
+        missing.append(f"g (no {SETUP_FILE} with g_m_s2 beside it, no g_m_s2 column)")
+    if missing:
+        keys = " and ".join(f"--set model.{m.split()[0]}=VALUE" for m in missing)
+        raise ConfigError(f"data: {impacts.path}: the model needs " + " and ".join(missing)
+                          + f": give the data's (bounce extract writes alpha_measured and "
+                          f"{SETUP_FILE}) or set {keys} (or model: in your own --config)")
+    assert alpha is not None and g is not None
+    if not math.isfinite(alpha.value) or not 0.0 <= alpha.value < 1.0:
+        raise ConfigError(f"data: {impacts.path}: the data's alpha {alpha.value:.3g} is "
+                          "outside [0, 1); set model.alpha")
+    if not math.isfinite(g.value) or g.value <= 0.0:
+        raise ConfigError(f"data: {impacts.path}: the data's g {g.value:.3g} m/s^2 is not "
+                          "positive; set model.g")
+    return DataModel(alpha, g)
+
+
+def model_for_data(impacts, config, options, source) -> DataModel:
+    """``data_model`` for an analysis: the user's settings from ``options`` (the CLI's
+    ``model_set_by_user``), the ``setup.csv`` of the file(s) ``source`` names (none for a
+    table in memory), and the result recorded for ``run.json`` (``model_at_data``). The data's
+    racket is checked against what a person can do (``plausibility``: a warning naming the
+    likely unit slip)."""
+    if source is None:
+        source = config.data
+    paths = [] if isinstance(source, tuple) else (
+        list(source) if isinstance(source, list) else [source])
+    found = data_model(impacts, config.model, options.model_set_by_user, paths)
+    options.record["model_at_data"] = found.record()
+    frame = impacts.frame
+    if {"racket_amplitude_m", "racket_period_s"} & set(frame.columns):
+        means = frame.groupby("trial", sort=False).mean(numeric_only=True)
+        for message in racket_warnings(
+                means.get("racket_amplitude_m", np.nan), means.get("racket_period_s", np.nan),
+                f"data: {impacts.path}: column racket_amplitude_m (trial means)",
+                f"data: {impacts.path}: column racket_period_s (trial means)"):
+            options.warn(message)
+    return found

@@ -1,0 +1,233 @@
+"""Reading lab recordings (racket and ball positions per trial) and event logs into SI arrays.
+
+* CSV: one row per sample, columns named in the config's ``columns`` mapping (trial, time,
+  racket, ball), units in ``units`` (length m | cm | mm, time s | ms). Several trials in one
+  file; a file without a trial column is one trial (``columns.trial: null``); without ball
+  data set ``columns.ball: null`` (then events must give the impacts). Empty cells are gaps.
+  ``columns.racket`` may name several columns: the racket's height is their mean.
+* Marker files, by ``format`` (``auto``: C3D by the ``.c3d`` suffix, the text exports by their
+  first line): C3D (``c3d_files``; the ``c3d`` package's parts, ``pip install '.[c3d]'``),
+  Vicon Nexus CSV, Qualisys QTM TSV, OptiTrack Motive CSV (``text_exports``). The racket and
+  ball markers by their labels, the vertical axis by name (``markers`` block, ``markers.py``);
+  the length unit from the file (or ``markers.units``); one file is one trial (named after the
+  file); invalid points are gaps.
+* Events CSV (``--events``): one row per impact (trial, time, optional alpha), as a virtual
+  set-up logs them, columns in ``event_columns``, time in ``units.time``.
+
+Every problem is one line naming the file and the column or trial (``ConfigError``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+import pandas as pd
+
+from ...runtime.config import ConfigError
+from .c3d_files import read_c3d_markers
+from .markers import MarkerSet, marker_heights
+from .text_exports import (
+    DEFAULT_VERTICAL,
+    check_text,
+    detect_format,
+    read_motive_csv,
+    read_qtm_tsv,
+    read_vicon_csv,
+)
+
+LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+TIME_UNITS = {"s": 1.0, "ms": 0.001}
+#: a trial needs at least this many samples (a few racket cycles at any sensible rate)
+MIN_SAMPLES = 50
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One trial's samples in SI units; ``ball`` is None without ball data."""
+
+    label: object
+    t: np.ndarray
+    racket: np.ndarray
+    ball: np.ndarray | None
+
+
+@dataclass(frozen=True)
+class Events:
+    """One trial's logged impacts: times (s) and, if logged, alpha."""
+
+    t: np.ndarray
+    alpha: np.ndarray | None
+
+
+def read_table(path: Path, csv_format: Any = None) -> pd.DataFrame:
+    """A CSV file as a DataFrame; a missing or unreadable file is a one-line ConfigError.
+    ``csv_format`` (the config's ``csv`` block): separator (blank: runs of whitespace),
+    decimal mark, rows to skip after the header; ``attrs["first_row"]`` is the file's line
+    number of the first data row (for messages)."""
+    separator = "," if csv_format is None else csv_format.separator
+    decimal = "." if csv_format is None else csv_format.decimal
+    skip = 0 if csv_format is None else csv_format.skip_rows
+    try:
+        with open(path, "rb") as handle:
+            check_text(path, handle.read(65536))
+        frame = pd.read_csv(path, sep=r"\s+" if not separator.strip() else separator,
+                            decimal=decimal, skiprows=range(1, 1 + skip) if skip else None,
+                            engine="c" if len(separator) == 1 else "python")
+        frame.attrs["first_row"] = 2 + skip
+        return frame
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: file not found") from None
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: cannot read as CSV: not UTF-8 text (byte "
+                          f"{exc.object[exc.start]:#04x} at offset {exc.start}): a binary "
+                          "file, or save it as UTF-8") from None
+    except (pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else "empty file"
+        raise ConfigError(f"{path}: cannot read as CSV: {first}") from None
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read: {exc.strerror}") from None
+
+
+def _column(frame: pd.DataFrame, path: Path, name: str, key: str) -> np.ndarray:
+    if name not in frame.columns:
+        have = ", ".join(map(str, frame.columns[:12]))
+        other = next((sep for sep in (";", "\t", "|", " ") if any(
+            sep in str(c) and name in str(c).split(sep) for c in frame.columns)), None)
+        hint = ("; another separator? set csv.separator" if other is not None
+                else f"; set {key}")
+        raise ConfigError(f"{path}: no column {name!r} (the file has: {have}{hint})")
+    values = pd.to_numeric(frame[name], errors="coerce")
+    bad = values.isna() & frame[name].notna()
+    if bad.any():
+        row = int(np.flatnonzero(bad.to_numpy())[0])
+        hint = " (a row of units? set csv.skip_rows)" if row == 0 else ""
+        raise ConfigError(f"{path}: column {name!r}, row {row + frame.attrs.get('first_row', 2)}"
+                          f": not a number ({frame[name].iloc[row]!r}){hint}")
+    return values.to_numpy(float)
+
+
+def _groups(frame: pd.DataFrame, path: Path, trial_column: str | None, key: str):
+    """(label, row indices) per trial, in order of first appearance."""
+    if trial_column is None:
+        return [(1, np.arange(len(frame)))]
+    if trial_column not in frame.columns:
+        have = ", ".join(map(str, frame.columns[:12]))
+        raise ConfigError(f"{path}: no column {trial_column!r} (set {key}, or null for a "
+                          f"single trial; the file has: {have})")
+    labels = frame[trial_column]
+    if labels.isna().any():
+        row = int(np.flatnonzero(labels.isna().to_numpy())[0])
+        raise ConfigError(f"{path}: column {trial_column!r}, row {row + 2}: empty trial label")
+    return [(label, np.flatnonzero((labels == label).to_numpy()))
+            for label in pd.unique(labels)]
+
+
+def check_trial(path: Path, label, t: np.ndarray, time_column: str) -> None:
+    """Time must increase strictly and a trial needs ``MIN_SAMPLES`` samples."""
+    if len(t) < MIN_SAMPLES:
+        raise ConfigError(f"{path}: trial {label}: only {len(t)} samples (at least "
+                          f"{MIN_SAMPLES} needed)")
+    if not np.all(np.isfinite(t)):
+        raise ConfigError(f"{path}: trial {label}: column {time_column!r} has empty cells")
+    step = np.diff(t)
+    if np.any(step <= 0.0):
+        i = int(np.flatnonzero(step <= 0.0)[0])
+        verb = "runs backwards" if step[i] < 0.0 else "repeats a time"
+        raise ConfigError(f"{path}: trial {label}: column {time_column!r} {verb} at sample "
+                          f"{i + 2} ({t[i]:g} -> {t[i + 1]:g})")
+
+
+def read_csv_recording(path: Path, columns, units, csv_format=None) -> list[Trial]:
+    """Trials of a CSV recording (``columns``: trial, time, racket (one name or several:
+    their mean), ball names; ``units``: length and time units; ``csv_format``: see
+    ``read_table``)."""
+    frame = read_table(path, csv_format)
+    length, time = LENGTH_UNITS[units.length], TIME_UNITS[units.time]
+    t_all = _column(frame, path, columns.time, "columns.time") * time
+    racket_names = [columns.racket] if isinstance(columns.racket, str) else columns.racket
+    racket_all = np.mean([_column(frame, path, name, "columns.racket")
+                          for name in racket_names], axis=0) * length
+    ball_all = (_column(frame, path, columns.ball, "columns.ball") * length
+                if columns.ball is not None else None)
+    trials = []
+    for label, rows in _groups(frame, path, columns.trial, "columns.trial"):
+        t = t_all[rows]
+        check_trial(path, label, t, columns.time)
+        trials.append(Trial(label, t, racket_all[rows],
+                            None if ball_all is None else ball_all[rows]))
+    return trials
+
+
+#: the marker-file formats and their readers: (path, length unit or None, warn) -> MarkerSet
+MARKER_READERS: dict[str, Callable[..., MarkerSet]] = {
+    "c3d": read_c3d_markers, "vicon": read_vicon_csv, "qtm": read_qtm_tsv,
+    "motive": read_motive_csv}
+
+
+def read_marker_recording(path: Path, file_format: str, markers,
+                          warn: Callable[[str], None]) -> list[Trial]:
+    """One trial (named after the file) from a marker file of ``file_format``: the racket's
+    height (the mean of ``markers.racket``'s), the ball's, along ``markers.vertical_axis``
+    (or the format's vertical axis)."""
+    found = MARKER_READERS[file_format](path, markers.units, warn)
+    racket_names = [markers.racket] if isinstance(markers.racket, str) else markers.racket
+    axis = markers.vertical_axis or DEFAULT_VERTICAL[file_format]
+    racket, ball = marker_heights(path, found, racket_names, markers.ball, axis)
+    time_source = {"c3d": "POINT:RATE", "vicon": "Frame", "qtm": "Time",
+                   "motive": "Time (Seconds)"}[file_format]
+    check_trial(path, path.stem, found.t, time_source)
+    return [Trial(path.stem, found.t, racket, ball)]
+
+
+def read_recording(path: Path, columns, units, markers, csv_format=None, file_format="auto",
+                   warn: Callable[[str], None] = lambda message: None) -> list[Trial]:
+    """A recording in ``file_format`` (``auto``: ``detect_format``): a CSV table or a marker
+    file (C3D, Vicon, QTM, Motive)."""
+    path = Path(path)
+    if file_format == "auto":
+        file_format = detect_format(path)
+    if file_format == "csv":
+        trials = read_csv_recording(path, columns, units, csv_format)
+    else:
+        trials = read_marker_recording(path, file_format, markers, warn)
+    if not trials:
+        raise ConfigError(f"{path}: no samples (a header and no rows?)")
+    return trials
+
+
+def read_events(path: Path, event_columns, units, trials: list[Trial],
+                csv_format=None) -> dict[str, Events]:
+    """Logged impacts per trial label (every trial of the recording gets an entry)."""
+    path = Path(path)
+    frame = read_table(path, csv_format)
+    time = TIME_UNITS[units.time]
+    t_all = _column(frame, path, event_columns.time, "event_columns.time") * time
+    alpha_all = None
+    if event_columns.alpha is not None and event_columns.alpha in frame.columns:
+        alpha_all = _column(frame, path, event_columns.alpha, "event_columns.alpha")
+    known = {_key(trial.label): trial.label for trial in trials}
+    if event_columns.trial is None:
+        if len(trials) != 1:
+            raise ConfigError(f"{path}: no trial column but the recording has {len(trials)} "
+                              "trials (set event_columns.trial)")
+        groups = [(trials[0].label, np.arange(len(frame)))]
+    else:
+        groups = _groups(frame, path, event_columns.trial, "event_columns.trial")
+    events = {_key(trial.label): Events(np.array([]), None) for trial in trials}
+    for label, rows in groups:
+        if _key(label) not in known:
+            raise ConfigError(f"{path}: trial {label} is not in the recording")
+        t = t_all[rows]
+        if np.any(np.diff(t) <= 0.0) or not np.all(np.isfinite(t)):
+            raise ConfigError(f"{path}: trial {label}: column {event_columns.time!r} does not "
+                              "increase")
+        events[_key(label)] = Events(t, None if alpha_all is None else alpha_all[rows])
+    return events
+
+
+def _key(label) -> str:
+    """Trial labels compare as text (1 and '1' are the same trial in two files)."""
+    return str(label)

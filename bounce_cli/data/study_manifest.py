@@ -1,0 +1,197 @@
+"""The study manifest (``bounce study --manifest study.csv``): one row per recording.
+
+Columns:
+
+=========================  =====================================================================
+``file``                   a recording (any format ``bounce extract`` reads: CSV/TSV or C3D) or
+                           an impacts table (``impacts.csv``); relative paths are relative to the
+                           manifest's folder
+``subject``                the subject (required): a unit of the study is a subject x condition
+``events`` (optional)      the events file of a recording (a virtual set-up's log)
+``condition``, ``session``, factors carried into every output; ``trial`` numbers a recording in
+``trial`` and any other    its subject's series (the learning trend's x axis); an empty cell is
+column                     the factor's value ``""`` (printed as ``-``)
+``extract.<key>``          a per-row override of the study's extraction settings, e.g.
+                           ``extract.markers.ball`` (an empty cell: no override)
+=========================  =====================================================================
+
+Read before anything runs: a missing column, a file that does not exist, a duplicate row or a
+factor value that cannot name a folder is one line naming the manifest, the line and the reason.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+import yaml
+
+from ..runtime.config import ConfigError
+
+#: columns every manifest has
+REQUIRED_COLUMNS = ("file", "subject")
+#: columns that are not factors
+FILE_COLUMNS = ("file", "events")
+#: prefix of the columns that override the extraction's settings per row
+OVERRIDE_PREFIX = "extract."
+#: a factor value names a folder: letters, digits and . _ - (and spaces inside)
+_SAFE = re.compile(r"^[A-Za-z0-9._\-][A-Za-z0-9._\- ]*$")
+
+
+@dataclass(frozen=True)
+class ManifestRow:
+    """One recording of the study: its file (absolute), events file, factors (column ->
+    value, as written) and extraction overrides (``key=value`` texts, ``--set`` style)."""
+
+    line: int
+    file: Path
+    events: Path | None
+    factors: dict[str, str]
+    overrides: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Unit:
+    """The recordings analysed together: one value per grouping factor."""
+
+    key: tuple[str, ...]
+    grouping: tuple[str, ...]
+    rows: tuple[ManifestRow, ...] = field(default_factory=tuple)
+
+    @property
+    def label(self) -> str:
+        """``subject s1, condition vision``."""
+        return ", ".join(f"{name} {value or '-'}" for name, value in zip(self.grouping, self.key))
+
+    @property
+    def folder(self) -> str:
+        """The unit's folder under ``--out``: ``<subject>/<condition>``."""
+        return "/".join(value or "-" for value in self.key)
+
+    def factors(self) -> dict[str, str]:
+        """The factors constant over the unit's rows (the grouping factors among them)."""
+        common = dict(self.rows[0].factors)
+        for row in self.rows[1:]:
+            for name in list(common):
+                if row.factors.get(name) != common[name]:
+                    del common[name]
+        return {**common, **dict(zip(self.grouping, self.key))}
+
+
+@dataclass(frozen=True)
+class Manifest:
+    """A checked manifest: its rows in file order and its factor columns."""
+
+    path: Path
+    rows: tuple[ManifestRow, ...]
+    factor_columns: tuple[str, ...]
+
+    def units(self, grouping: tuple[str, ...]) -> list[Unit]:
+        """The units by ``grouping`` (factors the manifest must have), in order of first
+        appearance; a unit's rows are ordered by their ``trial`` factor where it is a number,
+        else as listed."""
+        missing = [g for g in grouping if g not in self.factor_columns]
+        if missing:
+            raise ConfigError(f"grouping: manifest {self.path} has no column "
+                              f"{', '.join(map(repr, missing))} (its factors: "
+                              f"{', '.join(self.factor_columns)})")
+        groups: dict[tuple[str, ...], list[ManifestRow]] = {}
+        for row in self.rows:
+            groups.setdefault(tuple(row.factors[g] for g in grouping), []).append(row)
+        return [Unit(key, tuple(grouping), tuple(sorted(rows, key=_trial_order)))
+                for key, rows in groups.items()]
+
+
+def _trial_order(row: ManifestRow) -> tuple[float, int]:
+    try:
+        return float(row.factors.get("trial", "")), row.line
+    except ValueError:
+        return float("inf"), row.line
+
+
+def read_manifest(path: str | Path) -> Manifest:
+    """The manifest at ``path``, checked (see the module docstring).
+
+    Parameters
+    ----------
+    path : str or Path
+        The manifest CSV.
+
+    Returns
+    -------
+    Manifest
+        Rows with absolute file paths, factors and per-row extraction overrides.
+
+    Raises
+    ------
+    ConfigError
+        One line naming the manifest (and the line) for every problem found before the study
+        runs.
+    """
+    path = Path(path)
+    where = f"manifest {path}"
+    try:
+        frame = pd.read_csv(path, dtype=str, keep_default_na=False, skipinitialspace=True)
+    except FileNotFoundError:
+        raise ConfigError(f"{where}: file not found") from None
+    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ConfigError(f"{where}: cannot read as CSV: {first}") from None
+    frame.columns = [str(c).strip() for c in frame.columns]
+    missing = [c for c in REQUIRED_COLUMNS if c not in frame.columns]
+    if missing:
+        raise ConfigError(f"{where}: missing column(s) {', '.join(missing)} (a manifest has "
+                          f"one row per recording: file, subject[, condition, trial, ...])")
+    twice = sorted({c for c in frame.columns if list(frame.columns).count(c) > 1})
+    if twice:
+        raise ConfigError(f"{where}: column(s) {', '.join(twice)} given twice")
+    if frame.empty:
+        raise ConfigError(f"{where}: no rows (one row per recording)")
+    overrides = [c for c in frame.columns if c.startswith(OVERRIDE_PREFIX)]
+    factors = tuple(c for c in frame.columns if c not in FILE_COLUMNS and c not in overrides)
+    rows: list[ManifestRow] = []
+    seen: dict[tuple, int] = {}
+    base = path.parent
+    for i, record in enumerate(frame.to_dict("records"), start=2):
+        text = record["file"].strip()
+        if not text:
+            raise ConfigError(f"{where}: line {i}: empty file cell")
+        file = _existing(base, text, where, i, "file")
+        events_text = record.get("events", "").strip()
+        events = _existing(base, events_text, where, i, "events") if events_text else None
+        values = {name: record[name].strip() for name in factors}
+        if not values["subject"]:
+            raise ConfigError(f"{where}: line {i}: empty subject cell")
+        for name, value in values.items():
+            if value and (not _SAFE.match(value) or value in (".", "..")):
+                raise ConfigError(f"{where}: line {i}: {name} {value!r}: a factor value names a "
+                                  "folder (use letters, digits, '.', '_', '-' and spaces)")
+        texts = []
+        for column in overrides:
+            cell = record[column].strip()
+            if cell:
+                key = column[len(OVERRIDE_PREFIX):]
+                try:
+                    yaml.safe_load(cell)
+                except yaml.YAMLError:
+                    raise ConfigError(f"{where}: line {i}: {column}: cannot parse {cell!r} as a "
+                                      "YAML value") from None
+                texts.append(f"{key}={cell}")
+        identity = (file, events, tuple(sorted(values.items())))
+        if identity in seen:
+            raise ConfigError(f"{where}: line {i}: the same recording and factors as line "
+                              f"{seen[identity]} (duplicate row)")
+        seen[identity] = i
+        rows.append(ManifestRow(i, file, events, values, tuple(texts)))
+    return Manifest(path, tuple(rows), factors)
+
+
+def _existing(base: Path, text: str, where: str, line: int, column: str) -> Path:
+    file = Path(text)
+    file = file if file.is_absolute() else base / file
+    if not file.is_file():
+        raise ConfigError(f"{where}: line {line}: {column} {text!r}: no such file "
+                          f"(paths are relative to the manifest's folder)")
+    return file.resolve()

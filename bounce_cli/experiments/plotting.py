@@ -1,0 +1,242 @@
+"""Figure helpers shared by the experiments: figures are built on matplotlib's object API
+(no pyplot state, no display needed) from the same DataFrames that are written as CSV.
+
+The publication style is written here once and applied by every experiment's ``draw``
+(:func:`publication_style`): mathtext for every symbol (``$\\theta_k$``, ``m/s$^2$``, never
+``theta[k]`` or ``m/s^2``), integer ticks on integer axes (:func:`integer_axis`: trial,
+impact index, lag), and no run metadata in titles: the parameters, size and seed of a run
+(:func:`caption_figures`) go into the file's metadata instead (the PNG's text chunks, the
+PDF's Subject, the SVG's Description; :func:`save_figure`), beside ``run.json``.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Callable, TypeVar
+
+import numpy as np
+
+from ..paper.values import parameters_text
+
+if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn (an experiment's module
+    # can be imported, and its draw decorated, without it)
+    import pandas as pd
+    from matplotlib.figure import Figure
+
+    from ..model.params import ModelParams
+
+#: the file formats a figure can be written in (``--figure-format``)
+FIGURE_FORMATS = ("png", "pdf", "svg")
+
+#: rcParams of every figure while it is drawn: tick labels in mathtext (a true minus sign,
+#: powers of ten as superscripts)
+DRAW_STYLE: dict[str, Any] = {"axes.formatter.use_mathtext": True}
+
+#: rcParams while a figure is written: fonts embedded as TrueType in PDF (editable, accepted
+#: by journals; matplotlib's default Type 3 is not), SVG element ids from a fixed salt (a
+#: rerun writes the same bytes)
+SAVE_STYLE: dict[str, Any] = {"pdf.fonttype": 42, "svg.hashsalt": "bounce"}
+
+#: axis labels of the responses to a perturbation (Figs. 9-11: impulse, its data side, control)
+VELOCITY_LABEL = "velocity after impact $v_k$ (m/s)"
+PHASE_LABEL = r"phase of impact $\theta_k$ (deg)"
+IMPACT_AFTER_LABEL = "impact $k$ after the perturbation (0: the perturbed impact)"
+
+#: a figure's attribute holding its caption line (parameters, run size, seed, data)
+_CAPTION = "_bounce_caption"
+
+F = TypeVar("F", bound=Callable[..., Any])
+
+
+def publication_style(draw: F) -> F:
+    """Decorator of an experiment's ``draw``: its figures are made in :data:`DRAW_STYLE`."""
+
+    @functools.wraps(draw)
+    def styled(*args, **kwargs):
+        from matplotlib import rc_context
+
+        with rc_context(DRAW_STYLE):  # type: ignore[arg-type]  # (the keys are rcParams)
+            return draw(*args, **kwargs)
+
+    return styled  # type: ignore[return-value]
+
+
+def new_figure(nrows: int = 1, ncols: int = 1, *, width: float = 6.4, height: float = 4.8,
+               **subplot_kw: Any) -> tuple[Figure, Any]:
+    """A Figure with a grid of axes (``squeeze=False`` so ``axes[i, j]`` always works)."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width, height), layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=False, **subplot_kw)
+    return fig, axes
+
+
+def perturbation_title(lower: bool) -> str:
+    """The title of a column of Figs. 9-11: the perturbed alpha below or above alpha_0."""
+    return r"$\alpha_p < \alpha_0$" if lower else r"$\alpha_p > \alpha_0$"
+
+
+def integer_axis(*axes: Any, which: str = "x") -> None:
+    """Ticks at whole numbers only on the ``which`` axis ("x", "y" or a colorbar's "y") of
+    each of ``axes``: a trial, an impact index or a lag has no value 1.25."""
+    from matplotlib.ticker import MaxNLocator
+
+    for ax in axes:
+        getattr(ax, f"{which}axis").set_major_locator(MaxNLocator(integer=True))
+
+
+def caption_figures(figures: dict[str, Figure], params: ModelParams | None,
+                    extra: str = "") -> None:
+    """Record the parameters a run was made at (and ``extra``, e.g. the run's size and seed)
+    as each figure's caption: written into the file's metadata (:func:`save_figure`), not
+    into its title, so that figures of two runs can be told apart without the title carrying
+    run metadata."""
+    parts = ([parameters_text(params)] if params is not None else []) + ([extra] if extra else [])
+    for fig in figures.values():
+        setattr(fig, _CAPTION, "; ".join(parts))
+
+
+def figure_caption(fig: Figure) -> str:
+    """The caption line :func:`caption_figures` recorded ('' for a figure drawn from CSVs)."""
+    return str(getattr(fig, _CAPTION, ""))
+
+
+def figure_title(fig: Figure) -> str:
+    """The figure's title: its suptitle, else its first axes title (one line)."""
+    title = fig.get_suptitle() or next((ax.get_title() for ax in fig.axes if ax.get_title()),
+                                       "")
+    return " ".join(title.split())
+
+
+def figure_metadata(fig: Figure, kind: str, source: str) -> dict[str, Any]:
+    """The metadata written into a figure file of format ``kind``: its title, its caption
+    (:func:`caption_figures`) and the command that made it (``source``); no date, so that a
+    rerun writes the same bytes. Keys as each format names them (PNG text chunks, the PDF
+    document information, SVG's Dublin Core)."""
+    title, caption = figure_title(fig), figure_caption(fig)
+    meta: dict[str, Any]
+    if kind == "png":
+        meta = {"Title": title, "Description": caption, "Source": source}
+    elif kind == "pdf":
+        meta = {"Title": title, "Subject": caption, "Creator": source, "CreationDate": None}
+    else:
+        meta = {"Title": title, "Description": caption, "Creator": source, "Date": None}
+    return {k: v for k, v in meta.items() if v != ""}
+
+
+def save_figure(fig: Figure, path: Path, kind: str, *, dpi: float, source: str,
+                png_options: dict[str, Any] | None = None) -> None:
+    """Write ``fig`` to ``path`` as ``kind`` (one of :data:`FIGURE_FORMATS`) at ``dpi``, with
+    :func:`figure_metadata`, in :data:`SAVE_STYLE`.
+
+    Parameters
+    ----------
+    fig : Figure
+        The figure (from an experiment's ``draw``).
+    path : Path
+        The file to write (its name's suffix is not consulted).
+    kind : str
+        "png", "pdf" or "svg".
+    dpi : float
+        Resolution of a PNG (and of raster parts of a PDF or SVG), dots per inch.
+    source : str
+        What made the figure (e.g. ``bounce basin``), written into its metadata.
+    png_options : dict, optional
+        Pillow's options for a PNG (e.g. ``{"compress_level": 1}``).
+
+    Returns
+    -------
+    None
+    """
+    from matplotlib import rc_context
+
+    extra: dict[str, Any] = {"pil_kwargs": png_options} if kind == "png" and png_options else {}
+    with rc_context(SAVE_STYLE):  # type: ignore[arg-type]  # (the keys are rcParams)
+        fig.savefig(path, format=kind, dpi=dpi, metadata=figure_metadata(fig, kind, source),
+                    **extra)
+
+
+def data_caption(config: Any, source: Any = None, record: dict | None = None) -> str:
+    """A data-side figure's caption line: where the impacts came from and the model's alpha
+    and g with their sources (``record``: a run's ``RunOptions.record``, whose
+    ``model_at_data`` the data analyses fill; else the config's; the racket is the data's)."""
+    if source is not None:
+        where = "data: a simulated lab session"
+    elif config.data is not None:
+        where = "data: " + " + ".join(
+            [str(p) for p in config.data] if isinstance(config.data, list) else [config.data])
+    else:
+        where = "model only (no --data)"
+    used = (record or {}).get("model_at_data")
+    if used:
+        alpha, g = used["alpha"], used["g"]
+        return (f"{where}; model alpha = {alpha['value']:.3g} ({alpha['source']}), "
+                f"g = {g['value']:.3g} m/s^2 ({g['source']})")
+    return f"{where}; model alpha = {config.model.alpha:g}, g = {config.model.g:g} m/s^2"
+
+
+#: panel layout of Fig. 8: (row, column) -> pair
+PANELS = {(0, 0): "v_v", (0, 1): "theta_to_v", (1, 0): "v_to_theta", (1, 1): "theta_theta"}
+TITLES = {
+    "v_v": r"ACF of velocity: corr($v_{k+l}$, $v_k$)",
+    "theta_to_v": r"phase $\to$ velocity: corr($v_{k+l}$, $\theta_k$)",
+    "v_to_theta": r"velocity $\to$ phase: corr($\theta_{k+l}$, $v_k$)",
+    "theta_theta": r"ACF of phase: corr($\theta_{k+l}$, $\theta_k$)",
+}
+#: the x axis of every correlation panel (Fig. 8, with data, with control)
+LAG_LABEL = "lag $l$ (bounces)"
+
+
+def centred_deg(theta_deg):
+    """Phases in degrees mapped to [-180, 180): means and plots of phases near 0 stay
+    meaningful (the table keeps [0, 360))."""
+    return (np.asarray(theta_deg, dtype=float) + 180.0) % 360.0 - 180.0
+
+
+# -- Fig. 2 -------------------------------------------------------------------------------------
+def draw_fig2(samples: pd.DataFrame, impacts: pd.DataFrame, title: str, bounces: int = 10):
+    """Fig. 2: continuous trajectories on top; v_k and theta_k of the same bounces below, each
+    with its sample mean dashed. Shows the first trial of ``samples``, its impacts within the
+    samples' time span (at most ``bounces``); perturbed impacts (if marked) in red."""
+    label = samples["trial"].iloc[0]
+    s = samples[samples["trial"].astype(str) == str(label)]
+    t0, t1 = float(s["t_s"].min()), float(s["t_s"].max())
+    imp = impacts[(impacts["trial"].astype(str) == str(label)) & (impacts["t_s"] >= t0)
+                  & (impacts["t_s"] <= t1)].head(bounces)
+    fig, axes = new_figure(3, 1, width=7.5, height=7.0, sharex=True,
+                           gridspec_kw={"height_ratios": [2.2, 1, 1]})
+    ax_x, ax_v, ax_th = axes[0, 0], axes[1, 0], axes[2, 0]
+    if imp.empty:
+        t_hi = t1
+    else:
+        last = imp.iloc[-1]
+        t_hi = min(t1, float(last["t_s"]) + (float(last["hop_s"])
+                                              if math.isfinite(last["hop_s"]) else 0.0))
+    s = s[s["t_s"] <= t_hi]
+    ax_x.plot(s["t_s"], s["ball_x_m"], color="C0", lw=1.0, label="ball $x_b$")
+    ax_x.plot(s["t_s"], s["racket_x_m"], color="k", lw=0.9, label="racket $x_r$")
+    ax_x.set_ylabel("position (m)")
+    ax_x.legend(loc="upper right", fontsize=7, ncol=2)
+    perturbed = (imp["perturbed"].astype(str).str.lower() == "true").to_numpy() \
+        if "perturbed" in imp.columns else np.zeros(len(imp), dtype=bool)
+    for ax, column, label_, color in ((ax_v, "v_m_s", "$v_k$ (m/s)", "C0"),
+                                      (ax_th, "theta_deg", "$\\theta_k$ (deg)", "C2")):
+        t, y = imp["t_s"].to_numpy(float), imp[column].to_numpy(float)
+        if column == "theta_deg":
+            y = centred_deg(y)
+        ax.plot(t, y, "o-", ms=4, lw=0.8, color=color)
+        if perturbed.any():
+            ax.plot(t[perturbed], y[perturbed], "o", ms=6, color="C3",
+                    label=r"perturbed impact ($\alpha$ changed)")
+            ax.legend(loc="best", fontsize=7)
+        if len(y):
+            ax.axhline(float(np.mean(y)), ls="--", color="0.4", lw=0.8)
+        ax.set_ylabel(label_)
+        for ti in t:
+            ax_x.axvline(ti, color="0.85", lw=0.6, zorder=0)
+    ax_th.set_xlabel("time $t$ (s)")
+    fig.suptitle(f"Fig. 2: {title}\ntrial {label}; dashed: sample means of the bounces shown",
+                 fontsize=10)
+    return fig

@@ -1,0 +1,87 @@
+"""SIGINT / SIGTERM / SIGHUP: stop the run at once, clean up, say one line, exit 128 + signal.
+
+Light on purpose (standard library only): :func:`install` runs before the heavy imports of a
+``bounce`` command, so that an interrupt during the imports is handled like one later on.
+
+The handler raises :class:`Interrupted` in the main thread. It derives from BaseException
+(not KeyboardInterrupt), so that ``except Exception`` clauses, click's KeyboardInterrupt
+handling and the like let it through, while ``finally`` blocks and ``except BaseException``
+clean-ups (temporary files, worker processes, the output folder a run created) still run.
+Only the first signal raises; later ones arrive during that clean-up and are ignored.
+
+Critical sections (moving a run's staged files into place) run under :func:`deferred`: a
+signal arriving there is held and raised when the section ends, so a run's files are either
+all the previous run's or all the new run's.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import sys
+from typing import Any, Iterator
+
+#: the signals a terminal, ``kill`` or a batch scheduler sends to stop a program
+SIGNALS = tuple(
+    getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name)
+)
+
+
+class Interrupted(BaseException):
+    """The run was stopped by a signal; ``exit_code`` is 128 + the signal number."""
+
+    def __init__(self, signum: int) -> None:
+        super().__init__(signum)
+        self.signum = signum
+
+    @property
+    def exit_code(self) -> int:
+        return 128 + self.signum
+
+
+_state: dict[str, Any] = {"deferring": 0, "pending": None, "raised": False}
+
+
+def _handler(signum: int, frame) -> None:
+    if _state["raised"]:
+        return  # already stopping: clean-up is under way
+    if _state["deferring"]:
+        _state["pending"] = _state["pending"] or signum
+        return
+    _state["raised"] = True
+    raise Interrupted(signum)
+
+
+def install() -> None:
+    """Route SIGINT, SIGTERM and SIGHUP to :class:`Interrupted` (main thread only)."""
+    for signum in SIGNALS:
+        signal.signal(signum, _handler)
+    _state.update(deferring=0, pending=None, raised=False)
+
+
+def installed() -> bool:
+    return signal.getsignal(signal.SIGINT) is _handler
+
+
+@contextlib.contextmanager
+def deferred() -> Iterator[None]:
+    """Hold signals for the duration of the block; raise the first one after it."""
+    _state["deferring"] += 1
+    try:
+        yield
+    finally:
+        _state["deferring"] -= 1
+        pending = _state["pending"]
+        if pending is not None and not _state["deferring"] and not _state["raised"]:
+            _state["pending"] = None
+            _state["raised"] = True
+            raise Interrupted(pending)
+
+
+def report(exc: Interrupted) -> int:
+    """Print the one line and return the exit code (128 + signal number)."""
+    try:
+        print("bounce: interrupted", file=sys.stderr, flush=True)
+    except (OSError, ValueError):  # stderr gone (terminal closed)
+        pass
+    return exc.exit_code
