@@ -203,7 +203,7 @@ JobsOption = Annotated[
 def figure_formats(values: list[str] | None) -> list[str]:
     """--figure-format: each value one format or a comma list of them (png, pdf, svg), in the
     order given, each once; none given: png."""
-    from ..experiments.plotting import FIGURE_FORMATS
+    from ..runtime.figure_files import FIGURE_FORMATS
 
     kinds: list[str] = []
     for text in values or ["png"]:
@@ -362,7 +362,7 @@ def run_experiment(
                                      overrides=overrides, out=out, force=force,
                                      figure_formats=figure_formats, dpi=dpi)
         progress = make_progress() if not quiet else None
-        options = run_options(cfg, config, overrides, jobs=jobs or os.cpu_count() or 1,
+        options = run_options(entry, cfg, config, overrides, jobs=jobs or os.cpu_count() or 1,
                               warn=warn, scheduler=scheduler)
         run_dir.record = options.record
         if entry.resumable:
