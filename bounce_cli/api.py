@@ -144,14 +144,14 @@ def warn_if_unstable(params: ModelParams, controller=None,
     >>> warn_if_unstable(unstable, warn=print)  # doctest: +ELLIPSIS
     the period-1 fixed point is linearly unstable at these parameters (spectral radius ...
     """
-    from .model.linear import flip_boundary_g
+    from .model.linear import flip_boundary_g, is_stable
 
     say = warn if warn is not None else python_warning
     if controller is not None:
         from .model.control import controlled_jacobian, spectral_radius_3x3
 
         radius = float(spectral_radius_3x3(controlled_jacobian(params, controller)))
-        if not radius < 1.0:
+        if not is_stable(radius):
             say(f"the period-1 fixed point is linearly unstable with this racket period "
                 f"control (model.control: spectral radius {radius:.3g} of the 3 x 3 Jacobian)")
         return

@@ -47,6 +47,7 @@ import numpy as np
 
 from .bifurcation import detect_period, parameter_point, period1_thresholds
 from ..model.impact import gap, gap_slope
+from ..model.linear import is_stable
 from .lyapunov import map_jacobian
 from ..model.maps import iterate_orbit, velocity_after_impact
 from ..model.params import ModelError, ModelParams, phase_difference
@@ -291,7 +292,7 @@ class BranchPoint:
 
     @property
     def stable(self) -> bool:
-        return bool(np.max(np.abs(self.eigenvalues)) < 1.0)
+        return is_stable(float(np.max(np.abs(self.eigenvalues))))
 
 
 @dataclass(frozen=True)

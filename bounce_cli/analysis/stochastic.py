@@ -29,7 +29,7 @@ from scipy.linalg import solve_discrete_lyapunov
 
 from ..errors import NotStableError
 from .classify import ClassifySettings
-from ..model.linear import jacobian
+from ..model.linear import is_stable, jacobian
 from ..model.impact import next_impact_phase
 from ..model.maps import map_step, velocity_after_impact
 from ..model.params import ModelError, ModelParams, phase_difference, wrap_phase
@@ -83,11 +83,12 @@ def check_velocity_phase(velocity_phase: str) -> None:
 def stationary_covariance(jac: np.ndarray, noise_cov: np.ndarray) -> np.ndarray:
     """R(0) solving R = J R J^T + Q (discrete Lyapunov equation) for y_{k+1} = J y_k + eps_k.
 
-    Raises NotStableError (a ModelError) when J has an eigenvalue of modulus >= 1: then y
+    Raises NotStableError (a ModelError) when J has an eigenvalue of modulus >= 1 (to
+    rounding, ``linear.is_stable``): then y
     has no stationary distribution and the correlation functions of eq. 19 do not exist.
     """
     radius = float(np.max(np.abs(np.linalg.eigvals(jac))))
-    if not radius < 1.0:
+    if not is_stable(radius):
         raise NotStableError(
             f"the fixed point is not linearly stable (spectral radius {radius:.4g} >= 1): "
             "no stationary covariance for eq. 19"

@@ -25,9 +25,10 @@ from ..runtime.config import (
     ExperimentConfig,
     StrictModel,
 )
-from ..model.linear import jacobian, stability
+from ..model.linear import is_stable, jacobian, stability
 from ..model.control import controlled_jacobian
 from ..model.params import ModelError, ModelParams, phase_difference
+from ..errors import NotStableError
 from ..analysis.stochastic import (
     PAIR_NAMES,
     map_noise_covariance,
@@ -107,8 +108,8 @@ def run(config: AcfConfig, options: RunOptions) -> ExperimentResult:
                           "(theta) is implemented")
     jac = jacobian(params) if controller is None else controlled_jacobian(params, controller)
     radius = float(np.abs(np.linalg.eigvals(jac)).max())
-    if not radius < 1.0:
-        raise ModelError(
+    if not is_stable(radius):
+        raise NotStableError(
             f"the fixed point is unstable (spectral radius {radius:.4g}"
             " >= 1): no stationary correlation functions (eq. 19)"
         )

@@ -34,7 +34,7 @@ from ..runtime.config import (
 from ..analysis.classify import OUTCOMES
 from ..analysis.impulse import find_threshold
 from ..model.perturbation import perturbed_velocity, relaxation_impacts
-from ..model.linear import jacobian
+from ..model.linear import jacobian, radius_below
 from ..model.params import ModelError, ModelParams, phase_difference
 from ..analysis.stochastic import (
     PAIR_NAMES,
@@ -224,19 +224,14 @@ def radius_frames(params: ModelParams, config: ControlConfig) -> dict[str, pd.Da
             "eigen.csv": eigen, "regions.csv": regions}
 
 
-#: relative margin below which a spectral radius counts as below a level (``_region``)
-BOUNDARY_ROUNDING = 1e-12
-
-
 def _region(name: str, below: float, grid: str, K, c, radius) -> dict:
     """Where the spectral radius is below ``below`` on a grid: area in the (K, c) plane (cells
     times cell area), extent, and whether it touches the grid's edge (then it is cut).
 
-    A point whose radius equals ``below`` to within rounding is on the boundary, not inside:
-    at K = 1 (and at c = 0) an eigenvalue is on the unit circle exactly, and the computed
-    radius is 1 +- a few ulp, so ``radius < 1`` alone would count such grid points by the
-    last bits of the machine's arithmetic."""
-    inside = radius < below * (1.0 - BOUNDARY_ROUNDING)
+    A point whose radius equals ``below`` to within rounding is on the boundary, not inside
+    (``model.linear.radius_below``: at K = 1 and at c = 0 an eigenvalue is on the unit
+    circle exactly)."""
+    inside = radius_below(radius, below)
     cell = (K[0, 1] - K[0, 0]) * (c[1, 0] - c[0, 0])
     edge = inside[0].any() or inside[-1].any() or inside[:, 0].any() or inside[:, -1].any()
 
@@ -704,7 +699,7 @@ def draw_acf(frames):
 def _radius_image(ax, frame: pd.DataFrame, target: float, levels_extra=(0.5,)):
     gains, rates = np.unique(frame.gain_K), np.unique(frame.rate_c)
     radius = frame.pivot(index="rate_c", columns="gain_K", values="spectral_radius").to_numpy()
-    unstable = radius >= 1.0 - BOUNDARY_ROUNDING  # grey, as _region counts (neutral: K = 1)
+    unstable = ~radius_below(radius)  # grey, as _region counts (neutral: K = 1)
     im = ax.pcolormesh(gains, rates, np.ma.masked_where(unstable, radius), cmap="viridis",
                        vmin=0.0, vmax=1.0, shading="nearest")
     ax.set_facecolor("0.85")

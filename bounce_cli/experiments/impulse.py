@@ -28,7 +28,7 @@ from ..analysis.impulse import (
     perturbed_outcome,
 )
 from ..model.control import is_passive
-from ..model.linear import stability
+from ..model.linear import is_stable, stability
 from ..model.params import ModelParams
 from ..model.perturbation import perturbed_velocity, relaxation_impacts
 from .plotting import (
@@ -119,7 +119,7 @@ def linear_outcome(params: ModelParams, controller=None) -> str:
         from ..model.control import controlled_jacobian, spectral_radius_3x3
 
         radius = float(spectral_radius_3x3(controlled_jacobian(params, controller)))
-        return "period1" if radius < 1.0 else "diverges"
+        return "period1" if is_stable(radius) else "diverges"
     return "period1" if stability(params).stable else "diverges"
 
 

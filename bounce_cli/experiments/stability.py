@@ -25,6 +25,7 @@ from ..model.linear import (
     is_complex_regime,
     min_stable_spectral_radius,
     racket_amplitude_for_ac,
+    radius_below,
     spectral_radius,
     stability,
     stable_ac_range_g,
@@ -108,7 +109,7 @@ def eigen_frame(alpha: np.ndarray, ac: np.ndarray) -> pd.DataFrame:
             "lambda2_im": lm.imag,
             "spectral_radius": radius,
             "regime": np.where(is_complex_regime(aa, cc), "complex", "real"),
-            "stable": radius < 1.0,
+            "stable": radius_below(radius),
         }
     )
 
@@ -339,9 +340,4 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     return {"stability.png": fig}
 
 
-EXPERIMENT = Experiment(
-    name="stability",
-    schema=StabilityConfig,
-    run=run,
-    draw=draw,
-)
+EXPERIMENT = Experiment(name="stability", schema=StabilityConfig, run=run, draw=draw)

@@ -27,7 +27,7 @@ from pydantic import Field, model_validator
 from ..runtime import parallel
 from ..runtime.config import ClassifyBlock, ConfigError, ExperimentConfig, StrictModel
 from ..analysis.classify import EXACT_OUTCOMES, compiled_kernel_available
-from ..model.linear import flip_boundary_g
+from ..model.linear import flip_boundary_g, radius_below
 from ..model.params import ModelError, ModelParams
 from ..analysis.sweep import (
     MODEL_FIELDS,
@@ -188,7 +188,7 @@ def run(config: SweepConfig, options: RunOptions) -> ExperimentResult:
         f"{v_axis.num} at each" + (f"; {len(tasks) - len(todo)} resumed from an interrupted "
                                    f"run" if len(todo) < len(tasks) else ""),
         f"period-1 fixed point at {int(exists.sum())} points, linearly stable at "
-        f"{int((sweep['spectral_radius'] < 1).sum())}; period-1 fraction "
+        f"{int(radius_below(sweep['spectral_radius']).sum())}; period-1 fraction "
         f"{sweep['fraction_period1'].min():.3f} to {sweep['fraction_period1'].max():.3f}; "
         f"boundary basin entropy up to {sweep['boundary_basin_entropy'].max():.3f} "
         f"(ln 2 = {math.log(2):.3f})",

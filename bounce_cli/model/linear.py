@@ -60,6 +60,66 @@ def spectral_radius(alpha, ac):
     return np.maximum(np.abs(lp), np.abs(lm))
 
 
+#: relative margin by which a computed spectral radius must lie below a level to count as
+#: below it (``radius_below``, ``is_stable``); see ``radius_below`` for why 1e-12
+ROUNDING_MARGIN = 1e-12
+
+
+def radius_below(radius, level=1.0) -> np.ndarray:
+    """Where a computed spectral radius lies below ``level`` by more than rounding:
+    ``radius < level (1 - ROUNDING_MARGIN)``, elementwise (NaN: not below).
+
+    On a stability boundary an eigenvalue lies on the circle exactly: at AC = 0,
+    lambda_+ = 1 (eq. 10 with c = (1 + alpha^2) / 2), at the flip boundary (eq. 14)
+    lambda_- = -1, with racket period control at gain K = 1 an eigenvalue 1. The computed
+    radius is then 1 +- a few ulp (2.2e-16 each), its sign decided by the last bits of the
+    machine's arithmetic, so a plain ``radius < 1`` would call such points stable on one
+    machine and unstable on another. The margin, 1e-12 relative (thousands of ulp, far
+    below any radius a grid or a fit resolves), puts them on the boundary, not inside.
+
+    Parameters
+    ----------
+    radius : float or array_like
+        Spectral radii (max |lambda| of eq. 10, or of any Jacobian).
+    level : float or array_like, default 1.0
+        The level (1: linear stability; a target radius of a control design).
+
+    Returns
+    -------
+    numpy.ndarray of bool
+        ``radius``'s shape.
+
+    Examples
+    --------
+    >>> radius_below([0.5, 1.0 - 2.2e-16, 1.0, 1.0 + 2.2e-16]).tolist()
+    [True, False, False, False]
+    """
+    level = np.asarray(level, dtype=float)
+    return np.asarray(radius, dtype=float) < level * (1.0 - ROUNDING_MARGIN)
+
+
+def is_stable(radius: float) -> bool:
+    """Whether a period-1 fixed point with this spectral radius is linearly stable: both
+    eigenvalues of eq. 10 inside the unit circle (section 4's condition), by more than
+    rounding (``radius_below``: a radius of 1 +- a few ulp is on the boundary, not stable).
+
+    Parameters
+    ----------
+    radius : float
+        The spectral radius, max |lambda| (eq. 10, or of the 3 x 3 Jacobian with control).
+
+    Returns
+    -------
+    bool
+
+    Examples
+    --------
+    >>> is_stable(0.5), is_stable(1.0 - 2.2e-16), is_stable(float("nan"))
+    (True, False, False)
+    """
+    return bool(radius_below(radius))
+
+
 def is_complex_regime(alpha, ac):
     """True where c^2 < alpha^2: a complex pair with |lambda| = |alpha| (eqs. 11, 12)."""
     c = characteristic_c(alpha, ac)
@@ -102,7 +162,7 @@ def stability(params: ModelParams) -> Stability:
         eigenvalues=(complex(lp), complex(lm)),
         spectral_radius=radius,
         regime="complex" if bool(is_complex_regime(params.alpha, ac)) else "real",
-        stable=radius < 1.0,
+        stable=is_stable(radius),
     )
 
 
