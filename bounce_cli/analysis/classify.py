@@ -48,7 +48,7 @@ import numpy as np
 from ..model.chatter import release_fate, tail_is_summable
 from ..model.impact import MAX_SAFE_STEPS, can_fly, first_impact_phase
 from ..model.maps import velocity_after_impact
-from ..model.params import FixedPoint, ModelParams, phase_difference
+from ..model.params import MIN_HOP_S, FixedPoint, ModelParams, phase_difference
 
 PERIOD1, STICKING, BELOW_RACKET, UNDECIDED, LOCKED, RESTING = 0, 1, 2, 3, 4, 5
 #: outcome names indexed by their integer code (section 3's, with ``min_hop_s`` > 0)
@@ -83,7 +83,7 @@ class ClassifySettings:
 
     max_iterations: int = 100
     tolerance: float = 1e-3
-    min_hop_s: float = 1e-3
+    min_hop_s: float = MIN_HOP_S
 
 
 @dataclass(frozen=True)
