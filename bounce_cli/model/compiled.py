@@ -33,10 +33,10 @@ import math
 import numba
 import numpy as np
 
+from .impact import LAST_STEP_LEVEL, POLISH_LIMIT, ROUNDING_LEVEL, STEP_FLOOR
 from .params import FixedPoint, ModelParams
 
 TWO_PI = 2.0 * math.pi
-_EPS = float(np.finfo(float).eps)
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 
@@ -76,13 +76,31 @@ def _wrap(x):
 
 
 @_jit
+def _safe_step(s, G, d, terms, bound, two_bound):
+    """One step of ``impact.first_contact`` for one flight at s, where the gap is G, its slope
+    d, the sum of its terms' magnitudes ``terms`` and M = ``bound`` >= |G''| (``two_bound``
+    = 2 M): (its root, NaN while not finished; the next s). The same stopping rule, with the
+    same constants, in the same order of operations."""
+    G_pos = G if (G >= 0.0 or G != G) else 0.0  # np.maximum(G, 0.0)
+    step = (math.sqrt(G_pos * two_bound + d * d) + d) / bound
+    s_next = s + step
+    if (G <= terms * ROUNDING_LEVEL) | (step <= STEP_FLOOR * s):  # converged: the polish
+        corr = G / d if d < 0.0 else 0.0
+        return (s - corr if abs(corr) < POLISH_LIMIT * max(s, -d / bound) else s), s_next
+    delta = -(bound * step + d)  # the last step
+    if ((delta > 0.0) & (two_bound * step * step <= LAST_STEP_LEVEL * s_next * delta)
+            & (-d <= bound * s_next)):
+        return s_next, s_next
+    return np.nan, s_next
+
+
+@_jit
 def _first_impact(vv, cos_th, sin_th, m, c, max_steps, hop, pos, S, D0, C, SN, V, SH, CH):
     """hop[j] = ``impact.first_impact_phase`` of state j < m (NaN where the ball cannot fly
     or the solve did not converge in ``max_steps``); the other arrays are scratch of size m."""
     a, w, g = c[_A], c[_W], c[_G]
     two_a, bound, two_bound = c[_TWO_A], c[_BOUND], c[_TWO_BOUND]
     w_sq, two_w_sq = c[_W_SQ], c[_TWO_W_SQ]
-    eps4, eps8 = 4.0 * _EPS, 8.0 * _EPS
     q = 0
     for j in range(m):
         hop[j] = np.nan
@@ -112,18 +130,9 @@ def _first_impact(vv, cos_th, sin_th, m, c, max_steps, hop, pos, S, D0, C, SN, V
             drop = g_s * s / two_w_sq
             G = ball - drop - racket_rise
             d = D0[j] - g_s / w_sq + two_a * sin_mid * sin_half
-            scale = (abs(ball) + drop + abs(racket_rise)) * eps8
-            G_pos = G if (G >= 0.0 or G != G) else 0.0  # np.maximum(G, 0.0)
-            step = (math.sqrt(G_pos * two_bound + d * d) + d) / bound
-            done = (G <= scale) | (step <= eps4 * s)
-            corr = G / d if d < 0.0 else 0.0
-            corr = corr if abs(corr) < 1e-6 * s else 0.0
-            s_next = s + step
-            delta = -(bound * step + d)  # the last step (impact.first_impact_phase)
-            last = (delta > 0.0) & (two_bound * step * step <= _EPS * s_next * delta)
+            terms = abs(ball) + drop + abs(racket_rise)
             # NaN: not finished (a finished phase is finite)
-            SH[j] = s - corr if done else (s_next if last else np.nan)
-            CH[j] = s_next
+            SH[j], CH[j] = _safe_step(s, G, d, terms, bound, two_bound)
         r = 0
         for j in range(q):
             if SH[j] == SH[j]:

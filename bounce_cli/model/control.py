@@ -56,7 +56,7 @@ import numpy as np
 
 from ..analysis.classify import BELOW_RACKET, PERIOD1, STICKING, UNDECIDED, Classification
 from ..analysis.classify import ClassifySettings, tile_slices
-from .impact import first_impact_phase
+from .impact import MAX_SAFE_STEPS, SinusoidGap, first_contact, first_impact_phase
 from .perturbation import perturbed_impact, perturbed_velocity, relaxation_impacts
 from .linear import iterate_linear, jacobian, racket_acceleration_at_impact_g
 from .params import ModelError, ModelParams, phase_difference
@@ -209,32 +209,43 @@ def controlled_step(theta, v, tau, params: ModelParams, controller: Controller, 
                           hop_phase=hop, omega=np.broadcast_to(omega, hop.shape))
 
 
-def contact_after_crossing(height, v, amplitude, omega, g, *, max_steps: int = 2000):
-    """Phase s >= 0 (rad of a racket a sin(s) at angular frequency omega, from its upward
-    mid-position crossing s = 0) of the first contact of a ball that is ``height`` (> 0) above
-    the racket at s = 0 with velocity v (arrays broadcast). The safe steps of
-    ``engine.impact``: from G > 0 with G' = d, |G''| <= M = g / w^2 + a keeps G > 0 for
-    h < (d + sqrt(d^2 + 2 M G)) / M; a Newton polish ends it. NaN where none is found."""
+def contact_after_crossing(height, v, amplitude, omega, g, *,
+                           max_steps: int = MAX_SAFE_STEPS):
+    """Phase s >= 0 of the first contact after the racket's upward mid-position crossing.
+
+    The racket moves as a sin(s) at angular frequency omega from the crossing s = 0; the
+    ball is ``height`` (>= 0) above it there with velocity v. This is the map's gap with
+    theta = 0 and a height (``engine.impact.SinusoidGap``; |G''| <= g / w^2 + a), solved by
+    ``engine.impact.first_contact`` from s = 0 with its stopping rule.
+
+    Parameters
+    ----------
+    height : array_like
+        Ball above the racket at the crossing, m (NaN: no flight to solve).
+    v : array_like
+        Ball velocity there, m/s.
+    amplitude, omega, g : array_like
+        The racket's amplitude (m) and angular frequency (rad/s) after the crossing, and
+        gravity (m/s^2). All five broadcast.
+    max_steps : int
+        Safe steps after which a flight still not converged is NaN.
+
+    Returns
+    -------
+    numpy.ndarray
+        s (rad of the racket's phase after the crossing), NaN where none is found.
+    """
     height, v, amplitude, omega, g = np.broadcast_arrays(
         *(np.asarray(x, float) for x in (height, v, amplitude, omega, g)))
-    s = np.zeros(height.shape)
     result = np.full(height.shape, np.nan)
-    active = np.isfinite(height) & np.isfinite(v) & np.isfinite(omega) & (height >= 0.0)
-    bound = g / omega**2 + amplitude
-    for _ in range(max_steps):
-        if not active.any():
-            break
-        G = height + v * s / omega - g * s * s / (2.0 * omega**2) - amplitude * np.sin(s)
-        d = v / omega - g * s / omega**2 - amplitude * np.cos(s)
-        scale = np.abs(height) + np.abs(v * s / omega) + g * s * s / (2.0 * omega**2) + amplitude
-        done = active & (G <= 1e-13 * scale)
-        if done.any():
-            with np.errstate(divide="ignore", invalid="ignore"):
-                corr = np.where(d < 0.0, G / d, 0.0)
-            result = np.where(done, s - np.where(np.abs(corr) < 1e-6, corr, 0.0), result)
-            active &= ~done
-        step = (d + np.sqrt(d * d + 2.0 * bound * np.maximum(G, 0.0))) / bound
-        s = np.where(active, s + step, s)
+    idx = np.flatnonzero(np.isfinite(height) & np.isfinite(v) & np.isfinite(omega)
+                         & (height >= 0.0))
+    a, w, gg = (np.ravel(x)[idx] for x in (amplitude, omega, g))
+    vv = np.ravel(v)[idx]
+    ones = np.ones(idx.size)
+    gap = SinusoidGap(ones, np.zeros(idx.size), vv, vv / w - a * ones, a, w, gg,
+                      height=np.ravel(height)[idx])
+    result.flat[idx] = first_contact(gap, np.zeros(idx.size), max_steps=max_steps)
     return result
 
 

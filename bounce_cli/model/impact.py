@@ -1,47 +1,82 @@
-"""The first-impact solver for the implicit phase map (eq. 6), vectorised over many states.
+"""The contact solver: the FIRST root of a gap, for the map (eq. 6), the controlled map and the
+simulated recordings, vectorised over many flights.
 
-After an impact at phase theta with ball velocity v (just after impact), the height of the
-ball above the racket at elapsed phase s = omega_r (t - t_k) is the gap (eq. 1 minus eq. 4)
+After a flight starts (an impact, a release, the racket's mid-position crossing), the height
+of the ball above the racket is a gap G(s) of the elapsed phase (or time) s, and the next
+contact is its FIRST root: G has several, and a root finder handed a bracket may return a
+later landing. ``first_contact`` takes only steps that a lower bound of G proves root-free:
+from a point with G >= 0 and G' = d, a bound M >= |G''| on the segment ahead gives
 
-    G(s) = v s / w - g s^2 / (2 w^2) + a sin(theta) - a sin(theta + s),
+    G(s + h) >= G + d h - M h^2 / 2 > 0   for h < (d + sqrt(d^2 + 2 M G)) / M   (``safe_step``),
 
-and eq. 6 is G(s) = 0 (multiplied by w^2). G has several roots; the next impact is the FIRST
-positive one. With G(0) = 0 and G'(0) = (v - a w cos theta)/w > 0 the ball starts above the
-racket. Every step taken here is one that a lower bound of G proves root-free:
+so the iteration can never jump over a root; it approaches the first root from the safe side
+(like Newton, quadratically near a simple root). A gap describes itself through ``Gap``: at s
+its value, slope and the magnitude of its terms (its rounding level), the bound M and where
+M stops holding (a racket whose motion changes from cycle to cycle: steps stop there). The
+caller gives the start, a point up to which G > 0 is already proved (the gaps' starts below).
 
-* first step, from s = 0: Taylor to third order with |G'''| <= a gives
-  G(h) >= h (d + c h / 2 - a h^2 / 6), d = G'(0), c = G''(0);
-* first step after a release (exact sticking, ``engine.chatter``: the ball leaves the racket
-  where the racket's acceleration reaches -g, sin theta = 1/Gamma, with the racket's
-  velocity), where G = G' = G'' = 0 and that bound has no positive step: one order further,
-  G''' (0) = a cos theta > 0 and |G''''| <= a give G(h) >= h^3 (a cos theta / 6 - a h / 24),
-  positive for h < 4 cos theta; the first step is half that;
-* later steps, from a point with G > 0: |G''| <= g/w^2 + a =: M gives
-  G(s + h) >= G + d h - M h^2 / 2 > 0 for h < (d + sqrt(d^2 + 2 M G)) / M.
+The stopping rule, stated once (``ROUNDING_LEVEL``, ``STEP_FLOOR``, ``LAST_STEP_LEVEL``,
+``POLISH_LIMIT``; ``model.compiled`` uses the same constants):
 
-So the iteration can never jump over a root; it approaches the first root from the safe
-side (like Newton, quadratically near a simple root). It stops in one of two ways:
-
-* converged at s: G is at the rounding level of its terms or the next step is below
-  4 eps s; a Newton polish (only where the crossing is transversal and the correction tiny)
-  gives the root;
+* converged at s: G <= 8 eps (sum of |G's terms|), i.e. G is at the rounding level of its own
+  evaluation, or the next step is below 4 eps s; a Newton polish -G/G' gives the root, only
+  where the crossing is transversal (G' < 0) and the correction below 1e-6 max(s, |G'| / M),
+  so that it cannot move to another root (from a root with slope G', |G''| <= M keeps G
+  away from 0 for 2 |G'| / M). After an impact (G(0) = 0) |G'| <= M s at the root (G' has a
+  zero in (0, s)), so that is 1e-6 s; a gap that starts above the racket (G(0) > 0) can
+  meet it after a tiny s at a large slope, where the safe step's rounding, about
+  eps |G'| / M, is far above eps s and the polish corrects it;
 * after a last step h taken without evaluating G again: from s + h on, G' <= d + M h, so with
   delta = -(d + M h) > 0, G(s + h) <= M h^2 and the first root lies in
-  [s + h, s + h + 2 M h^2 / delta]; when 2 M h^2 <= eps (s + h) delta, s + h is the root to
-  about an ulp and the evaluation that would only confirm it is saved (about one of the
-  5.6 evaluations an impact of the Fig. 4 grid takes).
+  [s + h, s + h + 2 M h^2 / delta]; when 2 M h^2 <= eps (s + h) delta, and the step's own
+  rounding (about eps |d| / M) is as small (|d| <= M (s + h), which holds after an impact),
+  s + h is the root to about an ulp and the evaluation that would only confirm it is saved
+  (about one of the 5.6 evaluations an impact of the Fig. 4 grid takes).
 
-Each evaluation takes two transcendental functions, sin and cos of s/2: sin and cos of
-theta + s/2 follow from them and the launch's sin theta, cos theta by the angle-addition
-formulas. Against a long-double reference on 2 x 10^5 random flights (Fig. 4's racket, and
-a = 0.6 m), the mean error is 0.8-0.9 ulp, the error of the root finder this replaced (three
-transcendental functions, no last-step rule) 1.0-1.3 ulp; larger errors (up to a few hundred
-ulp) only where G' at the root is small (|G'| < 0.01: the root is ill-conditioned).
+The gaps:
+
+* ``SinusoidGap``, the map's (eq. 1 minus eq. 4; eq. 6 is G = 0 times w^2): after an impact at
+  phase theta with ball velocity v (just after it),
+
+      G(s) = h + v s / w - g s^2 / (2 w^2) + a sin(theta) - a sin(theta + s),
+
+  h = 0, |G''| <= g/w^2 + a =: M everywhere. sin(theta) - sin(theta + s) is evaluated as
+  -2 cos(theta + s/2) sin(s/2), which keeps full relative precision for the very short hops
+  near sticking (the plain difference loses it for hops below ~1e-6 rad). With G(0) = 0 and
+  G'(0) = d > 0 the safe step from s = 0 is zero, so ``first_impact_phase`` starts at:
+
+  - after an impact, Taylor to third order with |G'''| <= a:
+    G(h) >= h (d + c h / 2 - a h^2 / 6), c = G''(0), positive up to the smallest positive
+    root of d + c h/2 - a h^2/6. Where c < 0 and d is tiny, (c/2 + sqrt(c^2/4 + 2ad/3)) / (a/3)
+    cancels to an absolute error of about eps |c| / (a/3); the polish corrects it unless that
+    exceeds 1e-6 s (hops below ~1e-7 rad, deep in sticking, when |c| / a is large), where
+    the hop keeps that error (kept: the map's bits are the reference);
+  - after a release (exact sticking, ``model.chatter``: the ball leaves the racket where the
+    racket's acceleration reaches -g, sin theta = 1/Gamma, with the racket's velocity), where
+    G = G' = G'' = 0 and that bound has no positive step: one order further,
+    G'''(0) = a cos theta > 0 and |G''''| <= a give G(h) >= h^3 (a cos theta / 6 - a h / 24),
+    positive for h < 4 cos theta; the start is half that.
+
+  The controlled map's racket that changes its period at its upward mid-position crossing
+  (``model.control.contact_after_crossing``) is the same gap with theta = 0 and h >= 0 the
+  ball's height there, started at s = 0.
+* ``data.simulated_lab``'s gap of a flight over the simulated lab's racket (cycles of their own
+  period and amplitude, a second harmonic, a drifting mid-position, the impact's
+  disturbance): in time, with M per racket cycle.
+
+Each evaluation of ``SinusoidGap`` takes two transcendental functions, sin and cos of s/2:
+sin and cos of theta + s/2 follow from them and the launch's sin theta, cos theta by the
+angle-addition formulas. Against a long-double reference on 2 x 10^5 random flights (Fig. 4's
+racket, and a = 0.6 m), the mean error is 0.8-0.9 ulp, the error of the root finder this
+replaced (three transcendental functions, no last-step rule) 1.0-1.3 ulp; larger errors (up to
+a few hundred ulp) only where G' at the root is small (|G'| < 0.01: the root is
+ill-conditioned).
 """
 
 from __future__ import annotations
 
-from typing import Any
+import math
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
@@ -50,6 +85,229 @@ from .params import ModelParams
 #: steps after which a state still not converged is reported as NaN (never seen in tests:
 #: typical flights converge in 10-30 steps)
 MAX_SAFE_STEPS = 2000
+
+_EPS = float(np.finfo(float).eps)
+#: the stopping rule (module docstring): converged where G <= ROUNDING_LEVEL * (sum of |G's
+#: terms|), or where the next safe step is below STEP_FLOOR * s
+ROUNDING_LEVEL = 8.0 * _EPS
+STEP_FLOOR = 4.0 * _EPS
+#: a last step needs no confirming evaluation when it brackets the root within this * s
+LAST_STEP_LEVEL = _EPS
+#: a converged root's Newton polish moves it by less than POLISH_LIMIT * max(s, |G'| / M), or
+#: not at all (module docstring)
+POLISH_LIMIT = 1e-6
+
+
+class GapAt(NamedTuple):
+    """A gap and what the solver needs of it at the points s of a batch of flights.
+
+    value: G(s); slope: G'(s); terms: the sum of the absolute values of the terms G is
+    computed from (its rounding level is ``ROUNDING_LEVEL`` times that); bound: M >= |G''| on
+    [s, segment_end); segment_end: where that bound stops holding (None: nowhere)."""
+
+    value: Any
+    slope: Any
+    terms: Any
+    bound: Any
+    segment_end: Any = None
+
+
+class Gap(Protocol):
+    """The gap between ball and racket of a batch of flights, for ``first_contact``."""
+
+    def at(self, s: np.ndarray) -> GapAt:
+        """The gap's value, slope, terms and curvature bound at s (one point per flight)."""
+        ...
+
+    def select(self, keep: np.ndarray) -> "Gap":
+        """The same gap for the flights where ``keep`` is True (the batch compacted)."""
+        ...
+
+
+def safe_step(value, slope, bound):
+    """The longest step from a point where the gap is ``value`` (>= 0) and its slope ``slope``
+    that the bound ``bound`` >= |G''| proves root-free: (d + sqrt(d^2 + 2 M G)) / M (module
+    docstring; arrays broadcast; a negative value counts as 0)."""
+    step = np.maximum(value, 0.0)
+    step *= 2.0 * bound
+    step += slope * slope
+    step = np.sqrt(step)
+    step += slope
+    step /= bound
+    return step
+
+
+def first_contact(gap: Gap, start, *, max_steps: int = MAX_SAFE_STEPS,
+                  horizon: float = math.inf) -> np.ndarray:
+    """The first root of each flight's gap at or after ``start``: the next contact.
+
+    Parameters
+    ----------
+    gap : Gap
+        The flights' gaps (one flight per element of ``start``).
+    start : numpy.ndarray
+        1-D: for each flight, a phase (or time) s0 >= 0 up to which G > 0 is proved (G(s0)
+        may be 0: a contact at s0).
+    max_steps : int
+        Evaluations after which a flight still not converged is reported as NaN.
+    horizon : float
+        A flight that reaches it without contact is reported as +inf (``inf``: none).
+
+    Returns
+    -------
+    numpy.ndarray
+        s with G(s) = 0 and G > 0 on (0, s), to the stopping rule's accuracy (module
+        docstring); NaN where the iteration did not converge in ``max_steps``.
+
+    Notes
+    -----
+    Finished flights are dropped from the batch only when at least an eighth of it is
+    finished (until then they are carried along, their results already stored), which saves
+    copying every array at nearly every step. Neither that nor the batch a flight shares
+    changes a bit of its result: each flight's arithmetic is its own.
+    """
+    s = np.asarray(start, dtype=float)
+    result = np.full(s.shape, np.nan)
+    idx = np.arange(s.size)
+    live = np.ones(s.size, dtype=bool)  # not yet finished (finished ones may be carried)
+    n_live = s.size
+    for _ in range(max_steps):
+        if n_live == 0:
+            break
+        at = gap.at(s)
+        G, d, bound = at.value, at.slope, at.bound
+        two_bound = 2.0 * bound
+        step = np.maximum(G, 0.0)  # safe_step, in place
+        step *= two_bound
+        step += d * d
+        np.sqrt(step, out=step)
+        step += d
+        step /= bound
+        scale = at.terms
+        scale *= ROUNDING_LEVEL
+        done = G <= scale
+        done |= step <= STEP_FLOOR * s
+        done &= live
+        s_next = s + step
+        last = live & ~done  # candidates for the last-step rule
+        limit = at.segment_end
+        if not math.isinf(horizon):
+            limit = horizon if limit is None else np.minimum(limit, horizon)
+        beyond = None
+        if limit is not None:  # steps stop where the bound stops holding (or at the horizon)
+            clipped = s_next >= limit
+            s_next = np.where(clipped, limit, s_next)
+            last &= ~clipped
+            if not math.isinf(horizon):  # no contact before the horizon: +inf
+                beyond = live & ~done & (s_next >= horizon)
+                result[idx[beyond]] = math.inf
+        # the last step, taken without an evaluation to confirm it: the root lies in
+        # [s + h, s + h + 2 M h^2 / delta] when delta = -(d + M h) > 0 (module docstring);
+        # when that is within eps (s + h), s + h is the root to about an ulp
+        delta = np.multiply(bound, step)
+        delta += d
+        np.negative(delta, out=delta)
+        closes = np.multiply(two_bound, step)
+        closes *= step
+        closes = closes <= LAST_STEP_LEVEL * s_next * delta
+        closes &= delta > 0.0
+        closes &= last
+        if closes.any():
+            # ... provided the step's own rounding, about eps |G'| / M, is within eps (s + h)
+            # (after an impact it is: module docstring)
+            (at_,) = np.nonzero(closes)
+            closes[at_] = -d[at_] <= (bound if np.ndim(bound) == 0 else bound[at_]) * s_next[at_]
+            result[idx[closes]] = s_next[closes]
+        finished = done | closes
+        if beyond is not None:
+            finished |= beyond
+        if finished.any():
+            if done.any():
+                # Newton polish of the converged ones, only where the crossing is transversal
+                # and the correction tiny, so that a polish can never move to another root
+                sd, Gd, dd = s[done], G[done], d[done]
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    corr = np.where(dd < 0.0, Gd / dd, 0.0)
+                    reach = np.maximum(sd, -dd / (bound if np.ndim(bound) == 0 else bound[done]))
+                corr = np.where(np.abs(corr) < POLISH_LIMIT * reach, corr, 0.0)
+                result[idx[done]] = sd - corr
+            live &= ~finished
+            n_live = int(np.count_nonzero(live))
+            if n_live == 0:
+                break
+            if n_live <= live.size - live.size // 8:  # compact: drop the finished ones
+                idx, s_next = idx[live], s_next[live]
+                gap = gap.select(live)
+                live = np.ones(n_live, dtype=bool)
+        s = s_next
+    return result
+
+
+def _per_flight(x: np.ndarray) -> Any:
+    """A racket parameter as a plain float when it is one value (the fast path, the same
+    arithmetic as an array of that value), else the flat array."""
+    return float(x.flat[0]) if x.size and np.all(x == x.flat[0]) else x.ravel()
+
+
+class SinusoidGap:
+    """The map's gap (module docstring) for a batch of flights launched at phases theta with
+    cos theta, sin theta given, ball velocities v, G'(0) = ``slope0`` and racket amplitude a,
+    angular frequency w and g (each a float or one value per flight), and optionally a height
+    h above the racket at s = 0 (None: 0, the arithmetic of an impact)."""
+
+    def __init__(self, cos_theta, sin_theta, v, slope0, amplitude, omega, g, height=None):
+        self.cos_th, self.sin_th, self.v, self.d0 = cos_theta, sin_theta, v, slope0
+        self.a, self.w, self.g, self.height = amplitude, omega, g, height
+        self.bound: Any = g / (omega * omega) + amplitude  # M >= |G''|
+        # scalars of the evaluation, computed once (the values the array expressions give)
+        self.w_sq: Any = omega * omega
+        self.two_w_sq: Any = 2.0 * omega * omega
+        self.two_a: Any = 2.0 * amplitude
+
+    def select(self, keep: np.ndarray) -> "SinusoidGap":
+        def part(x):
+            return x if x is None or isinstance(x, float) else x[keep]
+
+        return SinusoidGap(*(part(x) for x in (self.cos_th, self.sin_th, self.v, self.d0,
+                                               self.a, self.w, self.g, self.height)))
+
+    def at(self, s: np.ndarray) -> GapAt:
+        """G, G' and the terms at s, written to compute each subexpression once
+        (``model.compiled`` repeats these expressions in the same order)."""
+        cos_th, sin_th, two_a = self.cos_th, self.sin_th, self.two_a
+        tmp = np.empty_like(s)
+        half = s / 2.0
+        sin_half = np.sin(half)
+        cos_half = np.cos(half, out=half)
+        # cos and sin of theta + s/2 by the angle-addition formulas: two transcendental
+        # functions per step instead of three (the same expressions as model.compiled)
+        cos_mid = cos_th * cos_half
+        cos_mid -= np.multiply(sin_th, sin_half, out=tmp)
+        sin_mid = np.multiply(sin_th, cos_half, out=cos_half)
+        sin_mid += np.multiply(cos_th, sin_half, out=tmp)
+        racket_rise = np.multiply(two_a, cos_mid, out=cos_mid)
+        racket_rise *= sin_half  # a (sin(th + s) - sin(th)) = 2 a cos(th + s/2) sin(s/2)
+        ball = self.v * s
+        ball /= self.w
+        g_s = self.g * s
+        drop = g_s * s
+        drop /= self.two_w_sq
+        G = ball - drop
+        G -= racket_rise
+        # d = d0 - g s / w^2 + 2 a sin(th + s/2) sin(s/2)
+        d = np.divide(g_s, self.w_sq, out=g_s)
+        np.subtract(self.d0, d, out=d)
+        rate = np.multiply(two_a, sin_mid, out=sin_mid)
+        rate *= sin_half
+        d += rate
+        # terms = |v s / w| + g s^2 / (2 w^2) + |racket rise| (+ |h|)
+        terms = np.abs(ball, out=ball)
+        terms += drop
+        terms += np.abs(racket_rise, out=racket_rise)
+        if self.height is not None:
+            G += self.height
+            terms += np.abs(self.height)
+        return GapAt(G, d, terms, self.bound)
 
 
 def gap(s, theta, v, params: ModelParams):
@@ -118,19 +376,15 @@ def first_impact_phase(theta, v, amplitude, omega, g, *, max_steps: int = MAX_SA
     transcendental functions per state); the result is the same to the last bit.
 
     ``released``: None, or a boolean (array broadcasting with theta) marking states that
-    leave the racket at a release point of exact sticking (``engine.chatter``): there the
+    leave the racket at a release point of exact sticking (``model.chatter``): there the
     ball moves with the racket and the racket's acceleration is -g, so G'(0) and G''(0) are
     zero by construction (whatever their rounded values: they are set to 0) and the first
     step is the module docstring's fourth-order one (needs cos theta > 0, i.e. the release
     of sin theta = 1/Gamma in the first quadrant; elsewhere NaN). With None (or all False)
     the arithmetic is the one without the argument, bit for bit.
 
-    The work per step is that of the module docstring's safe step, written to compute each
-    subexpression once (``engine.compiled`` repeats these expressions in the same order);
-    finished states are dropped from the arrays only when at least an eighth of them are
-    finished (until then they are carried along, their results already stored), which saves
-    copying every array at nearly every step. Neither changes a bit of the result, nor does
-    the batch a state shares: each state's arithmetic is its own.
+    The flights are ``SinusoidGap``'s, solved by ``first_contact`` from the module
+    docstring's first step (``model.compiled`` repeats these expressions in the same order).
     """
     theta, v, *given = np.broadcast_arrays(*(np.asarray(x, dtype=float)
                                              for x in (theta, v, amplitude, omega, g)))
@@ -140,11 +394,8 @@ def first_impact_phase(theta, v, amplitude, omega, g, *, max_steps: int = MAX_SA
     theta = np.mod(theta.ravel(), 2.0 * np.pi)  # sin/cos periodic: keep arguments small
     v = v.ravel()
     # racket parameters: plain floats when they are one value (the fast path), else arrays
-    # that are compacted with the states below
-    racket: list[Any] = [float(x.flat[0]) if x.size and np.all(x == x.flat[0]) else x.ravel()
-                         for x in given]
-    a, w, g = racket
-    bound: Any = g / (w * w) + a  # M >= |G''|
+    # that are compacted with the states
+    a, w, g = (_per_flight(x) for x in given)
     cos_th = np.cos(theta) if cos_theta is None else np.broadcast_to(cos_theta, shape).ravel()
     sin_th = np.sin(theta) if sin_theta is None else np.broadcast_to(sin_theta, shape).ravel()
 
@@ -156,7 +407,7 @@ def first_impact_phase(theta, v, amplitude, omega, g, *, max_steps: int = MAX_SA
         flies = np.where(release, cos_th > 0.0, flies)
     idx = np.flatnonzero(flies)
     vv = v[idx]
-    a, w, g, bound = (x if isinstance(x, float) else x[idx] for x in (a, w, g, bound))
+    a, w, g = (x if isinstance(x, float) else x[idx] for x in (a, w, g))
 
     # first step from s = 0 (G = 0): smallest positive root of d + c h/2 - a h^2/6
     cos_th, sin_th = cos_th[idx], sin_th[idx]
@@ -167,94 +418,6 @@ def first_impact_phase(theta, v, amplitude, omega, g, *, max_steps: int = MAX_SA
         at_release = release[idx]
         d0 = np.where(at_release, 0.0, d0)
         s = np.where(at_release, 2.0 * cos_th, s)
-    tmp = np.empty_like(s)
-    del slope, curvature, c0
-
-    eps = np.finfo(float).eps
-    # scalars of the step, computed once (the same values the array expressions would use)
-    w_sq: Any = w * w
-    two_w_sq: Any = 2.0 * w * w
-    two_a: Any = 2.0 * a
-    two_bound: Any = 2.0 * bound
-    live = np.ones(idx.size, dtype=bool)  # not yet finished (finished ones may be carried)
-    n_live = idx.size
-    for _ in range(max_steps):
-        if n_live == 0:
-            break
-        half = s / 2.0
-        sin_half = np.sin(half)
-        cos_half = np.cos(half, out=half)
-        # cos and sin of theta + s/2 by the angle-addition formulas: two transcendental
-        # functions per step instead of three (the same expressions as engine.compiled)
-        cos_mid = cos_th * cos_half
-        cos_mid -= np.multiply(sin_th, sin_half, out=tmp)
-        sin_mid = np.multiply(sin_th, cos_half, out=cos_half)
-        sin_mid += np.multiply(cos_th, sin_half, out=tmp)
-        racket_rise = np.multiply(two_a, cos_mid, out=cos_mid)
-        racket_rise *= sin_half  # a (sin(th + s) - sin(th)) = 2 a cos(th + s/2) sin(s/2)
-        ball = vv * s
-        ball /= w
-        g_s = g * s
-        drop = g_s * s
-        drop /= two_w_sq
-        G = ball - drop
-        G -= racket_rise
-        # d = d0 - g s / w^2 + 2 a sin(th + s/2) sin(s/2)
-        d = np.divide(g_s, w_sq, out=g_s)
-        np.subtract(d0, d, out=d)
-        rate = np.multiply(two_a, sin_mid, out=sin_mid)
-        rate *= sin_half
-        d += rate
-        # scale = |v s / w| + g s^2 / (2 w^2) + |racket rise|
-        scale = np.abs(ball, out=ball)
-        scale += drop
-        scale += np.abs(racket_rise, out=racket_rise)
-        # step = (d + sqrt(d^2 + 2 M max(G, 0))) / M
-        step = np.maximum(G, 0.0, out=drop)
-        step *= two_bound
-        step += np.multiply(d, d, out=sin_half)
-        np.sqrt(step, out=step)
-        step += d
-        step /= bound
-        scale *= 8.0 * eps
-        done = G <= scale
-        done |= step <= 4.0 * eps * s
-        done &= live
-        s_next = s + step
-        # the last step, taken without an evaluation to confirm it: the root lies in
-        # [s + h, s + h + 2 M h^2 / delta] when delta = -(d + M h) > 0 (module docstring);
-        # when that is within eps (s + h), s + h is the root to about an ulp
-        delta = np.multiply(bound, step)
-        delta += d
-        np.negative(delta, out=delta)
-        last = np.multiply(two_bound, step)
-        last *= step
-        last = last <= eps * s_next * delta
-        last &= delta > 0.0
-        last &= live
-        last &= ~done
-        if last.any():
-            result[idx[last]] = s_next[last]
-        finished = done | last
-        if finished.any():
-            if done.any():
-                # Newton polish of the converged ones, only where the crossing is transversal
-                # and the correction tiny, so that a polish can never move to another root
-                sd, Gd, dd = s[done], G[done], d[done]
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    corr = np.where(dd < 0.0, Gd / dd, 0.0)
-                corr = np.where(np.abs(corr) < 1e-6 * sd, corr, 0.0)
-                result[idx[done]] = sd - corr
-            live &= ~finished
-            n_live = int(np.count_nonzero(live))
-            if n_live <= live.size - live.size // 8:  # compact: drop the finished ones
-                idx, vv, d0, s_next, cos_th, sin_th = (
-                    x[live] for x in (idx, vv, d0, s_next, cos_th, sin_th)
-                )
-                tmp = np.empty_like(s_next)
-                a, w, g, bound = (x if isinstance(x, float) else x[live]
-                                  for x in (a, w, g, bound))
-                w_sq, two_w_sq, two_a, two_bound = w * w, 2.0 * w * w, 2.0 * a, 2.0 * bound
-                live = np.ones(n_live, dtype=bool)
-        s = s_next
+    result[idx] = first_contact(SinusoidGap(cos_th, sin_th, vv, d0, a, w, g), s,
+                                max_steps=max_steps)
     return result.reshape(shape)
