@@ -199,14 +199,16 @@ def check_model(entry: Entry, cfg: ExperimentConfig,
         warn_if_unstable(cfg.params, controller, warn)
 
 
-def run_options(cfg: ExperimentConfig, config: Path | None, overrides: list[str],
+def run_options(entry: Entry, cfg: ExperimentConfig, config: Path | None, overrides: list[str],
                 **options: Any) -> RunOptions:
     """The run's :class:`RunOptions` (``options``: jobs, warn, scheduler), with the model keys
-    the user set (their own config's and ``--set``'s) where a ``data`` analysis takes the
-    others from the data."""
+    the user set (``--set``'s, and their own config's where it differs from the bundled one:
+    ``config.keys_set_by_user``) where a ``data`` analysis takes the others from the data."""
     run = RunOptions(**options)
     if getattr(cfg, "data", None) is not None:
-        given = keys_set_by_user(config, overrides)
+        defaults = None if config is None else load_config(
+            type(cfg), bundled_config_path(entry.config)).model_dump(mode="json")
+        given = keys_set_by_user(config, overrides, defaults)
         run.model_set_by_user = frozenset(
             key for key in DATA_MODEL_KEYS if f"model.{key}" in given)
     return run
@@ -373,7 +375,7 @@ def run(name: str, config: str | Path | None = None,
         run_dir = open_run_directory(entry, cfg, path, config_given=config is not None,
                                      overrides=overrides, out=Path(out), force=force)
     try:
-        options = run_options(cfg, None if config is None else Path(config), overrides,
+        options = run_options(entry, cfg, None if config is None else Path(config), overrides,
                               jobs=int(jobs), warn=python_warning)
         if run_dir is not None:
             run_dir.record = options.record

@@ -153,6 +153,46 @@ def test_keys_set_by_user():
         "model.g", "model.alpha"}
 
 
+def test_a_config_file_sets_only_the_keys_that_differ_from_the_bundled_one(tmp_path):
+    """A leaf of the user's file equal to the bundled config's value is no choice (a printed
+    config holds every one); one that differs is; a --set always is."""
+    bundled = load_config(learning.LearningConfig, bundled_config_path("learning"))
+    own = tmp_path / "own.yaml"
+    own.write_text(f"model:\n  alpha: {bundled.model.alpha}\n  g: 9.6\n")
+    defaults = bundled.model_dump(mode="json")
+    assert bundled.model.g != 9.6
+    assert keys_set_by_user(own, [], defaults) == {"model.g"}
+    assert keys_set_by_user(own, [f"model.alpha={bundled.model.alpha}"], defaults) >= {
+        "model.alpha", "model.g"}
+    assert keys_set_by_user(own, []) >= {"model.alpha", "model.g"}  # no defaults: every leaf
+
+
+def test_a_printed_config_loaded_back_leaves_the_data_its_alpha_and_g(tmp_path, cli):
+    """--print-config writes every key of the resolved config, model.alpha and model.g among
+    them; loaded back with --config they counted as set by the user, so the data's alpha 0.55
+    and g 9.5 were replaced by the bundled 0.42 / 5.8 without a word. Now a printed default is
+    no choice, and a value edited in the printout is."""
+    path = lab_table(tmp_path)
+    printed = cli("acf", "--print-config")
+    assert printed.exit_code == 0, printed.output
+    config = tmp_path / "printed.yaml"
+    config.write_text(printed.stdout)
+    assert "alpha:" in printed.stdout and "g:" in printed.stdout
+    result = cli("acf", "--config", config, "--data", path, "--out", tmp_path / "o", *ACF_FAST)
+    assert result.exit_code == 0, result.output
+    assert "model at the data's alpha 0.55 (events, median of 480 impacts), g 9.50 m/s^2 " \
+           "(measured, setup.csv)" in summary(result)
+    assert json.loads((tmp_path / "o" / "run.json").read_text())["model_at_data"]["g"][
+        "source"] == "measured"
+    edited = tmp_path / "edited.yaml"
+    edited.write_text(printed.stdout.replace("alpha: 0.42", "alpha: 0.5", 1))
+    assert edited.read_text() != printed.stdout
+    result = cli("acf", "--config", edited, "--data", path, "--out", tmp_path / "e", *ACF_FAST)
+    assert result.exit_code == 0, result.output
+    assert "model at the data's alpha 0.5 (set), g 9.50 m/s^2 (measured, setup.csv)" in (
+        summary(result))
+
+
 @pytest.mark.slow
 def test_control_data_computes_everything_at_the_datas_racket(tmp_path, cli):
     """control --data at a lab's racket (0.11 m, 0.60 s) and alpha 0.55: at the config's

@@ -45,8 +45,8 @@ def test_fixed_point_warns_of_millimetres_typed_for_metres(cli):
 def test_regression_warns_of_trial_amplitudes_in_mm_under_an_m_column(tmp_path, cli):
     """a_r_m in mm gives eq. 15's slope 305 m/s^2 against 0.30: now with a warning naming it."""
     path = tmp_path / "trials.csv"
-    pd.DataFrame({"a_r_m": [100.0, 150.0, 210.0, 280.0], "tau_s": [0.5, 0.6, 0.7, 0.8]}).to_csv(
-        path, index=False)
+    pd.DataFrame({"a_r_m": [100.0, 150.0, 210.0, 280.0], "tau_s": [0.5, 0.6, 0.7, 0.8],
+                  "alpha": 0.5, "g": 9.81}).to_csv(path, index=False)
     result = cli("regression", "--data", path, "--out", tmp_path / "o", "--quiet")
     assert result.exit_code == 0, result.output
     (line,) = warnings_of(result)

@@ -263,3 +263,31 @@ def test_an_adaptive_table_is_compared_by_the_branches_it_traces():
     assert table_drift("continuation", "branches.csv", other, committed)
     # elsewhere a row more is a drift
     assert table_drift("continuation", "bifurcations.csv", extra, committed)
+
+
+def test_the_crosscheck_fit_at_the_rounding_floor_is_compared_within_its_stated_precision():
+    """stability's crosscheck fits a deviation's decay down to the rounding floor: where it
+    first drops below the floor, and so the fitted rate, moves with the last bits (an emulated
+    Nehalem gave 319 impacts and rate 0.934924 where the committed table has 318 and
+    0.934882, so `bounce reproduce` rewrote crosscheck.csv and git status was dirty). Moving
+    g by a few ulps shows the same; such rows agree within their stated precision, eq. 10's
+    and the Jacobian's radius keep the full tolerance (CROSSCHECK_ESTIMATES)."""
+    from bounce_cli.experiments.base import NullProgress
+    from bounce_cli.experiments.stability import (CrosscheckBlock, CrosscheckPoint,
+                                                  crosscheck_frame)
+    from bounce_cli.paper.reproduce import RTOL
+
+    block = CrosscheckBlock(points=[CrosscheckPoint(alpha=0.8, ac_g=-1.006, racket_period=0.6)])
+    committed = crosscheck_frame(block, 9.81, NullProgress())
+    moved = [crosscheck_frame(block, 9.81 * (1.0 + ulps * 2.2e-16), NullProgress())
+             for ulps in (-6, -3, -1, 1, 3, 6)]
+    for fresh in moved:
+        assert table_drift("stability", "crosscheck.csv", fresh, committed) == []
+    # the Nehalem's row: beyond rtol 1e-6 in the fit's columns only, and accepted
+    nehalem = committed.assign(impacts_fitted=committed.impacts_fitted + 1,
+                               radius_empirical=committed.radius_empirical * (1 + 4.5e-5))
+    assert abs(nehalem.radius_empirical / committed.radius_empirical - 1).max() > 10 * RTOL
+    assert table_drift("stability", "crosscheck.csv", nehalem, committed) == []
+    assert table_drift("other", "crosscheck.csv", nehalem, committed)  # the full tolerance
+    off = committed.assign(radius_fd_jacobian=committed.radius_fd_jacobian * (1 + 1e-5))
+    assert table_drift("stability", "crosscheck.csv", off, committed)

@@ -55,7 +55,8 @@ def test_committed_results_ignore_timing_files():
 
 def test_data_fit_records_the_file_and_no_seed(tmp_path):
     trials = tmp_path / "trials.csv"
-    trials.write_text("a_r_m,tau_s\n0.10,0.50\n0.15,0.60\n0.21,0.70\n0.28,0.80\n")
+    trials.write_text("a_r_m,tau_s,alpha,g\n0.10,0.50,0.5,9.81\n0.15,0.60,0.5,9.81\n"
+                      "0.21,0.70,0.5,9.81\n0.28,0.80,0.5,9.81\n")
     os.chdir(tmp_path)  # a relative --data path, as a user types it
     result = run("regression", "--data", "trials.csv", "--out", tmp_path / "fit", "--quiet")
     assert result.exit_code == 0, result.output

@@ -362,7 +362,7 @@ def run_experiment(
                                      overrides=overrides, out=out, force=force,
                                      figure_formats=figure_formats, dpi=dpi)
         progress = make_progress() if not quiet else None
-        options = run_options(cfg, config, overrides, jobs=jobs or os.cpu_count() or 1,
+        options = run_options(entry, cfg, config, overrides, jobs=jobs or os.cpu_count() or 1,
                               warn=warn, scheduler=scheduler)
         run_dir.record = options.record
         if entry.resumable:

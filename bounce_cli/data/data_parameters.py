@@ -10,8 +10,14 @@ data's alpha and g:
 * g: ``g_m_s2`` of the ``setup.csv`` beside the table (``bounce_cli.data.setup_table``, measured
   from the ball's free flights), else the mean of a ``g_m_s2`` column.
 
+``regression --data`` also reads a trials CSV (one row per trial: ``a_r_m``, ``tau_s``); its
+data's alpha and g are its ``alpha`` and ``g`` columns (one value per condition), under the
+same rules (``trials_model``).
+
 "Set by the user" means given on this command line: ``--set model.alpha=...`` (or
-``model.g``), or written under ``model:`` in the user's own ``--config`` file. The values of a
+``model.g``), or written under ``model:`` in the user's own ``--config`` file with a value
+other than the bundled config's (``runtime.config.keys_set_by_user``: a config printed by
+``--print-config`` and loaded back holds every default, which are no choice). The values of a
 bundled config (the paper's) are not set by the user: with ``--data`` they are replaced by the
 data's. A value set by the user wins over the data's. A value that is neither in the data nor
 set is a one-line error naming both ways to give it. Library use (``RunOptions`` without
@@ -37,7 +43,8 @@ class ModelValue:
     """One model parameter and where it came from: ``source`` is ``set`` (by the user),
     ``config`` (library use: the config's value), ``measured`` (per impact,
     ``alpha_measured``; or ``setup.csv``), ``events`` (the ``alpha`` column) or ``column``
-    (a ``g_m_s2`` column); ``n`` the observations it rests on."""
+    (a ``g_m_s2`` column; a trials CSV's ``alpha`` or ``g``); ``n`` the observations it rests
+    on."""
 
     name: str
     value: float
@@ -145,30 +152,99 @@ def data_model(impacts, model, set_by_user: frozenset[str] | None,
     ConfigError
         When a value is neither in the data nor set by the user (one line naming both ways).
     """
+    set_alpha, set_g = _set_values(model, set_by_user)
+    alpha = set_alpha or alpha_from_data(impacts.frame)
+    g = set_g or g_from_data(impacts.frame, list(paths or []))
+    return _checked(impacts.path, alpha, g, {
+        "alpha": "no alpha_measured or alpha column in the table",
+        "g": f"no {SETUP_FILE} with g_m_s2 beside it, no g_m_s2 column"},
+        f"bounce extract writes alpha_measured and {SETUP_FILE}")
+
+
+def _set_values(model, set_by_user: frozenset[str] | None
+                ) -> tuple[ModelValue | None, ModelValue | None]:
+    """The config's alpha and g where they count as given (set by the user; library use:
+    every config value), None where the data's apply."""
     given = frozenset(DATA_MODEL_KEYS) if set_by_user is None else set_by_user
     how = "config" if set_by_user is None else "set"
-    alpha = (ModelValue("alpha", float(model.alpha), how) if "alpha" in given
-             else alpha_from_data(impacts.frame))
-    g = (ModelValue("g", float(model.g), how) if "g" in given
-         else g_from_data(impacts.frame, list(paths or [])))
-    missing = []
-    if alpha is None:
-        missing.append("alpha (no alpha_measured or alpha column in the table)")
-    if g is None:
-        missing.append(f"g (no {SETUP_FILE} with g_m_s2 beside it, no g_m_s2 column)")
+    alpha = ModelValue("alpha", float(model.alpha), how) if "alpha" in given else None
+    g = ModelValue("g", float(model.g), how) if "g" in given else None
+    return alpha, g
+
+
+def _checked(path, alpha: ModelValue | None, g: ModelValue | None, why_missing: dict[str, str],
+             data_hint: str) -> DataModel:
+    """The model of a --data analysis, or the one-line error of a value neither in the data
+    nor set (naming both ways to give it: ``data_hint`` says how the data would hold it) or of
+    a data's value outside its range."""
+    missing = [name for name, found in (("alpha", alpha), ("g", g)) if found is None]
     if missing:
-        keys = " and ".join(f"--set model.{m.split()[0]}=VALUE" for m in missing)
-        raise ConfigError(f"data: {impacts.path}: the model needs " + " and ".join(missing)
-                          + f": give the data's (bounce extract writes alpha_measured and "
-                          f"{SETUP_FILE}) or set {keys} (or model: in your own --config)")
+        keys = " and ".join(f"--set model.{name}=VALUE" for name in missing)
+        raise ConfigError(f"data: {path}: the model needs " + " and ".join(
+            f"{name} ({why_missing[name]})" for name in missing)
+            + f": give the data's ({data_hint}) or set {keys} (or model: in your own --config)")
     assert alpha is not None and g is not None
     if not math.isfinite(alpha.value) or not 0.0 <= alpha.value < 1.0:
-        raise ConfigError(f"data: {impacts.path}: the data's alpha {alpha.value:.3g} is "
+        raise ConfigError(f"data: {path}: the data's alpha {alpha.value:.3g} is "
                           "outside [0, 1); set model.alpha")
     if not math.isfinite(g.value) or g.value <= 0.0:
-        raise ConfigError(f"data: {impacts.path}: the data's g {g.value:.3g} m/s^2 is not "
+        raise ConfigError(f"data: {path}: the data's g {g.value:.3g} m/s^2 is not "
                           "positive; set model.g")
     return DataModel(alpha, g)
+
+
+def trials_column_value(trials, name: str, path) -> ModelValue | None:
+    """A trials CSV's ``alpha`` or ``g`` column as the data's value: its value when the trials
+    share one, else their mean (then eq. 15 takes each condition's own, which the fit checks
+    to be one per condition); None without the column."""
+    if name not in trials.columns:
+        return None
+    values = np.asarray(trials[name], dtype=float)
+    absent = int((~np.isfinite(values)).sum())  # several files, some without the column
+    if absent:
+        raise ConfigError(f"data: {path}: column {name}: missing in {absent} of {len(values)} "
+                          f"trials: give it for every trial or set model.{name}")
+    distinct = np.unique(values)
+    detail = (f"{len(values)} trials" if len(distinct) == 1
+              else f"{len(distinct)} values over {len(values)} trials, one per condition")
+    return ModelValue(name, float(values.mean()), "column", len(values), detail)
+
+
+def trials_model(trials, path, model, set_by_user: frozenset[str] | None) -> DataModel:
+    """alpha and g for eq. 15 on a trials CSV (``regression --data``: one row per trial,
+    ``a_r_m``, ``tau_s``), by the rules of ``data_model``: the user's value where set, else the
+    CSV's ``alpha`` / ``g`` column (``trials_column_value``), else a one-line error naming both
+    ways.
+
+    Parameters
+    ----------
+    trials : pandas.DataFrame
+        The trials read (``regression.read_trials``; several files concatenated).
+    path : str
+        The file(s), as messages name them.
+    model : ModelBlock
+        The config's ``model`` block.
+    set_by_user : frozenset of str or None
+        The model keys the user set; None: every config value counts as set.
+
+    Returns
+    -------
+    DataModel
+        The values and their sources; a ``column`` source leaves eq. 15 (eq. 15's slope
+        (1 - alpha)/(1 + alpha) g / (4 pi cos theta)) each condition's own value.
+
+    Raises
+    ------
+    ConfigError
+        A value neither in the CSV nor set, a column missing for some trials, a value outside
+        its range.
+    """
+    set_alpha, set_g = _set_values(model, set_by_user)
+    alpha = set_alpha or trials_column_value(trials, "alpha", path)
+    g = set_g or trials_column_value(trials, "g", path)
+    return _checked(path, alpha, g, {"alpha": "no alpha column in the trials",
+                                     "g": "no g column in the trials"},
+                    "an alpha and a g column, one value per condition")
 
 
 def model_for_data(impacts, config, options, source) -> DataModel:

@@ -40,6 +40,7 @@ from ..analysis.regression import (
 )
 from .plotting import caption_figures, new_figure, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
+from ..data.data_parameters import DataModel, ModelValue, trials_model
 from ..data.impacts import read_data_csv
 from ..data.plausibility import racket_warnings
 from .data_side import is_impacts_table, trial_means_from_impacts
@@ -183,9 +184,12 @@ def read_trials(path_text: str) -> pd.DataFrame:
 NARROW_TAU2 = 0.01
 
 
-def fit_frame(trials: pd.DataFrame, config: RegressionConfig) -> pd.DataFrame:
+def fit_frame(trials: pd.DataFrame, config: RegressionConfig,
+              model: DataModel | None = None) -> pd.DataFrame:
     """fit.csv: one row per condition ("all" without a condition column); simulated trials
-    that lost the ball are left out."""
+    that lost the ball are left out. alpha and g of eq. 15: ``model``'s (a trials CSV's,
+    ``data_parameters.trials_model``) where set, else each condition's column (a ``column``
+    source, or simulated trials: the config's)."""
     if "lost" in trials.columns:
         trials = trials[~trials["lost"].astype(bool)]
     groups = (trials.groupby("condition", sort=True) if "condition" in trials.columns
@@ -198,8 +202,10 @@ def fit_frame(trials: pd.DataFrame, config: RegressionConfig) -> pd.DataFrame:
             fit = ols_line(x, y, config.confidence)
         except ModelError as exc:
             raise ConfigError(f"data: condition {condition!r}: {exc}") from None
-        alpha = _constant(group, "alpha", config.model.alpha, condition)
-        g = _constant(group, "g", config.model.g, condition)
+        alpha = _eq15_value(group, "alpha", None if model is None else model.alpha,
+                            config.model.alpha, condition)
+        g = _eq15_value(group, "g", None if model is None else model.g, config.model.g,
+                        condition)
         theta = (math.radians(group["theta_deg"].mean()) if "theta_deg" in group.columns
                  else math.nan)
         predicted = float(eq15_slope(theta, alpha, g)) if math.isfinite(theta) else math.nan
@@ -220,6 +226,16 @@ def fit_frame(trials: pd.DataFrame, config: RegressionConfig) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
+def _eq15_value(group: pd.DataFrame, column: str, given: ModelValue | None, default: float,
+                condition) -> float:
+    """alpha or g of eq. 15 for one condition: ``given`` (set by the user, or the config's)
+    unless that is the trials' own column (or there is none: simulated trials), whose one
+    value in the condition is taken."""
+    if given is not None and given.source != "column":
+        return given.value
+    return _constant(group, column, default, condition)
+
+
 def _constant(group: pd.DataFrame, column: str, default: float, condition) -> float:
     if column not in group.columns:
         return float(default)
@@ -234,19 +250,23 @@ def run(config: RegressionConfig, options: RunOptions, source=None) -> Experimen
     """``source``: an impacts table in memory, ``(label, frame)`` (default: ``config.data``)."""
     # None: simulated trials
     data_label = (data_text(config.data) or None) if source is None else source[0]
-    at_model = ""  # with an impacts table: the model's alpha and g and where they came from
+    at_model = ""  # with data: the model's alpha and g and where they came from
+    model: DataModel | None = None  # with a trials CSV: alpha and g of eq. 15
     impacts_source = source if source is not None else (
         config.data if config.data is not None and all(
             is_impacts_table(p) for p in data_files(config.data)) else None)
     if impacts_source is not None:
-        trials, model = trial_means_from_impacts(impacts_source, config, options)
+        trials, impacts_model = trial_means_from_impacts(impacts_source, config, options)
         described = (f"{'data ' if source is None else ''}{data_label} (impacts averaged per "
-                     f"trial); {model.text()}")
-        at_model = f"; {model.text()}"
+                     f"trial); {impacts_model.text()}")
+        at_model = f"; {impacts_model.text()}"
     elif config.data is not None:  # several trials CSVs: their trials together
         trials = pd.concat([read_trials(p) for p in data_files(config.data)],
                            ignore_index=True)
-        described = f"data {data_label}"
+        model = trials_model(trials, data_label, config.model, options.model_set_by_user)
+        options.record["model_at_data"] = model.record()
+        described = f"data {data_label}; {model.text()}"
+        at_model = f"; {model.text()}"
         for message in racket_warnings(trials["a_r_m"], trials["tau_s"],
                                        f"data: {data_label}: column a_r_m",
                                        f"data: {data_label}: column tau_s"):
@@ -256,7 +276,7 @@ def run(config: RegressionConfig, options: RunOptions, source=None) -> Experimen
         described = (f"{len(trials)} simulated trials ({int(trials['lost'].sum())} lost the "
                      "ball and are not fitted)")
     trials = trials.assign(tau2_s2=trials["tau_s"] ** 2)
-    fit = fit_frame(trials, config)
+    fit = fit_frame(trials, config, model)
     fitted = trials[~trials["lost"].astype(bool)] if "lost" in trials.columns else trials
     groups = (fitted.groupby("condition") if "condition" in fitted.columns
               else [("all", fitted)])

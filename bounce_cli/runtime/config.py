@@ -306,20 +306,31 @@ def data_text(data: Any) -> str:
 DATA_MODEL_KEYS: tuple[str, ...] = ("alpha", "g")
 
 
+def dotted_leaves(data: Any, prefix: str = "") -> dict[str, Any]:
+    """Every leaf of a nested mapping with its value, dotted:
+    ``{"model": {"g": 1}}`` -> ``{"model.g": 1}``."""
+    if not isinstance(data, dict):
+        return {prefix: data} if prefix else {}
+    leaves: dict[str, Any] = {}
+    for key, value in data.items():
+        leaves |= dotted_leaves(value, f"{prefix}.{key}" if prefix else str(key))
+    return leaves
+
+
 def dotted_keys(data: Any, prefix: str = "") -> set[str]:
     """Every leaf key of a nested mapping, dotted: ``{"model": {"g": 1}}`` -> ``{"model.g"}``."""
-    if not isinstance(data, dict):
-        return {prefix} if prefix else set()
-    keys: set[str] = set()
-    for key, value in data.items():
-        keys |= dotted_keys(value, f"{prefix}.{key}" if prefix else str(key))
-    return keys
+    return set(dotted_leaves(data, prefix))
 
 
-def keys_set_by_user(config_path: Path | None, overrides: list[str]) -> frozenset[str]:
+def keys_set_by_user(config_path: Path | None, overrides: list[str],
+                     defaults: dict[str, Any] | None = None) -> frozenset[str]:
     """The dotted keys the user gave: every leaf of their own ``--config`` file (None: the
-    bundled config, whose values are not the user's) and every ``--set`` key (a mapping
-    value counts with its leaves).
+    bundled config, whose values are not the user's) whose value is not the default, and
+    every ``--set`` key (a mapping value counts with its leaves; a ``--set`` always counts).
+
+    A file printed by ``--print-config`` holds every key of the resolved config: loaded back
+    unchanged it sets nothing, and after an edit only what was edited. (A user's config that
+    writes the bundled value itself is taken as the default too: ``--set`` says "this one".)
 
     Parameters
     ----------
@@ -327,13 +338,21 @@ def keys_set_by_user(config_path: Path | None, overrides: list[str]) -> frozense
         The user's config file, or None when the bundled config is used.
     overrides : list of str
         The ``--set`` texts (``dotted.key=value``).
+    defaults : dict, optional
+        The bundled config, resolved (``model_dump(mode="json")``): a leaf of the user's file
+        equal to its value there is no choice. None: every leaf of the file counts.
 
     Returns
     -------
     frozenset of str
         Dotted keys such as ``model.alpha``.
     """
-    keys = dotted_keys(read_yaml(config_path)) if config_path is not None else set()
+    own = dotted_leaves(read_yaml(config_path)) if config_path is not None else {}
+    if defaults is not None:
+        default_leaves = dotted_leaves(defaults)
+        own = {key: value for key, value in own.items()
+               if key not in default_leaves or value != default_leaves[key]}
+    keys = set(own)
     for text in overrides:
         path, value = parse_override(text)
         keys |= dotted_keys(value, ".".join(path)) if isinstance(value, dict) else {

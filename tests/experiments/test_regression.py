@@ -14,6 +14,8 @@ SMALL = ["--set", "design.subjects=2", "--set", "design.trials_per_height=2",
 NOISELESS = ["--set", "design.subject_phase_sd_deg=0", "--set", "design.phase_sd_deg=0",
              "--set", "design.period_sd_s=0", "--set", "design.amplitude_sd_m=0",
              "--set", "stochastic_map.q_v=0", "--set", "stochastic_map.q_theta=0"]
+#: a trials CSV without alpha and g columns needs them set (the bundled config's are no data)
+SET_MODEL = ["--set", "model.alpha=0.5", "--set", "model.g=9.81"]
 
 
 @pytest.fixture(scope="module")
@@ -78,7 +80,7 @@ def test_data_with_conditions_and_only_required_columns(tmp_path, cli):
             rows.append({"condition": cond, "tau_s": tau, "a_r_m": k * tau**2 + 0.001 * (-1) ** i})
     path = tmp_path / "trials.csv"
     pd.DataFrame(rows).to_csv(path, index=False)
-    result = cli("regression", "--data", path, "--out", tmp_path / "o")
+    result = cli("regression", "--data", path, "--out", tmp_path / "o", *SET_MODEL)
     assert result.exit_code == 0, result.output
     fit = pd.read_csv(tmp_path / "o" / "fit.csv").set_index("condition")
     assert sorted(fit.index) == ["no-vision", "vision"]
@@ -91,8 +93,9 @@ def test_data_with_conditions_and_only_required_columns(tmp_path, cli):
     ("a_r_m,period\n0.1,0.5\n", ["data:", "missing column(s) tau_s"]),
     ("a_r_m,tau_s\n0.1,0.5\nx,0.6\n0.2,0.7\n", ["column a_r_m", "not a number", "row 2"]),
     ("a_r_m,tau_s\n0.1,0.5\n-0.1,0.6\n0.2,0.7\n", ["column a_r_m", "must be > 0"]),
-    ("a_r_m,tau_s\n0.1,0.5\n0.2,0.6\n", ["at least 3 points"]),
-    ("a_r_m,tau_s,alpha\n0.1,0.5,0.5\n0.15,0.6,0.6\n0.2,0.7,0.5\n", ["alpha", "differs"]),
+    ("a_r_m,tau_s,alpha,g\n0.1,0.5,0.5,9.81\n0.2,0.6,0.5,9.81\n", ["at least 3 points"]),
+    ("a_r_m,tau_s,alpha,g\n0.1,0.5,0.5,9.81\n0.15,0.6,0.6,9.81\n0.2,0.7,0.5,9.81\n",
+     ["alpha", "differs"]),
     ("", ["cannot read"]),
 ])
 def test_bad_data_is_one_line_error(tmp_path, content, needles, cli, user_error):
@@ -121,9 +124,78 @@ def test_trials_at_one_period_warn_that_the_slope_is_undetermined(tmp_path, cli)
     tau = 0.92 + rng.normal(0, 1e-4, 6)
     pd.DataFrame({"a_r_m": 0.30 + rng.normal(0, 0.01, 6), "tau_s": tau}).to_csv(
         tmp_path / "t.csv", index=False)
-    result = cli("regression", "--data", tmp_path / "t.csv", "--out", tmp_path / "o")
+    result = cli("regression", "--data", tmp_path / "t.csv", "--out", tmp_path / "o", *SET_MODEL)
     assert result.exit_code == 0, result.output
     assert "bounce: warning: condition 'all': the trials' squared racket periods span only" in (
         result.stderr)
     spread = cli("regression", "--out", tmp_path / "s", "--quiet")
     assert "warning" not in spread.stderr
+
+
+def eq15_trials(tmp_path, alpha=None, g=None, name="trials.csv"):
+    """Trials on eq. 15's line at 35 deg for alpha 0.6, g 9.5 (far from the bundled config's
+    0.5 and 9.81), with ``alpha`` / ``g`` columns when given."""
+    tau = np.array([0.5, 0.55, 0.62, 0.7, 0.78, 0.85])
+    slope = (1 - 0.6) / (1 + 0.6) * 9.5 / (4 * np.pi * np.cos(np.radians(35.0)))
+    frame = pd.DataFrame({"a_r_m": slope * tau**2, "tau_s": tau, "theta_deg": 35.0})
+    if alpha is not None:
+        frame["alpha"] = alpha
+    if g is not None:
+        frame["g"] = g
+    frame.to_csv(tmp_path / name, index=False)
+    return tmp_path / name, slope
+
+
+def test_a_trials_csv_gives_eq15_its_own_alpha_and_g_and_says_so(tmp_path, cli):
+    """The trials' alpha and g columns, not the bundled config's 0.5 / 9.81 (taken silently
+    before): printed, recorded in run.json's model_at_data, used by eq. 15."""
+    path, slope = eq15_trials(tmp_path, alpha=0.6, g=9.5)
+    out = tmp_path / "o"
+    result = cli("regression", "--data", path, "--out", out)
+    assert result.exit_code == 0, result.output
+    text = " ".join(result.stderr.split())
+    assert "model at the data's alpha 0.6 (column, 6 trials), g 9.50 m/s^2 (column, 6 trials)" in (
+        text)
+    fit = pd.read_csv(out / "fit.csv").iloc[0]
+    assert (fit.alpha, fit.g) == (0.6, 9.5)
+    assert fit.predicted_slope == pytest.approx(slope, rel=1e-12)
+    assert fit.implied_theta_deg == pytest.approx(35.0, abs=1e-6)
+    manifest = json.loads((out / "run.json").read_text())
+    assert manifest["model_at_data"]["alpha"] == {"value": 0.6, "source": "column", "n": 6,
+                                                  "detail": "6 trials"}
+    assert manifest["model_at_data"]["g"]["value"] == 9.5
+
+
+def test_a_value_set_by_the_user_wins_over_the_trials_column(tmp_path, cli):
+    path, _ = eq15_trials(tmp_path, alpha=0.6, g=9.5)
+    out = tmp_path / "o"
+    result = cli("regression", "--data", path, "--out", out, "--set", "model.alpha=0.55")
+    assert result.exit_code == 0, result.output
+    assert "model at the data's alpha 0.55 (set), g 9.50 m/s^2 (column, 6 trials)" in (
+        " ".join(result.stderr.split()))
+    fit = pd.read_csv(out / "fit.csv").iloc[0]
+    assert (fit.alpha, fit.g) == (0.55, 9.5)
+    assert json.loads((out / "run.json").read_text())["model_at_data"]["alpha"]["source"] == (
+        "set")
+
+
+def test_a_trials_csv_without_alpha_or_g_is_one_line_naming_both_ways(tmp_path, cli,
+                                                                        user_error):
+    path, _ = eq15_trials(tmp_path, g=9.5)
+    user_error(cli("regression", "--data", path, "--out", tmp_path / "o"),
+               f"data: {path}: the model needs alpha (no alpha column in the trials)",
+               "give the data's (an alpha and a g column", "--set model.alpha=VALUE")
+    both, _ = eq15_trials(tmp_path, name="bare.csv")
+    user_error(cli("regression", "--data", both, "--out", tmp_path / "o"),
+               "alpha (no alpha column", "g (no g column",
+               "--set model.alpha=VALUE and --set model.g=VALUE")
+    # given both ways it runs
+    assert cli("regression", "--data", both, "--out", tmp_path / "o", *SET_MODEL).exit_code == 0
+
+
+def test_trials_files_of_which_only_some_have_the_alpha_column_are_refused(tmp_path, cli,
+                                                                         user_error):
+    with_alpha, _ = eq15_trials(tmp_path, alpha=0.6, g=9.5, name="a.csv")
+    without, _ = eq15_trials(tmp_path, g=9.5, name="b.csv")
+    user_error(cli("regression", "--data", with_alpha, "--data", without,
+                   "--out", tmp_path / "o"), "column alpha: missing in 6 of 12 trials")
