@@ -24,8 +24,7 @@ from typing import Any, Callable, Sequence
 #: old module path -> its new home
 MOVED_MODULES: dict[str, str] = {
     **{f"bounce_cli.engine.{name}": f"bounce_cli.model.{name}" for name in (
-        "params", "impact", "maps", "flight", "chatter", "linear", "compiled", "reference",
-        "control")},
+        "params", "impact", "maps", "flight", "chatter", "linear", "compiled", "reference")},
     **{f"bounce_cli.engine.{name}": f"bounce_cli.analysis.{name}" for name in (
         "classify", "basin_measures", "stochastic", "var_fit", "racket_inputs", "impulse",
         "regression", "lyapunov", "bifurcation", "continuation", "sweep", "group_stats",
@@ -70,8 +69,15 @@ ENGINE_EXPORTS: dict[str, str] = {
                     "bounce_cli.analysis.stochastic"),
 }
 
-#: old packages that have no one new module: served as an empty package of these names
-OLD_PACKAGES: dict[str, dict[str, str]] = {"bounce_cli.engine": ENGINE_EXPORTS}
+#: old packages and modules that have no one new module: served as an empty package of these
+#: names (name -> its module), or of every name of the new modules listed (the first that
+#: has it): ``engine.control`` is now the controlled map (``model.control``) and its design
+#: (``analysis.control_design``)
+OLD_PACKAGES: dict[str, dict[str, str] | tuple[str, ...]] = {
+    "bounce_cli.engine": ENGINE_EXPORTS,
+    "bounce_cli.engine.control": ("bounce_cli.model.control",
+                                  "bounce_cli.analysis.control_design"),
+}
 
 
 def warn_moved(old: str, new: str, stacklevel: int = 3) -> None:
@@ -88,7 +94,8 @@ def warn_moved(old: str, new: str, stacklevel: int = 3) -> None:
                   "removed)", DeprecationWarning, stacklevel=stacklevel)
 
 
-def forward_attributes(package: str, exports: dict[str, str] | str) -> Callable[[str], Any]:
+def forward_attributes(package: str,
+                       exports: dict[str, str] | tuple[str, ...] | str) -> Callable[[str], Any]:
     """A PEP 562 ``__getattr__`` for the old module ``package``: each name is served, after
     a :class:`DeprecationWarning`, from its new module.
 
@@ -96,8 +103,9 @@ def forward_attributes(package: str, exports: dict[str, str] | str) -> Callable[
     ----------
     package : str
         The old module's path (now a package, or an empty package made here).
-    exports : dict or str
-        Name -> its new module; or one new module holding every name.
+    exports : dict, tuple or str
+        Name -> its new module; or the new modules holding the names (the first that has
+        the name serves it); or one new module holding every name.
 
     Returns
     -------
@@ -106,7 +114,11 @@ def forward_attributes(package: str, exports: dict[str, str] | str) -> Callable[
     """
 
     def __getattr__(name: str) -> Any:
-        home = exports if isinstance(exports, str) else exports.get(name)
+        if isinstance(exports, tuple):
+            home = next((m for m in exports if not name.startswith("__")
+                         and hasattr(importlib.import_module(m), name)), None)
+        else:
+            home = exports if isinstance(exports, str) else exports.get(name)
         if home is None or name.startswith("__"):
             raise AttributeError(f"module {package!r} has no attribute {name!r}")
         value = getattr(importlib.import_module(home), name)  # AttributeError as it is

@@ -11,7 +11,8 @@ import pytest
 
 from bounce_cli.runtime.config import bundled_config_path, keys_set_by_user, load_config
 from bounce_cli.data.data_parameters import alpha_from_data, data_model
-from bounce_cli.model.control import PeriodController, simulate_perturbation_trials
+from bounce_cli.model.control import PeriodController
+from bounce_cli.analysis.control_design import simulate_perturbation_trials
 from bounce_cli.analysis.data_stats import simulate_impacts
 from bounce_cli.model.linear import stability
 from bounce_cli.model.params import ModelParams

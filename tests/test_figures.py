@@ -275,7 +275,7 @@ def test_every_experiment_command_offers_the_figure_options(cli):
 
 
 def test_a_figure_redrawn_from_csv_writes_as_pdf(tmp_path):
-    from bounce_cli.experiments.plotting import save_figure
+    from bounce_cli.runtime.figure_files import save_figure
 
     fig = entry("impulse").load().draw(committed_frames("impulse"))["impulse.png"]
     buffer = io.BytesIO()

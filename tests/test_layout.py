@@ -47,19 +47,8 @@ ROOMS = (
 #: imports that still run against the order, each to be removed by the work named (then the
 #: test fails until its line here goes too)
 KNOWN_EXCEPTIONS = {
-    # ClassifySettings (the stopping thresholds) is read by the flight and the scalar
-    # reference: it moves to the model with the step protocol (issue 23, "step")
-    ("bounce_cli.model.flight", "bounce_cli.analysis.classify"),
-    ("bounce_cli.model.reference", "bounce_cli.analysis.classify"),
-    # control.py holds the controlled map and its design; the design part moves to
-    # analysis/ (issue 23, "step")
-    ("bounce_cli.model.control", "bounce_cli.analysis.classify"),
-    ("bounce_cli.model.control", "bounce_cli.analysis.data_stats"),
     # the VARX's racket inputs simulate a session's racket (issue 22, "varx")
     ("bounce_cli.analysis.racket_inputs", "bounce_cli.data.simulated_lab"),
-    # a run directory writes figures with plotting's save_figure; the writing moves to
-    # runtime/ (issue 23, "layout" phase 2)
-    ("bounce_cli.runtime.artifacts", "bounce_cli.experiments.plotting"),
 }
 
 
@@ -279,3 +268,20 @@ def test_an_old_module_that_is_now_a_package_serves_its_names_with_a_warning(old
 def test_the_top_level_exports_still_work():
     for name in bounce_cli.__all__:
         assert getattr(bounce_cli, name) is not None
+
+
+def test_the_old_control_module_serves_the_map_and_its_design():
+    """``engine.control`` was split into the controlled map (``model.control``) and its
+    design (``analysis.control_design``): every name it had is served from its new home."""
+    control, messages = fresh_import("bounce_cli.engine.control")
+    assert any(m.startswith("bounce_cli.engine.control has moved") for m in messages)
+    from bounce_cli.analysis import control_design
+    from bounce_cli.model import control as model_control
+
+    with pytest.warns(DeprecationWarning, match=r"bounce_cli\.model\.control\.ControlledMap"):
+        assert control.ControlledMap is model_control.ControlledMap
+    with pytest.warns(DeprecationWarning,
+                      match=r"bounce_cli\.analysis\.control_design\.fit_period_control"):
+        assert control.fit_period_control is control_design.fit_period_control
+    with pytest.raises(AttributeError):
+        control.no_such_name  # noqa: B018

@@ -103,7 +103,7 @@ def test_every_default_sticking_threshold_is_section_3s_one_constant():
     import inspect
 
     from bounce_cli.analysis.bifurcation import SweepSettings
-    from bounce_cli.analysis.classify import ClassifySettings
+    from bounce_cli.model.maps import ClassifySettings
     from bounce_cli.analysis.continuation import orbit_by_iteration
     from bounce_cli.analysis.data_stats import simulate_impacts
     from bounce_cli.data.simulated_lab import LAB_MIN_HOP_S, SessionSettings
@@ -159,7 +159,8 @@ def test_every_fifth_bounce_first_and_last():
 def test_the_three_simulations_perturb_the_same_impacts():
     from bounce_cli.analysis.data_stats import perturbation_schedule
     from bounce_cli.data.simulated_lab import SessionSettings, alpha_at
-    from bounce_cli.model.control import PeriodController, simulate_perturbation_trials
+    from bounce_cli.analysis.control_design import simulate_perturbation_trials
+    from bounce_cli.model.control import PeriodController
 
     n = 23
     alpha = perturbation_schedule(2, n, 5, 0.5, [(0.3, 0.4), (0.6, 0.7)], seed=1)

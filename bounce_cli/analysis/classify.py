@@ -13,7 +13,7 @@ conditions occurs:
   ``|wrap(theta) - theta~| < tolerance`` (rad, the wrapped phase difference).
 * ``undecided``: none of these within ``max_iterations`` impacts.
 
-With ``min_hop_s`` 0 (exact sticking, ``engine.chatter``) a point sticks where a complete
+With ``min_hop_s`` 0 (exact sticking, ``model.chatter``) a point sticks where a complete
 chatter's tail is summable instead; since every orbit that sticks is released in the same
 state, it takes the released ball's one fate: ``locked`` (the periodic sticking solution,
 ``Classification.locked_cycles`` racket cycles), ``resting`` (Gamma <= 1), or ``period1`` /
@@ -45,15 +45,15 @@ from typing import Any, Callable, Iterable, Iterator, Literal
 
 import numpy as np
 
-from ..model.chatter import release_fate, tail_is_summable
-from ..model.impact import MAX_SAFE_STEPS, can_fly, first_impact_phase
-from ..model.maps import velocity_after_impact
-from ..model.params import MIN_HOP_S, FixedPoint, ModelParams, phase_difference
+from ..model.chatter import release_fate
+from ..model.impact import MAX_SAFE_STEPS
+from ..model.maps import ClassifySettings, ImpactMap, PassiveMap
+from ..model.params import FixedPoint, ModelError, ModelParams
 
 PERIOD1, STICKING, BELOW_RACKET, UNDECIDED, LOCKED, RESTING = 0, 1, 2, 3, 4, 5
 #: outcome names indexed by their integer code (section 3's, with ``min_hop_s`` > 0)
 OUTCOMES = ("period1", "sticking", "below_racket", "undecided")
-#: with exact sticking (``min_hop_s`` 0: ``engine.chatter``) "sticking" never occurs; an orbit
+#: with exact sticking (``min_hop_s`` 0: ``model.chatter``) "sticking" never occurs; an orbit
 #: that sticks is "locked" (its release repeats: periodic, superstable) or "resting" (Gamma
 #: <= 1: never released), or takes the fate of the released ball (period1, undecided)
 EXACT_OUTCOMES = OUTCOMES + ("locked", "resting")
@@ -67,23 +67,6 @@ def outcome_names(settings: "ClassifySettings") -> tuple[str, ...]:
 TWO_PI = 2.0 * math.pi
 #: default number of grid points per tile (memory per tile: a few tens of MB)
 DEFAULT_TILE_POINTS = 1 << 15
-
-
-@dataclass(frozen=True)
-class ClassifySettings:
-    """Stopping conditions of section 3, the paper's values by default (the one place these
-    defaults live: the config's ``classify`` block and the reference classifier take them from
-    here).
-
-    max_iterations: impacts at most (section 3: 100).
-    tolerance: period-1 when |v - v~| < tolerance (m/s) and the wrapped |theta - theta~| <
-    tolerance (rad) (section 3: 1e-3).
-    min_hop_s: sticking when a hop lasts less than this, s (section 3: 1e-3 s).
-    """
-
-    max_iterations: int = 100
-    tolerance: float = 1e-3
-    min_hop_s: float = MIN_HOP_S
 
 
 @dataclass(frozen=True)
@@ -101,7 +84,7 @@ class Classification:
 
 
 def compiled_kernel_available() -> bool:
-    """True when the compiled kernel (``engine.compiled``, numba) can be used: the
+    """True when the compiled kernel (``model.compiled``, numba) can be used: the
     environment variable ``BOUNCE_KERNEL`` is not ``numpy``, numba is installed and the
     kernel's module imports (numba may refuse, e.g. with no writable cache directory: then
     the numpy kernel runs, with the same results)."""
@@ -132,70 +115,67 @@ def classify_batch(theta0, v0, params: ModelParams,
                    settings: ClassifySettings = ClassifySettings(), *,
                    require_fixed_point: bool = True,
                    kernel: Literal["auto", "numpy", "compiled"] = "auto") -> Classification:
-    """Classify initial conditions (arrays broadcast) in one vectorised batch.
+    """Classify initial conditions (arrays broadcast) of the passive map in one batch.
 
     Returns a ``Classification`` with the broadcast shape. See the module docstring for the
     outcomes and the meaning of the iteration count. Without a period-1 fixed point (eq. 8)
     this raises NoFixedPointError, unless ``require_fixed_point`` is False: then no point is
     ``period1`` and the others are decided by the same iteration (parameter sweeps).
 
-    ``kernel``: "numpy" is the code below; "compiled" the same arithmetic compiled with numba
-    (``engine.compiled``: identical outcomes and iteration counts, about 3x faster per core);
-    "auto" the compiled one when ``compiled_kernel_available()``.
+    ``kernel``: "numpy" is ``classify_states``'s loop; "compiled" the same arithmetic
+    compiled with numba (``model.compiled``: identical outcomes and iteration counts, about
+    3x faster per core); "auto" the compiled one when ``compiled_kernel_available()``.
     """
+    return classify_states(PassiveMap.of(params, require_fixed_point=require_fixed_point),
+                           theta0, v0, settings, kernel=kernel)
+
+
+def classify_states(impact_map: ImpactMap, theta0, v0,
+                    settings: ClassifySettings = ClassifySettings(), *,
+                    kernel: Literal["auto", "numpy", "compiled"] = "auto") -> Classification:
+    """Section 3's classification of initial conditions (arrays broadcast) of any map that
+    implements the step protocol (``model.maps.ImpactMap``: the passive map, the
+    controlled one of ``model.control``), in one vectorised batch: the one loop of the
+    module docstring. ``kernel`` as for ``classify_batch``: the compiled kernel runs where
+    the map has one (``has_compiled_kernel``) and exact sticking is not asked for."""
     theta0, v0 = np.broadcast_arrays(np.asarray(theta0, dtype=float), np.asarray(v0, dtype=float))
     shape = theta0.shape
     theta0, v0 = theta0.ravel(), v0.ravel()
-    if require_fixed_point or params.cos_theta_fixed() <= 1.0:
-        fp = params.fixed_point()
-    else:  # a NaN target: no state is within any tolerance of it
-        fp = FixedPoint(v_m_s=math.nan, theta_rad=math.nan)
     exact = settings.min_hop_s == 0.0  # exact sticking: the numpy kernel, whatever ``kernel``
-    if not exact and (kernel == "compiled"
-                      or (kernel == "auto" and compiled_kernel_available())):
-        from ..model.compiled import classify_arrays
-
-        codes, counts = classify_arrays(theta0, v0, params, fp, settings.max_iterations,
-                                        settings.tolerance, settings.min_hop_s,
-                                        MAX_SAFE_STEPS)
+    if not exact and has_compiled_kernel(impact_map) and (
+            kernel == "compiled" or (kernel == "auto" and compiled_kernel_available())):
+        codes, counts = impact_map.compiled_classification(  # type: ignore[attr-defined]
+            theta0, v0, settings, MAX_SAFE_STEPS)
         return Classification(codes.reshape(shape), counts.reshape(shape))
     tol = settings.tolerance
     min_hop = settings.min_hop_s
-    w = params.omega
     stick_code, stick_iterations, locked_cycles = STICKING, None, 0
     if exact:
-        stick_code, stick_iterations, locked_cycles = _exact_sticking_fate(params, settings, fp)
+        if not isinstance(impact_map, PassiveMap):
+            raise ModelError("exact sticking (min_hop_s 0) is implemented for the passive "
+                             "map only; give a shortest hop > 0")
+        stick_code, stick_iterations, locked_cycles = _exact_sticking_fate(
+            impact_map.params, settings, impact_map.target)
 
     outcome = np.full(theta0.shape, UNDECIDED, dtype=np.int8)
     iterations = np.full(theta0.shape, settings.max_iterations, dtype=np.int16)
 
-    flies = can_fly(theta0, v0, params)
+    flies = impact_map.launches(impact_map.start(theta0, v0))
     outcome[~flies] = BELOW_RACKET
     iterations[~flies] = 0
 
     idx = np.flatnonzero(flies)
-    th = np.mod(theta0[idx], TWO_PI)
-    vv = v0[idx]
-    # cos and sin of the wrapped phase, each computed once per impact: eq. 5 and the solver's
-    # start share them (the same values each would compute)
-    cos_th = np.cos(th)
-    a, g = params.racket_amplitude, params.g
+    state = impact_map.start(theta0[idx], v0[idx], wrap=True)
     for k in range(1, settings.max_iterations + 1):
         if idx.size == 0:
             break
-        hop = first_impact_phase(th, vv, a, w, g, cos_theta=cos_th, sin_theta=np.sin(th))
-        th = np.mod(th + hop, TWO_PI)
-        cos_th = np.cos(th)
-        vv = velocity_after_impact(th, vv, hop, params, cos_theta_next=cos_th)
+        step = impact_map.step(state, wrap=True)
+        state = step.state
         # NaN hop (cannot leave the racket) compares False: sticking
-        sticking = ~(hop / w >= min_hop)
-        if exact:  # sticks where a complete chatter's tail is summable (``engine.chatter``)
-            sticking |= tail_is_summable(th, vv - a * w * cos_th, params)
-        period1 = (
-            (np.abs(vv - fp.v_m_s) < tol)
-            & (np.abs(phase_difference(th, fp.theta_rad)) < tol)
-            & ~sticking
-        )
+        sticking = ~(step.hop_s >= min_hop)
+        if exact:  # sticks where a complete chatter's tail is summable (``model.chatter``)
+            sticking |= impact_map.summable_chatter(state)  # type: ignore[attr-defined]
+        period1 = impact_map.near_fixed_point(state, tol) & ~sticking
         settled = sticking | period1
         if settled.any():
             done = idx[settled]
@@ -203,7 +183,7 @@ def classify_batch(theta0, v0, params: ModelParams,
             iterations[done] = (k if stick_iterations is None else
                                 np.where(sticking[settled], stick_iterations(k), k))
             keep = ~settled
-            idx, th, vv, cos_th = idx[keep], th[keep], vv[keep], cos_th[keep]
+            idx, state = idx[keep], state.take(keep)
     return Classification(outcome.reshape(shape), iterations.reshape(shape), locked_cycles)
 
 
@@ -228,18 +208,25 @@ def _exact_sticking_fate(params: ModelParams, settings: ClassifySettings, fp: Fi
     return code, iterations, fate.cycles if fate.kind == "locked" else 0
 
 
+def has_compiled_kernel(impact_map: ImpactMap) -> bool:
+    """The map has a compiled classification (``model.compiled``; the protocol's optional
+    ``compiled_kernel`` and ``compiled_classification``)."""
+    return bool(getattr(impact_map, "compiled_kernel", False))
+
+
 def classify_tile(args):
-    """One task of ``classify_grid``: (theta0, v0, params, settings, kernel) -> (outcome,
-    iterations) arrays; a module-level function, so that worker processes can receive it."""
-    theta0, v0, params, settings, kernel = args
-    result = classify_batch(theta0, v0, params, settings, kernel=kernel)
+    """One task of ``classify_grid``: (theta0, v0, impact_map, settings, kernel) -> (outcome,
+    iterations, locked cycles); a module-level function, so that worker processes can
+    receive it."""
+    theta0, v0, impact_map, settings, kernel = args
+    result = classify_states(impact_map, theta0, v0, settings, kernel=kernel)
     return result.outcome, result.iterations, result.locked_cycles
 
 
 def classify_grid(
     theta0,
     v0,
-    params: ModelParams,
+    params: ModelParams | ImpactMap,
     settings: ClassifySettings = ClassifySettings(),
     *,
     map: Callable[[Callable[[Any], Any], Iterable[Any]], Iterator[Any]] = builtins.map,
@@ -248,11 +235,13 @@ def classify_grid(
     on_tile_done: Callable[[int], None] | None = None,
     kernel: Literal["auto", "numpy", "compiled"] = "auto",
 ) -> Classification:
-    """``classify_batch`` for large arrays: cut into tiles of at most ``tile_points`` points,
-    each classified by ``map(classify_tile, tiles)`` (any ``map``-like callable that yields
-    results in task order: the built-in ``map`` in this process, or an executor's ``map``
-    running tiles on ``workers`` processes; the engine starts no processes itself).
+    """``classify_states`` for large arrays: cut into tiles of at most ``tile_points``
+    points, each classified by ``map(classify_tile, tiles)`` (any ``map``-like callable that
+    yields results in task order: the built-in ``map`` in this process, or an executor's
+    ``map`` running tiles on ``workers`` processes; the engine starts no processes itself).
 
+    ``params``: the passive map's parameters, or any map of the step protocol
+    (``model.maps.ImpactMap``: the controlled map of ``model.control``).
     Tiles interleave the points (tile i holds points i, i + n, i + 2n, ... of the flattened
     arrays), so every tile gets the same mix of cheap and expensive initial conditions and
     the workers stay balanced; the number of tiles is a multiple of ``workers``.
@@ -260,6 +249,7 @@ def classify_grid(
     it (for a progress bar). ``kernel`` as for ``classify_batch``. Results are identical for
     any ``map``, ``workers``, ``tile_points`` and ``kernel``.
     """
+    impact_map = PassiveMap.of(params) if isinstance(params, ModelParams) else params
     theta0, v0 = np.broadcast_arrays(np.asarray(theta0, dtype=float), np.asarray(v0, dtype=float))
     shape = theta0.shape
     theta0, v0 = theta0.ravel(), v0.ravel()
@@ -267,7 +257,7 @@ def classify_grid(
     outcome = np.empty(theta0.shape, dtype=np.int8)
     iterations = np.empty(theta0.shape, dtype=np.int16)
     # copies: contiguous arrays for a worker (and small pickles); made as tiles are sent
-    tasks = ((theta0[t].copy(), v0[t].copy(), params, settings, kernel) for t in tiles)
+    tasks = ((theta0[t].copy(), v0[t].copy(), impact_map, settings, kernel) for t in tiles)
     locked_cycles = 0  # the same in every tile: one release per parameter point
     for tile, (tile_outcome, tile_iterations, tile_cycles) in zip(
             tiles, map(classify_tile, tasks)):

@@ -13,7 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .classify import OUTCOMES, ClassifySettings, classify_batch
+from .classify import OUTCOMES, ClassifySettings, classify_batch, classify_states
+from ..model.control import ControlledMap
 from ..model.linear import iterate_linear, jacobian
 from ..model.maps import iterate_map
 from ..model.params import ModelParams, phase_difference
@@ -63,12 +64,12 @@ def perturbed_outcome(params: ModelParams, alpha_p: float,
     """Where the full map from (theta~, v_0(alpha_p)) ends with section 3's criteria (the
     basin's classifier, ``classify_batch``): ``period1`` | ``sticking`` | ``below_racket`` |
     ``undecided``, and the number of impacts until it was decided. With a racket period
-    ``controller`` (``engine.control``), the controlled map's outcome."""
+    ``controller`` (``model.control``), the controlled map's outcome (the same classifier
+    over the step protocol, the numpy kernel: one point does not repay loading numba)."""
     theta0, v0 = params.fixed_point().theta_rad, perturbed_velocity(params, alpha_p)
     if controller is not None:
-        from ..model.control import classify_controlled  # control builds on this module
-
-        result = classify_controlled(theta0, v0, params, controller, settings)
+        result = classify_states(ControlledMap.of(params, controller, require_fixed_point=True),
+                                 theta0, v0, settings, kernel="numpy")
     else:
         result = classify_batch(theta0, v0, params, settings)
     return OUTCOMES[int(result.outcome)], int(result.iterations)

@@ -45,7 +45,9 @@ period and amplitude of impact k's cycle), both estimators fit
 ends in the next one, so both cycles enter (:mod:`bounce_cli.analysis.racket_inputs` gives the
 model's B from eqs. 5-6). The inputs are their own instruments in ``lag2`` (they are measured
 with the racket's precision, not the ball's). Without them, a racket that varies from cycle to
-cycle biases J: u_k moves y_k and y_{k+1} alike.
+cycle biases J: u_k moves y_k and y_{k+1} alike. With them, on the nonlinear map, both
+estimators converge to its best linear predictor at the data's spread, not to eq. 9's J
+(``experiments.data_side.varx_prediction`` gives the model's prediction for the estimate).
 """
 
 from __future__ import annotations

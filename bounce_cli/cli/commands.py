@@ -203,7 +203,7 @@ JobsOption = Annotated[
 def figure_formats(values: list[str] | None) -> list[str]:
     """--figure-format: each value one format or a comma list of them (png, pdf, svg), in the
     order given, each once; none given: png."""
-    from ..experiments.plotting import FIGURE_FORMATS
+    from ..runtime.figure_files import FIGURE_FORMATS
 
     kinds: list[str] = []
     for text in values or ["png"]:

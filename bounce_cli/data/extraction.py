@@ -669,29 +669,106 @@ def widened_windows(s: ExtractionSettings, dt: float) -> ExtractionSettings:
     )
 
 
-def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
-                  s: ExtractionSettings = ExtractionSettings()) -> TrialExtraction:
-    """Impacts of one trial (see the module docstring). ``ball`` may be None when events give
-    the impact times; ``event_alpha`` (optional) the coefficient of restitution per event."""
-    t = np.asarray(t, dtype=float)
-    dt = float(np.median(np.diff(t)))
-    s = replace(widened_windows(s, dt), guard_samples=guard_samples(s, dt))
-    g = s.g
+@dataclass
+class _Racket:
+    """A trial's racket: its positions at the measured samples (NaN elsewhere), the same with
+    the short gaps bridged (for detection), the samples in gaps too long to bridge, and its
+    cycles."""
+
+    fit: np.ndarray
+    bridged: np.ndarray
+    long_gap: np.ndarray
+    cycles: RacketCycles
+
+
+@dataclass
+class _Ball:
+    """A trial's ball marker: positions at the measured samples (NaN elsewhere), the same with
+    the short gaps bridged, the samples in gaps too long to bridge, which samples were
+    measured."""
+
+    fit: np.ndarray
+    bridged: np.ndarray
+    long_gap: np.ndarray
+    measured: np.ndarray
+
+
+@dataclass
+class _Contacts:
+    """A trial's contacts before they are located: crude times and sample indices, whether the
+    time is an event's logged one (exact), the index k of each in the log, alpha per event."""
+
+    t: np.ndarray
+    index: np.ndarray
+    exact: np.ndarray
+    k: np.ndarray
+    alpha: np.ndarray
+
+
+@dataclass
+class _Impacts:
+    """Per contact, what the steps of :func:`extract_trial` find (NaN: not found): the located
+    time t_k, the velocities after and before, the contact's duration, area and weight, the
+    marker offset, the variance of t_k, the SE of v_k, whether the flights met, the apex
+    height, why it is not reported ("" when it is), whether the flight after runs into a long
+    gap; and the trial's marker offsets and free flights."""
+
+    t_k: np.ndarray
+    v_k: np.ndarray
+    v_in: np.ndarray
+    contact: np.ndarray
+    area: np.ndarray
+    weight: np.ndarray
+    offset_k: np.ndarray
+    var_t: np.ndarray
+    se_v: np.ndarray
+    met: np.ndarray
+    apex_x: np.ndarray
+    reason: list[str]
+    next_unknown: np.ndarray
+    offsets: list[float] = field(default_factory=list)
+    flights: list = field(default_factory=list)
+
+    @classmethod
+    def at(cls, contacts: _Contacts) -> _Impacts:
+        n = len(contacts.t)
+        return cls(
+            t_k=contacts.t.copy(), v_k=np.full(n, np.nan),
+            v_in=np.full(n, np.nan),  # ball velocity just before the impact (the flight before)
+            contact=np.full(n, np.nan),
+            area=np.full(n, np.nan),  # of the ball above its two flights, around it (m s)
+            weight=np.full(n, np.nan),  # |closing velocity| K(alpha): area / weight = contact^2
+            offset_k=np.full(n, np.nan),
+            var_t=np.zeros(n),  # variance of t_k from the flight fits (0: an event's time)
+            se_v=np.full(n, np.nan),
+            met=contacts.exact.copy(),  # timed where the flights meet (or logged)
+            apex_x=np.full(n, np.nan),  # ball height at the apex of the following flight
+            reason=[""] * n, next_unknown=np.zeros(n, dtype=bool))
+
+
+def _racket_of(t, racket, s: ExtractionSettings) -> _Racket:
+    """The racket's samples, bridged, and its cycles (ModelError without a complete one)."""
     racket_raw = np.asarray(racket, dtype=float)
-    racket_f, racket_long = bridge_short_gaps(t, racket_raw, s.max_gap_s)
-    racket_measured = np.isfinite(racket_raw)
-    cycles = racket_cycles(t, racket_f, racket_measured, s)
+    bridged, long_gap = bridge_short_gaps(t, racket_raw, s.max_gap_s)
+    measured = np.isfinite(racket_raw)
+    cycles = racket_cycles(t, bridged, measured, s)
     if cycles.crossings.size == 0:
         raise ModelError("no complete racket cycle found")
-    racket_fit = np.where(racket_measured, racket_raw, np.nan)
+    return _Racket(np.where(measured, racket_raw, np.nan), bridged, long_gap, cycles)
 
-    if ball is not None:
-        ball_raw = np.asarray(ball, dtype=float)
-        ball_f, ball_long = bridge_short_gaps(t, ball_raw, s.max_gap_s)
-        ball_measured = np.isfinite(ball_raw)
-    excluded: list[tuple[float, str]] = []
 
-    # contact times (crude) and sample indices
+def _ball_of(t, ball, s: ExtractionSettings) -> _Ball:
+    """The ball marker's samples and the same bridged."""
+    ball_raw = np.asarray(ball, dtype=float)
+    bridged, long_gap = bridge_short_gaps(t, ball_raw, s.max_gap_s)
+    measured = np.isfinite(ball_raw)
+    return _Ball(np.where(measured, ball_raw, np.nan), bridged, long_gap, measured)
+
+
+def _contacts_of(t, racket: _Racket, ball: _Ball | None, event_t, event_alpha,
+                 s: ExtractionSettings, excluded: list[tuple[float, str]]) -> _Contacts:
+    """The contacts: the events inside the recording's time (the others go to ``excluded``),
+    or, without events, the contacts detected in the ball's samples."""
     if event_t is not None:
         ct = np.asarray(event_t, dtype=float)
         inside = (ct > t[0]) & (ct < t[-1])
@@ -705,119 +782,148 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
     else:
         if ball is None:
             raise ModelError("neither ball positions nor events: no impacts to find")
-        ci = detect_contacts(t, ball_f, racket_f, s, ~ball_measured & ~ball_long)
+        ci = detect_contacts(t, ball.bridged, racket.bridged, s, ~ball.measured & ~ball.long_gap)
         ct = t[ci]
         exact = np.zeros(ct.shape, dtype=bool)
         k_index = np.arange(len(ct))
-    n = len(ct)
     alpha = (np.asarray(event_alpha, dtype=float) if event_alpha is not None
-             else np.full(n, np.nan))
+             else np.full(len(ct), np.nan))
+    return _Contacts(ct, ci, exact, k_index, alpha)
 
-    t_k = ct.copy()
-    v_k = np.full(n, np.nan)
-    v_in = np.full(n, np.nan)  # ball velocity just before the impact (the flight before)
-    contact = np.full(n, np.nan)
-    area = np.full(n, np.nan)  # of the ball above its two flights, around the impact (m s)
-    weight = np.full(n, np.nan)  # |closing velocity| K(alpha): area / weight = contact^2
-    offset_k = np.full(n, np.nan)
-    var_t = np.zeros(n)  # variance of t_k from the flight fits (0: an event's logged time)
-    se_v = np.full(n, np.nan)
-    flights: list = []
-    met = exact.copy()  # timed where the flights meet (or logged): the marker offset shows
-    apex_x = np.full(n, np.nan)  # ball height at the apex of the following flight
-    reason = [""] * n
-    offsets: list[float] = []
-    next_unknown = np.zeros(n, dtype=bool)
-    if ball is not None:
-        ball_fit_data = np.where(ball_measured, ball_raw, np.nan)
-        # fits between consecutive contacts (and before the first, after the last)
-        bounds = np.concatenate([[-s.guard_samples - 1], ci, [len(t) + s.guard_samples]])
-        afters, befores = [None] * n, [None] * n
-        # a contact in a bridged gap is timed from the flights either side: anywhere in it
-        gap_width = np.array([_run_width(t, ~ball_measured, i) for i in ci]) if n else ci
-        for j in range(n + 1):
-            lo = bounds[j] + s.guard_samples + (0 if j == 0 else 1)
-            hi = bounds[j + 1] - s.guard_samples
-            t_after = ct[j - 1] if j > 0 else t[0]
-            t_before = ct[j] if j < n else t[-1]
-            after, before, rest_s, has_gap = _segment_fits(
-                t, ball_fit_data, ball_long, racket_f, lo, hi, t_after, t_before, s)
-            if rest_s == 0.0:  # a free flight: its curvature is g
-                flight = after if after is not None else before
-                if flight is not None and flight.samples is not None:
-                    flights.append(flight.samples)
-            if j > 0:
-                afters[j - 1] = after
-                if rest_s > 0.0:
-                    reason[j - 1] = f"sticking: the ball rested on the racket for {rest_s:.3g} s"
-                if has_gap:
-                    next_unknown[j - 1] = True
-            if j < n:
-                befores[j] = before
-        for j in range(n):
-            after, before = afters[j], befores[j]
-            if reason[j]:
-                continue
-            if after is None:
-                near_gap = np.any(ball_long[max(ci[j] - 3, 0):ci[j] + 4])
-                reason[j] = ("gap: no ball data after the impact" if near_gap or next_unknown[j]
+
+def _flights_around(t, racket: _Racket, ball: _Ball, contacts: _Contacts,
+                    s: ExtractionSettings):
+    """The flight fits between consecutive contacts (and before the first, after the last):
+    per contact the fit after it and the fit before it (None where there is none); ``imp``'s
+    sticking reasons, long gaps and free flights are filled on the way."""
+    ct, ci = contacts.t, contacts.index
+    n = len(ct)
+    imp = _Impacts.at(contacts)
+    bounds = np.concatenate([[-s.guard_samples - 1], ci, [len(t) + s.guard_samples]])
+    afters: list[FlightFit | None] = [None] * n
+    befores: list[FlightFit | None] = [None] * n
+    for j in range(n + 1):
+        lo = bounds[j] + s.guard_samples + (0 if j == 0 else 1)
+        hi = bounds[j + 1] - s.guard_samples
+        t_after = ct[j - 1] if j > 0 else t[0]
+        t_before = ct[j] if j < n else t[-1]
+        after, before, rest_s, has_gap = _segment_fits(
+            t, ball.fit, ball.long_gap, racket.bridged, lo, hi, t_after, t_before, s)
+        if rest_s == 0.0:  # a free flight: its curvature is g
+            flight = after if after is not None else before
+            if flight is not None and flight.samples is not None:
+                imp.flights.append(flight.samples)
+        if j > 0:
+            afters[j - 1] = after
+            if rest_s > 0.0:
+                imp.reason[j - 1] = f"sticking: the ball rested on the racket for {rest_s:.3g} s"
+            if has_gap:
+                imp.next_unknown[j - 1] = True
+        if j < n:
+            befores[j] = before
+    return imp, afters, befores
+
+
+def _impacts_from_flights(t, racket: _Racket, ball: _Ball, contacts: _Contacts,
+                          s: ExtractionSettings) -> _Impacts:
+    """Each contact located where its two flights meet (or where the flight after meets the
+    racket), with v_k, the velocity before, the contact's area, the SEs and the apex."""
+    imp, afters, befores = _flights_around(t, racket, ball, contacts, s)
+    ct, ci, exact = contacts.t, contacts.index, contacts.exact
+    n, g = len(ct), s.g
+    # a contact in a bridged gap is timed from the flights either side: anywhere in it
+    gap_width = np.array([_run_width(t, ~ball.measured, i) for i in ci]) if n else ci
+    for j in range(n):
+        after, before = afters[j], befores[j]
+        if imp.reason[j]:
+            continue
+        if after is None:
+            near_gap = np.any(ball.long_gap[max(ci[j] - 3, 0):ci[j] + 4])
+            imp.reason[j] = ("gap: no ball data after the impact"
+                             if near_gap or imp.next_unknown[j]
                              else "no free flight after the impact")
-                continue
-            if not exact[j]:
-                if before is not None and abs(after.v0 - before.v0) > 0.0:
-                    # both parabolas have the same g: their difference is linear in t
-                    tj = ct[j] - (after.x0 - before.x0) / (after.v0 - before.v0)
-                    if abs(tj - ct[j]) <= 3.0 * _spacing(t, ci[j]) + gap_width[j]:
-                        t_k[j] = tj
-                        met[j] = True
-                        offsets.append(float(after.position(tj, g))
-                                       - local_derivatives(t, racket_fit, tj,
+            continue
+        if not exact[j]:
+            if before is not None and abs(after.v0 - before.v0) > 0.0:
+                # both parabolas have the same g: their difference is linear in t
+                tj = ct[j] - (after.x0 - before.x0) / (after.v0 - before.v0)
+                if abs(tj - ct[j]) <= 3.0 * _spacing(t, ci[j]) + gap_width[j]:
+                    imp.t_k[j] = tj
+                    imp.met[j] = True
+                    imp.offsets.append(float(after.position(tj, g))
+                                       - local_derivatives(t, racket.fit, tj,
                                                            s.position_half_window_s,
                                                            s.position_degree)[0])
-                    else:
-                        t_k[j] = _meet_racket(t, racket_fit, after, ct[j], s)
                 else:
-                    t_k[j] = _meet_racket(t, racket_fit, after, ct[j], s)
-            if not math.isfinite(t_k[j]):
-                # keep the detected sample's time: the impact is listed (excluded.csv) at it,
-                # the hops and the count of impacts lost in gaps stay defined, and k skips it
-                t_k[j] = ct[j]
-                reason[j] = "contact not located"
-                continue
-            v_k[j] = float(after.velocity(t_k[j], g))
-            if before is not None:
-                v_in[j] = float(before.velocity(t_k[j], g))
-                area[j] = _contact_area(t, ball_fit_data, before, after, g)
-                closing = float(v_in[j] - v_k[j])
-                if not exact[j] and closing > 0.0:
-                    var_t[j] = (before.position_var(t_k[j])
-                                + after.position_var(t_k[j])) / closing**2
-            se_v[j] = math.sqrt(after.cov[1][1] + g * g * var_t[j])
-            racket_here = local_fit(t, racket_fit, t_k[j], s.position_half_window_s,
-                                    s.position_degree)
-            if racket_here is not None and met[j]:
-                offset_k[j] = float(after.position(t_k[j], g)) - racket_here.x
-            x_k = float(after.position(t_k[j], g)) - s.ball_offset_m
-            rise = max(v_k[j], 0.0) / g
-            t_next = ct[j + 1] if j + 1 < n else t[-1]
-            if t_k[j] + rise <= min(t_next, after.t_last + 0.5 * _spacing(t, ci[j])):
-                apex_x[j] = x_k + 0.5 * max(v_k[j], 0.0) * rise
-    else:
-        for j in range(n - 1):
-            h = t_k[j + 1] - t_k[j]
-            x0 = local_derivatives(t, racket_fit, t_k[j], s.position_half_window_s,
-                                   s.position_degree)[0]
-            x1 = local_derivatives(t, racket_fit, t_k[j + 1], s.position_half_window_s,
-                                   s.position_degree)[0]
-            v_k[j] = (x1 - x0) / h + 0.5 * g * h  # eq. 1 at both impacts
-            rise = max(v_k[j], 0.0) / g
-            apex_x[j] = x0 + 0.5 * max(v_k[j], 0.0) * rise
-        if n:
-            reason[n - 1] = "last impact of the trial: no flight time (no ball data)"
+                    imp.t_k[j] = _meet_racket(t, racket.fit, after, ct[j], s)
+            else:
+                imp.t_k[j] = _meet_racket(t, racket.fit, after, ct[j], s)
+        if not math.isfinite(imp.t_k[j]):
+            # keep the detected sample's time: the impact is listed (excluded.csv) at it,
+            # the hops and the count of impacts lost in gaps stay defined, and k skips it
+            imp.t_k[j] = ct[j]
+            imp.reason[j] = "contact not located"
+            continue
+        _velocities_at(t, racket, ball, imp, j, after, before, exact[j],
+                       ct[j + 1] if j + 1 < n else t[-1], _spacing(t, ci[j]), s)
+    return imp
 
+
+def _velocities_at(t, racket: _Racket, ball: _Ball, imp: _Impacts, j: int, after: FlightFit,
+                   before: FlightFit | None, exact: bool, t_next: float, spacing: float,
+                   s: ExtractionSettings) -> None:
+    """Impact ``j`` at its located time: v_k and its SE, the velocity before and the
+    contact's area, the marker offset, the apex of the flight after."""
+    g, t_k = s.g, imp.t_k[j]
+    imp.v_k[j] = float(after.velocity(t_k, g))
+    if before is not None:
+        imp.v_in[j] = float(before.velocity(t_k, g))
+        imp.area[j] = _contact_area(t, ball.fit, before, after, g)
+        closing = float(imp.v_in[j] - imp.v_k[j])
+        if not exact and closing > 0.0:
+            imp.var_t[j] = (before.position_var(t_k) + after.position_var(t_k)) / closing**2
+    imp.se_v[j] = math.sqrt(after.cov[1][1] + g * g * imp.var_t[j])
+    racket_here = local_fit(t, racket.fit, t_k, s.position_half_window_s, s.position_degree)
+    if racket_here is not None and imp.met[j]:
+        imp.offset_k[j] = float(after.position(t_k, g)) - racket_here.x
+    x_k = float(after.position(t_k, g)) - s.ball_offset_m
+    rise = max(imp.v_k[j], 0.0) / g
+    if t_k + rise <= min(t_next, after.t_last + 0.5 * spacing):
+        imp.apex_x[j] = x_k + 0.5 * max(imp.v_k[j], 0.0) * rise
+
+
+def _impacts_from_racket(t, racket: _Racket, contacts: _Contacts,
+                         s: ExtractionSettings) -> _Impacts:
+    """Without ball data: v_k from eq. 1 between two impacts with the racket positions at
+    both, and the apex it gives; the last impact has no flight time."""
+    imp = _Impacts.at(contacts)
+    n, g = len(imp.t_k), s.g
+    for j in range(n - 1):
+        h = imp.t_k[j + 1] - imp.t_k[j]
+        x0 = local_derivatives(t, racket.fit, imp.t_k[j], s.position_half_window_s,
+                               s.position_degree)[0]
+        x1 = local_derivatives(t, racket.fit, imp.t_k[j + 1], s.position_half_window_s,
+                               s.position_degree)[0]
+        imp.v_k[j] = (x1 - x0) / h + 0.5 * g * h  # eq. 1 at both impacts
+        rise = max(imp.v_k[j], 0.0) / g
+        imp.apex_x[j] = x0 + 0.5 * max(imp.v_k[j], 0.0) * rise
+    if n:
+        imp.reason[n - 1] = "last impact of the trial: no flight time (no ball data)"
+    return imp
+
+
+def _hops_and_gaps(t, racket: _Racket, ball: _Ball | None, contacts: _Contacts,
+                   imp: _Impacts, from_events: bool, s: ExtractionSettings,
+                   excluded: list[tuple[float, str]]):
+    """The hops (NaN into a long gap), the impacts lost in long gaps of the ball data (counted
+    into k, reported in ``excluded``), chatter, and racket gaps in a flight without ball data:
+    (hop, k)."""
+    t_k, reason, next_unknown = imp.t_k, imp.reason, imp.next_unknown
+    n = len(t_k)
+    k_index = contacts.k
     hop = np.append(np.diff(t_k), np.nan)
     hop[next_unknown] = np.nan
-    if ball is not None and event_t is None and next_unknown.any():
+    if ball is not None and not from_events and next_unknown.any():
         # impacts inside a long gap of the ball data are lost: estimate how many from the
         # typical hop, report them, and keep k counting them
         spans = np.diff(t_k)
@@ -827,7 +933,7 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
         for j in np.flatnonzero(next_unknown[:-1]).tolist():
             lost[j] = max(int(round(spans[j] / typical)) - 1, 0) if math.isfinite(typical) else 0
             lo, hi = np.searchsorted(t, [t_k[j], t_k[j + 1]])
-            missing = np.flatnonzero(~np.isfinite(ball_f[lo:hi])) + lo
+            missing = np.flatnonzero(~np.isfinite(ball.bridged[lo:hi])) + lo
             excluded.append((float(np.mean(t[missing])),
                              f"gap: {t[missing[-1]] - t[missing[0]]:.3g} s without ball data; "
                              f"about {lost[j]} impact(s) lost in it"))
@@ -837,8 +943,19 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
             reason[j] = f"chatter: hop {hop[j]:.3g} s < sticking_hop_s"
         if ball is None and not reason[j]:
             lo, hi = np.searchsorted(t, [t_k[j], t_k[j + 1] if j + 1 < n else t[-1]])
-            if np.any(racket_long[max(lo - 1, 0):hi + 1]):
+            if np.any(racket.long_gap[max(lo - 1, 0):hi + 1]):
                 reason[j] = "gap: racket data missing in the flight"
+    return hop, k_index
+
+
+def _racket_at_impacts(t, racket: _Racket, imp: _Impacts, s: ExtractionSettings):
+    """Each impact's racket cycle and phase, AC (the racket's second derivative, eq. 4's
+    a_r w^2 / g), and eq. 3's alpha from the racket's velocity there (local fit), with the
+    contact's duration; the racket fits' residual sum of squares and dof:
+    (cycle, theta, AC, alpha measured, rss, dof)."""
+    t_k, reason, g = imp.t_k, imp.reason, s.g
+    n = len(t_k)
+    cycles = racket.cycles
     cycle, theta = cycles.locate(t_k)
     acc = np.full(n, np.nan)
     period = float(np.median(cycles.periods)) if cycles.periods.size else 0.0
@@ -849,37 +966,61 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
             # a cycle with a long racket gap is not a cycle: say so when that is why
             lo, hi = np.searchsorted(t, [t_k[j] - period, t_k[j] + period])
             reason[j] = ("gap: racket data missing in the impact's racket cycle"
-                         if np.any(racket_long[lo:hi]) else "outside a complete racket cycle")
+                         if np.any(racket.long_gap[lo:hi]) else "outside a complete racket cycle")
             continue
-        acc[j] = local_derivatives(t, racket_fit, t_k[j], s.acc_half_window_s,
+        acc[j] = local_derivatives(t, racket.fit, t_k[j], s.acc_half_window_s,
                                    s.acc_degree)[2] / g
-        if not math.isfinite(acc[j]) or not math.isfinite(v_k[j]):
+        if not math.isfinite(acc[j]) or not math.isfinite(imp.v_k[j]):
             reason[j] = "gap: too few racket samples around the impact"
     # eq. 3 at t_k with the racket's velocity there (local fit), and the racket's residuals
     alpha_measured = np.full(n, np.nan)
-    racket_v = np.full(n, np.nan)
     racket_rss, racket_dof = 0.0, 0
     for j in range(n):
         if reason[j]:
             continue
-        here = local_fit(t, racket_fit, t_k[j], s.acc_half_window_s, s.acc_degree)
+        here = local_fit(t, racket.fit, t_k[j], s.acc_half_window_s, s.acc_degree)
         if here is None:
             continue
-        racket_v[j] = here.v
         if math.isfinite(here.rss) and here.dof > 0:
             racket_rss, racket_dof = racket_rss + here.rss, racket_dof + here.dof
-        if math.isfinite(v_in[j]) and v_in[j] < here.v:  # approaching the racket
-            alpha_measured[j] = -(v_k[j] - here.v) / (v_in[j] - here.v)
-            if 0.0 < alpha_measured[j] < 1.0 and math.isfinite(area[j]):
-                weight[j] = (here.v - v_in[j]) * contact_shape_factor(alpha_measured[j])
-                contact[j] = math.sqrt(max(area[j], 0.0) / weight[j])
-    keep = np.array([not r for r in reason], dtype=bool)
+        if math.isfinite(imp.v_in[j]) and imp.v_in[j] < here.v:  # approaching the racket
+            alpha_measured[j] = -(imp.v_k[j] - here.v) / (imp.v_in[j] - here.v)
+            if 0.0 < alpha_measured[j] < 1.0 and math.isfinite(imp.area[j]):
+                imp.weight[j] = (here.v - imp.v_in[j]) * contact_shape_factor(alpha_measured[j])
+                imp.contact[j] = math.sqrt(max(imp.area[j], 0.0) / imp.weight[j])
+    return cycle, theta, acc, alpha_measured, racket_rss, racket_dof
+
+
+def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
+                  s: ExtractionSettings = ExtractionSettings()) -> TrialExtraction:
+    """Impacts of one trial (see the module docstring). ``ball`` may be None when events give
+    the impact times; ``event_alpha`` (optional) the coefficient of restitution per event.
+
+    In steps: the racket's cycles, the contacts (events or detected), the flights around each
+    contact (or, without ball data, eq. 1 between impacts), hops and gaps, the racket at each
+    impact; then the reported impacts and the excluded ones."""
+    t = np.asarray(t, dtype=float)
+    dt = float(np.median(np.diff(t)))
+    s = replace(widened_windows(s, dt), guard_samples=guard_samples(s, dt))
+    g = s.g
+    racket_ = _racket_of(t, racket, s)
+    ball_ = None if ball is None else _ball_of(t, ball, s)
+    excluded: list[tuple[float, str]] = []
+    contacts = _contacts_of(t, racket_, ball_, event_t, event_alpha, s, excluded)
+    imp = (_impacts_from_flights(t, racket_, ball_, contacts, s) if ball_ is not None
+           else _impacts_from_racket(t, racket_, contacts, s))
+    hop, k_index = _hops_and_gaps(t, racket_, ball_, contacts, imp, event_t is not None, s,
+                                  excluded)
+    cycle, theta, acc, alpha_measured, racket_rss, racket_dof = _racket_at_impacts(
+        t, racket_, imp, s)
+    t_k, n, cycles = imp.t_k, len(imp.t_k), racket_.cycles
+    keep = np.array([not r for r in imp.reason], dtype=bool)
     for j in np.flatnonzero(~keep).tolist():
-        excluded.append((float(t_k[j]), reason[j]))
+        excluded.append((float(t_k[j]), imp.reason[j]))
     excluded.sort()
     if not keep.any():
         raise ModelError("no bounce found" + (f" ({excluded[0][1]}, ...)" if excluded else ""))
-    apex_t = t_k + np.maximum(v_k, 0.0) / g
+    apex_t = t_k + np.maximum(imp.v_k, 0.0) / g
     mid_apex = np.full(n, np.nan)
     mid_apex[keep] = cycles.mid_position(apex_t[keep])
     cc = np.maximum(cycle, 0)
@@ -888,24 +1029,24 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
         "t_s": t_k[keep],
         "theta_rad": theta[keep],
         "theta_deg": np.degrees(theta[keep]),
-        "v_m_s": v_k[keep],
+        "v_m_s": imp.v_k[keep],
         "racket_acc_g": acc[keep],
         "racket_period_s": cycles.periods[cc][keep],
         "racket_amplitude_m": cycles.amplitudes[cc][keep],
         "hop_s": hop[keep],
-        "ball_apex_m": (apex_x - mid_apex)[keep],
+        "ball_apex_m": (imp.apex_x - mid_apex)[keep],
     }
     if event_t is not None:
-        impacts["alpha"] = alpha[keep]
-    if ball is not None:
-        impacts["v_in_m_s"] = v_in[keep]
+        impacts["alpha"] = contacts.alpha[keep]
+    if ball_ is not None:
+        impacts["v_in_m_s"] = imp.v_in[keep]
         impacts["alpha_measured"] = alpha_measured[keep]
-        impacts["contact_s"] = contact[keep]
-    offset = float(np.median(offsets)) if offsets else math.nan
-    se_theta = _phase_se(t, racket_fit, cycles, t_k, var_t, s)
-    return TrialExtraction(impacts, excluded, cycles, offset, flights, offset_k[keep],
-                           se_v[keep], se_theta[keep], racket_rss, racket_dof,
-                           area[keep], weight[keep])
+        impacts["contact_s"] = imp.contact[keep]
+    offset = float(np.median(imp.offsets)) if imp.offsets else math.nan
+    se_theta = _phase_se(t, racket_.fit, cycles, t_k, imp.var_t, s)
+    return TrialExtraction(impacts, excluded, cycles, offset, imp.flights, imp.offset_k[keep],
+                           imp.se_v[keep], se_theta[keep], racket_rss, racket_dof,
+                           imp.area[keep], imp.weight[keep])
 
 
 def _contact_area(t, ball, before: FlightFit, after: FlightFit, g: float) -> float:

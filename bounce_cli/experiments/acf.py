@@ -221,7 +221,7 @@ def controlled_runs(params: ModelParams, controller, q_v: float, q_theta: float,
     same noise, eq. 16 as printed), ``n_runs`` runs of ``n_bounces`` after ``burn_in``,
     started at the fixed point, one stream per run (spawned from ``seeds``). A run whose ball
     stops is lost (rows NaN)."""
-    from ..model.control import simulate_perturbation_trials
+    from ..analysis.control_design import simulate_perturbation_trials
 
     n = burn_in + n_bounces + 1  # impact 0 is the start
     sim = simulate_perturbation_trials(

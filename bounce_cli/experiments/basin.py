@@ -12,7 +12,7 @@ from __future__ import annotations
 import functools
 import importlib.util
 import math
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Callable, Literal
 
 import numpy as np
 from pydantic import Field, model_validator
@@ -29,14 +29,17 @@ from ..runtime.config import (
 from ..analysis.classify import (
     EXACT_OUTCOMES,
     OUTCOMES,
+    Classification,
     ClassifySettings,
     classify_batch,
     classify_grid,
     compiled_kernel_available,
+    has_compiled_kernel,
     load_compiled_kernel,
     outcome_names,
 )
-from ..model.control import is_passive
+from ..model.control import ControlledMap, is_passive
+from ..model.maps import ImpactMap, PassiveMap
 from ..model.params import ModelParams
 from .plotting import publication_style
 from .base import Experiment, ExperimentResult, RunOptions
@@ -167,28 +170,12 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
     if controller is not None and settings.min_hop_s == 0.0:
         raise ConfigError("classify.min_hop_s: 0 (exact sticking) is not implemented with "
                           "model.control; give a shortest hop > 0")
-    if controller is None:
-        # the compiled kernel releases the GIL: threads, which cost nothing to start
-        threads = n_points >= COMPILED_MIN_POINTS and compiled_kernel_available()
-        jobs = options.jobs if threads or n_points >= POOL_MIN_POINTS else 1
-        with parallel.executor(jobs, threads=threads) as executor:
-            classify = functools.partial(
-                classify_grid, theta_grid_rad.ravel(), v_grid.ravel(), params, settings,
-                map=executor.map, workers=executor.workers,
-                on_tile_done=options.progress.advance,
-                kernel="auto" if threads else "numpy",
-            )
-            if threads:  # numba's start-up first: it would contend with the imports
-                load_compiled_kernel()
-            # the output's libraries are imported while the grid is classified (in threads
-            # or worker processes, or in numpy's loops, which release the GIL)
-            result = parallel.meanwhile(classify, import_output_libraries)
-    else:  # racket period control (engine.control): in this process
-        from ..model.control import classify_controlled_grid
-
-        result = classify_controlled_grid(theta_grid_rad.ravel(), v_grid.ravel(), params,
-                                          controller, settings,
-                                          on_tile_done=options.progress.advance)
+    # the passive map, or the racket period controller's map: the same classifier and tiles
+    impact_map = (PassiveMap.of(params) if controller is None else
+                  ControlledMap.of(params, controller, require_fixed_point=True))
+    result = classify_map_grid(theta_grid_rad.ravel(), v_grid.ravel(), impact_map, settings,
+                               jobs=options.jobs, on_tile_done=options.progress.advance,
+                               meanwhile=import_output_libraries)
     import pandas as pd
 
     from .plotting import caption_figures
@@ -236,6 +223,35 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
     return ExperimentResult(frames=frames, figures=figures, summary=summary)
 
 
+def classify_map_grid(theta0, v0, impact_map: ImpactMap, settings: ClassifySettings, *,
+                      jobs: int, on_tile_done: Callable[[int], None] | None = None,
+                      meanwhile: Callable[[], Any] | None = None) -> Classification:
+    """``classify_grid`` of any map of the step protocol (the passive map, the controlled
+    one) where it runs fastest: the compiled kernel in threads from ``COMPILED_MIN_POINTS``
+    points (where the map has one and numba is installed), the numpy kernel on
+    ``jobs`` worker processes from ``POOL_MIN_POINTS``, else in this process;
+    ``on_tile_done`` as for ``classify_grid``. ``meanwhile`` runs while the grid is
+    classified (imports). The result is the same whichever runs it."""
+    n_points = np.size(theta0)
+    # the compiled kernel releases the GIL: threads, which cost nothing to start
+    threads = (n_points >= COMPILED_MIN_POINTS and compiled_kernel_available()
+               and has_compiled_kernel(impact_map))
+    jobs = jobs if threads or n_points >= POOL_MIN_POINTS else 1
+    with parallel.executor(jobs, threads=threads) as executor:
+        classify = functools.partial(
+            classify_grid, theta0, v0, impact_map, settings,
+            map=executor.map, workers=executor.workers, on_tile_done=on_tile_done,
+            kernel="auto" if threads else "numpy",
+        )
+        if threads:  # numba's start-up first: it would contend with the imports
+            load_compiled_kernel()
+        if meanwhile is None:
+            return classify()
+        # the output's libraries are imported while the grid is classified (in threads
+        # or worker processes, or in numpy's loops, which release the GIL)
+        return parallel.meanwhile(classify, meanwhile)
+
+
 def import_output_libraries() -> None:
     """Import what the tables and figures need (pandas, matplotlib and its Agg backend,
     about 0.5 s): done while the compiled kernel classifies in threads that do not hold
@@ -279,7 +295,7 @@ def marker_frame(params: ModelParams, settings: ClassifySettings, *,
     if controller is None:  # three points: numpy (no need to load the compiled kernel)
         res = classify_batch(theta, v, params, settings, kernel="numpy")
     else:
-        from ..model.control import classify_controlled
+        from ..analysis.control_design import classify_controlled
 
         res = classify_controlled(theta, v, params, controller, settings)
     return pd.DataFrame(

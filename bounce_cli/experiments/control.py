@@ -42,19 +42,23 @@ from ..analysis.stochastic import (
     sample_correlations,
     var1_theory,
 )
+from .basin import classify_map_grid
 from ..model.control import (
+    ControlledMap,
     PASSIVE,
-    FastestController,
     PeriodController,
+    controlled_jacobian,
+    spectral_radius_3x3,
+    iterate_controlled,
+)
+from ..analysis.control_design import (
+    FastestController,
     align_perturbations,
     classify_controlled,
     controlled_impulse_response,
-    controlled_jacobian,
-    spectral_radius_3x3,
     fastest_controller,
     fastest_immediate_controller,
     fit_period_control,
-    iterate_controlled,
     period_control_radius,
     predicted_deviations,
     simulate_perturbation_trials,
@@ -318,9 +322,11 @@ def basin_frames(params: ModelParams, config: ControlConfig,
     theta_grid, v_grid = np.meshgrid(theta_deg, v0)  # rows: v0 outer, theta0 inner
     frames, fractions = [], []
     for model, controller in _controllers(config).items():
-        res = classify_controlled(np.deg2rad(theta_grid).ravel(), v_grid.ravel(), params,
-                                  controller, config.classify.settings(),
-                                  period_tolerance_s=config.classify.period_tolerance_s)
+        impact_map = ControlledMap.of(params, controller, require_fixed_point=True,
+                                      period_tolerance_s=config.classify.period_tolerance_s)
+        # the basin command's classifier: worker processes (--jobs), compiled kernel
+        res = classify_map_grid(np.deg2rad(theta_grid).ravel(), v_grid.ravel(), impact_map,
+                                config.classify.settings(), jobs=options.jobs)
         frames.append(pd.DataFrame({"model": model, "theta0_deg": theta_grid.ravel(),
                                     "v0_m_s": v_grid.ravel(), "outcome": res.names(),
                                     "iterations": res.iterations}))

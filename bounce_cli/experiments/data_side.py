@@ -70,6 +70,9 @@ class AcfDataBlock(StrictModel):
                                         "when coverage >= confidence - slack and |median bias| <= "
                                         "a quarter of the 16-84 % spread")
     trust_seed: int = Field(0, ge=0)
+    model_sessions: int = Field(
+        39, ge=0, description="sessions simulated by the model at the data's racket "
+        "variability for the model's prediction of each VARX estimate (0: none)")
 
 
 class ImpulseDataBlock(StrictModel):
@@ -270,7 +273,7 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
         raise ConfigError(f"data: {impacts.path}: no run of {config.max_lag + 2} consecutive "
                           "unperturbed impacts (max_lag + 2) in any trial; lower max_lag or "
                           "data_analysis.settle_after_perturbation")
-    options.progress.start(3 + len(d.trust_bounces), "data: correlations, VAR(1) fits")
+    options.progress.start(4 + len(d.trust_bounces), "data: correlations, VAR(1) fits")
     corr = trial_correlations([s[1] for s in segments], [s[2] for s in segments], config.max_lag)
     options.progress.advance(1)
     jac = jacobian(params)
@@ -381,6 +384,12 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
         note="measurement noise of v_k used by the trust study")
     add("measurement_sd_theta", "deg", noise.source, math.degrees(noise.sd_theta_rad),
         note="measurement noise of theta_k used by the trust study")
+    prediction = varx_prediction(params, fits, trials, racket_sd, d)
+    options.progress.advance(1)
+    prediction_lines: list[str] = []
+    if prediction is not None:
+        more, prediction_lines = prediction_rows(prediction, fits, params, conf)
+        srows.extend(more)
     stab = pd.DataFrame(srows)
     diagnostics, diagnostic_lines = var_diagnostics(fits, trials, config.max_lag)
     trust = trust_frame(params, q_v, q_theta, config, segments, options, noise)
@@ -395,6 +404,7 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
         prefix = ("VARX (each impact's racket period and amplitude as inputs) "
                   if method.startswith("varx_") else "")
         lines.append(f"{prefix}{fit.method}: {radius_text(fit, conf)}")
+    lines.extend(prediction_lines)
     lines.extend(diagnostic_lines)
     warning = racket_warning(fits, racket_sd)
     if warning:
@@ -423,6 +433,182 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
                      f"runs of the data's mean length, {run_length}): {method} trusted "
                      f"{need}; these data have {n_data}")
     return frames, lines
+
+
+# -- the model's prediction for the VARX estimates ---------------------------------------------
+def simulated_trials(runs) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """(v, theta) and (period, amplitude) of simulated runs (``racket_inputs.SimulatedRun``)
+    as :func:`stationary_segments` gives the data's: the phase minus the run's circular mean,
+    wrapped to [-pi, pi)."""
+    trials = [np.column_stack([r.v_m_s, phase_difference(r.theta_rad,
+                                                         circular_mean(r.theta_rad))])
+              for r in runs]
+    racket = [np.column_stack([r.racket_period_s, r.racket_amplitude_m]) for r in runs]
+    return trials, racket
+
+
+@dataclass(frozen=True)
+class VarxPrediction:
+    """The model's prediction for each VARX estimate: the same fit on ``sessions`` sessions
+    simulated by the model at the data's racket, racket variability, run lengths and velocity
+    noise ``q_v`` (module docstring of ``analysis.racket_inputs``). ``estimates[label]``: (sessions,
+    5) J entries (row-major) and spectral radius per session."""
+
+    sessions: int
+    q_v: float
+    q_v_residual: float
+    redrawn: int
+    estimates: dict[str, np.ndarray]
+
+
+def varx_prediction(params: ModelParams, fits: dict, trials: list[np.ndarray],
+                    racket_sd: np.ndarray, block) -> VarxPrediction | None:
+    """Simulate the data's session by the model and fit it as the data were fitted.
+
+    The map is nonlinear: at the spread a varying racket gives the state (the phase's SD is
+    several degrees), the best linear predictor that OLS and the lag-2 fit estimate is not
+    eq. 9's Jacobian (section 6's linearisation holds only for small noise), and theta's
+    equation has no noise of its own, so its SEs are small and that difference counts. The
+    model's own prediction for each estimate is its mean over sessions simulated at the data's
+    parameters (``model_at_data``), racket SDs per cycle, run lengths and eq. 16's velocity
+    noise. That noise is calibrated: first simulated at the data's OLS VARX residual q_v
+    (:func:`noise_from_residual_covariance`), q0, which the nonlinearity inflates, then at
+    q0^2 / s with s the simulated sessions' mean residual q_v (one multiplicative step of
+    matching the data's residual). No
+    measurement noise is simulated (the extraction's is far below the racket's spread; the
+    trust study asks about measurement noise).
+
+    Parameters
+    ----------
+    params : ModelParams
+        The model at the data's parameters.
+    fits : dict
+        The data's fits by label (``varx_ols``, ``varx_lag2``: Var1Fit or ModelError).
+    trials : list of (N_i, 2) arrays
+        The data's runs (their lengths are simulated).
+    racket_sd : (2,) array
+        The data's pooled within-run SDs of period (s) and amplitude (m).
+    block : AcfDataBlock
+        ``model_sessions`` (0: no prediction), ``jackknife``, ``trust_seed``.
+
+    Returns
+    -------
+    VarxPrediction or None
+        None when the OLS VARX did not fit or ``model_sessions`` is 0.
+    """
+    from ..analysis.racket_inputs import RacketSession, simulate_runs
+
+    base = fits.get("varx_ols")
+    if block.model_sessions == 0 or not isinstance(base, Var1Fit):
+        return None
+    labels = [label for label in ("varx_ols", "varx_lag2") if isinstance(fits.get(label),
+                                                                          Var1Fit)]
+    lengths = [len(t) for t in trials]
+    seeds = np.random.SeedSequence([block.trust_seed, 9]).spawn(2)
+    q_residual = noise_from_residual_covariance(base.noise_cov)[0]
+    calibration = max(2, block.model_sessions // 4)  # sessions of the first step
+    first = RacketSession(float(racket_sd[0]), float(racket_sd[1]), q_residual)
+    residual, redrawn = [], 0
+    for seed in seeds[0].spawn(calibration):
+        runs, again = simulate_runs(params, first, lengths, seed)
+        redrawn += again
+        sim_trials, sim_racket = simulated_trials(runs)
+        residual.append(noise_from_residual_covariance(
+            fit_var1(sim_trials, "ols", jackknife=False, exog=sim_racket).noise_cov)[0])
+    q_v = q_residual * q_residual / float(np.mean(residual))
+    session = RacketSession(first.period_sd_s, first.amplitude_sd_m, q_v)
+    estimates: dict[str, list[np.ndarray]] = {label: [] for label in labels}
+    for seed in seeds[1].spawn(block.model_sessions):
+        runs, again = simulate_runs(params, session, lengths, seed)
+        redrawn += again
+        sim_trials, sim_racket = simulated_trials(runs)
+        for label in labels:
+            try:
+                fit = fit_var1(sim_trials, label.removeprefix("varx_"),
+                               jackknife=block.jackknife, exog=sim_racket)
+            except ModelError:
+                continue
+            radius = fit.eigen_summary()["spectral_radius"][0]
+            estimates[label].append(np.append(fit.jacobian.ravel(), radius))
+    return VarxPrediction(block.model_sessions, q_v, q_residual, redrawn,
+                          {label: np.array(e) for label, e in estimates.items() if len(e) > 1})
+
+
+def rank_interval(sims: np.ndarray, confidence: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """The k-th smallest and k-th largest of R simulated estimates (per column), k =
+    max(1, floor((R + 1)(1 - confidence) / 2)), and the interval's level 1 - 2 k / (R + 1): a
+    further estimate exchangeable with the R (the data, when they are the model) falls
+    outside with probability 2 k / (R + 1), whatever the estimates' distribution (a Monte
+    Carlo test's interval; heavy tails do not shorten it).
+
+    Parameters
+    ----------
+    sims : (R, q) array
+        R simulated estimates of q quantities.
+    confidence : float
+        The wanted level; R >= 2 / (1 - confidence) - 1 reaches it.
+
+    Returns
+    -------
+    tuple
+        (low (q,), high (q,), level).
+    """
+    n = len(sims)
+    k = max(1, int(math.floor((n + 1) * (1.0 - confidence) / 2.0)))
+    ordered = np.sort(sims, axis=0)
+    return ordered[k - 1], ordered[n - k], 1.0 - 2.0 * k / (n + 1)
+
+
+def prediction_rows(prediction: VarxPrediction, fits: dict, params: ModelParams,
+                    confidence: float) -> tuple[list[dict], list[str]]:
+    """stability_data.csv rows and summary lines of the model's prediction for each VARX
+    estimate and of each estimate corrected by the model's bias.
+
+    ``model_<estimator>``: the mean over the simulated sessions (se: their SD; interval:
+    :func:`rank_interval` of the sessions' estimates, where the data's estimate falls with
+    the interval's level when the data are the model). ``<estimator>+model_bias``: the
+    estimate minus the model's bias for it (mean minus eq. 9's J, eq. 10's radius), with
+    the same interval shifted: [estimate - (high - target), estimate - (low - target)],
+    which holds eq. 9's J exactly when the estimate lies in the model's interval."""
+    st = stability(params)
+    target = np.append(jacobian(params).ravel(), st.spectral_radius)
+    names = list(J_ENTRIES) + ["spectral_radius"]
+    rows, lines = [], []
+    how = (f"sessions simulated by the model at the data's racket variability and run "
+           f"lengths, q_v = {prediction.q_v:.4f} m/s (calibrated to the data's VARX residual "
+           f"q_v, {prediction.q_v_residual:.4f} m/s)")
+    for label, sims in prediction.estimates.items():
+        fit = fits[label]
+        source = "varx_" + fit.method
+        mean, sd = sims.mean(axis=0), sims.std(axis=0, ddof=1)
+        low, high, level = rank_interval(sims, confidence)
+        observed = np.append(fit.jacobian.ravel(), fit.eigen_summary()["spectral_radius"][0])
+        corrected = observed - (mean - target)
+        lows, highs = observed - (high - target), observed - (low - target)
+        lows[-1] = max(lows[-1], 0.0)  # a modulus
+        interval = f"{level:.0%} interval from the order statistics of {len(sims)} {how}"
+        for i, name in enumerate(names):
+            unit = "1" if name == "spectral_radius" else "mixed"
+            rows.append({"quantity": name, "unit": unit, "source": f"model_{source}",
+                         "estimate": float(mean[i]), "se": float(sd[i]),
+                         "ci_low": float(low[i]), "ci_high": float(high[i]),
+                         "note": f"the model's prediction for the {source} estimate: mean, SD "
+                                 f"and {interval}"})
+            rows.append({"quantity": name, "unit": unit, "source": f"{source}+model_bias",
+                         "estimate": float(corrected[i]), "se": float(sd[i]),
+                         "ci_low": float(lows[i]), "ci_high": float(highs[i]),
+                         "note": f"{source} minus the model's bias for it (prediction minus "
+                                 f"eq. 9/10); its {level:.0%} interval holds eq. 9's J when the "
+                                 "data are the model"})
+        lines.append(f"VARX {source}: the model predicts spectral radius {mean[4]:.3f} "
+                     f"[{low[4]:.3f}, {high[4]:.3f}] for this estimate (eq. 10: "
+                     f"{st.spectral_radius:.3f}: the map's nonlinearity at the data's spread); "
+                     f"corrected by that bias {corrected[4]:.3f} [{lows[4]:.3f}, "
+                     f"{highs[4]:.3f}] ({interval})")
+    if prediction.redrawn:
+        lines.append(f"the model's simulated sessions: {prediction.redrawn} run(s) fell into "
+                     "sticking and were drawn again")
+    return rows, lines
 
 
 def interval_note(fit: Var1Fit, quantity: str) -> str:

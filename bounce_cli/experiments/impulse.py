@@ -121,7 +121,7 @@ def linear_outcome(params: ModelParams, controller=None) -> str:
 # -- tables ---------------------------------------------------------------------------------
 def responses(params: ModelParams, alpha_p: float, n: int, controller=None):
     if controller is not None:  # racket period control (model.control)
-        from ..model.control import (
+        from ..analysis.control_design import (
             controlled_impulse_response,
             controlled_impulse_response_linear,
         )

@@ -6,19 +6,20 @@ The publication style is written here once and applied by every experiment's ``d
 ``theta[k]`` or ``m/s^2``), integer ticks on integer axes (:func:`integer_axis`: trial,
 impact index, lag), and no run metadata in titles: the parameters, size and seed of a run
 (:func:`caption_figures`) go into the file's metadata instead (the PNG's text chunks, the
-PDF's Subject, the SVG's Description; :func:`save_figure`), beside ``run.json``.
+PDF's Subject, the SVG's Description; :func:`bounce_cli.runtime.figure_files.save_figure`),
+beside ``run.json``.
 """
 
 from __future__ import annotations
 
 import functools
 import math
-from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, TypeVar
 
 import numpy as np
 
 from ..paper.values import parameters_text
+from ..runtime.figure_files import CAPTION_ATTRIBUTE
 
 if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn (an experiment's module
     # can be imported, and its draw decorated, without it)
@@ -27,25 +28,14 @@ if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn (an experimen
 
     from ..model.params import ModelParams
 
-#: the file formats a figure can be written in (``--figure-format``)
-FIGURE_FORMATS = ("png", "pdf", "svg")
-
 #: rcParams of every figure while it is drawn: tick labels in mathtext (a true minus sign,
 #: powers of ten as superscripts)
 DRAW_STYLE: dict[str, Any] = {"axes.formatter.use_mathtext": True}
-
-#: rcParams while a figure is written: fonts embedded as TrueType in PDF (editable, accepted
-#: by journals; matplotlib's default Type 3 is not), SVG element ids from a fixed salt (a
-#: rerun writes the same bytes)
-SAVE_STYLE: dict[str, Any] = {"pdf.fonttype": 42, "svg.hashsalt": "bounce"}
 
 #: axis labels of the responses to a perturbation (Figs. 9-11: impulse, its data side, control)
 VELOCITY_LABEL = "velocity after impact $v_k$ (m/s)"
 PHASE_LABEL = r"phase of impact $\theta_k$ (deg)"
 IMPACT_AFTER_LABEL = "impact $k$ after the perturbation (0: the perturbed impact)"
-
-#: a figure's attribute holding its caption line (parameters, run size, seed, data)
-_CAPTION = "_bounce_caption"
 
 F = TypeVar("F", bound=Callable[..., Any])
 
@@ -90,72 +80,12 @@ def integer_axis(*axes: Any, which: str = "x") -> None:
 def caption_figures(figures: dict[str, Figure], params: ModelParams | None,
                     extra: str = "") -> None:
     """Record the parameters a run was made at (and ``extra``, e.g. the run's size and seed)
-    as each figure's caption: written into the file's metadata (:func:`save_figure`), not
+    as each figure's caption: written into the file's metadata (``figure_files.save_figure``), not
     into its title, so that figures of two runs can be told apart without the title carrying
     run metadata."""
     parts = ([parameters_text(params)] if params is not None else []) + ([extra] if extra else [])
     for fig in figures.values():
-        setattr(fig, _CAPTION, "; ".join(parts))
-
-
-def figure_caption(fig: Figure) -> str:
-    """The caption line :func:`caption_figures` recorded ('' for a figure drawn from CSVs)."""
-    return str(getattr(fig, _CAPTION, ""))
-
-
-def figure_title(fig: Figure) -> str:
-    """The figure's title: its suptitle, else its first axes title (one line)."""
-    title = fig.get_suptitle() or next((ax.get_title() for ax in fig.axes if ax.get_title()),
-                                       "")
-    return " ".join(title.split())
-
-
-def figure_metadata(fig: Figure, kind: str, source: str) -> dict[str, Any]:
-    """The metadata written into a figure file of format ``kind``: its title, its caption
-    (:func:`caption_figures`) and the command that made it (``source``); no date, so that a
-    rerun writes the same bytes. Keys as each format names them (PNG text chunks, the PDF
-    document information, SVG's Dublin Core)."""
-    title, caption = figure_title(fig), figure_caption(fig)
-    meta: dict[str, Any]
-    if kind == "png":
-        meta = {"Title": title, "Description": caption, "Source": source}
-    elif kind == "pdf":
-        meta = {"Title": title, "Subject": caption, "Creator": source, "CreationDate": None}
-    else:
-        meta = {"Title": title, "Description": caption, "Creator": source, "Date": None}
-    return {k: v for k, v in meta.items() if v != ""}
-
-
-def save_figure(fig: Figure, path: Path, kind: str, *, dpi: float, source: str,
-                png_options: dict[str, Any] | None = None) -> None:
-    """Write ``fig`` to ``path`` as ``kind`` (one of :data:`FIGURE_FORMATS`) at ``dpi``, with
-    :func:`figure_metadata`, in :data:`SAVE_STYLE`.
-
-    Parameters
-    ----------
-    fig : Figure
-        The figure (from an experiment's ``draw``).
-    path : Path
-        The file to write (its name's suffix is not consulted).
-    kind : str
-        "png", "pdf" or "svg".
-    dpi : float
-        Resolution of a PNG (and of raster parts of a PDF or SVG), dots per inch.
-    source : str
-        What made the figure (e.g. ``bounce basin``), written into its metadata.
-    png_options : dict, optional
-        Pillow's options for a PNG (e.g. ``{"compress_level": 1}``).
-
-    Returns
-    -------
-    None
-    """
-    from matplotlib import rc_context
-
-    extra: dict[str, Any] = {"pil_kwargs": png_options} if kind == "png" and png_options else {}
-    with rc_context(SAVE_STYLE):  # type: ignore[arg-type]  # (the keys are rcParams)
-        fig.savefig(path, format=kind, dpi=dpi, metadata=figure_metadata(fig, kind, source),
-                    **extra)
+        setattr(fig, CAPTION_ATTRIBUTE, "; ".join(parts))
 
 
 def data_caption(config: Any, source: Any = None, record: dict | None = None) -> str:

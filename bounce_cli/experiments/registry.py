@@ -214,6 +214,7 @@ EXPERIMENTS: tuple[Entry, ...] = (
         data_help="impacts.csv with perturbation events (trial, k, theta_rad, v_m_s, "
         "racket_period_s, racket_amplitude_m, perturbed; optional alpha): fit K and c to it, "
         "every result at the data's racket, alpha and g (sets `data`).",
+        parallel=True,
     ),
     Entry(
         "sweep",

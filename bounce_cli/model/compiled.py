@@ -45,15 +45,13 @@ _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
  _A_3, _V_COEF, _ALPHA, _G_ALPHA_W, _V_FP, _TH_FP, _TOL, _MIN_HOP, _N_CONSTANTS) = range(20)
 
 
-def _constants(params: ModelParams, fp: FixedPoint, tolerance: float,
-               min_hop: float) -> np.ndarray:
-    """The scalars of the numpy code, each by the numpy code's own expression (Python floats:
-    ``-g / w**2`` is Python's pow, ``a * w * cos`` is ``(a * w) * cos``)."""
-    a, w, g, alpha = params.racket_amplitude, params.omega, params.g, params.alpha
-    c = np.empty(_N_CONSTANTS)
+@_jit
+def _flight_constants(a, w, g, c):
+    """The solver's constants at angular frequency w, each by the numpy code's expression
+    (for an array of frequencies: w**2 is w * w; ``_constants`` puts Python's pow back)."""
     c[_A], c[_W], c[_G] = a, w, g
     c[_AW] = a * w  # can_fly, racket_velocity: a * w * cos
-    c[_NEG_G_W2] = -g / w**2  # can_fly's curvature
+    c[_NEG_G_W2] = -g / (w * w)  # can_fly's curvature
     c[_NEG_G_WW] = -g / (w * w)  # first step's curvature
     c[_BOUND] = g / (w * w) + a
     c[_W_SQ] = w * w
@@ -61,12 +59,34 @@ def _constants(params: ModelParams, fp: FixedPoint, tolerance: float,
     c[_TWO_A] = 2.0 * a
     c[_TWO_BOUND] = 2.0 * (g / (w * w) + a)
     c[_A_3] = a / 3.0
+
+
+def _constants(params: ModelParams, fp: FixedPoint, tolerance: float,
+               min_hop: float) -> np.ndarray:
+    """The scalars of the numpy code, each by the numpy code's own expression (Python floats:
+    ``-g / w**2`` is Python's pow, ``a * w * cos`` is ``(a * w) * cos``)."""
+    a, w, g, alpha = params.racket_amplitude, params.omega, params.g, params.alpha
+    c = np.empty(_N_CONSTANTS)
+    _flight_constants(a, w, g, c)
+    c[_NEG_G_W2] = -g / w**2  # can_fly's curvature: Python's pow, as the numpy code's scalar
     c[_V_COEF] = (1.0 + alpha) * a * w  # eq. 5
     c[_ALPHA] = alpha
     c[_G_ALPHA_W] = g * alpha / w
     c[_V_FP], c[_TH_FP] = fp.v_m_s, fp.theta_rad
     c[_TOL], c[_MIN_HOP] = tolerance, min_hop
     return c
+
+
+@_jit
+def _launch(i, slope, curvature, idx, m, outcome, iterations):
+    """can_fly of initial condition i from G'(0) and G''(0): queue it (idx[m] = i, returns
+    m + 1), or classify it below the racket (0 iterations, returns m)."""
+    if slope > 0.0 or (slope == 0.0 and curvature > 0.0):
+        idx[m] = i
+        return m + 1
+    outcome[i] = 2  # below_racket
+    iterations[i] = 0
+    return m
 
 
 @_jit
@@ -152,14 +172,8 @@ def _classify(theta0, v0, c, max_iterations, max_steps, outcome, iterations):
     idx = np.empty(n, np.int64)
     m = 0
     for i in range(n):  # can_fly at the unwrapped initial phase
-        slope = (v0[i] - c[_AW] * math.cos(theta0[i])) / w
-        curvature = c[_NEG_G_W2] + a * math.sin(theta0[i])
-        if slope > 0.0 or (slope == 0.0 and curvature > 0.0):
-            idx[m] = i
-            m += 1
-        else:
-            outcome[i] = 2  # below_racket
-            iterations[i] = 0
+        m = _launch(i, (v0[i] - c[_AW] * math.cos(theta0[i])) / w,
+                    c[_NEG_G_W2] + a * math.sin(theta0[i]), idx, m, outcome, iterations)
     work = np.empty((12, m))  # the states (5 rows) and the solver's scratch (7 rows)
     th, vv, cos_th, sin_th, hop = work[0], work[1], work[2], work[3], work[4]
     S, D0, C, SN, V, SH, CH = work[5], work[6], work[7], work[8], work[9], work[10], work[11]
@@ -206,6 +220,94 @@ def classify_arrays(theta0: np.ndarray, v0: np.ndarray, params: ModelParams, fp:
     _classify(np.ascontiguousarray(theta0, dtype=float), np.ascontiguousarray(v0, dtype=float),
               _constants(params, fp, tolerance, min_hop_s), max_iterations, max_steps,
               outcome, iterations)
+    return outcome, iterations
+
+
+# -- the controlled map (``model.control.ControlledMap``, ``switch: impact``) -----------------
+# its classification loop: each flight has its own racket frequency (the period the controller
+# set at the impact), so each state's solve gets its own constants, filled by the numpy code's
+# array expressions (``impact.first_impact_phase`` with an array of frequencies: w**2 is w*w)
+(_C_A, _C_G, _C_ALPHA, _C_TAU_BAR, _C_V_REF, _C_GAIN, _C_RATE, _C_V_FP, _C_TH_FP, _C_TOL,
+ _C_TOL_TAU, _C_MIN_HOP, _C_V_COEF_A, _C_G_ALPHA, _N_CONTROL) = range(15)
+
+
+@_jit
+def _classify_controlled(theta0, v0, tau0, k, max_iterations, max_steps, outcome, iterations):
+    """``classify.classify_states`` of a ``ControlledMap`` with a period controller
+    (``switch: impact``) into ``outcome`` / ``iterations``: ``controlled_step``'s arithmetic
+    (wrapped), one solve per state (``_first_impact`` on one state, its own frequency)."""
+    n = theta0.size
+    a, g = k[_C_A], k[_C_G]
+    idx = np.empty(n, np.int64)
+    m = 0
+    for i in range(n):  # can_fly_at at the unwrapped phase, with the period the racket had
+        w = TWO_PI / tau0[i]
+        m = _launch(i, (v0[i] - a * w * math.cos(theta0[i])) / w,
+                    -g / (w * w) + a * math.sin(theta0[i]), idx, m, outcome, iterations)
+    th, vv, tt = np.empty(m), np.empty(m), np.empty(m)
+    for j in range(m):
+        th[j], vv[j], tt[j] = _wrap(theta0[idx[j]]), v0[idx[j]], tau0[idx[j]]
+    c = np.empty(_N_CONSTANTS)
+    one = np.empty((11, 1))  # one state's v, cos, sin, its hop and the solver's scratch
+    pos = np.empty(1, np.int64)
+    tau_bar, gain, rate = k[_C_TAU_BAR], k[_C_GAIN], k[_C_RATE]
+    for it in range(1, max_iterations + 1):
+        if m == 0:
+            break
+        p = 0
+        for j in range(m):
+            # the period controller: tau' = tau + c (tau_bar + K 2 (v - v~) / g - tau)
+            tau = tt[j] + rate * ((tau_bar + gain * (2.0 * (vv[j] - k[_C_V_REF]) / g)) - tt[j])
+            if not tau > 0.0:
+                tau = np.nan  # no racket has a period <= 0
+            w = TWO_PI / tau
+            _flight_constants(a, w, g, c)
+            one[0, 0], one[1, 0], one[2, 0] = vv[j], math.cos(th[j]), math.sin(th[j])
+            _first_impact(one[0], one[1], one[2], 1, c, max_steps, one[3], pos, one[4],
+                          one[5], one[6], one[7], one[8], one[9], one[10])
+            h = one[3, 0]
+            t = _wrap(th[j] + h)
+            v = k[_C_V_COEF_A] * w * math.cos(t) - k[_C_ALPHA] * vv[j] + k[_C_G_ALPHA] / w * h
+            if not h / w >= k[_C_MIN_HOP]:  # sticking (NaN: cannot leave, or no period)
+                outcome[idx[j]] = 1
+                iterations[idx[j]] = it
+            elif (abs(v - k[_C_V_FP]) < k[_C_TOL]
+                  and abs(_wrap(t - k[_C_TH_FP] + math.pi) - math.pi) < k[_C_TOL]
+                  and abs(tau - tau_bar) < k[_C_TOL_TAU]):
+                outcome[idx[j]] = 0  # period1
+                iterations[idx[j]] = it
+            else:
+                idx[p], th[p], vv[p], tt[p] = idx[j], t, v, tau
+                p += 1
+        m = p
+    for j in range(m):
+        outcome[idx[j]] = 3  # undecided
+        iterations[idx[j]] = max_iterations
+
+
+def classify_controlled_arrays(theta0: np.ndarray, v0: np.ndarray, tau0: np.ndarray,
+                               params: ModelParams, fp: FixedPoint, *, tau_bar: float,
+                               v_reference: float, gain: float, rate: float,
+                               max_iterations: int, tolerance: float,
+                               period_tolerance_s: float, min_hop_s: float,
+                               max_steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """(outcome int8, iterations int16) of flat float arrays for the controlled map with the
+    period controller (gain K, rate c; ``switch: impact``), as ``classify_states`` gives
+    them with the numpy code."""
+    a, g, alpha = params.racket_amplitude, params.g, params.alpha
+    k = np.empty(_N_CONTROL)
+    k[_C_A], k[_C_G], k[_C_ALPHA] = a, g, alpha
+    k[_C_TAU_BAR], k[_C_V_REF], k[_C_GAIN], k[_C_RATE] = tau_bar, v_reference, gain, rate
+    k[_C_V_FP], k[_C_TH_FP] = fp.v_m_s, fp.theta_rad
+    k[_C_TOL], k[_C_TOL_TAU], k[_C_MIN_HOP] = tolerance, period_tolerance_s, min_hop_s
+    k[_C_V_COEF_A] = (1.0 + alpha) * a  # eq. 5: ((1 + alpha) a) w cos(theta')
+    k[_C_G_ALPHA] = g * alpha  # eq. 5: (g alpha / w) s
+    outcome = np.empty(theta0.size, dtype=np.int8)
+    iterations = np.empty(theta0.size, dtype=np.int16)
+    _classify_controlled(np.ascontiguousarray(theta0, dtype=float),
+                         np.ascontiguousarray(v0, dtype=float),
+                         np.ascontiguousarray(tau0, dtype=float), k, max_iterations, max_steps,
+                         outcome, iterations)
     return outcome, iterations
 
 

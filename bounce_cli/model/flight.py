@@ -29,13 +29,14 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 from scipy.optimize import brentq
 
 from .chatter import IMPACT, RELEASE, STICK, iterate_exact_orbit, release_phase
-from ..analysis.classify import ClassifySettings
-from .impact import can_fly, next_impact_phase
+from .maps import ClassifySettings
+from .impact import can_fly, first_impact_phase
 from .params import ModelError, ModelParams
 
 INTEGRATORS = ("exact", "rk4")
@@ -67,7 +68,7 @@ class FlightSettings:
 
     integrator: str = "exact"
     rk4_step_s: float = 1e-3  # the paper's RK4 step (section 3)
-    #: section 3's sticking criterion; 0: exact sticking (``engine.chatter``, integrator
+    #: section 3's sticking criterion; 0: exact sticking (``model.chatter``, integrator
     #: exact only; ``min_relative_velocity_m_s`` is then not used)
     min_hop_s: float = ClassifySettings().min_hop_s
     min_relative_velocity_m_s: float = 1e-3
@@ -164,7 +165,7 @@ def leave_phase(theta, params: ModelParams) -> float:
     """First phase >= theta at which a ball resting on the racket leaves it: where the
     racket's downward acceleration reaches g (a_r w^2 sin = g, sin increasing), or theta
     itself when it already exceeds g there. ``inf`` when a_r w^2 <= g (never). The release
-    of exact sticking, ``engine.chatter.release_phase``."""
+    of exact sticking, ``model.chatter.release_phase``."""
     return release_phase(theta, params)
 
 
@@ -189,9 +190,90 @@ def simulate(
         raise ModelError(f"duration must be > 0 (got {duration_s!r})")
     if settings.min_hop_s == 0.0:
         return _exact_sticking_trajectory(float(theta0), float(v0), params, duration_s)
-    sim = _Simulation(params, settings, theta0 / params.omega, duration_s)
-    sim.run(float(theta0), float(v0))
-    return Trajectory(params, sim.t0, sim.t_end, tuple(sim.segments), tuple(sim.impacts))
+    return simulate_with_racket(PassiveRacket(params), float(theta0), float(v0), duration_s,
+                                settings)
+
+
+class Racket(Protocol):
+    """The racket as the continuous motion sees it (eq. 4, or a racket whose period a
+    controller sets at each impact: ``model.control.ControlledRacket``): its phase,
+    position and velocity at a time, the time a flight launched at a phase ends, and
+    ``launch`` / ``impact``, where a controller may change the period. ``omega``: the angular
+    frequency now (rad/s); ``params``: the model (g, alpha, the amplitude)."""
+
+    @property
+    def params(self) -> ModelParams: ...
+
+    @property
+    def omega(self) -> float: ...
+
+    def start_time(self, theta0: float) -> float: ...
+
+    def phase(self, t: float) -> float: ...
+
+    def position(self, t: float) -> float: ...
+
+    def velocity(self, t: float) -> float: ...
+
+    def can_fly(self, phase: float, v: float) -> bool: ...
+
+    def leave_time(self, t: float) -> float: ...
+
+    def hit_time(self, t: float, phase: float, launch_phase: float, hop: float) -> float: ...
+
+    def launch(self, t: float, v: float) -> None: ...
+
+    def impact(self, t: float, v_after: float) -> None: ...
+
+
+@dataclass(frozen=True)
+class PassiveRacket:
+    """The racket of eq. 4: phase w t, the period never changes."""
+
+    params: ModelParams
+
+    @property
+    def omega(self) -> float:
+        return self.params.omega
+
+    def start_time(self, theta0: float) -> float:
+        return theta0 / self.params.omega
+
+    def phase(self, t: float) -> float:
+        return self.params.omega * t
+
+    def position(self, t: float) -> float:
+        return float(self.params.racket_position(self.params.omega * t))
+
+    def velocity(self, t: float) -> float:
+        return float(self.params.racket_velocity(self.params.omega * t))
+
+    def can_fly(self, phase: float, v: float) -> bool:
+        return bool(can_fly(phase, v, self.params))
+
+    def leave_time(self, t: float) -> float:
+        return leave_phase(self.params.omega * t, self.params) / self.params.omega
+
+    def hit_time(self, t: float, phase: float, launch_phase: float, hop: float) -> float:
+        return (launch_phase + hop) / self.params.omega
+
+    def launch(self, t: float, v: float) -> None:
+        pass
+
+    def impact(self, t: float, v_after: float) -> None:
+        pass
+
+
+def simulate_with_racket(racket: Racket, theta0: float, v0: float, duration_s: float,
+                         settings: FlightSettings = FlightSettings()) -> Trajectory:
+    """``simulate`` (with ``min_hop_s`` > 0) against any ``Racket``: the one event loop of
+    the continuous motion (fly, impact, maybe stick, leave, fly...) for the passive racket
+    and the one whose period a controller sets (``model.control``). The ball leaves at
+    phase theta0 (at ``racket.start_time(theta0)``) with v0."""
+    sim = _Simulation(racket, settings, racket.start_time(theta0), duration_s)
+    sim.run(theta0, v0)
+    return Trajectory(racket.params, sim.t0, sim.t_end, tuple(sim.segments),
+                      tuple(sim.impacts))
 
 
 def _exact_sticking_trajectory(theta0: float, v0: float, params: ModelParams,
@@ -244,29 +326,33 @@ def _exact_sticking_trajectory(theta0: float, v0: float, params: ModelParams,
 
 
 class _Simulation:
-    """The event loop shared by both integrators: fly, impact, maybe stick, leave, fly..."""
+    """The event loop shared by both integrators and every racket: fly, impact, maybe
+    stick, leave, fly..."""
 
-    def __init__(self, params: ModelParams, settings: FlightSettings, t0: float, duration: float):
-        self.p = params
+    def __init__(self, racket: Racket, settings: FlightSettings, t0: float, duration: float):
+        self.racket = racket
+        self.p = racket.params
         self.s = settings
         self.t0 = t0
         self.t_end = t0 + duration
         self.segments: list[Segment] = []
         self.impacts: list[Impact] = []
+        if settings.integrator != "exact" and not isinstance(racket, PassiveRacket):
+            raise ModelError("a racket whose period changes needs integrator exact")
 
     def run(self, theta: float, v: float) -> None:
-        p, w = self.p, self.p.omega
-        t = theta / w
-        stuck = not bool(can_fly(theta, v, p))
+        racket = self.racket
+        t = self.t0
+        racket.launch(t, v)
+        stuck = not racket.can_fly(theta, v)
         while t < self.t_end:
             if stuck:
-                t_leave = leave_phase(w * t, p) / w
+                t_leave = racket.leave_time(t)
                 self.segments.append(Segment(
-                    "stuck", t, min(t_leave, self.t_end),
-                    float(p.racket_position(w * t)), float(p.racket_velocity(w * t)),
+                    "stuck", t, min(t_leave, self.t_end), racket.position(t), racket.velocity(t),
                 ))
                 t = t_leave
-                v = float(p.racket_velocity(w * t)) if math.isfinite(t) else math.nan
+                v = racket.velocity(t) if math.isfinite(t) else math.nan
                 stuck = False
                 continue
             impact = self.fly(t, v)
@@ -277,18 +363,19 @@ class _Simulation:
                 continue
             self.impacts.append(impact)
             t, v = impact.t_s, impact.v_after_m_s
+            racket.impact(t, v)  # a controller may set the next flight's period here
             stuck = (
                 impact.hop_s < self.s.min_hop_s
-                or v - impact.racket_v_m_s <= self.s.min_relative_velocity_m_s
-                or not bool(can_fly(w * t, v, p))
+                or v - racket.velocity(t) <= self.s.min_relative_velocity_m_s
+                or not racket.can_fly(impact.theta_rad, v)
             )
 
     # -- one flight: from the racket at time t with velocity v to the next impact ---------------
     def fly(self, t: float, v: float) -> Impact | FlightEnd:
         """The impact ending the flight from the racket at time t with velocity v, or how
         the flight ends otherwise (beyond the run's end; a hop rk4 cannot resolve)."""
-        p, w = self.p, self.p.omega
-        x = float(p.racket_position(w * t))
+        p, racket = self.p, self.racket
+        x = racket.position(t)
         if self.s.integrator == "exact":
             t_hit = self._exact_hit(t, v)
         else:
@@ -301,22 +388,23 @@ class _Simulation:
             return FlightEnd.BEYOND_END
         hop = t_hit - t
         v_before = v - p.g * hop
-        racket_v = float(p.racket_velocity(w * t_hit))
-        return Impact(t_hit, w * t_hit, v_before, impact_velocity(v_before, racket_v, p.alpha),
-                      racket_v, hop)
+        racket_v = racket.velocity(t_hit)
+        return Impact(t_hit, racket.phase(t_hit), v_before,
+                      impact_velocity(v_before, racket_v, p.alpha), racket_v, hop)
 
     def _exact_hit(self, t: float, v: float) -> float:
-        p, w = self.p, self.p.omega
-        theta = w * t
+        p, racket = self.p, self.racket
+        w = racket.omega
+        theta = racket.phase(t)
         launch_v, launch_theta = v, theta
-        if v - float(p.racket_velocity(theta)) <= 0.0:
+        if v - racket.velocity(t) <= 0.0:
             # leaving with the racket's velocity (G' = 0): hand over just after the leave
             launch_theta = theta + LEAVE_NUDGE_PHASE
             launch_v = v - p.g * LEAVE_NUDGE_PHASE / w
-        hop = float(next_impact_phase(launch_theta, launch_v, p))
+        hop = float(first_impact_phase(launch_theta, launch_v, p.racket_amplitude, w, p.g))
         if not math.isfinite(hop):
             raise ModelError(f"no next impact found after t = {t:.6g} s")
-        return (launch_theta + hop) / w
+        return racket.hit_time(t, theta, launch_theta, hop)
 
     def _rk4_hit(self, t: float, x: float, v: float) -> float | None:
         p, w, h, g = self.p, self.p.omega, self.s.rk4_step_s, self.p.g

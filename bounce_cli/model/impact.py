@@ -1,5 +1,5 @@
-"""The contact solver: the FIRST root of a gap, for the map (eq. 6), the controlled map and the
-simulated recordings, vectorised over many flights.
+"""The contact solver: the FIRST root of a gap, for the map (eq. 6) and the controlled map,
+vectorised over many flights.
 
 After a flight starts (an impact, a release, the racket's mid-position crossing), the height
 of the ball above the racket is a gap G(s) of the elapsed phase (or time) s, and the next
@@ -60,9 +60,8 @@ The gaps:
   The controlled map's racket that changes its period at its upward mid-position crossing
   (``model.control.contact_after_crossing``) is the same gap with theta = 0 and h >= 0 the
   ball's height there, started at s = 0.
-* ``data.simulated_lab``'s gap of a flight over the simulated lab's racket (cycles of their own
-  period and amplitude, a second harmonic, a drifting mid-position, the impact's
-  disturbance): in time, with M per racket cycle.
+* (not yet moved here: ``data.simulated_lab.next_contact``, the simulated lab's racket, still
+  has its own loop; ``GapAt.segment_end`` and the horizon are for it: M per racket cycle.)
 
 Each evaluation of ``SinusoidGap`` takes two transcendental functions, sin and cos of s/2:
 sin and cos of theta + s/2 follow from them and the launch's sin theta, cos theta by the

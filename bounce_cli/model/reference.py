@@ -15,7 +15,7 @@ import math
 import numpy as np
 from scipy.optimize import brentq
 
-from ..analysis.classify import ClassifySettings
+from .maps import ClassifySettings
 from .params import ModelParams
 
 #: scan step of the bracket search (rad of racket phase; 1e-3 rad = 0.15 ms at tau = 0.92 s)

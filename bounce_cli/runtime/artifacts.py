@@ -41,7 +41,7 @@ import numpy as np
 from .. import __version__
 from ..errors import OutputDirError, RunDirectoryBusy
 from .interrupts import deferred
-from ..experiments.plotting import save_figure
+from .figure_files import save_figure
 
 if TYPE_CHECKING:  # pandas is imported where a table is written or read (fast start-up)
     import pandas as pd

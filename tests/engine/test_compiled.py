@@ -147,3 +147,45 @@ def test_a_compiled_module_that_does_not_import_falls_back_to_numpy(monkeypatch)
         monkeypatch.undo()
         classify_module._compiled_module_imports.cache_clear()
     assert classify_module.compiled_kernel_available()
+
+
+# -- the controlled map (engine.control.ControlledMap): the same kernel loop over its step ----
+@pytest.mark.parametrize("params", PARAMETERS[:4], ids=["fig4", "rigid", "dead", "large"])
+@pytest.mark.parametrize("gain, rate", [(0.6, 0.9), (0.0, 1.0), (-0.4, 0.5), (1.6, 1.3)])
+def test_controlled_map_compiled_is_numpy_point_for_point(params, gain, rate):
+    """Random states, and a controller strong enough to ask for periods <= 0 (1.6, 1.3):
+    the compiled controlled classification is the numpy one, codes and counts."""
+    from bounce_cli.model.control import ControlledMap, PeriodController
+
+    rng = np.random.default_rng(int(1000 * abs(gain)) + 7)
+    theta, v = rng.uniform(-1.0, 7.5, 1500), rng.uniform(0.0, 12.0, 1500)
+    impact_map = ControlledMap.of(params, PeriodController(gain, rate),  # no fixed point:
+                                  require_fixed_point=params.cos_theta_fixed() <= 1.0,
+                                  period_tolerance_s=2e-3)  # NaN target, no period1
+    settings = ClassifySettings(max_iterations=60)
+    numpy_result = classify_module.classify_states(impact_map, theta, v, settings,
+                                                   kernel="numpy")
+    assert_same(numpy_result, classify_module.classify_states(impact_map, theta, v, settings,
+                                                              kernel="compiled"))
+    assert len(np.unique(numpy_result.outcome)) >= 2
+
+
+def test_controlled_basin_compiled_in_threads_is_one_process():
+    """``classify_grid`` of the controlled map on the compiled kernel in threads (as
+    ``bounce basin`` with model.control runs it) and the numpy kernel in this process."""
+    from bounce_cli.runtime import parallel
+    from bounce_cli.model.control import ControlledMap, PeriodController
+
+    theta, v = np.meshgrid(np.linspace(0, 2 * np.pi, 80), np.linspace(0, 10, 80))
+    impact_map = ControlledMap.of(PARAMETERS[0], PeriodController(0.7, 0.8),
+                                  require_fixed_point=True)
+    one = classify_grid(theta, v, impact_map, kernel="numpy")
+    with parallel.Threads(2) as threads:
+        assert_same(one, classify_grid(theta, v, impact_map, map=threads.map, workers=2,
+                                       tile_points=1000, kernel="compiled"))
+    # the cycle-switching racket has no compiled kernel: "compiled" runs the numpy loop
+    cycle = ControlledMap.of(PARAMETERS[0], PeriodController(0.7, 0.8, switch="cycle"),
+                             require_fixed_point=True)
+    assert not classify_module.has_compiled_kernel(cycle)
+    assert_same(classify_grid(theta, v, cycle, kernel="numpy"),
+                classify_grid(theta, v, cycle, kernel="compiled"))

@@ -21,15 +21,17 @@ from bounce_cli.model.control import (
     PASSIVE,
     PeriodController,
     Reference,
-    align_perturbations,
-    classify_controlled,
     controlled_fixed_point,
-    controlled_impulse_response,
     controlled_jacobian,
     controlled_step,
     finite_difference_controlled_jacobian,
-    fit_period_control,
     iterate_controlled,
+)
+from bounce_cli.analysis.control_design import (
+    align_perturbations,
+    classify_controlled,
+    controlled_impulse_response,
+    fit_period_control,
     period_control_radius,
     simulate_perturbation_trials,
 )
@@ -362,12 +364,14 @@ def test_flight_time_matching_returns_the_phase_in_one_impact(paper_params):
 
 
 def test_grid_tiles_and_orbit_agree_with_the_batch(paper_params):
-    from bounce_cli.model.control import classify_controlled_grid, iterate_controlled_orbit
+    from bounce_cli.analysis.classify import classify_grid
+    from bounce_cli.model.control import ControlledMap, iterate_controlled_orbit
 
     c = PeriodController(0.6, 0.9)
     theta, v = np.meshgrid(np.linspace(0, 2 * np.pi, 50), np.linspace(0, 10, 50))
     whole = classify_controlled(theta, v, paper_params, c)
-    tiled = classify_controlled_grid(theta, v, paper_params, c, tile_points=77)
+    tiled = classify_grid(theta, v, ControlledMap.of(paper_params, c, require_fixed_point=True),
+                          tile_points=77)
     assert np.array_equal(whole.outcome, tiled.outcome)
     assert np.array_equal(whole.iterations, tiled.iterations)
     orbit = iterate_controlled_orbit(0.8, 5.3, paper_params, c, 15, 1e-3)
@@ -418,3 +422,11 @@ def test_fit_is_not_caught_in_a_local_minimum():
     assert fit.gain_ci[0] <= truth.gain <= fit.gain_ci[1]
     assert fit.rate_ci[0] <= truth.rate <= fit.rate_ci[1]
     assert fit.reduced_chi2 < 3
+
+
+def test_alignment_without_a_perturbed_impact_is_empty_by_the_errors_class():
+    """No perturbed impact: no responses (decided by ``NoPerturbedImpactError``, not by the
+    message's text)."""
+    trial, k = np.zeros(20, int), np.arange(20)
+    v, theta, tau = np.full(20, 4.5), np.full(20, 0.4), np.full(20, 0.92)
+    assert align_perturbations(trial, k, v, theta, tau, np.zeros(20, bool), n_after=3) == {}

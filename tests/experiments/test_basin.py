@@ -240,3 +240,22 @@ def test_exact_sticking_basin_separates_locked_orbits_with_their_period(tmp_path
     assert (image == basin.EXACT_OUTCOMES.index("locked")).sum() == locked["count"]
     labels = [t.get_text() for t in figures["basin.png"].legends[0].get_texts()]
     assert any("locked" in t and "period 1 racket cycle" in t for t in labels)
+
+
+@pytest.mark.parametrize("kernel", ["numpy", "auto"])
+def test_controlled_basin_cli_jobs_2_is_jobs_1(tmp_path, cli, monkeypatch, kernel):
+    """``bounce basin`` with racket period control on two worker processes (numpy kernel) or
+    two threads of the compiled kernel (auto, where numba is installed): the same basin.csv
+    as one process, byte for byte."""
+    monkeypatch.setenv("BOUNCE_KERNEL", kernel)
+    control = ["--set", "model.control.gain=0.6", "--set", "model.control.rate=0.9"]
+    out1, out2 = tmp_path / "j1", tmp_path / "j2"
+    r1 = cli("basin", *SMALL, *control, "--jobs", 1, "--out", out1, "--quiet")
+    monkeypatch.setattr(basin, "POOL_MIN_POINTS", 100)
+    monkeypatch.setattr(basin, "COMPILED_MIN_POINTS", 100)
+    r2 = cli("basin", *SMALL, *control, "--jobs", 2, "--out", out2, "--quiet")
+    assert r1.exit_code == 0 and r2.exit_code == 0, r1.output + r2.output
+    for name in ("basin.csv", "fractions.csv", "markers.csv"):
+        assert (out1 / name).read_bytes() == (out2 / name).read_bytes(), name
+    fractions = pd.read_csv(out1 / "fractions.csv").set_index("outcome")["count"]
+    assert fractions["period1"] > 0 and fractions["sticking"] > 0

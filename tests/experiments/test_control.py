@@ -15,12 +15,8 @@ from typer.testing import CliRunner
 from bounce_cli.cli.commands import app
 from bounce_cli.runtime.config import bundled_config_path, load_config
 from bounce_cli.model.params import ModelParams
-from bounce_cli.model.control import (
-    PeriodController,
-    controlled_jacobian,
-    period_control_radius,
-    simulate_perturbation_trials,
-)
+from bounce_cli.model.control import PeriodController, controlled_jacobian
+from bounce_cli.analysis.control_design import period_control_radius, simulate_perturbation_trials
 from bounce_cli.experiments import control as exp
 from bounce_cli.experiments.base import RunOptions
 from bounce_cli.experiments.registry import entry
@@ -134,7 +130,7 @@ def test_relaxation_along_gain_matches_single_responses(result, paper_params):
     passive relaxation of relaxation.csv)."""
     import math
 
-    from bounce_cli.model.control import controlled_impulse_response
+    from bounce_cli.analysis.control_design import controlled_impulse_response
 
     scan = result.frames["relaxation_gain.csv"]
     relax = result.frames["relaxation.csv"].set_index(["model", "alpha_p"])
@@ -254,3 +250,28 @@ def test_zero_gain_correlations_are_the_passive_ones():
     frame = exp.correlations_frame(cfg.params, cfg)
     np.testing.assert_allclose(frame.controlled_theory, frame.passive_theory, rtol=1e-10,
                                atol=1e-12)
+
+
+def test_the_controlled_basin_runs_on_the_worker_pool(monkeypatch):
+    """``bounce control --jobs 2``: the passive and controlled basins on two worker processes
+    (the basin command's classifier), the same tables as in one process."""
+    from bounce_cli.runtime import parallel
+    from bounce_cli.experiments import basin
+
+    started = []
+
+    class CountedPool(parallel.LocalPool):
+        def __enter__(self):
+            started.append(self.workers)
+            return super().__enter__()
+
+    monkeypatch.setenv("BOUNCE_KERNEL", "numpy")
+    monkeypatch.setattr(parallel, "LocalPool", CountedPool)
+    cfg = load()
+    one = exp.basin_frames(cfg.params, cfg, RunOptions(jobs=1))
+    monkeypatch.setattr(basin, "POOL_MIN_POINTS", 100)
+    two = exp.basin_frames(cfg.params, cfg, RunOptions(jobs=2))
+    assert started == [2, 2]  # one pool per model (passive, controlled)
+    for name in ("basin.csv", "basin_fractions.csv"):
+        pd.testing.assert_frame_equal(one[name], two[name])
+    assert "--jobs" in runner.invoke(app, ["control", "--help"]).output

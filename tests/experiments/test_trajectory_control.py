@@ -62,3 +62,40 @@ def test_trajectory_with_control_writes_the_period_and_refuses_rk4():
     assert impacts["racket_period_s"].nunique() > 3
     with pytest.raises(ConfigError, match="integrator"):
         run(["model.control.gain=0.7", "integrator=rk4"])
+
+
+@pytest.mark.parametrize("gain", [0.0, 0.05])
+def test_controlled_motion_sticks_and_leaves_where_the_racket_outruns_gravity(gain):
+    """The stuck/leave branch of the one event loop with the controlled racket: Fig. 3's
+    sticking start (v0 = 5.7 m/s) sticks under a weak controller too; while stuck the ball is
+    the racket, and it leaves where the racket's acceleration reaches -g at the period the
+    racket has then (a w^2 sin(phase) = g); with gain 0 the motion is the passive one."""
+    from bounce_cli.model.flight import simulate
+
+    params = ModelParams(0.5, 9.81, 0.3, 0.92)
+    theta0 = math.asin(0.205 / 0.30)
+    traj, clock, periods = simulate_controlled_motion(
+        theta0, 5.7, params, PeriodController(gain, 1.0), 6.0, FlightSettings())
+    stuck = [s for s in traj.segments if s.kind == "stuck"]
+    assert stuck, "the run never stuck"
+    for seg in stuck[:-1] if stuck[-1].t_end == traj.t_end else stuck:
+        phase, omega = clock.phase(seg.t_end)
+        assert params.racket_amplitude * omega**2 * math.sin(phase) == pytest.approx(
+            params.g, rel=1e-9)
+        # the ball leaves with the racket's velocity (the next flight starts from it)
+        after = next(s for s in traj.segments if s.t_start == seg.t_end and s.kind == "flight")
+        assert after.v_start == pytest.approx(params.racket_amplitude * omega
+                                              * math.cos(phase), abs=1e-12)
+        # riding: at its start the ball is where the racket is
+        ph0, w0 = clock.phase(seg.t_start)
+        assert seg.x_start == pytest.approx(params.racket_amplitude * math.sin(ph0), abs=1e-12)
+    assert len(periods) == len(traj.impacts)
+    if gain == 0.0:
+        passive = simulate(theta0, 5.7, params, 6.0, FlightSettings())
+        assert np.allclose([s.t_end for s in stuck], [s.t_end for s in passive.segments
+                                                      if s.kind == "stuck"], atol=1e-9)
+        assert np.allclose([im.t_s for im in traj.impacts],
+                           [im.t_s for im in passive.impacts], atol=1e-9)
+        assert np.all(periods == params.racket_period)
+    else:
+        assert np.ptp(periods) > 0  # the controller moved the period

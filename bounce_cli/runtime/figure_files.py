@@ -1,0 +1,84 @@
+"""Figure files: a figure written as PNG, PDF or SVG with its title, caption and source in the
+file's metadata (the PNG's text chunks, the PDF's document information, SVG's Dublin Core),
+and no date, so that a rerun writes the same bytes. The run directory writes every figure
+through :func:`save_figure`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # matplotlib is imported when a figure is written
+    from matplotlib.figure import Figure
+
+#: the file formats a figure can be written in (``--figure-format``)
+FIGURE_FORMATS = ("png", "pdf", "svg")
+
+#: rcParams while a figure is written: fonts embedded as TrueType in PDF (editable, accepted
+#: by journals; matplotlib's default Type 3 is not), SVG element ids from a fixed salt (a
+#: rerun writes the same bytes)
+SAVE_STYLE: dict[str, Any] = {"pdf.fonttype": 42, "svg.hashsalt": "bounce"}
+
+#: a figure's attribute holding its caption line (parameters, run size, seed, data), set by
+#: :func:`bounce_cli.experiments.plotting.caption_figures`
+CAPTION_ATTRIBUTE = "_bounce_caption"
+
+
+def figure_caption(fig: Figure) -> str:
+    """The caption line ``plotting.caption_figures`` recorded ('' for a figure drawn from CSVs)."""
+    return str(getattr(fig, CAPTION_ATTRIBUTE, ""))
+
+
+def figure_title(fig: Figure) -> str:
+    """The figure's title: its suptitle, else its first axes title (one line)."""
+    title = fig.get_suptitle() or next((ax.get_title() for ax in fig.axes if ax.get_title()),
+                                       "")
+    return " ".join(title.split())
+
+
+def figure_metadata(fig: Figure, kind: str, source: str) -> dict[str, Any]:
+    """The metadata written into a figure file of format ``kind``: its title, its caption
+    (``plotting.caption_figures``) and the command that made it (``source``); no date, so that a
+    rerun writes the same bytes. Keys as each format names them (PNG text chunks, the PDF
+    document information, SVG's Dublin Core)."""
+    title, caption = figure_title(fig), figure_caption(fig)
+    meta: dict[str, Any]
+    if kind == "png":
+        meta = {"Title": title, "Description": caption, "Source": source}
+    elif kind == "pdf":
+        meta = {"Title": title, "Subject": caption, "Creator": source, "CreationDate": None}
+    else:
+        meta = {"Title": title, "Description": caption, "Creator": source, "Date": None}
+    return {k: v for k, v in meta.items() if v != ""}
+
+
+def save_figure(fig: Figure, path: Path, kind: str, *, dpi: float, source: str,
+                png_options: dict[str, Any] | None = None) -> None:
+    """Write ``fig`` to ``path`` as ``kind`` (one of :data:`FIGURE_FORMATS`) at ``dpi``, with
+    :func:`figure_metadata`, in :data:`SAVE_STYLE`.
+
+    Parameters
+    ----------
+    fig : Figure
+        The figure (from an experiment's ``draw``).
+    path : Path
+        The file to write (its name's suffix is not consulted).
+    kind : str
+        "png", "pdf" or "svg".
+    dpi : float
+        Resolution of a PNG (and of raster parts of a PDF or SVG), dots per inch.
+    source : str
+        What made the figure (e.g. ``bounce basin``), written into its metadata.
+    png_options : dict, optional
+        Pillow's options for a PNG (e.g. ``{"compress_level": 1}``).
+
+    Returns
+    -------
+    None
+    """
+    from matplotlib import rc_context
+
+    extra: dict[str, Any] = {"pil_kwargs": png_options} if kind == "png" and png_options else {}
+    with rc_context(SAVE_STYLE):  # type: ignore[arg-type]  # (the keys are rcParams)
+        fig.savefig(path, format=kind, dpi=dpi, metadata=figure_metadata(fig, kind, source),
+                    **extra)
