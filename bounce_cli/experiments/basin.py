@@ -449,9 +449,4 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     return {"basin.png": fig, "basin_iterations.png": fig2}
 
 
-EXPERIMENT = Experiment(
-    name="basin",
-    schema=BasinConfig,
-    run=run,
-    draw=draw,
-)
+EXPERIMENT = Experiment(name="basin", schema=BasinConfig, run=run, draw=draw)

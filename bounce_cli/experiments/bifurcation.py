@@ -362,16 +362,12 @@ def _runs(mask: np.ndarray):
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     """bifurcation.png: v after impact against the swept parameter with the closed-form
     thresholds, and the Lyapunov exponents below; from the CSVs alone."""
-    from .plotting import new_figure
+    from .plotting import sweep_figure
 
     bif, attractors = frames["bifurcation.csv"], frames["attractors.csv"]
     per_value, thresholds = frames["values.csv"], frames["thresholds.csv"]
     column = per_value.columns[0]
-    parameter = next(p for p, (col, _) in SWEEPABLE.items() if col == column)
-
-    fig, axes = new_figure(2, 1, width=8.0, height=7.5, sharex=True,
-                           gridspec_kw=dict(height_ratios=[2.2, 1]))
-    top, bottom = axes[0, 0], axes[1, 0]
+    fig, top, bottom = sweep_figure(column)
     exact = "locked_cycles" in attractors  # exact sticking (min_hop_s 0)
     on_locked = np.zeros(len(bif), dtype=bool)
     if exact:
@@ -442,7 +438,6 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
                 label=r"$\ln$ spectral radius of the stable period-1 orbit (eq. 10)")
     bottom.axhline(0.0, color="black", lw=0.6)
     bottom.set_ylabel("Lyapunov exponent\n(per impact)")
-    bottom.set_xlabel(SWEEPABLE[parameter][1])
     handles, labels = [], []
     for ax in (top, bottom):
         h, lab = ax.get_legend_handles_labels()
@@ -453,9 +448,4 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     return {"bifurcation.png": fig}
 
 
-EXPERIMENT = Experiment(
-    name="bifurcation",
-    schema=BifurcationConfig,
-    run=run,
-    draw=draw,
-)
+EXPERIMENT = Experiment(name="bifurcation", schema=BifurcationConfig, run=run, draw=draw)

@@ -313,15 +313,12 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     """continuation.png: the branches' impact velocities over the brute-force diagram (stable
     solid, unstable dashed, non-physical parts omitted), the located bifurcations marked;
     below, the multiplier of largest modulus along each branch. From the CSVs alone."""
-    from .plotting import new_figure
+    from .plotting import sweep_figure
 
     orbits, bifs = frames["orbits.csv"], frames["bifurcations.csv"]
     branches, diagram = frames["branches.csv"], frames["diagram.csv"]
     column = diagram.columns[0]
-    parameter = next(p for p, (col, _) in SWEEPABLE.items() if col == column)
-    fig, axes = new_figure(2, 1, width=8.0, height=7.5, sharex=True,
-                           gridspec_kw=dict(height_ratios=[2.2, 1]))
-    top, bottom = axes[0, 0], axes[1, 0]
+    fig, top, bottom = sweep_figure(column)
     top.plot(diagram[column], diagram["v_m_s"], ".", ms=0.8, mew=0, color="black", zorder=3,
              rasterized=True)
     top.plot([], [], ".", color="black", label="brute force: the map iterated (attractors)")
@@ -359,15 +356,9 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     bottom.set_yscale("log")
     bottom.set_ylim(1e-2, 1e3)
     bottom.set_ylabel("largest $|$multiplier$|$\n(of the period-$p$ map)")
-    bottom.set_xlabel(SWEEPABLE[parameter][1])
     handles, labels = top.get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncol=3, fontsize=7, frameon=False)
     return {"continuation.png": fig}
 
 
-EXPERIMENT = Experiment(
-    name="continuation",
-    schema=ContinuationConfig,
-    run=run,
-    draw=draw,
-)
+EXPERIMENT = Experiment(name="continuation", schema=ContinuationConfig, run=run, draw=draw)

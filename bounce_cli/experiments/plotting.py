@@ -63,6 +63,21 @@ def new_figure(nrows: int = 1, ncols: int = 1, *, width: float = 6.4, height: fl
     return fig, axes
 
 
+def sweep_figure(column: str) -> tuple[Figure, Any, Any]:
+    """The two panels over a swept parameter (bifurcation.png, continuation.png): a tall top
+    one above a short bottom one on the same x axis, labelled with the parameter whose values
+    are the table column ``column`` (a key of
+    :data:`bounce_cli.analysis.bifurcation.SWEEPABLE`). Returns (figure, top, bottom)."""
+    from ..analysis.bifurcation import SWEEPABLE
+
+    parameter = next(p for p, (col, _) in SWEEPABLE.items() if col == column)
+    fig, axes = new_figure(2, 1, width=8.0, height=7.5, sharex=True,
+                           gridspec_kw=dict(height_ratios=[2.2, 1]))
+    top, bottom = axes[0, 0], axes[1, 0]
+    bottom.set_xlabel(SWEEPABLE[parameter][1])
+    return fig, top, bottom
+
+
 def perturbation_title(lower: bool) -> str:
     """The title of a column of Figs. 9-11: the perturbed alpha below or above alpha_0."""
     return r"$\alpha_p < \alpha_0$" if lower else r"$\alpha_p > \alpha_0$"

@@ -340,9 +340,4 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     return {"stability.png": fig}
 
 
-EXPERIMENT = Experiment(
-    name="stability",
-    schema=StabilityConfig,
-    run=run,
-    draw=draw,
-)
+EXPERIMENT = Experiment(name="stability", schema=StabilityConfig, run=run, draw=draw)

@@ -266,9 +266,4 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     return {"trajectory.png": fig}
 
 
-EXPERIMENT = Experiment(
-    name="trajectory",
-    schema=TrajectoryConfig,
-    run=run,
-    draw=draw,
-)
+EXPERIMENT = Experiment(name="trajectory", schema=TrajectoryConfig, run=run, draw=draw)
