@@ -44,9 +44,13 @@ def test_radius_below_is_elementwise_and_takes_any_level():
     assert radius_below(radius, np.array([1.0, 0.25])).tolist() == [[True, False], [True, False]]
 
 
-def test_the_linear_modules_examples_run():
-    outcome = doctest.testmod(linear, verbose=False)
-    assert outcome.attempted >= 2 and outcome.failed == 0
+@pytest.mark.parametrize("module", ["linear", "params", "perturbation"])
+def test_the_examples_of_the_modules_holding_the_rules_run(module):
+    import importlib
+
+    outcome = doctest.testmod(importlib.import_module(f"bounce_cli.model.{module}"),
+                              verbose=False)
+    assert outcome.attempted >= 1 and outcome.failed == 0
 
 
 # -- the neutral points decided by the margin, not by the last bits --------------------------
@@ -92,3 +96,106 @@ def test_no_stationary_covariance_on_the_boundary():
 
     with pytest.raises(NotStableError):
         stationary_covariance(np.diag([ulps_from_one(-1), 0.5]), np.eye(2))
+
+
+# -- the sticking threshold: one constant ------------------------------------------------------
+def test_every_default_sticking_threshold_is_section_3s_one_constant():
+    import inspect
+
+    from bounce_cli.analysis.bifurcation import SweepSettings
+    from bounce_cli.model.maps import ClassifySettings
+    from bounce_cli.analysis.continuation import orbit_by_iteration
+    from bounce_cli.analysis.data_stats import simulate_impacts
+    from bounce_cli.data.simulated_lab import LAB_MIN_HOP_S, SessionSettings
+    from bounce_cli.experiments.bifurcation import IterateBlock
+    from bounce_cli.experiments.continuation import DiagramBlock
+    from bounce_cli.experiments.lab import LabBlock
+    from bounce_cli.experiments.simulate_recording import RecordingConfig
+    from bounce_cli.model.params import MIN_HOP_S
+
+    assert MIN_HOP_S == 1e-3  # section 3: "the time between bounces was less than 1e-3 s"
+    assert ClassifySettings().min_hop_s == SweepSettings().min_hop_s == MIN_HOP_S
+    assert IterateBlock().min_hop_s == DiagramBlock().min_hop_s == MIN_HOP_S
+    for fn in (orbit_by_iteration, simulate_impacts):
+        assert inspect.signature(fn).parameters["min_hop_s"].default == MIN_HOP_S
+    assert SessionSettings().min_hop_s == LAB_MIN_HOP_S
+    assert LabBlock.model_fields["min_hop_s"].default == LAB_MIN_HOP_S
+    assert RecordingConfig.model_fields["min_hop_s"].default == LAB_MIN_HOP_S
+
+
+# -- the circular mean --------------------------------------------------------------------------
+@pytest.mark.parametrize("degrees, mean", [
+    ([350.0, 10.0], 0.0), ([359.0, 1.0, 3.0], 1.0), ([-10.0, 10.0, 30.0], 10.0),
+    ([170.0, -170.0], 180.0), ([90.0], 90.0), ([0.5 + 360.0 * 3, 359.5], 0.0),
+])
+def test_the_circular_mean_of_phases_around_zero_is_near_zero(degrees, mean):
+    from bounce_cli.model.params import circular_mean, phase_difference
+
+    got = circular_mean(np.radians(degrees))
+    assert 0.0 <= got < 2 * np.pi
+    assert abs(float(phase_difference(got, np.radians(mean)))) < 1e-12
+
+
+def test_the_circular_mean_is_the_one_the_data_side_uses():
+    from bounce_cli.data import impacts
+    from bounce_cli.model.params import circular_mean
+
+    assert impacts.circular_mean is circular_mean
+    assert np.isnan(circular_mean([]))
+
+
+# -- section 7's perturbation schedule: one rule ----------------------------------------------
+def test_every_fifth_bounce_first_and_last():
+    from bounce_cli.model.perturbation import perturbed_impact
+
+    mask = perturbed_impact(np.arange(21), 5)
+    assert np.flatnonzero(mask).tolist() == [5, 10, 15, 20]  # not 0: a trial starts unperturbed
+    assert np.flatnonzero(perturbed_impact(np.arange(20), 5)).tolist() == [5, 10, 15]
+    assert np.flatnonzero(perturbed_impact(np.arange(12), 5, first=0)).tolist() == [0, 5, 10]
+    assert perturbed_impact(4, 5, first=4) is True and perturbed_impact(3, 5, first=4) is False
+    assert not perturbed_impact(np.arange(30), 0).any()  # no perturbations
+
+
+def test_the_three_simulations_perturb_the_same_impacts():
+    from bounce_cli.analysis.data_stats import perturbation_schedule
+    from bounce_cli.data.simulated_lab import SessionSettings, alpha_at
+    from bounce_cli.analysis.control_design import simulate_perturbation_trials
+    from bounce_cli.model.control import PeriodController
+
+    n = 23
+    alpha = perturbation_schedule(2, n, 5, 0.5, [(0.3, 0.4), (0.6, 0.7)], seed=1)
+    assert (np.flatnonzero(alpha[0] != 0.5) == [5, 10, 15, 20]).all()
+    trials = simulate_perturbation_trials(PAPER, PeriodController(gain=0.5, rate=0.5), n_trials=1,
+                                          impacts_per_trial=n, seed=1)
+    perturbed = np.asarray(trials["perturbed"], bool)
+    assert np.flatnonzero(perturbed).tolist() == [5, 10, 15, 20]
+    lab = SessionSettings(perturb_every=5, perturb_first=5, perturb_alphas=(0.4, 0.6))
+    assert [k for k in range(n) if alpha_at(k, 0.5, lab)[1]] == [5, 10, 15, 20]
+    assert [alpha_at(k, 0.5, lab)[0] for k in (5, 10, 15)] == [0.4, 0.6, 0.4]
+
+
+# -- the relaxation rule ------------------------------------------------------------------------
+def test_relaxation_at_the_boundaries_of_the_series():
+    from bounce_cli.model.perturbation import relaxation_impacts, relaxed_from
+
+    assert relaxed_from([True, True, True]) == 0  # relaxed from the perturbed impact on
+    assert relaxed_from([False, False, True]) == 2  # only the last impact inside
+    assert relaxed_from([True, True, False]) == -1  # leaves at the end: not relaxed
+    assert relaxed_from([False, True, False, True]) == 3  # a return inside is not relaxed
+    dv = np.array([0.3, 0.02, 0.01, 0.01])
+    assert relaxation_impacts(dv, np.zeros(4), 0.01, 0.01) == 2  # |dv| <= tol is inside
+    assert relaxation_impacts(dv, np.array([0, 0, 0, np.nan]), 0.01, 0.01) == -1
+
+
+def test_data_and_model_relax_by_the_same_rule():
+    from bounce_cli.analysis.data_stats import relaxation_impact
+    from bounce_cli.model.perturbation import relaxation_impacts
+
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        dv, dtheta = rng.normal(0, 0.02, 8), rng.normal(0, 0.02, 8)
+        model = relaxation_impacts(dv, dtheta, 0.02, 0.02)
+        data = relaxation_impact([dv, dtheta], [np.zeros(8), np.zeros(8)], [0.02, 0.02])
+        assert model == data
+    # the data's SE widens the tolerance: a mean within 2 SE of 0 counts as relaxed
+    assert relaxation_impact([[0.5, 0.05]], [[0.01, 0.03]], [0.01]) == 1

@@ -43,7 +43,7 @@ from ..model.impact import can_fly
 from ..model.linear import ac_explicit_g, flip_boundary_g, spectral_radius
 from .lyapunov import advance_tangent, initial_tangent, map_jacobian
 from ..model.maps import map_step
-from ..model.params import ModelError, ModelParams, phase_difference
+from ..model.params import MIN_HOP_S, ModelError, ModelParams, phase_difference
 
 TWO_PI = 2.0 * math.pi
 
@@ -195,7 +195,7 @@ class SweepSettings:
     recorded_impacts: int = 64
     max_period: int = 32
     period_tolerance: float = 1e-6
-    min_hop_s: float = 1e-3
+    min_hop_s: float = MIN_HOP_S
     chaos_threshold: float = 0.0
 
     def __post_init__(self) -> None:

@@ -50,7 +50,7 @@ from ..model.impact import gap, gap_slope
 from ..model.linear import is_stable
 from .lyapunov import map_jacobian
 from ..model.maps import iterate_orbit, velocity_after_impact
-from ..model.params import ModelError, ModelParams, phase_difference
+from ..model.params import MIN_HOP_S, ModelError, ModelParams, phase_difference
 
 TWO_PI = 2.0 * math.pi
 #: Newton on one flight's gap: iterations and relative tolerance of the hop
@@ -651,7 +651,7 @@ class IteratedOrbit:
 
 def orbit_by_iteration(theta0: float, v0: float, params: ModelParams, *, transient: int,
                        max_period: int, tolerance: float,
-                       min_hop_s: float = 1e-3) -> IteratedOrbit:
+                       min_hop_s: float = MIN_HOP_S) -> IteratedOrbit:
     """Iterate eqs. 5, 6 (first roots, ``maps.iterate_orbit``) ``transient`` impacts from
     (theta0, v0), then read the smallest period p <= max_period whose v and wrapped theta
     repeat within ``tolerance`` (m/s, rad) over the next 2 max_period impacts

@@ -31,7 +31,7 @@ from ..model.control import (
 )
 from ..model.linear import iterate_linear, racket_acceleration_at_impact_g
 from ..model.params import ModelParams, phase_difference
-from ..model.perturbation import perturbed_velocity, relaxation_impacts
+from ..model.perturbation import perturbed_impact, perturbed_velocity, relaxation_impacts
 from .classify import Classification, ClassifySettings, classify_states
 
 TWO_PI = 2.0 * math.pi
@@ -130,7 +130,7 @@ def simulate_perturbation_trials(params: ModelParams, controller: Controller, *,
     ups = np.stack([rng.random(n) < 0.5 for rng in streams])
     fracs = np.stack([rng.random(n) for rng in streams])
     k_all = np.arange(n)
-    perturbed = np.broadcast_to((k_all % perturb_every == 0) & (k_all > 0), (n_trials, n))
+    perturbed = np.broadcast_to(perturbed_impact(k_all, perturb_every), (n_trials, n))
     lo = alpha_p_low[0] + fracs * (alpha_p_low[1] - alpha_p_low[0])
     hi = alpha_p_high[0] + fracs * (alpha_p_high[1] - alpha_p_high[0])
     alpha = np.where(perturbed, np.where(ups, hi, lo), params.alpha)

@@ -21,7 +21,15 @@ from ..errors import NoPerturbedImpactError
 from ..model.impact import next_impact_phase
 from ..model.linear import jacobian
 from ..model.maps import velocity_after_impact
-from ..model.params import ModelError, ModelParams, phase_difference, wrap_phase
+from ..model.params import (
+    MIN_HOP_S,
+    ModelError,
+    ModelParams,
+    circular_mean,
+    phase_difference,
+    wrap_phase,
+)
+from ..model.perturbation import perturbed_impact, relaxed_from
 from .stochastic import (
     PAIR_NAMES,
     paper_noise_covariance,
@@ -60,7 +68,7 @@ def simulate_impacts(
     *,
     alpha: np.ndarray | None = None,
     burn_in: int = 20,
-    min_hop_s: float = 1e-3,
+    min_hop_s: float = MIN_HOP_S,
 ) -> SimulatedImpacts:
     """Iterate eqs. 16-18 (cos(theta_{k+1}) in eq. 16, as printed and as ``map_step``) for
     ``n_trials`` independent trials of ``n_bounces`` impacts after ``burn_in``, all trials at
@@ -120,7 +128,7 @@ def perturbation_schedule(n_trials: int, n_bounces: int, every: int, alpha_0: fl
     (0.6, 0.7)); all other impacts alpha_0. Returns (n_trials, n_bounces)."""
     rng = np.random.default_rng(seed)
     alpha = np.full((n_trials, n_bounces), float(alpha_0))
-    idx = np.arange(every if first is None else first, n_bounces, every)
+    idx = np.flatnonzero(perturbed_impact(np.arange(n_bounces), every, first))
     which = rng.integers(0, len(ranges), size=(n_trials, len(idx)))
     lows = np.array([r[0] for r in ranges])[which]
     highs = np.array([r[1] for r in ranges])[which]
@@ -269,7 +277,7 @@ def align(values_trials: Sequence[np.ndarray], perturbed_trials: Sequence[np.nda
                              "after a perturbation to take the baseline from (lower "
                              "data_analysis.settle_after_perturbation, or leave the trial out)")
         if phase:
-            ref = float(np.angle(np.mean(np.exp(1j * x[base]))))
+            ref = circular_mean(x[base])
             dev = phase_difference(x, ref)
         else:
             dev = x - x[base].mean()
@@ -298,7 +306,4 @@ def relaxation_impact(means: Sequence[np.ndarray], ses: Sequence[np.ndarray],
         se = np.nan_to_num(np.asarray(se, float), nan=0.0)
         ok = np.abs(mean) <= np.maximum(tol, z * se)
         inside = ok if inside is None else inside & ok
-    if inside is None or not inside[-1]:
-        return -1
-    outside = np.flatnonzero(~inside)
-    return int(outside[-1] + 1) if len(outside) else 0
+    return -1 if inside is None else relaxed_from(inside)

@@ -45,6 +45,7 @@ from typing import Any, Union
 import numpy as np
 import pandas as pd
 
+from ..model.params import circular_mean  # noqa: F401 (its former home)
 from ..runtime.config import ConfigError, show_value
 
 #: the columns every impacts table has, in this order
@@ -310,7 +311,3 @@ def impacts_frame(sim, params, trial_names=None) -> pd.DataFrame:
         }))
     return pd.concat(rows, ignore_index=True)
 
-
-def circular_mean(theta_rad) -> float:
-    """Mean phase (rad) in [0, 2 pi): the angle of the mean unit vector."""
-    return float(np.mod(np.angle(np.mean(np.exp(1j * np.asarray(theta_rad, float)))), 2 * math.pi))

@@ -66,6 +66,11 @@ from scipy.integrate import solve_ivp
 
 from ..model.flight import impact_velocity
 from ..model.params import ModelError, ModelParams
+from ..model.perturbation import perturbed_impact
+
+#: a simulated session's sticking threshold, s: a hop shorter than this is an error (a lab's
+#: ball does not chatter); ten times section 3's ``MIN_HOP_S``
+LAB_MIN_HOP_S = 0.01
 
 TWO_PI = 2.0 * math.pi
 #: the contact iteration stops when the gap is below this (m) and polishes with one Newton step
@@ -92,7 +97,7 @@ class SessionSettings:
     perturb_every: int = 0
     perturb_first: int = 4
     perturb_alphas: tuple[float, ...] = ()
-    min_hop_s: float = 0.01
+    min_hop_s: float = LAB_MIN_HOP_S
     seed: int = 0
     #: a physical set-up (module docstring): compliant contact, restitution SD per impact,
     #: the racket's second harmonic and its disturbance after each impact
@@ -322,9 +327,7 @@ def _draw_racket(params: ModelParams, s: SessionSettings, rng: np.random.Generat
 def alpha_at(k: int, alpha: float, s: SessionSettings) -> tuple[float, bool]:
     """Coefficient of restitution of impact k: alpha_p at the perturbed impacts (every
     ``perturb_every``-th from ``perturb_first``, cycling through ``perturb_alphas``)."""
-    if s.perturb_every > 0 and s.perturb_alphas and k >= s.perturb_first and (
-        (k - s.perturb_first) % s.perturb_every == 0
-    ):
+    if s.perturb_alphas and perturbed_impact(k, s.perturb_every, s.perturb_first):
         j = (k - s.perturb_first) // s.perturb_every
         return float(s.perturb_alphas[j % len(s.perturb_alphas)]), True
     return alpha, False

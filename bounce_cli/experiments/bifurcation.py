@@ -22,7 +22,7 @@ import pandas as pd
 from pydantic import Field, model_validator
 
 from ..runtime.config import ConfigError, ExperimentConfig, StrictModel
-from ..model.params import ModelError, ModelParams
+from ..model.params import MIN_HOP_S, ModelError, ModelParams
 from ..analysis.bifurcation import (
     SWEEPABLE,
     FlipBracket,
@@ -74,7 +74,7 @@ class IterateBlock(StrictModel):
     recorded_impacts: int = Field(64, ge=2, description="last measured impacts kept")
     max_period: int = Field(32, ge=1, description="longest period detected")
     period_tolerance: float = Field(1e-6, gt=0.0, description="m/s and rad")
-    min_hop_s: float = Field(1e-3, ge=0.0, description="s, shortest hop not sticking")
+    min_hop_s: float = Field(MIN_HOP_S, ge=0.0, description="s, shortest hop not sticking")
     chaos_threshold: float = Field(0.01, ge=0.0, description="per impact")
 
     @model_validator(mode="after")

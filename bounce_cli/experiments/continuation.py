@@ -23,7 +23,7 @@ import pandas as pd
 from pydantic import Field, model_validator
 
 from ..runtime.config import ConfigError, ExperimentConfig, StrictModel
-from ..model.params import ModelError
+from ..model.params import MIN_HOP_S, ModelError
 from ..analysis.bifurcation import (
     SWEEPABLE,
     SweepSettings,
@@ -112,7 +112,7 @@ class DiagramBlock(StrictModel):
     v0_m_s: list[float] = Field([3.0, 5.0, 9.0], min_length=1, max_length=100)
     transient_impacts: int = Field(600, ge=0)
     recorded_impacts: int = Field(64, ge=2)
-    min_hop_s: float = Field(1e-3, ge=0.0, description="s, shorter hops are sticking")
+    min_hop_s: float = Field(MIN_HOP_S, ge=0.0, description="s, shorter hops are sticking")
 
 
 class ContinuationConfig(ExperimentConfig):

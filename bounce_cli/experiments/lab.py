@@ -27,6 +27,7 @@ from pydantic import Field, ValidationError, model_validator
 
 from ..runtime.config import ConfigError, StrictModel, format_validation_error
 from ..data.recordings import Events
+from ..data.simulated_lab import LAB_MIN_HOP_S
 from .base import Experiment, ExperimentResult, RunOptions
 from .extract import ExtractionBlock, extract_all, trials_from_frame
 from .simulate_recording import PerturbationBlock, RacketBlock, RecordingConfig, session_frames
@@ -56,7 +57,8 @@ class LabBlock(StrictModel):
     perturbations: PerturbationBlock = PerturbationBlock()
     conditions: list[ConditionBlock] = Field(
         default_factory=list, description="one session per racket; empty: the model's racket")
-    min_hop_s: float = Field(0.01, gt=0.0, description="a shorter hop is sticking: an error")
+    min_hop_s: float = Field(LAB_MIN_HOP_S, gt=0.0,
+                             description="a shorter hop is sticking: an error")
     events: bool = Field(False, description="extract at the logged impact times (with alpha "
                          "and perturbed), as with --events; else detect the impacts")
     #: extracted at the session's known set-up: the model's g and no marker offset where

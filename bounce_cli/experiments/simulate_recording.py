@@ -21,7 +21,7 @@ import pandas as pd
 from pydantic import Field, model_validator
 
 from ..runtime.config import ControllableModelBlock, ExperimentConfig, StrictModel
-from ..data.simulated_lab import SessionSettings, simulate_session, truth_rows
+from ..data.simulated_lab import LAB_MIN_HOP_S, SessionSettings, simulate_session, truth_rows
 from ..data.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
 from .plotting import caption_figures, centred_deg, draw_fig2, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
@@ -82,7 +82,8 @@ class RecordingConfig(ExperimentConfig):
     ball_marker_offset_m: float = Field(0.0, description="ball marker above the ball's "
                                         "lowest point (its radius: a marker at the centre)")
     contact: ContactBlock = ContactBlock()
-    min_hop_s: float = Field(0.01, gt=0.0, description="a shorter hop is sticking: an error")
+    min_hop_s: float = Field(LAB_MIN_HOP_S, gt=0.0,
+                             description="a shorter hop is sticking: an error")
 
     @model_validator(mode="after")
     def _limits(self):

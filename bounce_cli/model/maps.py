@@ -21,7 +21,7 @@ import numpy as np
 
 from .chatter import tail_is_summable
 from .impact import can_fly, first_impact_phase, next_impact_phase
-from .params import FixedPoint, ModelParams, phase_difference
+from .params import MIN_HOP_S, FixedPoint, ModelParams, phase_difference
 
 TWO_PI = 2.0 * math.pi
 
@@ -93,7 +93,7 @@ class ClassifySettings:
 
     max_iterations: int = 100
     tolerance: float = 1e-3
-    min_hop_s: float = 1e-3
+    min_hop_s: float = MIN_HOP_S
 
 
 # -- the one step protocol ---------------------------------------------------------------------

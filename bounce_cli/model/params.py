@@ -13,6 +13,10 @@ import numpy as np
 
 from ..errors import ModelError, NoFixedPointError
 
+#: section 3's sticking threshold: a hop (time between two impacts) shorter than this, s, is
+#: sticking (grey in Fig. 4); the default of every ``min_hop_s`` on the map's side
+MIN_HOP_S = 1e-3
+
 
 @dataclass(frozen=True)
 class FixedPoint:
@@ -118,3 +122,33 @@ def phase_difference(theta, reference):
     """theta - reference wrapped to [-pi, pi): compares a wrapped or unwrapped phase with a
     reference without the 2 pi ambiguity."""
     return np.mod(np.asarray(theta) - reference + np.pi, 2.0 * np.pi) - np.pi
+
+
+def circular_mean(theta_rad) -> float:
+    """The mean of phases: the angle of the mean unit vector exp(i theta), in [0, 2 pi).
+
+    Unlike the arithmetic mean it does not depend on where the phases were wrapped (impacts
+    at 359 deg and 1 deg average to 0 deg, not 180 deg); deviations from it are taken with
+    :func:`phase_difference`. A mean a rounding error below 0 is 0, not 2 pi (``np.mod``
+    of -1e-17 is 2 pi exactly).
+
+    Parameters
+    ----------
+    theta_rad : array_like
+        Phases, rad (wrapped or not).
+
+    Returns
+    -------
+    float
+        The mean phase, rad, in [0, 2 pi); NaN for no phases.
+
+    Examples
+    --------
+    >>> round(math.degrees(circular_mean(np.radians([359.0, 1.0, 3.0]))), 9)  # not 121
+    1.0
+    """
+    theta = np.asarray(theta_rad, float)
+    if theta.size == 0:
+        return math.nan
+    mean = float(np.mod(np.angle(np.mean(np.exp(1j * theta))), 2 * math.pi))
+    return 0.0 if mean == 2 * math.pi else mean  # a mean just below 0 rounds up to 2 pi
