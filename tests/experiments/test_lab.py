@@ -42,6 +42,7 @@ def test_a_lab_config_refuses_a_data_file():
         load_config(experiment.schema, bundled_config_path("acf-data"), ["data=x.csv"])
 
 
+@pytest.mark.slow
 def test_acf_data_recovers_eq9_and_eq10_from_extracted_impacts():
     config, result = run_bundled("acf-data", FAST_TRUST)
     stab = result.frames["stability_data.csv"].set_index(["quantity", "source"])
@@ -74,6 +75,7 @@ def test_acf_data_recovers_eq9_and_eq10_from_extracted_impacts():
     assert stab.loc[("theta_mean", "data")].estimate == pytest.approx(fp.theta_deg, abs=1.5)
 
 
+@pytest.mark.slow
 def test_acf_data_gives_the_same_fit_on_extracted_and_exact_impacts():
     """Within one SE of the exact impacts' fit (the extraction drops the impacts of each
     trial's last, incomplete racket cycle, so the samples differ a little)."""
@@ -118,6 +120,7 @@ def test_impulse_data_aligned_responses_follow_the_model_and_the_exact_impacts()
     assert np.abs(period["mean"]).max() < 1e-3
 
 
+@pytest.mark.slow
 def test_regression_data_recovers_eq15_from_extracted_trials():
     config, result = run_bundled("regression-data")
     fit = result.frames["fit.csv"].iloc[0]
