@@ -14,6 +14,10 @@
 #   baseline      an x86-64-v2 machine (Nehalem-like): numpy on its SSE4.2 baseline (every
 #                 dispatched group above it disabled), OPENBLAS_CORETYPE=Prescott (the oldest
 #                 SSE3 kernel), NUMBA_CPU_NAME=nehalem
+#   nehalem       baseline, and glibc's libm on the code paths of a CPU without AVX2 and FMA
+#                 (GLIBC_TUNABLES=glibc.cpu.hwcaps=-AVX2,-FMA: its sin, cos, exp and log
+#                 choose their SSE2 variants, whose last bits differ from the FMA ones): what
+#                 qemu-nehalem showed, at native speed
 # PROFILE, emulation (qemu-user's TCG: cpuid reports that CPU, so numpy, OpenBLAS and numba
 # all choose their paths as on it; slow, so the suite runs only the reproduction and
 # extraction tests):
@@ -48,6 +52,9 @@ case "$profile" in
     baseline)
         profile_env=("NPY_DISABLE_CPU_FEATURES=X86_V3 $avx512_groups" OPENBLAS_CORETYPE=Prescott
                      NUMBA_CPU_NAME=nehalem) ;;
+    nehalem)
+        profile_env=("NPY_DISABLE_CPU_FEATURES=X86_V3 $avx512_groups" OPENBLAS_CORETYPE=Prescott
+                     NUMBA_CPU_NAME=nehalem GLIBC_TUNABLES=glibc.cpu.hwcaps=-AVX2,-FMA) ;;
     qemu-nehalem)
         qemu_model=Nehalem; profile_env=() ;;
     qemu-haswell)
@@ -55,7 +62,7 @@ case "$profile" in
         # which the CLI tests' one-line-error checks would read)
         qemu_model=Haswell-noTSX,-invpcid,-pcid,-x2apic,-tsc-deadline; profile_env=() ;;
     *)
-        echo "unknown profile $profile (avx512-intel, haswell, baseline, qemu-nehalem," \
+        echo "unknown profile $profile (avx512-intel, haswell, baseline, nehalem, qemu-nehalem," \
              "qemu-haswell)" >&2
         exit 2 ;;
 esac
@@ -106,6 +113,12 @@ print("numpy", np.__version__, "baseline", __cpu_baseline__, "dispatch used",
 for blas in threadpoolctl.threadpool_info():
     if blas["internal_api"] == "openblas":
         print("openblas", blas["version"], blas["architecture"], os.path.basename(blas["filepath"]))
+# glibc picks its sin/cos by the CPU's features (ifunc): a digest of math.sin over fixed
+# arguments tells the FMA paths from the SSE2 ones (the same on two runs of one machine)
+import hashlib, math, struct
+digest = hashlib.sha256(struct.pack("4096d", *(math.sin(0.37 * k + 0.1) for k in range(4096))))
+print("libm sin digest", digest.hexdigest()[:12], "GLIBC_TUNABLES",
+      os.environ.get("GLIBC_TUNABLES", "(unset)"))
 print("numba", numba.__version__, "host cpu", llvm.get_host_cpu_name(),
       "NUMBA_CPU_NAME", numba.config.CPU_NAME)
 EOF

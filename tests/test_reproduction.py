@@ -4,7 +4,8 @@ committed CSVs alone; ``bounce verify`` passes on the baseline and fails on drif
 
 The tolerance is the one ``bounce reproduce`` uses (``bounce_cli.paper.reproduce.table_drift``;
 stated there): rtol 1e-6 / atol 1e-9 for floats, categorical columns exact but for the few
-stated exceptions.
+stated exceptions, and the tables filled by chaotic orbits compared by what reproduces of
+them (``bounce_cli.paper.chaotic_tables``; ``tests/test_chaotic_tables.py``).
 """
 
 import io
@@ -21,6 +22,7 @@ from bounce_cli.runtime.config import bundled_config_path, load_config
 from bounce_cli.experiments.base import RunOptions
 from bounce_cli.experiments.registry import entry, reproduced
 from bounce_cli.paper.reproduce import table_drift
+from bounce_cli.runtime.artifacts import RunTables
 
 EXPERIMENT_NAMES = [e.name for e in reproduced()]
 #: re-runs too slow for the default suite (15-120 s each on a loaded 2-core machine): run
@@ -50,9 +52,11 @@ def test_bundled_config_reproduces_committed_results(name):
     result = experiment.run(config, RunOptions(jobs=1))
     committed = committed_frames(name)
     assert sorted(result.frames) == sorted(committed)
-    for csv_name, frame in result.frames.items():
-        fresh = pd.read_csv(io.StringIO(frame.to_csv(index=False)))  # the CSV round trip
-        drift = table_drift(name, csv_name, fresh, committed[csv_name])
+    fresh = {csv_name: pd.read_csv(io.StringIO(frame.to_csv(index=False)))  # the CSV round trip
+             for csv_name, frame in result.frames.items()}
+    both_runs = RunTables(fresh, committed, manifest["config"])
+    for csv_name in fresh:
+        drift = table_drift(name, csv_name, fresh[csv_name], committed[csv_name], both_runs)
         assert not drift, "\n".join(drift)
     assert sorted(result.figures) == sorted(png for png, _ in entry(name).figures)
 

@@ -154,6 +154,7 @@ def run(config: BifurcationConfig, options: RunOptions) -> ExperimentResult:
         "attractor": names,
         "period": periods,
         "lyapunov_per_impact": orbits.lyapunov,
+        "lyapunov_se_per_impact": orbits.lyapunov_se,
         "stuck_at_impact": orbits.stuck_at,
     })
     if orbits.locked_cycles is not None:  # exact sticking: the locked orbits' periods

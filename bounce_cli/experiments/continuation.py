@@ -263,7 +263,8 @@ def cascade_table(bifurcations: pd.DataFrame, column: str) -> pd.DataFrame:
 def brute_force_diagram(config: ContinuationConfig, column: str,
                         options: RunOptions) -> pd.DataFrame:
     """The map iterated from every diagram initial condition at ``diagram.num`` values: the
-    recorded impacts (v, wrapped theta) of the orbits that did not stick."""
+    recorded impacts (v, wrapped theta) of the orbits that did not stick, with the index of
+    the initial condition (``diagram.theta0_deg`` x ``diagram.v0_m_s``, theta0 slowest)."""
     d, rng = config.diagram, config.range
     values = np.linspace(rng.low, rng.high, d.num)
     theta0, v0 = (a.ravel() for a in np.meshgrid(np.radians(d.theta0_deg), d.v0_m_s,
@@ -281,6 +282,10 @@ def brute_force_diagram(config: ContinuationConfig, column: str,
     n = settings.recorded_impacts
     return pd.DataFrame({
         column: np.repeat(np.repeat(values, theta0.size)[recorded], n),
+        # which start each orbit came from (as in bounce bifurcation's tables): orbits of a
+        # chaotic attractor are compared by start, and one that stuck is told from its row
+        "initial_condition": np.repeat(np.tile(np.arange(theta0.size), values.size)[recorded],
+                                       n),
         "v_m_s": orbits.v[recorded].ravel(),
         "theta_deg": np.degrees(orbits.theta[recorded]).ravel(),
     })

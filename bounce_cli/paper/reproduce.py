@@ -9,7 +9,10 @@ seeded streams, no dependence on the number of workers; the slack absorbs what d
 between CPUs, BLAS kernels and libm builds: seen up to 2e-7 relative); categorical columns
 must match exactly, except the basin's outcome, where at most 1 point in 10^4 may flip (a
 grid point lying on a basin boundary to within rounding); a few columns whose last digits are
-rounding by construction are compared to their stated precision (``ATOL_FOR``).
+rounding by construction are compared to their stated precision (``ATOL_FOR``). The tables
+filled by orbits on chaotic attractors (``bounce bifurcation``, ``continuation``'s
+brute-force diagram, ``sweep``) are compared by what reproduces of such orbits, each at the
+precision it has (``chaotic_tables``).
 """
 
 from __future__ import annotations
@@ -20,6 +23,8 @@ import numpy as np
 import pandas as pd
 
 from ..experiments.registry import reproduced
+from ..runtime.artifacts import RunTables
+from .chaotic_tables import RULES
 
 RTOL, ATOL = 1e-6, 1e-9
 #: (experiment, table, column) -> fraction of values that may differ
@@ -58,17 +63,22 @@ ADAPTIVE_TABLES = {("continuation", "branches.csv"): ["branch", "start", "parent
                    ("continuation", "orbits.csv"): ["branch"]}
 
 
-def table_drift(experiment: str, table: str, fresh: pd.DataFrame,
-                committed: pd.DataFrame) -> list[str]:
+def table_drift(experiment: str, table: str, fresh: pd.DataFrame, committed: pd.DataFrame,
+                tables: RunTables | None = None) -> list[str]:
     """Where a regenerated table lies outside the reproduction tolerance of the committed one.
 
     Parameters
     ----------
     experiment, table
         The experiment's name and the table's file name (they select the per-column
-        exceptions ``MAX_FLIPPED_FRACTION`` and ``ATOL_FOR``, and ``ADAPTIVE_TABLES``).
+        exceptions ``MAX_FLIPPED_FRACTION`` and ``ATOL_FOR``, ``ADAPTIVE_TABLES``, and the
+        rules of the tables filled by chaotic orbits, ``chaotic_tables.RULES``).
     fresh, committed
         The two tables as read back from their files (the same reader for both).
+    tables
+        Both runs' tables and config, which the rules of ``chaotic_tables`` read (an orbit's
+        points are compared as its ``attractors.csv`` row says); without them every table is
+        compared value by value.
 
     Returns
     -------
@@ -79,6 +89,21 @@ def table_drift(experiment: str, table: str, fresh: pd.DataFrame,
     where = f"{experiment}/{table}"
     if list(fresh.columns) != list(committed.columns):
         return [f"{where}: columns {list(fresh.columns)} instead of {list(committed.columns)}"]
+    rule = RULES.get((experiment, table))
+    if rule is not None and tables is not None:
+        def deterministic(a: pd.DataFrame, b: pd.DataFrame) -> list[str]:
+            return value_drift(experiment, table, a, b)
+
+        return rule(where, fresh, committed, tables, deterministic, RTOL, ATOL)
+    return value_drift(experiment, table, fresh, committed)
+
+
+def value_drift(experiment: str, table: str, fresh: pd.DataFrame,
+                committed: pd.DataFrame) -> list[str]:
+    """``table_drift``'s rule for a table whose values reproduce one by one: floats to
+    RTOL/ATOL (or ``ATOL_FOR``), the rest exactly (but for ``MAX_FLIPPED_FRACTION``), an
+    adaptive table by its identity columns."""
+    where = f"{experiment}/{table}"
     identity = ADAPTIVE_TABLES.get((experiment, table))
     if identity is not None:
         fresh, committed = (frame[identity].drop_duplicates().reset_index(drop=True)
@@ -106,10 +131,12 @@ def table_drift(experiment: str, table: str, fresh: pd.DataFrame,
 
 
 def tables_agree(experiment: str):
-    """``RunDirectory.commit``'s ``agrees`` for one experiment: (table, new, previous) ->
-    whether the new table agrees with the previous within the reproduction tolerance."""
-    def agrees(table: str, new: pd.DataFrame, previous: pd.DataFrame) -> bool:
-        return not table_drift(experiment, table, new, previous)
+    """``RunDirectory.commit``'s ``agrees`` for one experiment: (table, new, previous, both
+    runs' tables) -> whether the new table agrees with the previous within the reproduction
+    tolerance."""
+    def agrees(table: str, new: pd.DataFrame, previous: pd.DataFrame,
+               tables: RunTables) -> bool:
+        return not table_drift(experiment, table, new, previous, tables)
     return agrees
 
 

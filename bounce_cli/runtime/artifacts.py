@@ -34,6 +34,8 @@ import tempfile
 import time
 from importlib import metadata
 from pathlib import Path
+from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Callable, Iterator
 
 import numpy as np
@@ -509,17 +511,19 @@ class RunDirectory:
             manifest = {**manifest, "versions": previous["versions"]}
         return json.dumps(manifest, indent=2) + "\n"
 
-    def commit(self, agrees: Callable[[str, pd.DataFrame, pd.DataFrame], bool] | None = None,
+    def commit(self,
+               agrees: Callable[[str, pd.DataFrame, pd.DataFrame, RunTables], bool] | None = None,
                ) -> list[Path]:
         """Stage every collected file under a temporary name (the slow part: CSVs, PNGs),
         then move them all into place with ``os.replace``, ``run.json`` last. Returns the
         paths written. Until the staging is complete, the previous run's files are untouched.
 
-        With ``agrees`` (``bounce reproduce``: ``agrees(table, new, previous)``, the
-        reproduction tolerance), a table whose previous file agrees with the new one is left
-        untouched, and the figures are not redrawn when every table agrees and they exist
-        (their data did not change). ``self.comparison`` then says per file: identical,
-        within tolerance, kept (a figure not redrawn), changed or new."""
+        With ``agrees`` (``bounce reproduce``: ``agrees(table, new, previous, tables)``, the
+        reproduction tolerance; ``tables``: both runs' tables, :class:`RunTables`), a table
+        whose previous file agrees with the new one is left untouched, and the figures are
+        not redrawn when every table agrees and they exist (their data did not change).
+        ``self.comparison`` then says per file: identical, within tolerance, kept (a figure
+        not redrawn), changed or new."""
         self.out_dir.mkdir(parents=True, exist_ok=True)
         writers: dict[str, Callable[[Path], object]] = {}
         written = {*self._frames, *self._figures, *self._files}
@@ -553,6 +557,7 @@ class RunDirectory:
                 children[-1].start()
             unchanged = True
             tables_agree = True
+            both_runs = RunTables(self._frames, FramesOnDisk(self.out_dir), self.resolved_config)
             for name, write in writers.items():  # the tables first, then the figures
                 final = self.out_dir / name
                 if (agrees is not None and name in self._figures and tables_agree
@@ -564,7 +569,7 @@ class RunDirectory:
                 if same_bytes(tmp, final):
                     self.comparison[name] = "identical"
                 elif (agrees is not None and name in self._frames and final.is_file()
-                      and agrees(name, read_frame(tmp), read_frame(final))):
+                      and agrees(name, read_frame(tmp), read_frame(final), both_runs)):
                     self.comparison[name] = "within tolerance"
                     tmp.unlink()  # leave the previous file as it is
                     staged.pop()
@@ -858,6 +863,41 @@ def read_frame(path: Path) -> pd.DataFrame:
             else:
                 columns[name] = data[name]
     return pd.DataFrame(columns)
+
+
+class FramesOnDisk(Mapping):
+    """The tables of a run directory as a read-only mapping, each read when first asked for
+    (``bounce reproduce`` compares some tables with the help of others)."""
+
+    def __init__(self, folder: Path) -> None:
+        self.folder = Path(folder)
+        self._read: dict[str, pd.DataFrame] = {}
+
+    def __getitem__(self, name: str) -> pd.DataFrame:
+        if name not in self._read:
+            path = self.folder / name
+            if not path.is_file():
+                raise KeyError(name)
+            self._read[name] = read_frame(path)
+        return self._read[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(sorted(p.name for p in self.folder.iterdir() if p.is_file()
+                           and not p.name.startswith(".") and p.suffix in FRAME_FORMATS))
+
+    def __len__(self) -> int:
+        return sum(1 for _ in self)
+
+
+@dataclass(frozen=True)
+class RunTables:
+    """Both runs of one experiment when a new run is compared with the previous one: table
+    name -> frame of each (``previous`` read on demand) and the resolved config both were
+    made from. What ``RunDirectory.commit`` hands its ``agrees``."""
+
+    fresh: Mapping[str, pd.DataFrame]
+    committed: Mapping[str, pd.DataFrame]
+    config: Mapping[str, Any]
 
 
 def read_frames(folder: Path) -> dict[str, pd.DataFrame]:

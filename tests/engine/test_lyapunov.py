@@ -180,3 +180,49 @@ def test_chaotic_exponent_agrees_with_two_nearby_orbits():
     benettin = two_orbit_exponent(params, math.radians(90.0), 5.0, transient, measured)
     assert jacobian_route > 0.2
     assert jacobian_route == pytest.approx(benettin, abs=1e-4)  # measured: 0.375312 both
+
+
+def test_batch_means_standard_error_by_hand_and_for_independent_growth():
+    """SD of the batch means / sqrt(B): by hand on four batches; for independent log growths
+    of SD sigma it is sigma / sqrt(N) on average (the textbook error of a mean), whatever the
+    batch lengths (N not a multiple of B)."""
+    from bounce_cli.analysis.bifurcation import lyapunov_standard_error
+
+    sums = np.array([[1.0, 2.0, 3.0, 6.0]])  # 4 batches of 2 impacts: means 0.5 1 1.5 3
+    expected = np.std([0.5, 1.0, 1.5, 3.0], ddof=1) / 2.0
+    assert lyapunov_standard_error(sums, 8)[0] == pytest.approx(expected, rel=1e-14)
+    assert np.isnan(lyapunov_standard_error(np.ones((3, 1)), 5)).all()  # one batch: no error
+
+    rng = np.random.default_rng(7)
+    n_states, measured, batches, sigma = 4000, 1003, 10, 0.8
+    growth = rng.normal(0.3, sigma, (n_states, measured))
+    which = np.arange(measured) * batches // measured  # iterate_sweep's assignment
+    sums = np.stack([growth[:, which == j].sum(axis=1) for j in range(batches)], axis=1)
+    se = lyapunov_standard_error(sums, measured)
+    # E[SE^2] = sigma^2 / N (the batch means have variance sigma^2 B / N)
+    assert np.mean(se**2) == pytest.approx(sigma**2 / measured, rel=0.05)
+
+
+def test_exponent_standard_error_matches_the_scatter_of_exponents_on_one_chaotic_attractor():
+    """Independent route: 40 orbits on the chaotic attractor at Gamma = 1.75 give 40
+    finite-time exponents whose scatter is what each orbit's batch-means error says; a
+    period-1 orbit (Gamma = 1.3) has an error at rounding level, and an orbit whose transient
+    ends while it is measured has an error that covers it."""
+    params = gamma_params(1.75)
+    settings = SweepSettings(transient_impacts=300, measured_impacts=800)
+    rng = np.random.default_rng(3)
+    n = 40
+    orbits = iterate_sweep(rng.uniform(0.5, 1.5, n), rng.uniform(4.5, 5.5, n),
+                           sweep_parameters(params, "alpha", [0.5] * n), settings)
+    chaotic = (orbits.stuck_at < 0) & (orbits.lyapunov > 0.1)
+    assert chaotic.sum() >= 20
+    scatter = np.std(orbits.lyapunov[chaotic], ddof=1)
+    typical_se = math.sqrt(np.mean(orbits.lyapunov_se[chaotic] ** 2))
+    assert 0.5 < scatter / typical_se < 2.0, (scatter, typical_se)  # measured: 0.92
+
+    # near the period-1 orbit at Gamma = 1.3 (eq. 8: theta~ = 36.34 deg, v~ = 4.5126 m/s): a
+    # complex pair of multipliers turns the tangent vector, so batches differ a little
+    period1 = iterate_sweep([math.radians(36.0)], [4.5], sweep_parameters(
+        gamma_params(1.3), "alpha", [0.5]), settings)
+    assert period1.lyapunov[0] == pytest.approx(math.log(0.5), abs=0.01)  # eq. 12: |lambda|
+    assert period1.lyapunov_se[0] < 0.01 * abs(period1.lyapunov[0])  # measured: 0.0028
