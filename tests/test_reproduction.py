@@ -187,7 +187,11 @@ def test_reproduce_leaves_tables_within_tolerance_as_committed_and_rewrites_chan
     assert not table_drift("trajectory", "impacts.csv", pd.read_csv(csv),
                            pd.read_csv(RESULTS / "trajectory" / "impacts.csv"))
     assert png.read_bytes().startswith(b"\x89PNG")  # redrawn
-    assert "trajectory: identical" in _reproduce_trajectory(results)
+    # what this machine wrote is identical now (the tables still as committed may differ from
+    # this machine's in their last digits: another libm)
+    status = next(line for line in _reproduce_trajectory(results).splitlines()
+                  if line.startswith("trajectory: "))
+    assert "changed" not in status and "impacts.csv" not in status, status
 
     png.write_bytes(b"not redrawn")  # --force-regen redraws what agrees
     out = _reproduce_trajectory(results, "--force-regen")
