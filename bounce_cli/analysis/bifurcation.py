@@ -40,7 +40,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from ..model.impact import can_fly
-from ..model.linear import ac_explicit_g, flip_boundary_g, spectral_radius
+from ..model.linear import ac_explicit_g, flip_boundary_g, spectral_radius, with_parameters
 from .lyapunov import advance_tangent, initial_tangent, map_jacobian
 from ..model.maps import map_step
 from ..model.params import MIN_HOP_S, ModelError, ModelParams, phase_difference
@@ -100,15 +100,7 @@ def parameter_point(base: ModelParams, parameter: str, value: float) -> ModelPar
     the racket period stay). Raises ModelError for invalid parameters."""
     if parameter not in SWEEPABLE:
         raise ModelError(f"cannot sweep {parameter!r}: choose one of {', '.join(SWEEPABLE)}")
-    fields = dict(alpha=base.alpha, g=base.g, racket_amplitude=base.racket_amplitude,
-                  racket_period=base.racket_period)
-    if parameter == "gamma":
-        if not value > 0.0:
-            raise ModelError(f"gamma must be > 0 (got {value!r})")
-        fields["racket_amplitude"] = value * base.g / base.omega**2
-    else:
-        fields[parameter] = value
-    return ModelParams(**fields)
+    return with_parameters(base, {parameter: value})
 
 
 def sweep_parameters(base: ModelParams, parameter: str, values) -> ParameterArrays:

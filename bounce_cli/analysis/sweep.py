@@ -26,7 +26,7 @@ import numpy as np
 
 from .basin_measures import basin_entropy, uncertainty_exponent
 from .classify import OUTCOMES, Classification, ClassifySettings, classify_batch, outcome_names
-from ..model.linear import racket_acceleration_at_impact_g, racket_amplitude_for_ac, stability
+from ..model.linear import racket_acceleration_at_impact_g, stability, with_parameters
 from ..model.params import ModelError, ModelParams
 
 #: parameters a sweep axis can set: CSV column (unit in the name) and axis label
@@ -37,30 +37,18 @@ SWEEP_PARAMETERS: dict[str, tuple[str, str]] = {
     "racket_period": ("racket_period_s", r"racket period $\tau$ (s)"),
     "ac_g": ("ac_g", r"racket acceleration at impact AC (g)"),
 }
-MODEL_FIELDS = ("alpha", "g", "racket_amplitude", "racket_period")
 
 
 def parameter_point(base: ModelParams, values: dict[str, float]) -> ModelParams:
-    """``base`` with the given parameters replaced; ``ac_g`` (<= 0) sets the racket amplitude
-    that puts the fixed point at that AC (section 4's explicit form) at the point's other
-    parameters. Raises ModelError for an invalid point."""
+    """``base`` with the given parameters replaced (``model.linear.with_parameters``);
+    ``ac_g`` (<= 0) sets the racket amplitude that puts the fixed point at that AC (section
+    4's explicit form) at the point's other parameters. Raises ModelError for a parameter a
+    sweep does not offer or an invalid point."""
     unknown = set(values) - set(SWEEP_PARAMETERS)
     if unknown:
         raise ModelError(f"cannot sweep {sorted(unknown)}: choose from "
                          f"{', '.join(SWEEP_PARAMETERS)}")
-    if "ac_g" in values and "racket_amplitude" in values:
-        raise ModelError("ac_g and racket_amplitude cannot both be swept (ac_g sets a_r)")
-    fields = {f: getattr(base, f) for f in MODEL_FIELDS}
-    fields.update({k: float(v) for k, v in values.items() if k in MODEL_FIELDS})
-    if "ac_g" in values:
-        ac = float(values["ac_g"])
-        if not ac <= 0.0:
-            raise ModelError(f"ac_g must be <= 0 (the fixed point's racket acceleration, "
-                             f"section 4; got {ac!r})")
-        ModelParams(**fields)  # the other parameters first: a clear error names them
-        fields["racket_amplitude"] = float(racket_amplitude_for_ac(
-            fields["alpha"], ac, fields["g"], fields["racket_period"]))
-    return ModelParams(**fields)
+    return with_parameters(base, values)
 
 
 def classify_points(theta0, v0, params: ModelParams,

@@ -27,10 +27,9 @@ from pydantic import Field, model_validator
 from ..runtime import parallel
 from ..runtime.config import ClassifyBlock, ConfigError, ExperimentConfig, StrictModel
 from ..analysis.classify import EXACT_OUTCOMES, compiled_kernel_available
-from ..model.linear import flip_boundary_g, radius_below
+from ..model.linear import MODEL_FIELDS, flip_boundary_g, radius_below
 from ..model.params import ModelError, ModelParams
 from ..analysis.sweep import (
-    MODEL_FIELDS,
     SWEEP_PARAMETERS,
     Axis,
     UncertaintySettings,

@@ -7,12 +7,13 @@ AC = -a_r w^2 sin(theta~) / g. Functions of (alpha, ac) accept numpy arrays.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
 from .maps import map_step
-from .params import ModelParams
+from .params import ModelError, ModelParams
 
 
 def racket_acceleration_at_impact_g(params: ModelParams) -> float:
@@ -206,6 +207,61 @@ def racket_amplitude_for_ac(alpha, ac_g, g, racket_period):
     w = 2.0 * np.pi / np.asarray(racket_period, dtype=float)
     ratio = (1.0 - np.asarray(alpha)) / (1.0 + np.asarray(alpha))
     return g / w**2 * np.sqrt(np.square(ac_g) + np.pi**2 * np.square(ratio))
+
+
+#: the four parameters of ``ModelParams``
+MODEL_FIELDS = ("alpha", "g", "racket_amplitude", "racket_period")
+
+
+def with_parameters(base: ModelParams, values: Mapping[str, float]) -> ModelParams:
+    """``base`` with some parameters replaced: the point of a parameter sweep.
+
+    Parameters
+    ----------
+    base : ModelParams
+        The parameters not replaced.
+    values : mapping
+        New values of any of ``alpha``, ``g``, ``racket_amplitude``, ``racket_period``, and
+        at most one of the two that set the racket amplitude instead: ``gamma``
+        (Gamma = a_r w^2 / g > 0, at the point's g and racket period) or ``ac_g`` (the
+        fixed point's racket acceleration at impact AC in units of g, <= 0: section 4's
+        explicit form solved for a_r, ``racket_amplitude_for_ac``, at the point's alpha, g
+        and racket period).
+
+    Returns
+    -------
+    ModelParams
+
+    Raises
+    ------
+    ModelError
+        An unknown name, two values for the racket amplitude, or an invalid point (the other
+        parameters are checked first, so that the error names them).
+    """
+    unknown = set(values) - set(MODEL_FIELDS) - {"gamma", "ac_g"}
+    if unknown:
+        raise ModelError(f"cannot set {sorted(unknown)}: choose from "
+                         f"{', '.join(MODEL_FIELDS + ('gamma', 'ac_g'))}")
+    amplitude = [k for k in ("racket_amplitude", "gamma", "ac_g") if k in values]
+    if len(amplitude) > 1:
+        raise ModelError(f"{' and '.join(amplitude)} cannot both be swept (each sets a_r)")
+    fields = {f: getattr(base, f) for f in MODEL_FIELDS}
+    fields.update({k: float(v) for k, v in values.items() if k in MODEL_FIELDS})
+    if "gamma" in values:
+        gamma = float(values["gamma"])
+        if not gamma > 0.0:
+            raise ModelError(f"gamma must be > 0 (got {values['gamma']!r})")
+        point = ModelParams(**fields)
+        fields["racket_amplitude"] = gamma * point.g / point.omega**2
+    if "ac_g" in values:
+        ac = float(values["ac_g"])
+        if not ac <= 0.0:
+            raise ModelError(f"ac_g must be <= 0 (the fixed point's racket acceleration, "
+                             f"section 4; got {values['ac_g']!r})")
+        ModelParams(**fields)
+        fields["racket_amplitude"] = float(racket_amplitude_for_ac(
+            fields["alpha"], ac, fields["g"], fields["racket_period"]))
+    return ModelParams(**fields)
 
 
 def stable_ac_range_g(alpha):

@@ -87,3 +87,27 @@ def test_jacobian_sign_conventions(paper_params):
     assert J[0, 1] < 0
     ac = racket_acceleration_at_impact_g(paper_params)
     assert math.isclose(np.trace(J), 1 + 0.25 + 2.25 * ac)
+
+
+def test_with_parameters_sets_the_racket_amplitude_by_gamma_or_by_ac():
+    """The one parameter-point rule of bounce bifurcation, continuation and sweep: Gamma and
+    AC each give back the value they were set to (AC through eq. 8's fixed point, an
+    independent route to section 4's explicit form), at the point's own g and period."""
+    from bounce_cli.model.linear import racket_acceleration_at_impact_g, with_parameters
+    from bounce_cli.model.params import ModelError
+
+    base = ModelParams(0.5, 9.81, 0.30, 0.92)
+    point = with_parameters(base, {"gamma": 1.7, "g": 3.7, "racket_period": 0.6})
+    assert point.racket_amplitude * point.omega**2 / point.g == pytest.approx(1.7, rel=1e-14)
+    assert (point.alpha, point.g, point.racket_period) == (0.5, 3.7, 0.6)
+    point = with_parameters(base, {"ac_g": -0.8, "alpha": 0.7})
+    assert racket_acceleration_at_impact_g(point) == pytest.approx(-0.8, rel=1e-12)
+    assert with_parameters(base, {}) == base
+    with pytest.raises(ModelError, match="gamma and ac_g cannot both"):
+        with_parameters(base, {"gamma": 1.7, "ac_g": -0.8})
+    with pytest.raises(ModelError, match="cannot set"):
+        with_parameters(base, {"tau": 0.6})
+    with pytest.raises(ModelError, match="gamma must be > 0"):
+        with_parameters(base, {"gamma": 0.0})
+    with pytest.raises(ModelError, match="ac_g must be <= 0"):
+        with_parameters(base, {"ac_g": 0.2})
