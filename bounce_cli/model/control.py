@@ -56,7 +56,7 @@ import numpy as np
 
 from .chatter import release_phase
 from .flight import simulate_with_racket
-from .impact import MAX_SAFE_STEPS, SinusoidGap, first_contact, first_impact_phase
+from .impact import MAX_SAFE_STEPS, SinusoidGap, can_fly_at, first_contact, first_impact_phase
 from .linear import jacobian, racket_acceleration_at_impact_g
 from .maps import ClassifySettings, State, Step, iterate_map_orbit, iterate_states, velocity_map
 from .params import FixedPoint, ModelError, ModelParams, phase_difference
@@ -145,15 +145,6 @@ CONTROLLERS: dict[str, type] = {"period": PeriodController}
 
 
 # -- the controlled map -----------------------------------------------------------------------
-def can_fly_at(theta, v, amplitude, omega, g):
-    """``engine.can_fly`` with the racket's amplitude, angular frequency and g given directly
-    (arrays broadcast): the ball rises above a racket moving at that frequency."""
-    theta = np.asarray(theta, dtype=float)
-    slope = (np.asarray(v, dtype=float) - amplitude * omega * np.cos(theta)) / omega
-    curvature = -g / omega**2 + amplitude * np.sin(theta)
-    return (slope > 0.0) | ((slope == 0.0) & (curvature > 0.0))
-
-
 @dataclass(frozen=True)
 class ControlledStep:
     """One impact of the controlled map: theta_{k+1} (rad, unwrapped continuation), v_{k+1}

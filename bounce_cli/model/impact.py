@@ -340,9 +340,16 @@ def can_fly(theta, v, params: ModelParams):
     Either it leaves faster than the racket (G'(0) > 0), or it leaves with the racket's
     velocity while the racket decelerates faster than gravity (G'(0) = 0, G''(0) > 0).
     """
+    return can_fly_at(theta, v, params.racket_amplitude, params.omega, params.g)
+
+
+def can_fly_at(theta, v, amplitude, omega, g):
+    """``can_fly`` with the racket's amplitude (m), angular frequency (rad/s) and g given
+    directly (arrays broadcast): a racket whose period changes from flight to flight (the
+    controlled map) is at the frequency it has at the launch."""
     theta = np.asarray(theta, dtype=float)
-    slope = launch_slope(theta, v, params)
-    curvature = -params.g / params.omega**2 + params.racket_amplitude * np.sin(theta)
+    slope = (np.asarray(v, dtype=float) - amplitude * omega * np.cos(theta)) / omega  # G'(0)
+    curvature = -g / omega**2 + amplitude * np.sin(theta)  # G''(0)
     return (slope > 0.0) | ((slope == 0.0) & (curvature > 0.0))
 
 
