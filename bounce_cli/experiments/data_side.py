@@ -175,7 +175,16 @@ def noise_from_residual_covariance(sigma: np.ndarray) -> tuple[float, float]:
     return q_v, q_theta
 
 
-def noise_from_trials(impacts: Impacts, settle: int, min_length: int = 8
+#: the shortest run of consecutive unperturbed impacts a VAR is fitted to, and the shortest
+#: trial of the trust study's simulated data (a VAR(1) per trial needs a few pairs beyond its
+#: six coefficients)
+MIN_RUN_LENGTH = 8
+#: impacts of the trust study's linear VAR dropped before each simulated trial, so that its
+#: start at the fixed point is forgotten (|lambda|^100 < 1e-4 for a radius below 0.91)
+TRUST_BURN_IN = 100
+
+
+def noise_from_trials(impacts: Impacts, settle: int, min_length: int = MIN_RUN_LENGTH
                       ) -> tuple[float, float, int]:
     """The data's own noise strengths (q_v m/s, q_theta rad) and the pairs they rest on: an
     OLS VAR(1) per trial (each trial its own J: a learning series changes the racket, so J,
@@ -434,7 +443,7 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
                  f"{implied_alpha(params, theta_mean):.3f}; the model's alpha = {params.alpha:g}, "
                  f"{used.alpha.source})")
     n_data = int(sum(len(s[1]) for s in segments))
-    run_length = max(int(round(np.mean([len(s[1]) for s in segments]))), 8)
+    run_length = max(int(round(np.mean([len(s[1]) for s in segments]))), MIN_RUN_LENGTH)
     noise_words = (f"assumed: no {SETUP_FILE} beside the data gives it" if noise.source ==
                    "assumed" else f"the data's own, from {SETUP_FILE}")
     for method in ("ols", "lag2"):
@@ -732,15 +741,15 @@ def trust_frame(params, q_v, q_theta, config, segments, options,
     rng = np.random.default_rng(np.random.SeedSequence(d.trust_seed))
     rows = []
     for total in d.trust_bounces:
-        per = max(run_length, 8)
+        per = max(run_length, MIN_RUN_LENGTH)
         n_trials = max(1, int(round(total / per)))
         reps = d.trust_repetitions
         y = np.zeros((reps * n_trials, 2))
         series = np.empty((reps * n_trials, per, 2))
-        for k in range(100 + per):
+        for k in range(TRUST_BURN_IN + per):
             y = y @ jac.T + rng.standard_normal(y.shape) @ chol.T
-            if k >= 100:
-                series[:, k - 100] = y
+            if k >= TRUST_BURN_IN:
+                series[:, k - TRUST_BURN_IN] = y
         series += rng.standard_normal(series.shape) * meas
         for method in ("ols", "lag2"):
             found: list[float] = []
