@@ -251,6 +251,33 @@ def test_a_run_keeps_the_files_that_agree_within_the_reproduction_tolerance(tmp_
     assert commit(x, agrees=None)["fig.png"] != "kept"  # --force-regen: all rewritten
 
 
+def test_a_run_that_changed_rewrites_its_tables_within_tolerance_too(tmp_path):
+    """One table beyond the tolerance, another within it: both are rewritten (the folder
+    holds the tables of one run, as the rules that read one table beside another assume),
+    and reproduce says which were rewritten along."""
+    from bounce_cli.paper.reproduce import experiment_status, tables_agree
+    from bounce_cli.runtime.artifacts import RunDirectory
+
+    out = tmp_path / "demo"
+
+    def commit(x, y):
+        run = RunDirectory(out, command="demo", resolved_config={"a": 1}, overrides=[],
+                           config_path=None)
+        run.add_csv("data.csv", pd.DataFrame({"x_m": x}))
+        run.add_csv("other.csv", pd.DataFrame({"y_m": y}))
+        run.commit(tables_agree("demo"))
+        return run.comparison
+
+    commit([1.0, 2.0], [1.0 / 3.0])
+    assert commit([1.0, 2.0], [1.0 / 3.0 * (1 + 3e-8)]) == {
+        "data.csv": "identical", "other.csv": "within tolerance"}
+    comparison = commit([1.0, 2.00001], [1.0 / 3.0 * (1 + 3e-8)])
+    assert comparison == {"data.csv": "changed", "other.csv": "rewritten"}
+    assert pd.read_csv(out / "other.csv").y_m.iloc[0] == 1.0 / 3.0 * (1 + 3e-8)
+    assert experiment_status(comparison) == (
+        "changed: data.csv (rewritten with them, within tolerance: other.csv)")
+
+
 def test_reproduce_refuses_an_unknown_experiment_before_running_any(cli, user_error, tmp_path):
     result = cli("reproduce", "trajectory", "trajectry", "--out", tmp_path / "r")
     user_error(result, "reproduce trajectry", "no such reproduced experiment", "trajectory")

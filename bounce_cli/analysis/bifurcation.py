@@ -308,10 +308,11 @@ def lyapunov_standard_error(batch_growth: np.ndarray, measured_impacts: int) -> 
     into ``B`` consecutive batches (``LYAPUNOV_BATCHES``), each batch's mean log growth is an
     estimate of its own, nearly independent of the others when a batch is longer than the
     correlation time, and the standard error of their mean is SD(batch means) / sqrt(B)
-    (Flegal & Jones 2010). It covers what a finite measurement leaves open: the statistics of a
-    chaotic orbit, a tangent vector still turning, a transient that ended while measured. Two
-    machines whose last bits differ follow a chaotic orbit apart and agree on its exponent
-    within this error, not digit for digit (``bounce_cli.paper.reproduce``).
+    (Flegal & Jones 2010). It measures the scatter a finite measurement leaves within the
+    run (the statistics of a chaotic orbit, a tangent vector still turning), not what the run
+    is too short to see (an intermittency longer than the run). Two machines whose last bits
+    differ follow a chaotic orbit apart and agree on its exponent within a few such errors,
+    not digit for digit (``bounce_cli.paper.chaotic_tables``).
 
     Parameters
     ----------

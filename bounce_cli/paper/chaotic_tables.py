@@ -8,33 +8,38 @@ is of the order of the state after 100-200 impacts. From there on two machines f
 different orbits of the same attractor: its recorded points, the impact at which a chaotic
 transient ends in sticking, and whether it ends before the measurement does are not
 reproducible digit for digit, on any two machines. What reproduces is what the attractor and
-the statistics of its orbits fix; these rules compare that, each at the precision it has:
+the statistics of its orbits fix. The rules compare that in two tiers:
 
-* **Late outcomes** (``late_outcome``): an orbit on a chaotic attractor (``chaotic``, or
-  ``unresolved``: not settled) or one that stuck only at impact ``LATE_IMPACT`` or later (a
-  chaotic transient or a chatter decided at the 1 ms rule's edge). Between two late outcomes
-  the label, period and sticking impact may differ (chaotic <-> sticking at impact 54 ... 1773
-  was seen when g moved by 1-3 ulps); every other row's outcome must be the same.
-* **Lyapunov exponents**: each is a finite-time mean with a standard error (batch means,
-  ``analysis.bifurcation.lyapunov_standard_error``); two agree within ``Z_EXPONENT`` combined
-  standard errors (or the reproduction tolerance, when that is larger).
-* **Points of an orbit**: a periodic orbit's cycle is the same to the full tolerance, starting
-  at any of its impacts (a chaotic transient can end at another phase of the cycle); the
-  points of an aperiodic orbit are two samples of one attractor, compared by the
-  two-sample Kolmogorov-Smirnov test of the velocities and of the phases (the circle cut at
-  the widest gap of the two samples together, so that a band across 0/360 deg is not cut),
-  rejected below ``P_MIN``.
-* **Basin fractions over a parameter grid** (``bounce sweep``): an orbit still chaotic when
-  the classification stops (undecided) or stuck just before is decided by its last bits, so
-  per parameter point up to ``allowed_flips`` points may change class (binomial noise of the
-  undecided points, 4 standard deviations); the basin entropies within the change so many
-  flips can make (each flip moves one box's entropy by at most 2 ln(m)/m for m cells a box).
+* **Each row** where a last bit cannot matter keeps the full tolerance (``reproduce.RTOL``):
+  an orbit whose outcome is not late (below) keeps its label, period and sticking impact; a
+  periodic orbit its cycle (from any of its impacts: a chaotic transient can end at another
+  phase of it); a parameter point with no undecided basin point its fractions, but for one
+  point on a boundary.
+* **Late outcomes** (``late_outcome``) are an orbit still moving when the run ends
+  (``chaotic``, ``unresolved``, or periodic at the longest period looked for: a long or
+  chaotic orbit read as periodic) or one that ended only at impact ``LATE_IMPACT`` or later
+  (stuck, resting or locked after a chaotic transient or a chatter decided at the 1 ms rule's
+  edge). Between two late outcomes the label, period and sticking impact may change, one
+  orbit at a time: as many orbits may go from moving to ended as the other way, within
+  chance (``balance_drift``: more one way than 4 sqrt(n) + 1 of n is a drift). A last bit
+  reshuffles late outcomes; a change of the model moves them one way.
+* **Statistics of chaotic orbits** are compared as samples: each difference is divided by its
+  standard error (a Lyapunov exponent's from batch means,
+  ``analysis.bifurcation.lyapunov_standard_error``; an attractor's pooled points' from batch
+  means of ``BATCH`` consecutive impacts; a basin fraction's from its undecided points), and
+  the standardised differences z of a table must look like chance (``aggregate_drift``):
+  about as many up as down (``balance_drift``), a mean near 0 (each z clipped to +-3, the
+  mean within 5 / sqrt(n)), and a median |z| of at most ``MEDIAN_Z`` (chance: about 0.7)
+  over at least ``MEDIAN_MIN_UNITS`` of them. One intermittent orbit can
+  be far off (an exponent 14 standard errors away was seen: batch means do not see an
+  intermittency longer than the run), a systematic change cannot hide: exponents 10 % off,
+  an attractor's velocities 5 % off or its phases 10 deg off are drifts.
 
-Measured (``python -m bounce_cli`` runs at g moved by -3..3 ulps, and the whole of ``bounce
-reproduce`` with glibc's non-FMA libm: ``GLIBC_TUNABLES=glibc.cpu.hwcaps=-AVX2,-FMA``): no
-sticking impact below 36 changed; exponents moved by at most 3.6 combined standard errors
-(830 pairs); the largest Kolmogorov-Smirnov statistic of 1508 pairs of chaotic orbits was
-0.28 (p = 0.012); a sweep point changed at most 47 of its 1600 points (993 undecided).
+Measured (runs at g moved by -3..3 ulps, and the whole of ``bounce reproduce`` with glibc's
+non-FMA libm: ``GLIBC_TUNABLES=glibc.cpu.hwcaps=-AVX2,-FMA``): no sticking impact below 36
+changed; late outcomes switched 0 to 3 orbits each way; exponents moved by at most 3.6
+combined standard errors (830 pairs); a sweep point changed at most 47 of its 1600 basin
+points (993 undecided).
 """
 
 from __future__ import annotations
@@ -44,52 +49,77 @@ from typing import Callable, Mapping
 
 import numpy as np
 import pandas as pd
-from scipy.stats import ks_2samp
 
 from ..analysis.bifurcation import detect_period
+from ..experiments.bifurcation import IterateBlock
+from ..experiments.sweep import MeasuresBlock
 from ..model.params import phase_difference
 from ..runtime.artifacts import RunTables
 
-#: a stick at this impact or later is a late outcome (see the module doc: measured from 36 on)
+#: an orbit that ended (stuck, rested, locked) at this impact or later ended late (measured:
+#: with g moved by ulps, no sticking impact below 36 changed)
 LATE_IMPACT = 30
 #: outcomes of an orbit still moving on a chaotic attractor (or not settled) when it ends
 MOVING = ("chaotic", "unresolved")
-STUCK = ("sticking", "resting")
-#: exponents agree within this many combined standard errors (the errors come from 10 batches:
-#: a t distribution with about 18 degrees of freedom, P(|t| > 6) ~ 1e-5 per row)
-Z_EXPONENT = 6.0
-#: two samples of one attractor's points are told apart below this p-value
-P_MIN = 1e-6
+#: outcomes of an orbit that ended on the racket
+ENDED = ("sticking", "resting", "locked")
+#: a row that is not late: its exponent within this many combined standard errors
+Z_ROW = 6.0
+#: more units one way than Z_SIGN sqrt(n) + 1 of n is a drift (chance: < 1e-4)
+Z_SIGN = 4.0
+#: the mean of a table's standardised differences, each clipped to +-WINSOR (one intermittent
+#: orbit weighs no more than 3), at most Z_MEAN / sqrt(n) (chance: the clipped mean of n
+#: standard normal z has SD < 1 / sqrt(n))
+Z_MEAN, WINSOR = 5.0, 3.0
+#: the median |z| of a table's standardised differences at most this (chance: 0.67 for normal
+#: z; P(median of 5 > 2.5) ~ 4e-4 even for t with 9 degrees of freedom)
+MEDIAN_Z = 2.5
+MEDIAN_MIN_UNITS = 5
+#: consecutive recorded impacts per batch for the standard errors of an attractor's points
+BATCH = 8
 #: the period tolerance (m/s and rad) with which the points of an orbit are read as periodic:
 #: the experiments' own (``period_tolerance``)
 PERIOD_TOLERANCE = 1e-6
 
-
-#: a rule: (where, fresh, committed, both runs, the deterministic rule for some columns)
+#: the deterministic rule of ``reproduce.table_drift`` for some columns: (fresh, committed)
 #: -> one line per disagreement
 Deterministic = Callable[[pd.DataFrame, pd.DataFrame], list[str]]
 
 
-def late_outcome(attractors: pd.DataFrame) -> np.ndarray:
-    """Per row of an ``attractors.csv``: whether its outcome is late (see the module doc)."""
-    name = attractors["attractor"].astype(str)
-    stuck_late = name.isin(STUCK) & (attractors["stuck_at_impact"] >= LATE_IMPACT)
-    return (name.isin(MOVING) | stuck_late).to_numpy()
+# -- chance ------------------------------------------------------------------------------------
+def balance_drift(where: str, what: str, up: int, down: int) -> list[str]:
+    """A drift when ``up`` and ``down`` (units that changed one way and the other) are more
+    unequal than chance allows: |up - down| > Z_SIGN sqrt(up + down) + 1."""
+    if abs(up - down) <= Z_SIGN * math.sqrt(up + down) + 1.0:
+        return []
+    return [f"{where} {what}: {up} one way and {down} the other, more one-sided than a last "
+            "bit's reshuffling allows"]
 
 
-def _keys(frame: pd.DataFrame) -> list[str]:
-    """The columns that name an orbit: the swept parameter (first column) and its start."""
-    return [frame.columns[0], "initial_condition"]
+def aggregate_drift(where: str, what: str, z) -> list[str]:
+    """A drift when a table's standardised differences ``z`` (one per unit that differs) do
+    not look like chance: one-sided (``balance_drift``, or a mean of z clipped to +-WINSOR
+    beyond Z_MEAN / sqrt(n)), or a median |z| above MEDIAN_Z."""
+    z = np.asarray(z, dtype=float)
+    z = z[~np.isnan(z) & (z != 0.0)]
+    problems = balance_drift(where, what, int((z > 0).sum()), int((z < 0).sum()))
+    if z.size and abs(np.clip(z, -WINSOR, WINSOR).mean()) * math.sqrt(z.size) > Z_MEAN:
+        problems.append(f"{where} {what}: mean difference {np.clip(z, -WINSOR, WINSOR).mean():+.3g}"
+                        f" standard errors over {z.size}: one-sided beyond chance")
+    if z.size >= MEDIAN_MIN_UNITS and np.median(np.abs(z)) > MEDIAN_Z:
+        problems.append(f"{where} {what}: median |difference| {np.median(np.abs(z)):.3g} "
+                        f"standard errors over {z.size}, more than chance ({MEDIAN_Z:g})")
+    return problems
 
 
-def exponents_agree(a, b, se_a, se_b, rtol: float, atol: float) -> np.ndarray:
-    """Finite-time exponents agree within Z_EXPONENT combined standard errors or the
-    reproduction tolerance; NaN (no exponent) and -inf (superstable) only with themselves."""
+def standardised(a, b, se_a, se_b) -> np.ndarray:
+    """(a - b) / sqrt(se_a^2 + se_b^2); 0 where a == b, +-inf where they differ with no
+    error to measure it by."""
     a, b = np.asarray(a, float), np.asarray(b, float)
-    spread = Z_EXPONENT * np.hypot(np.nan_to_num(se_a), np.nan_to_num(se_b))
-    with np.errstate(invalid="ignore"):
-        close = np.abs(a - b) <= np.maximum(spread, atol + rtol * np.abs(b))
-    return close | (a == b) | (np.isnan(a) & np.isnan(b))
+    se = np.hypot(np.nan_to_num(np.asarray(se_a, float)), np.nan_to_num(np.asarray(se_b, float)))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        z = (a - b) / se
+    return np.where(a == b, 0.0, z)
 
 
 def _problem(where: str, column: str, bad: np.ndarray, what: str = "") -> list[str]:
@@ -99,31 +129,98 @@ def _problem(where: str, column: str, bad: np.ndarray, what: str = "") -> list[s
             f"committed baseline{what}; first at row {np.flatnonzero(bad)[:5]}"]
 
 
+def _close(a, b, rtol: float, atol: float) -> np.ndarray:
+    return np.isclose(np.asarray(a, float), np.asarray(b, float), rtol=rtol, atol=atol,
+                      equal_nan=True)
+
+
+# -- bounce bifurcation ------------------------------------------------------------------------
+def late_outcome(attractors: pd.DataFrame, max_period: int | None = None) -> np.ndarray:
+    """Per row of an ``attractors.csv``: whether its outcome is late (module doc).
+    ``max_period``: the longest period the run looked for (``iterate.max_period``)."""
+    name = attractors["attractor"].astype(str)
+    late = name.isin(MOVING) | (name.isin(ENDED) & (attractors["stuck_at_impact"] >= LATE_IMPACT))
+    if "locked_cycles" in attractors:  # exact sticking: when it locked is not recorded
+        late |= name == "locked"
+    if max_period is not None:
+        late |= attractors["period"] == max_period
+    return late.to_numpy()
+
+
+def moving(attractors: pd.DataFrame) -> np.ndarray:
+    """Per row: whether the orbit was still moving when the run ended (not stuck, rested or
+    locked, and not below the racket)."""
+    return ~attractors["attractor"].astype(str).isin(ENDED + ("below_racket",)).to_numpy()
+
+
+def _keys(frame: pd.DataFrame) -> list[str]:
+    """The columns that name an orbit: the swept parameter (first column) and its start."""
+    return [frame.columns[0], "initial_condition"]
+
+
+def _setting(tables: RunTables, default, *path: str):
+    """A value of the runs' config (``run.json``'s resolved config), or the experiment's
+    default where the config does not hold it."""
+    block: object = tables.config
+    for key in path:
+        block = block.get(key) if isinstance(block, Mapping) else None
+    return default if block is None else block
+
+
+def _max_period(tables: RunTables) -> int:
+    return int(_setting(tables, IterateBlock().max_period, "iterate", "max_period"))
+
+
+def _both_attractors(tables: RunTables) -> tuple[pd.DataFrame, pd.DataFrame] | None:
+    """Both runs' ``attractors.csv`` when they hold the same orbits in the same order (else
+    the tables that depend on them are compared value by value)."""
+    fresh, committed = tables.fresh["attractors.csv"], tables.committed["attractors.csv"]
+    keys = _keys(committed)
+    if (len(fresh) != len(committed) or list(fresh.columns[:1]) != keys[:1]
+            or not all(np.array_equal(fresh[k].to_numpy(), committed[k].to_numpy())
+                       for k in keys)):
+        return None
+    return fresh.reset_index(drop=True), committed.reset_index(drop=True)
+
+
 def attractors_drift(where: str, fresh: pd.DataFrame, committed: pd.DataFrame,
                      tables: RunTables, deterministic: Deterministic, rtol: float,
                      atol: float) -> list[str]:
     """``attractors.csv`` of ``bounce bifurcation``: one row per orbit (value x start)."""
-    outcome = ["attractor", "period", "stuck_at_impact"]
+    outcome = [c for c in ("attractor", "period", "stuck_at_impact", "locked_cycles")
+               if c in committed]
     statistical = outcome + ["lyapunov_per_impact", "lyapunov_se_per_impact"]
     fixed = [c for c in committed.columns if c not in statistical]
     problems = deterministic(fresh[fixed], committed[fixed])
     if problems or len(fresh) != len(committed):
         return problems
-    late = late_outcome(fresh) & late_outcome(committed)
+    max_period = _max_period(tables)
+    late = late_outcome(fresh, max_period) & late_outcome(committed, max_period)
     for column in outcome:
         same = (fresh[column].astype(str) == committed[column].astype(str)).to_numpy()
         problems += _problem(where, column, ~(same | late), " (not a late outcome)")
-    exponent = exponents_agree(fresh.lyapunov_per_impact, committed.lyapunov_per_impact,
-                               fresh.lyapunov_se_per_impact,
-                               committed.lyapunov_se_per_impact, rtol, atol)
-    moved = (fresh.attractor.astype(str) != committed.attractor.astype(str)).to_numpy() & late
-    problems += _problem(where, "lyapunov_per_impact", ~(exponent | moved),
-                         f" by more than {Z_EXPONENT:g} standard errors")
+    went = moving(committed) & ~moving(fresh) & late
+    came = ~moving(committed) & moving(fresh) & late
+    problems += balance_drift(where, "late outcomes (moving -> ended, ended -> moving)",
+                              int(went.sum()), int(came.sum()))
+
+    a, b = fresh.lyapunov_per_impact.to_numpy(float), committed.lyapunov_per_impact.to_numpy(float)
+    both = np.isfinite(a) & np.isfinite(b)
+    differ = both & ~_close(a, b, rtol, atol)
+    z = standardised(a, b, fresh.lyapunov_se_per_impact, committed.lyapunov_se_per_impact)
+    problems += _problem(where, "lyapunov_per_impact", differ & ~late & ~(np.abs(z) <= Z_ROW),
+                         f" by more than {Z_ROW:g} standard errors (not a late outcome)")
+    problems += aggregate_drift(where, "lyapunov_per_impact", z[differ])
+    # an exponent where the orbit did not end; -inf (locked) only with itself
+    kind = [np.where(np.isfinite(x), 0, np.where(np.isnan(x), 1, np.sign(x) + 3))
+            for x in (a, b)]
+    problems += _problem(where, "lyapunov_per_impact", (kind[0] != kind[1]) & ~late,
+                         " (an exponent in one run only)")
     # the errors themselves are statistics of a statistic (an intermittent orbit's moved by a
     # factor 3.5, a periodic orbit's from 3e-5 to 2e-11 where a transient ended while
     # measured in one run only): only where they exist is compared
     has_se = [np.isfinite(t.lyapunov_se_per_impact.to_numpy(float)) for t in (fresh, committed)]
-    problems += _problem(where, "lyapunov_se_per_impact", (has_se[0] != has_se[1]) & ~moved,
+    problems += _problem(where, "lyapunov_se_per_impact", (has_se[0] != has_se[1]) & ~late,
                          " (missing in one run)")
     return problems
 
@@ -142,69 +239,87 @@ def cycles_agree(a: pd.DataFrame, b: pd.DataFrame, period: int, rtol: float,
     va, vb = a["v_m_s"].to_numpy(float)[:period], b["v_m_s"].to_numpy(float)
     ta = np.radians(a["theta_deg"].to_numpy(float))[:period]
     tb = np.radians(b["theta_deg"].to_numpy(float))
-    if vb.size < period:
+    if vb.size < period or va.size < period:
         return False
     for shift in range(period):
         vs, ts = np.roll(vb[:period], -shift), np.roll(tb[:period], -shift)
         if (np.allclose(vs, va, rtol=rtol, atol=atol)
-                and np.all(np.abs(phase_difference(ts, ta)) <= atol + rtol * TWO_PI)):
+                and np.all(np.abs(phase_difference(ts, ta)) <= atol + rtol * 2.0 * math.pi)):
             return True
     return False
 
 
-TWO_PI = 2.0 * math.pi
+#: what is compared of an attractor's points at one value: means of v, cos theta, sin theta
+#: (the phase's mean direction, no cut on the circle) and |v - the committed mean v| (spread)
+POINT_STATISTICS = ("mean v", "mean cos theta", "mean sin theta", "mean |v - centre|")
 
 
-def widest_gap_cut(theta_deg: np.ndarray) -> float:
-    """The phase (deg) in the middle of the widest arc that no point of ``theta_deg`` falls
-    on: cutting the circle there keeps a band of phases across 0/360 deg in one piece."""
-    ordered = np.sort(np.mod(theta_deg, 360.0))
-    gaps = np.diff(np.concatenate([ordered, [ordered[0] + 360.0]]))
-    widest = int(np.argmax(gaps))
-    return float(np.mod(ordered[widest] + gaps[widest] / 2.0, 360.0))
-
-
-def samples_agree(a: pd.DataFrame, b: pd.DataFrame) -> bool:
-    """Whether two aperiodic orbits' recorded points can be samples of one attractor: the
-    two-sample Kolmogorov-Smirnov test of the velocities and of the phases (the circle cut at
-    the widest gap of both samples together) keeps p >= P_MIN."""
-    if ks_2samp(a["v_m_s"], b["v_m_s"]).pvalue < P_MIN:
-        return False
-    both = np.concatenate([a["theta_deg"].to_numpy(float), b["theta_deg"].to_numpy(float)])
-    cut = widest_gap_cut(both)
-    ta, tb = (np.mod(t["theta_deg"].to_numpy(float) - cut, 360.0) for t in (a, b))
-    return bool(ks_2samp(ta, tb).pvalue >= P_MIN)
+def point_statistics(orbits: list[pd.DataFrame], centre: float) -> tuple[np.ndarray, np.ndarray]:
+    """The POINT_STATISTICS of the recorded points of ``orbits`` (orbits of one attractor at
+    one value) and their standard errors by batch means: each orbit's impacts in batches of
+    BATCH consecutive ones (a remainder dropped), SD of the batch means / sqrt(batches)."""
+    batches = []
+    for orbit in orbits:
+        v = orbit["v_m_s"].to_numpy(float)
+        theta = np.radians(orbit["theta_deg"].to_numpy(float))
+        per_point = np.stack([v, np.cos(theta), np.sin(theta), np.abs(v - centre)], axis=1)
+        whole = (len(v) // BATCH) * BATCH
+        if whole:
+            batches.append(per_point[:whole].reshape(-1, BATCH, 4).mean(axis=1))
+    if not batches:
+        return np.full(4, np.nan), np.full(4, np.nan)
+    means = np.concatenate(batches)
+    if len(means) < 2:
+        return means.mean(axis=0), np.full(4, np.nan)
+    return means.mean(axis=0), means.std(axis=0, ddof=1) / math.sqrt(len(means))
 
 
 def orbit_points_drift(where: str, fresh: pd.DataFrame, committed: pd.DataFrame,
                        period_fresh: Mapping[tuple, int], period_committed: Mapping[tuple, int],
-                       may_be_missing: Callable[[tuple], bool], rtol: float,
-                       atol: float) -> list[str]:
-    """Recorded points of many orbits, compared orbit by orbit: each orbit's period on each
-    side (``period_*``: key -> period, 0 when aperiodic); an orbit recorded on one side only
-    is allowed where ``may_be_missing(key)`` (it stuck late on the other)."""
+                       late: Callable[[tuple], bool], rtol: float, atol: float) -> list[str]:
+    """Recorded points of many orbits. ``period_*``: key -> the orbit's period on each side (0:
+    aperiodic); ``late(key)``: whether the orbit's outcome is late on both sides. A periodic
+    orbit is compared as its cycle; the aperiodic orbits at one value, pooled, by their
+    POINT_STATISTICS over all values (``aggregate_drift``); an orbit recorded on one side only,
+    or periodic on one and aperiodic on the other, must be late, as many one way as the other."""
     keys = _keys(committed)
     groups_f = dict(tuple(fresh.groupby(keys, sort=False)))
     groups_c = dict(tuple(committed.groupby(keys, sort=False)))
-    missing = [k for k in set(groups_f) ^ set(groups_c) if not may_be_missing(k)]
     problems = []
-    if missing:
-        problems.append(f"{where}: {len(missing)} orbit(s) recorded in one run only, not after a "
-                        f"late outcome; first {sorted(missing)[:3]}")
-    differ = []
+    only = {"fresh": set(groups_f) - set(groups_c), "committed": set(groups_c) - set(groups_f)}
+    early = sorted(k for side in only.values() for k in side if not late(k))
+    if early:
+        problems.append(f"{where}: {len(early)} orbit(s) recorded in one run only, not after a "
+                        f"late outcome; first {early[:3]}")
+    problems += balance_drift(where, "orbits recorded in one run only (this run, the "
+                              "committed)", len(only["fresh"]), len(only["committed"]))
+    differ: list[tuple] = []
+    pooled: dict[float, tuple[list[pd.DataFrame], list[pd.DataFrame]]] = {}
     for key in sorted(set(groups_f) & set(groups_c)):
         a, b = groups_f[key], groups_c[key]
-        pa, pb = period_fresh[key], period_committed[key]
+        pa, pb = period_fresh.get(key, 0), period_committed.get(key, 0)
         if pa and pb:
             ok = pa == pb and len(a) == len(b) and cycles_agree(a, b, pa, rtol, atol)
+        elif not pa and not pb:
+            pooled.setdefault(key[0], ([], []))
+            pooled[key[0]][0].append(a)
+            pooled[key[0]][1].append(b)
+            continue
         else:
-            ok = len(a) == len(b) and samples_agree(a, b)
+            ok = late(key)
         if not ok:
             differ.append(key)
     if differ:
         problems.append(f"{where}: {len(differ)} orbit(s) drifted from the committed baseline "
-                        f"(another cycle, or points that cannot be samples of one attractor); "
-                        f"first {differ[:3]}")
+                        f"(another cycle, or periodic in one run only); first {differ[:3]}")
+    z = []
+    for orbits_f, orbits_c in pooled.values():
+        centre = float(np.mean(np.concatenate([o["v_m_s"].to_numpy(float) for o in orbits_c])))
+        (mean_f, se_f), (mean_c, se_c) = (point_statistics(o, centre)
+                                          for o in (orbits_f, orbits_c))
+        z.append(standardised(mean_f, mean_c, se_f, se_c))
+    for i, name in enumerate(POINT_STATISTICS):
+        problems += aggregate_drift(where, f"aperiodic orbits' {name}", [row[i] for row in z])
     return problems
 
 
@@ -212,12 +327,15 @@ def bifurcation_points_drift(where: str, fresh: pd.DataFrame, committed: pd.Data
                              tables: RunTables, deterministic: Deterministic, rtol: float,
                              atol: float) -> list[str]:
     """``bifurcation.csv``: each orbit's recorded points, read as its ``attractors.csv`` row
-    says (periodic: the cycle; chaotic or unresolved: a sample of the attractor)."""
-    rows = [tables.fresh["attractors.csv"], tables.committed["attractors.csv"]]
-    keys = _keys(rows[1])
-    periods = [dict(zip(zip(*(t[k] for k in keys)), t["period"].astype(int))) for t in rows]
-    late = dict(zip(zip(*(rows[1][k] for k in keys)),
-                    late_outcome(rows[0]) & late_outcome(rows[1])))
+    says (its period; aperiodic when chaotic or unresolved)."""
+    both = _both_attractors(tables)
+    if both is None:
+        return deterministic(fresh, committed)
+    keys = _keys(both[1])
+    names = list(zip(*(both[1][k] for k in keys)))
+    periods = [dict(zip(names, t["period"].astype(int))) for t in both]
+    max_period = _max_period(tables)
+    late = dict(zip(names, late_outcome(both[0], max_period) & late_outcome(both[1], max_period)))
     return orbit_points_drift(where, fresh, committed, periods[0], periods[1],
                               lambda key: bool(late.get(key, False)), rtol, atol)
 
@@ -225,45 +343,67 @@ def bifurcation_points_drift(where: str, fresh: pd.DataFrame, committed: pd.Data
 def diagram_points_drift(where: str, fresh: pd.DataFrame, committed: pd.DataFrame,
                          tables: RunTables, deterministic: Deterministic, rtol: float,
                          atol: float) -> list[str]:
-    """``diagram.csv`` of ``bounce continuation``: each orbit's period read from its points;
-    an aperiodic orbit may be missing on one side (it stuck there)."""
+    """``diagram.csv`` of ``bounce continuation``: each orbit's period read from its points
+    (the longest looked for: half the recorded impacts); an orbit is late where it is
+    aperiodic or at that longest period, or missing (it stuck), on each side."""
     keys = _keys(committed)
-    periods = [{key: _period_of(group) for key, group in t.groupby(keys, sort=False)}
-               for t in (fresh, committed)]
-    aperiodic = {key for side in periods for key, p in side.items() if p == 0}
-    return orbit_points_drift(where, fresh, committed, periods[0], periods[1],
-                              lambda key: key in aperiodic, rtol, atol)
+    if list(fresh.columns) != list(committed.columns) or keys[1] not in committed:
+        return deterministic(fresh, committed)
+    sides = []
+    for table in (fresh, committed):
+        groups = dict(tuple(table.groupby(keys, sort=False)))
+        sides.append(({key: _period_of(g) for key, g in groups.items()},
+                      {key: len(g) // 2 for key, g in groups.items()}))
+
+    def late_on(side, key) -> bool:
+        periods, longest = side
+        return key not in periods or periods[key] in (0, longest[key])
+
+    return orbit_points_drift(where, fresh, committed, sides[0][0], sides[1][0],
+                              lambda key: late_on(sides[0], key) and late_on(sides[1], key),
+                              rtol, atol)
+
+
+def _changed_values(both: tuple[pd.DataFrame, pd.DataFrame]) -> np.ndarray:
+    """The swept values at which some orbit's outcome changed between the runs."""
+    changed = (both[0].attractor.astype(str) != both[1].attractor.astype(str)).to_numpy()
+    return np.unique(both[1].iloc[:, 0].to_numpy(float)[changed])
 
 
 def values_drift(where: str, fresh: pd.DataFrame, committed: pd.DataFrame, tables: RunTables,
                  deterministic: Deterministic, rtol: float, atol: float) -> list[str]:
     """``values.csv`` of ``bounce bifurcation``: one row per value, summarising its orbits
-    (``attractors.csv``). At a value where some orbit's late outcome changed, the outcome
-    columns may differ; the exponents (a maximum and a mean of the orbits' exponents) agree
-    within Z_EXPONENT times the largest combined standard error of that value's orbits."""
+    (``attractors.csv``). Where some orbit's late outcome changed, the outcome columns may
+    differ; the exponents (a maximum and a mean of the orbits' exponents) within Z_ROW times
+    the largest combined standard error of that value's orbits where no orbit is late, and
+    like chance over all values (``aggregate_drift``)."""
     outcome = ["attractors", "dominant_attractor", "n_sticking"]
     exponents = ["lyapunov_max_per_impact", "lyapunov_dominant_per_impact"]
     fixed = [c for c in committed.columns if c not in outcome + exponents]
     problems = deterministic(fresh[fixed], committed[fixed])
-    if problems or len(fresh) != len(committed):
-        return problems
-    rows = [tables.fresh["attractors.csv"], tables.committed["attractors.csv"]]
+    both = _both_attractors(tables)
+    if problems or len(fresh) != len(committed) or both is None:
+        return problems or deterministic(fresh, committed)
     column = committed.columns[0]
-    changed = (rows[0].attractor.astype(str) != rows[1].attractor.astype(str)).to_numpy()
-    value_changed = pd.Series(changed).groupby(rows[1][column].to_numpy()).any()
-    se = np.hypot(rows[0].lyapunov_se_per_impact.fillna(0.0).to_numpy(),
-                  rows[1].lyapunov_se_per_impact.fillna(0.0).to_numpy())
-    value_se = pd.Series(se).groupby(rows[1][column].to_numpy()).max()
-    moved = value_changed.reindex(committed[column]).fillna(True).to_numpy(bool)
+    value_of_row = both[1][column].to_numpy(float)
+    max_period = _max_period(tables)
+    late_rows = late_outcome(both[0], max_period) | late_outcome(both[1], max_period)
+    values = committed[column].to_numpy(float)
+    moved = np.isin(values, _changed_values(both))
+    has_late = np.isin(values, np.unique(value_of_row[late_rows]))
     for name in outcome:
         same = (fresh[name].astype(str) == committed[name].astype(str)).to_numpy()
         problems += _problem(where, name, ~(same | moved), " (no late outcome changed there)")
-    spread = value_se.reindex(committed[column]).fillna(0.0).to_numpy()
+    se = np.hypot(both[0].lyapunov_se_per_impact.fillna(0.0).to_numpy(),
+                  both[1].lyapunov_se_per_impact.fillna(0.0).to_numpy())
+    spread = pd.Series(se).groupby(value_of_row).max().reindex(values).fillna(0.0).to_numpy()
     for name in exponents:
         a, b = fresh[name].to_numpy(float), committed[name].to_numpy(float)
-        close = exponents_agree(a, b, spread, 0.0, rtol, atol)
-        problems += _problem(where, name, ~(close | moved),
-                             f" by more than {Z_EXPONENT:g} standard errors")
+        differ = ~_close(a, b, rtol, atol) & ~moved
+        z = standardised(a, b, spread, 0.0)
+        problems += _problem(where, name, differ & ~has_late & ~(np.abs(z) <= Z_ROW),
+                             f" by more than {Z_ROW:g} standard errors")
+        problems += aggregate_drift(where, name, z[differ])
     return problems
 
 
@@ -274,17 +414,15 @@ def thresholds_drift(where: str, fresh: pd.DataFrame, committed: pd.DataFrame,
     with a chaotic orbit (or a chaotic dominant attractor): they may move only to or from a
     value at which a late outcome changed; every other entry keeps the full tolerance."""
     onset = committed["threshold"].isin(["chaos_onset", "first_chaotic_orbit"]).to_numpy()
-    if len(fresh) != len(committed) or not np.array_equal(
-            fresh["threshold"].astype(str), committed["threshold"].astype(str)):
+    both = _both_attractors(tables)
+    if (both is None or len(fresh) != len(committed) or not np.array_equal(
+            fresh["threshold"].astype(str), committed["threshold"].astype(str))):
         return deterministic(fresh, committed)
     problems = deterministic(fresh[~onset].reset_index(drop=True),
                              committed[~onset].reset_index(drop=True))
     located = next(c for c in committed.columns if c.startswith("located_")
                    and not c.startswith(("located_period1", "located_period2")))
-    rows = [tables.fresh["attractors.csv"], tables.committed["attractors.csv"]]
-    column = rows[1].columns[0]
-    changed = (rows[0].attractor.astype(str) != rows[1].attractor.astype(str)).to_numpy()
-    changed_values = np.array(sorted(set(rows[1][column].to_numpy()[changed])), dtype=float)
+    changed_values = _changed_values(both)
     for i in np.flatnonzero(onset):
         a, b = float(fresh[located].iloc[i]), float(committed[located].iloc[i])
         if (np.isnan(a) and np.isnan(b)) or np.isclose(a, b, rtol=rtol, atol=atol):
@@ -297,20 +435,28 @@ def thresholds_drift(where: str, fresh: pd.DataFrame, committed: pd.DataFrame,
     return problems
 
 
-def allowed_flips(undecided: np.ndarray) -> np.ndarray:
+# -- bounce sweep ------------------------------------------------------------------------------
+def allowed_flips(undecided) -> np.ndarray:
     """Basin points that may change class at a parameter point with ``undecided`` points
-    still moving when the classification stopped: 1 + 4 sqrt(undecided)."""
+    still moving when the classification stopped: 1 + 4 sqrt(undecided) (the net change of
+    a class among n points each flipping with probability p has SD sqrt(2 n p (1 - p)) <=
+    0.71 sqrt(n): this is at least 5.7 SD; the one is a point on a basin boundary)."""
     return 1.0 + 4.0 * np.sqrt(np.asarray(undecided, float))
 
 
 def sweep_drift(where: str, fresh: pd.DataFrame, committed: pd.DataFrame, tables: RunTables,
                 deterministic: Deterministic, rtol: float, atol: float) -> list[str]:
     """``sweep.csv`` of ``bounce sweep``: one row per parameter point, its basin summarised.
-    The fractions may move by ``allowed_flips`` points, the boundary boxes by as many, and
-    the basin entropies by what so many flips can change (module doc)."""
+    Per point the fractions may move by ``allowed_flips`` points, the boundary boxes by as
+    many, the basin entropies by what so many flips can change (one flip changes one box's
+    Gibbs entropy by at most 2 ln(m)/m for m cells a box, and a boundary box's entropy is at
+    most ln of the number of outcomes), the uncertainty exponent by Z_ROW of its standard
+    errors; over all points each like chance (``aggregate_drift``)."""
     fractions = [c for c in committed.columns if c.startswith("fraction_")]
     entropies = ["basin_entropy", "boundary_basin_entropy", "boundary_boxes"]
-    fixed = [c for c in committed.columns if c not in fractions + entropies]
+    uncertainty = [c for c in ("uncertainty_exponent", "uncertainty_exponent_se")
+                   if c in committed]
+    fixed = [c for c in committed.columns if c not in fractions + entropies + uncertainty]
     problems = deterministic(fresh[fixed], committed[fixed])
     if problems or len(fresh) != len(committed):
         return problems
@@ -318,30 +464,67 @@ def sweep_drift(where: str, fresh: pd.DataFrame, committed: pd.DataFrame, tables
     undecided = n * np.maximum(fresh["fraction_undecided"].to_numpy(float),
                                committed["fraction_undecided"].to_numpy(float))
     flips = allowed_flips(undecided)
+    scale = np.sqrt(undecided + 1.0)  # the standard error of a count, at most (see above)
     for name in fractions:
-        moved = np.abs(fresh[name].to_numpy(float) - committed[name].to_numpy(float)) * n
-        problems += _problem(where, name, moved > flips + 1e-6,
+        moved = (fresh[name].to_numpy(float) - committed[name].to_numpy(float)) * n
+        problems += _problem(where, name, np.abs(moved) > flips + 1e-6,
                              " by more than 1 + 4 sqrt(undecided) points")
-    box = int(tables.config.get("measures", {}).get("entropy_box", 5))
+        problems += aggregate_drift(where, name, moved / scale)
+
+    box = int(_setting(tables, MeasuresBlock().entropy_box, "measures", "entropy_box"))
     cells = box * box
+    grid = [_setting(tables, None, "basin", axis, "num") for axis in ("theta0_deg", "v0_m_s")]
+    boxes = (math.prod(int(num) // box for num in grid) if all(grid)
+             else np.floor(n / cells))  # whole boxes only
     per_flip = 2.0 * math.log(cells) / cells if cells > 1 else 0.0  # one box's entropy
-    boxes = n / cells  # whole boxes (a grid that is not a multiple of the box has fewer)
+    outcomes = max(len(fractions), 2)
     boundary = np.minimum(fresh["boundary_boxes"].to_numpy(float),
                           committed["boundary_boxes"].to_numpy(float))
     with np.errstate(divide="ignore", invalid="ignore"):
         bounds = {
             "boundary_boxes": flips,
-            "basin_entropy": flips * per_flip / np.floor(boxes),
-            # a flip changes one boundary box's entropy, and may add or remove one (S <= ln m)
+            "basin_entropy": flips * per_flip / boxes,
+            # a flip changes one boundary box's entropy, and may add or remove one
+            # (its entropy at most ln(outcomes))
             "boundary_basin_entropy": np.where(
-                boundary > flips, flips * (per_flip + math.log(cells)) / (boundary - flips),
+                boundary > flips,
+                flips * (per_flip + math.log(min(cells, outcomes))) / (boundary - flips),
                 np.inf),
         }
     for name, bound in bounds.items():
-        moved = np.abs(fresh[name].to_numpy(float) - committed[name].to_numpy(float))
-        problems += _problem(where, name, moved > bound + atol,
+        moved = fresh[name].to_numpy(float) - committed[name].to_numpy(float)
+        problems += _problem(where, name, np.abs(moved) > bound + atol,
                              " by more than the allowed flips can change")
+        problems += aggregate_drift(where, name, moved / (bound / flips * scale))
+    if "uncertainty_exponent" in uncertainty:
+        a, b = (t["uncertainty_exponent"].to_numpy(float) for t in (fresh, committed))
+        z = standardised(a, b, fresh.get("uncertainty_exponent_se"),
+                         committed.get("uncertainty_exponent_se"))
+        differ = ~_close(a, b, rtol, atol)
+        problems += _problem(where, "uncertainty_exponent", differ & ~(np.abs(z) <= Z_ROW),
+                             f" by more than {Z_ROW:g} standard errors")
+        problems += aggregate_drift(where, "uncertainty_exponent", z[differ])
     return problems
+
+
+def uncertainty_drift(where: str, fresh: pd.DataFrame, committed: pd.DataFrame,
+                      tables: RunTables, deterministic: Deterministic, rtol: float,
+                      atol: float) -> list[str]:
+    """``uncertainty.csv`` of ``bounce sweep``: the fraction of ``measures.samples`` random
+    points whose outcome changes at each eps, within Z_ROW binomial standard errors, and
+    like chance over all rows."""
+    fixed = [c for c in committed.columns if c != "uncertain_fraction"]
+    problems = deterministic(fresh[fixed], committed[fixed])
+    samples = int(_setting(tables, MeasuresBlock().samples, "measures", "samples"))
+    if problems or len(fresh) != len(committed):
+        return problems
+    a, b = (t["uncertain_fraction"].to_numpy(float) for t in (fresh, committed))
+    se = [np.sqrt(np.maximum(f * (1.0 - f), 1.0 / samples) / samples) for f in (a, b)]
+    z = standardised(a, b, se[0], se[1])
+    differ = ~_close(a, b, rtol, atol)
+    problems += _problem(where, "uncertain_fraction", differ & ~(np.abs(z) <= Z_ROW),
+                         f" by more than {Z_ROW:g} standard errors")
+    return problems + aggregate_drift(where, "uncertain_fraction", z[differ])
 
 
 #: (experiment, table) -> its rule
@@ -352,4 +535,5 @@ RULES: dict[tuple[str, str], Callable[..., list[str]]] = {
     ("bifurcation", "thresholds.csv"): thresholds_drift,
     ("continuation", "diagram.csv"): diagram_points_drift,
     ("sweep", "sweep.csv"): sweep_drift,
+    ("sweep", "uncertainty.csv"): uncertainty_drift,
 }

@@ -142,10 +142,13 @@ def tables_agree(experiment: str):
 
 def experiment_status(comparison: dict[str, str]) -> str:
     """One line per experiment for ``bounce reproduce``: ``identical``, ``within tolerance``
-    (and which tables) or ``changed`` (and which files), from ``RunDirectory.comparison``."""
+    (and which tables) or ``changed`` (and which files; the tables within tolerance that were
+    rewritten with them), from ``RunDirectory.comparison``."""
     changed = sorted(name for name, how in comparison.items() if how in ("changed", "new"))
     if changed:
-        return "changed: " + ", ".join(changed)
+        along = sorted(name for name, how in comparison.items() if how == "rewritten")
+        return "changed: " + ", ".join(changed) + (
+            f" (rewritten with them, within tolerance: {', '.join(along)})" if along else "")
     close = sorted(name for name, how in comparison.items() if how == "within tolerance")
     if close:
         return "within tolerance (left as committed): " + ", ".join(close)

@@ -521,9 +521,12 @@ class RunDirectory:
         With ``agrees`` (``bounce reproduce``: ``agrees(table, new, previous, tables)``, the
         reproduction tolerance; ``tables``: both runs' tables, :class:`RunTables`), a table
         whose previous file agrees with the new one is left untouched, and the figures are
-        not redrawn when every table agrees and they exist (their data did not change).
+        not redrawn when every table agrees and they exist (their data did not change); when
+        some table changed, every table is rewritten (the folder never holds the tables of
+        two runs, which rules comparing one table with the help of another would read).
         ``self.comparison`` then says per file: identical, within tolerance, kept (a figure
-        not redrawn), changed or new."""
+        not redrawn), changed, rewritten (within tolerance, but another table changed) or
+        new."""
         self.out_dir.mkdir(parents=True, exist_ok=True)
         writers: dict[str, Callable[[Path], object]] = {}
         written = {*self._frames, *self._figures, *self._files}
@@ -557,6 +560,7 @@ class RunDirectory:
                 children[-1].start()
             unchanged = True
             tables_agree = True
+            within: list[tuple[str, Path]] = []  # tables within tolerance of the previous
             both_runs = RunTables(self._frames, FramesOnDisk(self.out_dir), self.resolved_config)
             for name, write in writers.items():  # the tables first, then the figures
                 final = self.out_dir / name
@@ -571,12 +575,17 @@ class RunDirectory:
                 elif (agrees is not None and name in self._frames and final.is_file()
                       and agrees(name, read_frame(tmp), read_frame(final), both_runs)):
                     self.comparison[name] = "within tolerance"
-                    tmp.unlink()  # leave the previous file as it is
-                    staged.pop()
+                    within.append((name, tmp))
                 else:
                     self.comparison[name] = "changed" if final.is_file() else "new"
                     unchanged = False
                     tables_agree = tables_agree and name not in self._frames
+            for name, tmp in within:
+                if tables_agree:  # leave the previous file as it is
+                    tmp.unlink()
+                    staged.remove((tmp, self.out_dir / name))
+                else:  # another table changed: the folder holds the tables of one run
+                    self.comparison[name] = "rewritten"
             while children:
                 unchanged &= children[0].wait()  # the child compared its files
                 children.pop(0)

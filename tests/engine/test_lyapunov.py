@@ -191,6 +191,10 @@ def test_batch_means_standard_error_by_hand_and_for_independent_growth():
     sums = np.array([[1.0, 2.0, 3.0, 6.0]])  # 4 batches of 2 impacts: means 0.5 1 1.5 3
     expected = np.std([0.5, 1.0, 1.5, 3.0], ddof=1) / 2.0
     assert lyapunov_standard_error(sums, 8)[0] == pytest.approx(expected, rel=1e-14)
+    # 13 impacts in 4 batches: impact i in batch i * 4 // 13, so of 4, 3, 3 and 3 impacts
+    sums = np.array([[4.0, 6.0, 9.0, 3.0]])
+    expected = np.std([4.0 / 4, 6.0 / 3, 9.0 / 3, 3.0 / 3], ddof=1) / 2.0
+    assert lyapunov_standard_error(sums, 13)[0] == pytest.approx(expected, rel=1e-14)
     assert np.isnan(lyapunov_standard_error(np.ones((3, 1)), 5)).all()  # one batch: no error
 
     rng = np.random.default_rng(7)
@@ -226,3 +230,29 @@ def test_exponent_standard_error_matches_the_scatter_of_exponents_on_one_chaotic
         gamma_params(1.3), "alpha", [0.5]), settings)
     assert period1.lyapunov[0] == pytest.approx(math.log(0.5), abs=0.01)  # eq. 12: |lambda|
     assert period1.lyapunov_se[0] < 0.01 * abs(period1.lyapunov[0])  # measured: 0.0028
+
+
+def test_the_sweeps_standard_error_is_that_of_its_own_log_growths():
+    """Independent route to iterate_sweep's batches: the orbit followed impact by impact
+    (map_step, map_jacobian, advance_tangent), its measured log growths cut into 10 equal
+    batches by numpy, give the same exponent and standard error. On the period-1 orbit at
+    Gamma 1.3, whose complex multipliers turn the tangent vector (batches differ), and which
+    no last bit can send elsewhere."""
+    params = gamma_params(1.3)
+    transient, measured = 150, 400
+    orbits = iterate_sweep([math.radians(36.0)], [4.5], sweep_parameters(params, "alpha", [0.5]),
+                           SweepSettings(transient_impacts=transient, measured_impacts=measured))
+    theta, v, tangent, growths = math.radians(36.0), 4.5, initial_tangent(1), []
+    for k in range(1, transient + measured + 1):
+        step = map_step(np.array([theta]), np.array([v]), params)
+        jac = map_jacobian(np.array([theta]), np.array([v]), step.hop_phase, params)
+        tangent, growth = advance_tangent(tangent, jac, params)
+        if k > transient:
+            growths.append(float(growth[0]))
+        theta, v = float(np.mod(step.theta[0], 2 * math.pi)), float(step.v[0])
+    means = [batch.mean() for batch in np.array_split(np.array(growths), 10)]
+    assert orbits.stuck_at[0] == -1
+    assert orbits.lyapunov[0] == pytest.approx(np.mean(growths), rel=1e-9)
+    assert orbits.lyapunov_se[0] == pytest.approx(np.std(means, ddof=1) / math.sqrt(10),
+                                                  rel=1e-6)
+    assert orbits.lyapunov_se[0] > 1e-4  # the batches do differ
