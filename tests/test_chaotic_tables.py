@@ -16,7 +16,7 @@ import pytest
 
 import bounce_cli
 from bounce_cli.paper.chaotic_tables import (
-    LATE_IMPACT,
+    LATE_STRETCH,
     aggregate_drift,
     allowed_flips,
     balance_drift,
@@ -76,7 +76,6 @@ def test_a_bifurcation_moved_by_ulps_is_reproduced_value_by_value_it_is_not(
         t: [] for t in small_bifurcation}
 
 
-@pytest.mark.slow  # 2-3 s
 def test_a_racket_period_sweep_moved_by_ulps_is_reproduced():
     """Another swept parameter (the racket period: its column first, gamma second), with an
     intermittent chaotic orbit whose exponent is 14 standard errors off at 3 ulps and an
@@ -195,27 +194,31 @@ def test_a_continuation_diagram_moved_by_ulps_is_reproduced():
 
 
 def test_a_diagram_whose_aperiodic_orbits_all_stuck_is_a_drift():
-    from bounce_cli.analysis.bifurcation import detect_period
-
+    """Every chaotic orbit of the committed diagram stuck instead (gone from diagram.csv,
+    sticking in diagram_orbits.csv): each a late outcome, all one way a drift; 3 of them a
+    last bit's reshuffling; gone from diagram.csv alone, the two tables disagree."""
     frames = committed("continuation")
-    diagram = frames["diagram.csv"]
+    diagram, orbits = frames["diagram.csv"], frames["diagram_orbits.csv"]
     keys = ["gamma", "initial_condition"]
 
-    def period(orbit):
-        return detect_period(orbit.v_m_s.to_numpy()[None], np.radians(orbit.theta_deg)
-                             .to_numpy()[None], 32, 1e-6)[0]
+    def stuck(which):
+        gone = orbits.loc[which, keys]
+        kept = diagram[~pd.MultiIndex.from_frame(diagram[keys]).isin(
+            pd.MultiIndex.from_frame(gone))].reset_index(drop=True)
+        ended = orbits.copy()
+        ended.loc[which, ["attractor", "period", "stuck_at_impact"]] = ["sticking", 0, 500]
+        ended.loc[which, ["lyapunov_per_impact", "lyapunov_se_per_impact"]] = np.nan
+        return {**frames, "diagram.csv": kept, "diagram_orbits.csv": ended}
 
-    periods = diagram.groupby(keys)[["v_m_s", "theta_deg"]].apply(period)
-    aperiodic = periods[periods == 0].index
-    assert len(aperiodic) > 20
-    gone = pd.MultiIndex.from_frame(diagram[keys]).isin(aperiodic)
-    kept = diagram[~gone].reset_index(drop=True)
-    drift = drift_by_table("continuation", {**frames, "diagram.csv": kept}, frames)
-    assert drift["diagram.csv"] and all("one-sided" in line for line in drift["diagram.csv"]), (
-        drift["diagram.csv"])
-    three = diagram[~pd.MultiIndex.from_frame(diagram[keys]).isin(aperiodic[:3])]
-    assert drift_by_table("continuation", {**frames, "diagram.csv": three.reset_index(
-        drop=True)}, frames)["diagram.csv"] == []
+    chaotic = np.flatnonzero(orbits.attractor == "chaotic")
+    assert len(chaotic) > 20
+    drift = drift_by_table("continuation", stuck(chaotic), frames)
+    assert any("late outcomes" in line for line in drift["diagram_orbits.csv"]), drift
+    assert drift_by_table("continuation", stuck(chaotic[:3]), frames) == {
+        name: [] for name in frames}
+    alone = {**stuck(chaotic[:3]), "diagram_orbits.csv": orbits}
+    assert any("not those" in line for line in drift_by_table(
+        "continuation", alone, frames)["diagram.csv"])
 
 
 def test_a_periodic_orbit_is_the_same_cycle_from_any_of_its_impacts():
@@ -235,7 +238,7 @@ def attractor_rows(**columns):
             "attractor": ["chaotic", "sticking", "period2"], "period": [0, 0, 2],
             "lyapunov_per_impact": [0.30, np.nan, -0.4],
             "lyapunov_se_per_impact": [0.01, np.nan, 1e-12],
-            "stuck_at_impact": [-1, 12, -1]}
+            "stuck_at_impact": [-1, 12, -1], "peak_stretch": [600.0, 5.0, 3.0]}
     return pd.DataFrame({**base, **columns})
 
 
@@ -246,14 +249,25 @@ def test_late_outcomes_may_change_and_early_ones_may_not():
     def drift(fresh):
         return table_drift("bifurcation", "attractors.csv", fresh, base, tables)
 
-    # the chaotic orbit stuck late in the other run: allowed; at impact 12: not late
+    # the chaotic orbit stuck after its start's perturbations grew by LATE_STRETCH in the
+    # other run: allowed; before they grew so much: not late
     late_stick = attractor_rows(attractor=["sticking", "sticking", "period2"],
                                 lyapunov_per_impact=[np.nan, np.nan, -0.4],
                                 lyapunov_se_per_impact=[np.nan, np.nan, 1e-12],
-                                stuck_at_impact=[LATE_IMPACT + 5, 12, -1])
+                                stuck_at_impact=[40, 12, -1],
+                                peak_stretch=[LATE_STRETCH + 5, 5.0, 3.0])
     assert drift(late_stick) == []
-    early_stick = late_stick.assign(stuck_at_impact=[LATE_IMPACT - 5, 12, -1])
+    early_stick = late_stick.assign(peak_stretch=[LATE_STRETCH - 5, 5.0, 3.0])
     assert any("attractor" in line for line in drift(early_stick))
+    # a chaotic transient that ended on a periodic orbit in one run and stuck in the other
+    periodic = attractor_rows(attractor=["chaotic", "sticking", "sticking"], period=[0, 0, 0],
+                              lyapunov_per_impact=[0.30, np.nan, np.nan],
+                              stuck_at_impact=[-1, 12, 38],
+                              peak_stretch=[600.0, 5.0, LATE_STRETCH + 8])
+    assert drift(periodic)  # committed: period 2 with peak_stretch 3 is not late
+    assert table_drift("bifurcation", "attractors.csv", periodic,
+                       attractor_rows(peak_stretch=[600.0, 5.0, LATE_STRETCH + 20]),
+                       tables) == []
     assert any("stuck_at_impact" in line for line in drift(attractor_rows(
         stuck_at_impact=[-1, 13, -1])))
     # a periodic orbit's exponent: the reproduction tolerance, or within 6 of its errors
@@ -264,7 +278,8 @@ def test_late_outcomes_may_change_and_early_ones_may_not():
     assert drift(attractor_rows(lyapunov_per_impact=[0.45, np.nan, -0.4])) == []
     # the period at the longest looked for is read as moving (a long or chaotic orbit)
     # (the config's iterate.max_period; the experiment's default, 32, without one)
-    long = attractor_rows(attractor=["period32", "sticking", "period2"], period=[32, 0, 2])
+    long = attractor_rows(attractor=["period32", "sticking", "period2"], period=[32, 0, 2],
+                          peak_stretch=[10.0, 5.0, 3.0])
     assert drift(long) == []
     assert table_drift("bifurcation", "attractors.csv", long, base,
                        RunTables({}, {}, {"iterate": {"max_period": 64}}))
@@ -340,7 +355,6 @@ def test_basin_fractions_moved_one_way_at_every_point_are_a_drift():
     assert not any("1 + 4 sqrt" in line for line in drift)  # no point beyond its allowance
 
 
-@pytest.mark.slow  # 2-3 s
 def test_a_sweep_with_the_uncertainty_exponent_moved_by_ulps_is_reproduced():
     small = {"sweep.x": {"parameter": "alpha", "start": 0.3, "stop": 0.4, "num": 2},
              "sweep.y": {"parameter": "ac_g", "start": -1.6, "stop": -1.5, "num": 2},
@@ -410,3 +424,86 @@ def test_reproduce_leaves_a_bifurcation_moved_by_ulps_as_committed(tmp_path):
     assert changed["attractors.csv"] == "changed" and changed["bifurcation.png"] != "kept"
     for name, frame in frames.items():  # every table is this run's
         assert (out / name).read_bytes() == frame.to_csv(index=False).encode(), name
+
+
+@pytest.mark.parametrize("case", ["alpha sweep: transients ending on cycles 6 or 3",
+                                  "one start recording 8 impacts",
+                                  "continuation diagram with exact sticking",
+                                  pytest.param("sweep with exact sticking",
+                                               marks=pytest.mark.slow)])  # 3 s
+def test_other_settings_moved_by_ulps_are_reproduced(case):
+    """Settings a review found refused before (each at the ulps it was refused at): chaotic
+    transients that end on one cycle, another or the racket; recordings of one batch (no
+    standard error); a chaotic orbit in one run locked (a chatter cycle) in the other; with
+    exact sticking, every stuck ball of a sweep point takes the one released ball's fate."""
+    name, settings, ulps = {
+        "alpha sweep: transients ending on cycles 6 or 3": ("bifurcation", {
+            "initial_conditions.theta0_deg": [45, 90, 135], "initial_conditions.v0_m_s": [3, 5, 7],
+            "iterate.transient_impacts": 300, "iterate.measured_impacts": 400,
+            "flip.locate": False, "sweep.parameter": "alpha", "sweep.start": 0.72,
+            "sweep.stop": 0.76, "sweep.num": 3}, (-3, -2)),
+        "one start recording 8 impacts": ("bifurcation", {
+            "initial_conditions.theta0_deg": [90], "initial_conditions.v0_m_s": [5],
+            "iterate.recorded_impacts": 8, "iterate.max_period": 4,
+            "iterate.transient_impacts": 300, "iterate.measured_impacts": 400,
+            "flip.locate": False, "sweep.start": 1.70, "sweep.stop": 2.0, "sweep.num": 31},
+            (-2, 3)),
+        "continuation diagram with exact sticking": ("continuation", {
+            "starts": [{"at": 1.7, "cycles": 1}], "steps.max_period": 4, "range.low": 1.5,
+            "range.high": 1.9, "diagram.num": 20, "diagram.transient_impacts": 300,
+            "diagram.min_hop_s": 0}, (-1, 1)),
+        "sweep with exact sticking": ("sweep", {
+            "sweep.x": {"parameter": "alpha", "start": 0.4, "stop": 0.7, "num": 2},
+            "sweep.y": {"parameter": "ac_g", "start": -1.6, "stop": -1.0, "num": 3},
+            "basin.theta0_deg": {"start": 0, "stop": 360, "num": 40},
+            "basin.v0_m_s": {"start": 0, "stop": 10, "num": 40}, "classify.min_hop_s": 0},
+            (-1, 1)),
+    }[case]
+    config = _nested(settings)
+    base = run_frames(name, **settings)
+    for k in ulps:
+        moved = run_frames(name, **settings, **{"model.g": 9.81 * (1 + k * EPS)})
+        assert drift_by_table(name, moved, base, config) == {t: [] for t in base}, k
+
+
+def _nested(settings):
+    """Dotted settings as the nested config run.json holds."""
+    out: dict = {}
+    for key, value in settings.items():
+        *parents, last = key.split(".")
+        block = out
+        for part in parents:
+            block = block.setdefault(part, {})
+        block[last] = value
+    return out
+
+
+@pytest.mark.parametrize("regression", [
+    "exponents' standard errors x10", "impacts renumbered", "chaotic orbits cut to 16 impacts",
+    "boundary entropy 0 where many points are late"])
+def test_regressions_in_what_the_statistical_rules_read_are_drifts(regression):
+    name = "sweep" if "entropy" in regression else "bifurcation"
+    frames = committed(name)
+    config = {"measures": {"entropy_box": 5},
+              "basin": {"theta0_deg": {"num": 40}, "v0_m_s": {"num": 40}}}
+    fresh = dict(frames)
+    if regression == "exponents' standard errors x10":
+        fresh["attractors.csv"] = frames["attractors.csv"].assign(
+            lyapunov_se_per_impact=lambda f: f.lyapunov_se_per_impact * 10)
+    elif regression == "impacts renumbered":
+        fresh["bifurcation.csv"] = frames["bifurcation.csv"].assign(impact=lambda f: f.impact + 1)
+    elif regression == "chaotic orbits cut to 16 impacts":
+        points = frames["bifurcation.csv"]
+        keys = ["gamma", "initial_condition"]
+        chaotic = frames["attractors.csv"].loc[chaotic_rows(frames), keys]
+        on = pd.MultiIndex.from_frame(points[keys]).isin(pd.MultiIndex.from_frame(chaotic))
+        cut = on & (points.groupby(keys).cumcount() >= 16).to_numpy()
+        fresh["bifurcation.csv"] = points[~cut].reset_index(drop=True)
+    else:
+        table = frames["sweep.csv"].copy()
+        many = table.boundary_boxes <= allowed_flips(table.points_decided_late)
+        assert many.sum() >= 5
+        table.loc[many, "boundary_basin_entropy"] = 0.0
+        fresh["sweep.csv"] = table
+    drift = drift_by_table(name, fresh, frames, config)
+    assert any(drift.values()), drift

@@ -215,6 +215,12 @@ class SweepOrbits:
     #: releases when it stuck during the measured impacts (a locked orbit), else 0; None
     #: with the 1 ms rule
     locked_cycles: np.ndarray | None = None
+    #: per state: the largest growth (ln) of a perturbation of its start over the orbit
+    #: (the tangent vector's log growths summed since the start, at their maximum; 0 if it
+    #: never grew). A last bit (relative 1.1e-16) has grown to 1.1e-16 exp(peak_stretch) at
+    #: most: where that reaches the scale of a decision, the orbit's outcome is one of the
+    #: last bits' (a chaotic transient, a chatter at the edge of the sticking rule)
+    peak_stretch: np.ndarray | None = None
 
 
 def iterate_sweep(
@@ -240,6 +246,9 @@ def iterate_sweep(
     v_rec = np.full((n, settings.recorded_impacts), np.nan)
     theta_rec = np.full_like(v_rec, np.nan)
     log_growth = np.zeros(n)
+    # the log growth of a perturbation of the start, summed since the start, and its largest
+    # value (what a last bit can have grown to)
+    stretch, peak_stretch = np.zeros(n), np.zeros(n)
     batches = min(LYAPUNOV_BATCHES, settings.measured_impacts)
     batch_growth = np.zeros((n, batches))  # the same, summed per batch (standard error)
     stuck_at = np.full(n, -1, dtype=np.int64)
@@ -258,6 +267,8 @@ def iterate_sweep(
             hop = step.hop_phase
             jac = map_jacobian(th, vv, hop, pars)
             tangent, growth = advance_tangent(tangent, jac, pars)
+            stretch[idx] += growth
+            peak_stretch[idx] = np.fmax(peak_stretch[idx], stretch[idx])
             if k > settings.transient_impacts:
                 log_growth[idx] += growth
                 measured = k - settings.transient_impacts - 1
@@ -288,12 +299,13 @@ def iterate_sweep(
     se = np.where(settled, lyapunov_standard_error(batch_growth, settings.measured_impacts),
                   np.nan)
     if chatter is None:
-        return SweepOrbits(v_rec, theta_rec, lyapunov, se, stuck_at, flies, first_recorded)
+        return SweepOrbits(v_rec, theta_rec, lyapunov, se, stuck_at, flies, first_recorded,
+                           peak_stretch=peak_stretch)
     locked = settled & chatter.locked
     lyapunov[locked] = -np.inf  # superstable: a stick forgets the state
     se[locked] = np.nan
     return SweepOrbits(v_rec, theta_rec, lyapunov, se, stuck_at, flies, first_recorded,
-                       np.where(locked, chatter.cycles, 0))
+                       np.where(locked, chatter.cycles, 0), peak_stretch)
 
 
 #: batches of the measured impacts for the exponent's standard error (batch means)

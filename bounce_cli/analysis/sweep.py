@@ -104,15 +104,24 @@ def point_tasks(points: list[ModelParams], theta0_deg: Axis, v0_m_s: Axis,
             for i, (p, s) in enumerate(zip(points, seeds))]
 
 
+#: a basin point decided at this impact or later, other than by reaching the period-1 orbit,
+#: may have been decided by a chaotic transient whose last bits another machine rounds
+#: otherwise (measured in bounce bifurcation: with g moved by ulps, sticking impacts changed
+#: from impact 36 on, never before)
+LATE_ITERATIONS = 30
+
+
 def evaluate_point(task: PointTask) -> dict[str, Any]:
     """The sweep's numbers at one parameter point, as plain Python numbers (JSON-able, so a
     finished point can be stored and read back exactly):
 
     ``row``: ``ac_g``, ``fixed_point_v_m_s``, ``fixed_point_theta_deg``, ``spectral_radius``
     (eqs. 7, 8, 10; NaN without a fixed point), ``fraction_<outcome>`` for each outcome of
-    section 3, ``basin_entropy``, ``boundary_basin_entropy`` (nats), ``boundary_boxes``,
-    ``basin_points`` and, with ``task.uncertainty``, ``uncertainty_exponent`` and
-    ``uncertainty_exponent_se``; ``uncertainty``: the eps and uncertain fractions (or None).
+    section 3, ``points_decided_late`` (not reaching period 1, decided after
+    ``LATE_ITERATIONS`` impacts or more, or undecided), ``basin_entropy``,
+    ``boundary_basin_entropy`` (nats), ``boundary_boxes``, ``basin_points`` and, with
+    ``task.uncertainty``, ``uncertainty_exponent`` and ``uncertainty_exponent_se``;
+    ``uncertainty``: the eps and uncertain fractions (or None).
     """
     params = task.params
     row: dict[str, Any] = {}
@@ -133,6 +142,10 @@ def evaluate_point(task: PointTask) -> dict[str, Any]:
         row[f"fraction_{name}"] = float(count / outcome.size)
     if names is not OUTCOMES:  # the locked orbit's period in racket cycles (0: none)
         row["locked_cycles"] = int(classified.locked_cycles)
+    # the points a last bit can decide: those that did not reach the period-1 orbit and were
+    # decided (or left undecided) only after LATE_ITERATIONS impacts or more
+    late = (outcome != OUTCOMES.index("period1")) & (classified.iterations >= LATE_ITERATIONS)
+    row["points_decided_late"] = int(late.sum())
     entropy = basin_entropy(outcome, box=task.entropy_box)
     row.update(basin_entropy=entropy.basin_entropy,
                boundary_basin_entropy=entropy.boundary_basin_entropy,

@@ -141,33 +141,9 @@ def run(config: BifurcationConfig, options: RunOptions) -> ExperimentResult:
     options.progress.start(total, "bifurcation: impacts")
     orbits = iterate_sweep(np.tile(np.deg2rad(theta0_deg), values.size), np.tile(v0, values.size),
                            params, settings, options.progress.advance)
-    names, periods = attractor_names(orbits, settings)
-
     column = parameter_column(sweep.parameter)
-    value_of_state = np.repeat(values, n_ic)
-    ic_of_state = np.tile(np.arange(n_ic), values.size)
-    attractors = pd.DataFrame({
-        **with_gamma(column, value_of_state, params.gamma),
-        "initial_condition": ic_of_state,
-        "theta0_deg": np.tile(theta0_deg, values.size),
-        "v0_m_s": np.tile(v0, values.size),
-        "attractor": names,
-        "period": periods,
-        "lyapunov_per_impact": orbits.lyapunov,
-        "lyapunov_se_per_impact": orbits.lyapunov_se,
-        "stuck_at_impact": orbits.stuck_at,
-    })
-    if orbits.locked_cycles is not None:  # exact sticking: the locked orbits' periods
-        attractors["locked_cycles"] = orbits.locked_cycles
-    recorded = np.isfinite(orbits.v[:, 0])
-    n_rec = settings.recorded_impacts
-    bifurcation = pd.DataFrame({
-        column: np.repeat(value_of_state[recorded], n_rec),
-        "initial_condition": np.repeat(ic_of_state[recorded], n_rec),
-        "impact": np.tile(np.arange(n_rec) + orbits.first_recorded_impact, int(recorded.sum())),
-        "v_m_s": orbits.v[recorded].ravel(),
-        "theta_deg": np.degrees(orbits.theta[recorded]).ravel(),
-    })
+    attractors, bifurcation, periods = orbit_frames(column, values, theta0_deg, v0, params,
+                                                    orbits, settings)
     per_value = value_summary(attractors, column, values, base, sweep.parameter)
     thresholds = threshold_frame(config, per_value, periods.reshape(values.size, n_ic), values,
                                  theta0_deg, v0, options)
@@ -183,6 +159,45 @@ def run(config: BifurcationConfig, options: RunOptions) -> ExperimentResult:
     return ExperimentResult(frames=frames, figures=figures,
                             summary=summary_lines(thresholds, per_value, column,
                                                   config.flip.locate))
+
+
+def orbit_frames(column: str, values: np.ndarray, theta0_deg: np.ndarray, v0: np.ndarray,
+                 params, orbits, settings: SweepSettings
+                 ) -> tuple[pd.DataFrame, pd.DataFrame, np.ndarray]:
+    """The tables of a sweep's orbits (``iterate_sweep`` of every value x initial condition,
+    values slowest): ``attractors.csv`` (one row per orbit: its attractor, period, Lyapunov
+    exponent with its standard error, sticking impact, and ``peak_stretch``, the largest ln
+    growth of a perturbation of its start), the recorded impacts (``bifurcation.csv``:
+    value, initial condition, impact, v, wrapped theta, of the orbits that did not stick),
+    and the periods (0: none)."""
+    names, periods = attractor_names(orbits, settings)
+    n_ic = theta0_deg.size
+    value_of_state = np.repeat(values, n_ic)
+    ic_of_state = np.tile(np.arange(n_ic), values.size)
+    attractors = pd.DataFrame({
+        **with_gamma(column, value_of_state, params.gamma),
+        "initial_condition": ic_of_state,
+        "theta0_deg": np.tile(theta0_deg, values.size),
+        "v0_m_s": np.tile(v0, values.size),
+        "attractor": names,
+        "period": periods,
+        "lyapunov_per_impact": orbits.lyapunov,
+        "lyapunov_se_per_impact": orbits.lyapunov_se,
+        "stuck_at_impact": orbits.stuck_at,
+        "peak_stretch": orbits.peak_stretch,
+    })
+    if orbits.locked_cycles is not None:  # exact sticking: the locked orbits' periods
+        attractors["locked_cycles"] = orbits.locked_cycles
+    recorded = np.isfinite(orbits.v[:, 0])
+    n_rec = orbits.v.shape[1]
+    points = pd.DataFrame({
+        column: np.repeat(value_of_state[recorded], n_rec),
+        "initial_condition": np.repeat(ic_of_state[recorded], n_rec),
+        "impact": np.tile(np.arange(n_rec) + orbits.first_recorded_impact, int(recorded.sum())),
+        "v_m_s": orbits.v[recorded].ravel(),
+        "theta_deg": np.degrees(orbits.theta[recorded]).ravel(),
+    })
+    return attractors, points, periods
 
 
 def with_gamma(column: str, values, gamma) -> dict:

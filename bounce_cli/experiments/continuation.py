@@ -39,6 +39,7 @@ from ..analysis.continuation import (
     feigenbaum_ratios,
     orbit_by_iteration,
 )
+from .bifurcation import orbit_frames
 from .plotting import caption_figures, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
@@ -206,9 +207,10 @@ def run(config: ContinuationConfig, options: RunOptions) -> ExperimentResult:
         "type", "start", "period", "cycles", column, "v_m_s", "theta_deg",
         "test_function_residual"]), config, column)
     feigenbaum = cascade_table(bifurcations, column)
-    diagram = brute_force_diagram(config, column, options)
+    diagram, diagram_orbits = brute_force_diagram(config, column, options)
     frames = {"branches.csv": branches, "orbits.csv": orbits, "bifurcations.csv": bifurcations,
-              "feigenbaum.csv": feigenbaum, "diagram.csv": diagram}
+              "feigenbaum.csv": feigenbaum, "diagram.csv": diagram,
+              "diagram_orbits.csv": diagram_orbits}
     figures = draw(frames)
     base = config.params
     fixed = {"alpha": f"alpha = {base.alpha:g}", "g": f"g = {base.g:g} m/s^2",
@@ -261,34 +263,29 @@ def cascade_table(bifurcations: pd.DataFrame, column: str) -> pd.DataFrame:
 
 
 def brute_force_diagram(config: ContinuationConfig, column: str,
-                        options: RunOptions) -> pd.DataFrame:
-    """The map iterated from every diagram initial condition at ``diagram.num`` values: the
-    recorded impacts (v, wrapped theta) of the orbits that did not stick, with the index of
-    the initial condition (``diagram.theta0_deg`` x ``diagram.v0_m_s``, theta0 slowest)."""
+                        options: RunOptions) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The map iterated from every diagram initial condition at ``diagram.num`` values
+    (``diagram.theta0_deg`` x ``diagram.v0_m_s``, theta0 slowest, numbered as
+    ``initial_condition``): ``diagram.csv``, the recorded impacts (v, wrapped theta) of the
+    orbits that did not stick, and ``diagram_orbits.csv``, one row per orbit as ``bounce
+    bifurcation``'s ``attractors.csv`` (its attractor, period, sticking impact and how much a
+    perturbation of its start grew: what a last bit can decide)."""
     d, rng = config.diagram, config.range
     values = np.linspace(rng.low, rng.high, d.num)
-    theta0, v0 = (a.ravel() for a in np.meshgrid(np.radians(d.theta0_deg), d.v0_m_s,
-                                                  indexing="ij"))
+    theta0_deg, v0 = (a.ravel() for a in np.meshgrid(np.asarray(d.theta0_deg, float),
+                                                      d.v0_m_s, indexing="ij"))
     settings = SweepSettings(transient_impacts=d.transient_impacts,
                              measured_impacts=d.recorded_impacts,
                              recorded_impacts=d.recorded_impacts,
                              max_period=d.recorded_impacts // 2, min_hop_s=d.min_hop_s)
-    params = sweep_parameters(config.params, rng.parameter, np.repeat(values, theta0.size))
+    params = sweep_parameters(config.params, rng.parameter, np.repeat(values, theta0_deg.size))
     options.progress.start(settings.transient_impacts + settings.measured_impacts,
                            "continuation: brute-force diagram")
-    orbits = iterate_sweep(np.tile(theta0, values.size), np.tile(v0, values.size), params,
-                           settings, options.progress.advance)
-    recorded = np.isfinite(orbits.v[:, 0])
-    n = settings.recorded_impacts
-    return pd.DataFrame({
-        column: np.repeat(np.repeat(values, theta0.size)[recorded], n),
-        # which start each orbit came from (as in bounce bifurcation's tables): orbits of a
-        # chaotic attractor are compared by start, and one that stuck is told from its row
-        "initial_condition": np.repeat(np.tile(np.arange(theta0.size), values.size)[recorded],
-                                       n),
-        "v_m_s": orbits.v[recorded].ravel(),
-        "theta_deg": np.degrees(orbits.theta[recorded]).ravel(),
-    })
+    orbits = iterate_sweep(np.tile(np.radians(theta0_deg), values.size),
+                           np.tile(v0, values.size), params, settings, options.progress.advance)
+    attractors, points, _ = orbit_frames(column, values, theta0_deg, v0, params, orbits,
+                                         settings)
+    return points, attractors
 
 
 def summary_lines(bifurcations: pd.DataFrame, feigenbaum: pd.DataFrame,

@@ -308,7 +308,7 @@ def test_cli_small_sweep_files_and_columns(tmp_path):
     assert list(bif.columns) == ["gamma", "initial_condition", "impact", "v_m_s", "theta_deg"]
     assert list(att.columns) == ["gamma", "initial_condition", "theta0_deg", "v0_m_s",
                                  "attractor", "period", "lyapunov_per_impact",
-                                 "lyapunov_se_per_impact", "stuck_at_impact"]
+                                 "lyapunov_se_per_impact", "stuck_at_impact", "peak_stretch"]
     np.testing.assert_array_equal(np.unique(att.gamma), np.linspace(1.4, 1.8, 41))
     assert bif.theta_deg.between(0, 360, inclusive="left").all()
     assert bif.impact.min() == 1000 + 1000 - 64 + 1 and bif.impact.max() == 2000

@@ -35,7 +35,12 @@ def run_small(cli, out, *extra):
 def test_cli_small_run_files_columns_and_numbers(cli, tmp_path):
     frames = run_small(cli, tmp_path)
     assert sorted(frames) == ["bifurcations.csv", "branches.csv", "diagram.csv",
-                              "feigenbaum.csv", "orbits.csv"]
+                              "diagram_orbits.csv", "feigenbaum.csv", "orbits.csv"]
+    orbits_of_diagram = frames["diagram_orbits.csv"]
+    recorded = frames["diagram.csv"].groupby(["gamma", "initial_condition"]).size()
+    # every orbit that did not stick has its recorded impacts in diagram.csv
+    flew = orbits_of_diagram[orbits_of_diagram.stuck_at_impact < 0]
+    assert len(recorded) == len(flew) and (recorded == 64).all()
     assert (tmp_path / "continuation.png").is_file()
     branches, bifs = frames["branches.csv"], frames["bifurcations.csv"]
     for column in ("branch", "period", "cycles", "gamma", "v_m_s", "theta_deg", "lambda1_re",
