@@ -290,6 +290,10 @@ def test_tables_of_another_length_are_a_drift_not_a_crash(small_bifurcation):
                else frame for name, frame in small_bifurcation.items()}
     drift = drift_by_table("bifurcation", shorter, small_bifurcation)
     assert drift["attractors.csv"]
+    # results of a version without peak_stretch: a drift of its columns, not a crash
+    older = {**small_bifurcation, "attractors.csv": small_bifurcation["attractors.csv"].drop(
+        columns="peak_stretch")}
+    assert drift_by_table("bifurcation", small_bifurcation, older)["attractors.csv"]
     # the tables read beside it are then compared value by value (here: unchanged)
     assert drift["bifurcation.csv"] == drift["values.csv"] == drift["thresholds.csv"] == []
 

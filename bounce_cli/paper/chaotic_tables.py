@@ -193,14 +193,16 @@ def _max_period(tables: RunTables) -> int:
 
 def _both_attractors(tables: RunTables, name: str = "attractors.csv"
                      ) -> tuple[pd.DataFrame, pd.DataFrame] | None:
-    """Both runs' table of orbits (``attractors.csv``) when they hold the same orbits in the
-    same order (else the tables that depend on it are compared value by value)."""
+    """Both runs' table of orbits (``attractors.csv``) when they hold the same columns and
+    the same orbits in the same order (else, results of another version among them, the
+    tables that depend on it are compared value by value)."""
     try:
         fresh, committed = tables.fresh[name], tables.committed[name]
     except KeyError:
         return None
     keys = _keys(committed)
-    if (len(fresh) != len(committed) or list(fresh.columns[:1]) != keys[:1]
+    if (list(fresh.columns) != list(committed.columns) or "peak_stretch" not in committed
+            or len(fresh) != len(committed)
             or not all(np.array_equal(fresh[k].to_numpy(), committed[k].to_numpy())
                        for k in keys)):
         return None

@@ -119,6 +119,21 @@ def test_entropies_are_those_of_the_classified_grid(paper_params):
     assert sum(row[f"fraction_{o}"] for o in OUTCOMES) == pytest.approx(1.0, abs=1e-12)
 
 
+def test_points_decided_late_are_the_grids_late_non_period1_points(paper_params):
+    """At an unstable point (AC -1.6 g): every undecided point is late, and the late ones are
+    the grid's points not on period 1 whose classification took 30 impacts or more."""
+    from bounce_cli.analysis.sweep import LATE_ITERATIONS, parameter_point
+
+    unstable = parameter_point(paper_params, {"ac_g": -1.6})
+    task = tasks_at([unstable], num=30)[0]
+    row = evaluate_point(task)["row"]
+    theta, v = np.meshgrid(np.deg2rad(task.theta0_deg.values()), task.v0_m_s.values())
+    grid = classify_batch(theta, v, unstable)
+    late = (grid.outcome != OUTCOMES.index("period1")) & (grid.iterations >= LATE_ITERATIONS)
+    assert row["points_decided_late"] == int(late.sum())
+    assert row["points_decided_late"] >= round(row["fraction_undecided"] * 900) > 0
+
+
 def test_no_fixed_point_gives_nan_fixed_point_columns_and_no_period1(paper_params):
     low = parameter_point(paper_params, {"racket_amplitude": 0.15})
     row = evaluate_point(tasks_at([low], num=20)[0])["row"]
