@@ -814,6 +814,7 @@ def add_experiment_command(entry: Entry) -> None:
         data: Optional[list[Path]] = None,
         events: Optional[list[Path]] = None,
         manifest: Optional[list[Path]] = None,
+        racket: Optional[list[str]] = None,
         resume: ResumeOption = False,
         scheduler: SchedulerOption = None,
         figure_format: FigureFormatOption = None,
@@ -836,6 +837,9 @@ def add_experiment_command(entry: Entry) -> None:
             path = only_once(f"--{key}", paths)
             if path is not None:
                 overrides.append(f"{key}={json.dumps(str(path))}")
+        source = only_once("--racket", racket)
+        if source is not None:
+            overrides.append(f"racket={json.dumps(source)}")
         run_experiment(entry, config=config, overrides=overrides, out=out_dir, quiet=quiet,
                        force=force, print_config=print_config, jobs=jobs, resume=resume,
                        scheduler=scheduler, figure_formats=tuple(figure_format or ["png"]),
@@ -849,7 +853,11 @@ def add_experiment_command(entry: Entry) -> None:
     for key, help_text in file_options.items():
         hints[key] = Annotated[Optional[list[Path]],
                                typer.Option(f"--{key}", help=help_text, metavar="PATH")]
+    hints["racket"] = Annotated[Optional[list[str]],
+                                typer.Option("--racket", help=entry.racket_help,
+                                             metavar="SOURCE")]
     declared = {**{k: v is not None for k, v in file_options.items()},
+                "racket": entry.racket_help is not None,
                 "resume": entry.resumable, "scheduler": entry.cluster, "jobs": entry.parallel}
     params = [p.replace(annotation=hints[p.name])
               for p in inspect.signature(command).parameters.values()

@@ -32,6 +32,7 @@ class Entry:
     it takes ``--scheduler ADDRESS`` (its tasks can run on a Dask cluster). ``attribute``:
     the module's attribute holding the :class:`Experiment` (one module may define several).
     ``manifest_help``: the command takes ``--manifest FILE`` (config key ``manifest``);
+    ``racket_help``: the command takes ``--racket SOURCE`` (config key ``racket``);
     ``task_keys``: its resumed tasks carry keys of what they were made from and are rerun
     when those change, so ``--resume`` accepts a changed config (the experiment decides
     which tasks to keep)."""
@@ -51,6 +52,7 @@ class Entry:
     attribute: str = "EXPERIMENT"
     manifest_help: str | None = None
     task_keys: bool = False
+    racket_help: str | None = None
 
     def __post_init__(self) -> None:
         if not self.module:
@@ -245,6 +247,15 @@ EXPERIMENTS: tuple[Entry, ...] = (
         "condition, trial, events, extract.<key>]); sets the config key `manifest`.",
         needs_fixed_point=False, reproduce=False, resumable=True, parallel=True, cluster=True,
         task_keys=True,
+    ),
+    Entry(
+        "virtual",
+        "The paper's virtual set-up: a racket stream drives the model's ball (sections 6-7).",
+        (("virtual.png", "The virtual set-up (sections 6-7): ball and racket of trial 1, the "
+          "exact impacts' v_k and theta_k; perturbed impacts in red."),),
+        racket_help="The racket's source: sine (the model's racket, eq. 4) or replay:<file> "
+        "(the racket of a recording bounce extract reads); sets the config key `racket`.",
+        needs_fixed_point=False, reproduce=False,
     ),
 )
 

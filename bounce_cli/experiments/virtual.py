@@ -1,0 +1,224 @@
+"""``bounce virtual``: the paper's virtual set-up (sections 6-7), run headless.
+
+A racket stream (``--racket``: ``sine``, ``replay:<file>``) drives the model's ball
+(``bounce_cli.virtual.physics``: exact flights, each impact at the first crossing of the
+interpolated racket, eq. 3 with the interpolant's velocity), trial by trial, with the
+protocol's perturbations of alpha (section 7: every N-th impact from given ranges, seeded).
+Headless runs go as fast as the physics allows. It writes, in formats bounce already reads:
+
+* ``recordings/<subject>_<condition>_t<n>.csv``: trial, t_s, racket_x_m, ball_x_m (what
+  ``bounce extract`` takes with no ``--set``);
+* ``events/<subject>_<condition>_t<n>.csv``: trial, t_s, alpha of every impact (as
+  ``extract --events`` and ``bounce study`` read a virtual set-up's log);
+* ``impacts.csv``: the exact impacts in the impacts table's columns (phase, period and
+  amplitude from the recorded racket's cycles, as ``bounce extract`` defines them);
+* ``gaps.csv``: the stream's gaps longer than ``max_gap_s`` (the ball waited);
+* ``study.csv``: the manifest for ``bounce study --manifest <out>/study.csv``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+import numpy as np
+import pandas as pd
+from pydantic import Field, model_validator
+
+from ..data.extraction import ExtractionSettings, racket_cycles
+from ..data.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
+from ..data.simulated_lab import LAB_MIN_HOP_S
+from ..errors import ConfigError
+from ..runtime.config import ExperimentConfig, ModelBlock, StrictModel
+from ..virtual.session import Launch, Schedule, TrialRecord, run_trial
+from ..virtual.sources import open_source
+from .base import Experiment, ExperimentResult, RunOptions
+from .plotting import caption_figures, draw_fig2, publication_style
+
+
+class LaunchBlock(StrictModel):
+    """How each trial's ball starts."""
+
+    mode: Literal["fixed_point", "state", "drop"] = Field(
+        "fixed_point", description="fixed_point: from the racket at the model's theta~, v~ "
+        "(eqs. 7, 8); state: from the racket at theta_deg with v_m_s; drop: at rest from "
+        "height_m")
+    theta_deg: float = Field(40.0, description="state: the racket's phase at launch, deg "
+                             "(t = theta / omega_r of the model's racket)")
+    v_m_s: float = Field(4.5, description="state: the ball's velocity at launch, m/s")
+    height_m: float = Field(1.0, description="drop: the ball's height at rest, m")
+
+
+class PerturbationsBlock(StrictModel):
+    """Section 7: alpha drawn from one of ``ranges`` (equal chances) at impacts ``first``,
+    ``first + every``, ... (every 0: none)."""
+
+    every: int = Field(0, ge=0, le=1000)
+    first: int = Field(4, ge=0)
+    ranges: list[tuple[float, float]] = Field(
+        default_factory=lambda: [(0.3, 0.4), (0.6, 0.7)])
+
+    @model_validator(mode="after")
+    def _ranges(self):
+        if self.every and not self.ranges:
+            raise ValueError("give ranges for the perturbed impacts")
+        for lo, hi in self.ranges:
+            if not 0.0 <= lo <= hi < 1.0:
+                raise ValueError(f"each range must satisfy 0 <= low <= high < 1 (got "
+                                 f"[{lo}, {hi}])")
+        return self
+
+
+class VirtualConfig(ExperimentConfig):
+    model: ModelBlock = ModelBlock()
+    racket: str = Field("sine", description="the racket's source: sine | replay:<file>")
+    sample_rate_hz: float = Field(1000.0, ge=20.0, le=100_000.0,
+                                  description="sine: racket samples per second")
+    subject: str = Field("s1", pattern=r"^[A-Za-z0-9._\-]+$")
+    condition: str = Field("virtual", pattern=r"^[A-Za-z0-9._\-]+$")
+    seed: int = Field(0, ge=0)
+    trials: int = Field(2, ge=1, le=1000)
+    trial_s: float = Field(40.0, gt=1.0, le=3600.0)
+    rest_s: float = Field(0.0, ge=0.0, description="rest between trials, s (headless: "
+                          "recorded, not waited)")
+    launch: LaunchBlock = LaunchBlock()
+    perturbations: PerturbationsBlock = PerturbationsBlock()
+    min_hop_s: float = Field(LAB_MIN_HOP_S, gt=0.0, description="a shorter hop: the ball "
+                             "sticks to the racket (section 3)")
+    min_relative_velocity_m_s: float = Field(1e-3, ge=0.0, description="leaving the racket "
+                                             "slower than this: the ball sticks")
+    max_gap_s: float = Field(0.05, gt=0.0, description="longer stretches without racket "
+                             "samples stop the ball's clock (logged in gaps.csv)")
+
+    @model_validator(mode="after")
+    def _size(self):
+        if self.racket == "sine" and self.trials * self.trial_s * self.sample_rate_hz > 2e7:
+            raise ValueError("trials x trial_s x sample_rate_hz exceeds 2e7 racket samples")
+        return self
+
+
+def _read_racket(path: Path, warn):
+    from ..data.recordings import read_recording
+    from .extract import ExtractConfig
+
+    defaults = ExtractConfig()
+    trials = read_recording(path, defaults.columns, defaults.units, defaults.markers,
+                            warn=warn)
+    return [(np.asarray(tr.t, float), np.asarray(tr.racket, float)) for tr in trials]
+
+
+def launch_of(config: VirtualConfig) -> Launch:
+    params = config.params
+    if config.launch.mode == "drop":
+        return Launch(None, None, config.launch.height_m)
+    if config.launch.mode == "state":
+        return Launch(np.radians(config.launch.theta_deg) / params.omega,
+                      config.launch.v_m_s, None)
+    fixed = params.fixed_point()
+    return Launch(fixed.theta_rad / params.omega, fixed.v_m_s, None)
+
+
+def impacts_frame(record: TrialRecord, trial: int, g: float, duration_s: float) -> pd.DataFrame:
+    """The trial's exact impacts in the impacts table's columns; phase, period and amplitude
+    from the recorded racket's cycles (``bounce extract``'s definitions)."""
+    imp = record.impacts
+    t = np.array([i.t_s for i in imp])
+    v = np.array([i.v_m_s for i in imp])
+    settings = ExtractionSettings(g=g)
+    cycles = racket_cycles(record.t, record.racket, np.isfinite(record.racket), settings)
+    cycle, theta = cycles.locate(t) if len(t) else (np.array([], int), np.array([]))
+    inside = cycle >= 0
+    cc = np.maximum(cycle, 0)
+    periods = np.where(inside, cycles.periods[cc] if cycles.periods.size else np.nan, np.nan)
+    amplitudes = np.where(inside, cycles.amplitudes[cc] if cycles.amplitudes.size else np.nan,
+                          np.nan)
+    next_t = np.append(t[1:], duration_s)
+    rise = np.maximum(v, 0.0) / g
+    racket_x = np.array([i.racket_x_m for i in imp])
+    apex = np.where(t + rise <= next_t,
+                    racket_x + np.maximum(v, 0.0) ** 2 / (2 * g) - cycles.mid_position(t + rise)
+                    if len(t) else np.array([]), np.nan)
+    racket_v = np.array([i.racket_v_m_s for i in imp])
+    v_in = np.array([i.v_in_m_s for i in imp])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        alpha_measured = -(v - racket_v) / (v_in - racket_v)
+    frame = pd.DataFrame({
+        "trial": trial, "k": np.arange(len(t)), "t_s": t, "theta_rad": theta,
+        "theta_deg": np.degrees(theta), "v_m_s": v,
+        "racket_acc_g": np.array([i.racket_acc_m_s2 for i in imp]) / g,
+        "racket_period_s": periods, "racket_amplitude_m": amplitudes,
+        "hop_s": np.append(np.diff(t), np.nan), "ball_apex_m": apex,
+        "alpha": [i.alpha for i in imp], "perturbed": [i.perturbed for i in imp],
+        "v_in_m_s": v_in, "alpha_measured": alpha_measured, "contact_s": 0.0,
+        "stuck": [i.stuck for i in imp],
+    })
+    return frame[[*REQUIRED_COLUMNS, *EVENT_COLUMNS, *MEASURED_COLUMNS, "stuck"]]
+
+
+def trial_name(config: VirtualConfig, trial: int, folder: str) -> str:
+    return f"{folder}/{config.subject}_{config.condition}_t{trial}.csv"
+
+
+def run(config: VirtualConfig, options: RunOptions) -> ExperimentResult:
+    params = config.params
+    source = open_source(config.racket, params.racket_amplitude, params.racket_period,
+                         config.sample_rate_hz, lambda path: _read_racket(path, options.warn))
+    schedule = Schedule(params.alpha, config.perturbations.every, config.perturbations.first,
+                        tuple((lo, hi) for lo, hi in config.perturbations.ranges))
+    launch = launch_of(config)
+    streams = np.random.SeedSequence(config.seed).spawn(config.trials)
+    frames: dict[str, pd.DataFrame] = {}
+    impacts, gaps = [], []
+    options.progress.start(config.trials, "virtual")
+    for n in range(1, config.trials + 1):
+        record = run_trial(source, n, config.trial_s, params.g, schedule, launch,
+                           np.random.default_rng(streams[n - 1]), min_hop_s=config.min_hop_s,
+                           min_relative_velocity_m_s=config.min_relative_velocity_m_s,
+                           max_gap_s=config.max_gap_s)
+        if record.t.size < 4:
+            raise ConfigError(f"racket: {source.description}: trial {n} has fewer than 4 "
+                              "samples")
+        frames[trial_name(config, n, "recordings")] = pd.DataFrame({
+            "trial": n, "t_s": record.t, "racket_x_m": record.racket,
+            "ball_x_m": record.ball})
+        table = impacts_frame(record, n, params.g, float(record.t[-1]))
+        frames[trial_name(config, n, "events")] = table[["trial", "t_s", "alpha"]]
+        impacts.append(table)
+        gaps += [{"trial": n, "t_start_s": gap.t_start_s, "t_end_s": gap.t_end_s}
+                 for gap in record.gaps]
+        options.progress.advance(1)
+    impacts_table = pd.concat(impacts, ignore_index=True)
+    trials = range(1, config.trials + 1)
+    frames.update({
+        "impacts.csv": impacts_table,
+        "gaps.csv": pd.DataFrame(gaps, columns=["trial", "t_start_s", "t_end_s"]),
+        "study.csv": pd.DataFrame({
+            "file": [trial_name(config, n, "recordings") for n in trials],
+            "events": [trial_name(config, n, "events") for n in trials],
+            "subject": config.subject, "condition": config.condition, "trial": list(trials)}),
+    })
+    options.record["racket_source"] = source.description
+    figures = draw(frames)
+    caption_figures(figures, params, f"{config.trials} trials x {config.trial_s:g} s, "
+                    f"{source.description}, seed {config.seed}")
+    stuck = int(impacts_table["stuck"].sum())
+    summary = [
+        f"{config.trials} trials x {config.trial_s:g} s ({source.description}): "
+        f"{len(impacts_table)} impacts ({int(impacts_table['perturbed'].sum())} perturbed"
+        + (f", {stuck} left the ball on the racket" if stuck else "") + f"), {len(gaps)} "
+        "stream gap(s); run `bounce study --manifest <out>/study.csv`"]
+    return ExperimentResult(frames=frames, figures=figures, summary=summary)
+
+
+@publication_style
+def draw(frames: dict[str, pd.DataFrame]) -> dict:
+    """Fig. 2's layout for the first trial's first 10 bounces (perturbed ones in red)."""
+    first = sorted(name for name in frames if name.startswith("recordings/"))
+    if not first:
+        return {}
+    fig = draw_fig2(frames[first[0]], frames["impacts.csv"],
+                    "virtual set-up, trial 1: the first 10 bounces")
+    return {"virtual.png": fig}
+
+
+EXPERIMENT = Experiment(name="virtual", schema=VirtualConfig, run=run, draw=draw)

@@ -1,0 +1,89 @@
+"""A virtual set-up's trial: the protocol's schedule of alpha, the ball on the racket stream,
+and what is recorded (section 7's perturbation study: alpha_0 with every N-th impact's alpha
+drawn from one of the given ranges, which one at random).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .physics import Gap, Impact, VirtualBall
+from .sources import RacketSource
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """alpha of each impact: ``alpha`` except at impacts ``first, first + every, ...`` (every
+    > 0), where it is drawn uniformly from one of ``ranges`` (each chosen with equal
+    probability) from the trial's own random stream."""
+
+    alpha: float
+    every: int
+    first: int
+    ranges: tuple[tuple[float, float], ...]
+
+    def alpha_at(self, k: int, rng: np.random.Generator) -> tuple[float, bool]:
+        """(alpha, perturbed) of impact k; called once per impact in impact order, so that
+        the draws (and so the trial) do not depend on how fast the samples come."""
+        if self.every and k >= self.first and (k - self.first) % self.every == 0:
+            lo, hi = self.ranges[int(rng.integers(len(self.ranges)))]
+            return float(rng.uniform(lo, hi)), True
+        return self.alpha, False
+
+
+@dataclass(frozen=True)
+class Launch:
+    """How each trial's ball starts: from the racket at time ``t_s`` with ``v_m_s`` (None:
+    the racket's velocity), or dropped at rest from ``height_m`` at t = 0."""
+
+    t_s: float | None
+    v_m_s: float | None
+    height_m: float | None
+
+
+@dataclass(frozen=True)
+class TrialRecord:
+    """What one trial recorded: the samples (t, racket, ball), the impacts, the stream's
+    gaps."""
+
+    t: np.ndarray
+    racket: np.ndarray
+    ball: np.ndarray
+    impacts: tuple[Impact, ...]
+    gaps: tuple[Gap, ...]
+
+
+#: impacts a trial may schedule (far above any 1-hour trial's bounces)
+MAX_IMPACTS = 100_000
+
+
+def run_trial(source: RacketSource, trial: int, duration_s: float, g: float,
+              schedule: Schedule, launch: Launch, rng: np.random.Generator, *,
+              min_hop_s: float, min_relative_velocity_m_s: float,
+              max_gap_s: float) -> TrialRecord:
+    """One trial as fast as the physics goes (headless): every racket sample of the source
+    pushed to the ball in order."""
+    alphas: list[tuple[float, bool]] = []
+
+    def alpha_of(k: int) -> tuple[float, bool]:
+        while len(alphas) <= k:
+            alphas.append(schedule.alpha_at(len(alphas), rng))
+        return alphas[k]
+
+    ball = VirtualBall(g=g, alpha_of=alpha_of, min_hop_s=min_hop_s,
+                       min_relative_velocity_m_s=min_relative_velocity_m_s,
+                       max_gap_s=max_gap_s)
+    if launch.height_m is not None:
+        ball.drop(0.0, launch.height_m)
+    else:
+        ball.launch_from_racket(0.0 if launch.t_s is None else launch.t_s, launch.v_m_s)
+    ts, xs, bs = [], [], []
+    for t, x in source.samples(trial, duration_s):
+        _, b = ball.push(t, x)
+        ts.append(t)
+        xs.append(x)
+        bs.append(b)
+    return TrialRecord(np.asarray(ts), np.asarray(xs), np.asarray(bs), tuple(ball.impacts),
+                       tuple(ball.gaps))

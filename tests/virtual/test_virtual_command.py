@@ -1,0 +1,84 @@
+"""``bounce virtual`` headless: the protocol's perturbations, files bounce reads, replay."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import bounce_cli
+
+SHORT = {"trials": 2, "trial_s": 12.0, "perturbations.every": 5, "seed": 3}
+
+
+def test_perturbation_protocol_every_fifth_impact_in_the_ranges(tmp_path):
+    result = bounce_cli.run("virtual", config="configs/virtual/perturbation.yaml", set=SHORT,
+                            out=tmp_path / "v")
+    impacts = result.frames["impacts.csv"]
+    for _, trial in impacts.groupby("trial"):
+        k = trial["k"].to_numpy()
+        expected = (k >= 4) & ((k - 4) % 5 == 0)
+        assert np.array_equal(trial["perturbed"].to_numpy(), expected)
+        alpha = trial["alpha"].to_numpy()
+        low = (alpha >= 0.3) & (alpha <= 0.4)
+        high = (alpha >= 0.6) & (alpha <= 0.7)
+        assert np.all((low | high)[expected]) and np.all(alpha[~expected] == 0.5)
+    # the two trials draw from streams of their own
+    a1 = impacts.loc[(impacts["trial"] == 1) & impacts["perturbed"], "alpha"].to_numpy()
+    a2 = impacts.loc[(impacts["trial"] == 2) & impacts["perturbed"], "alpha"].to_numpy()
+    assert not np.array_equal(a1[:2], a2[:2])
+    # alpha_measured by eq. 3 from the exact velocities is the alpha applied
+    assert np.allclose(impacts["alpha_measured"], impacts["alpha"], atol=1e-9)
+    manifest = pd.read_csv(tmp_path / "v" / "study.csv")
+    assert list(manifest.columns) == ["file", "events", "subject", "condition", "trial"]
+    for row in manifest.itertuples():
+        assert (tmp_path / "v" / row.file).is_file() and (tmp_path / "v" / row.events).is_file()
+    assert (tmp_path / "v" / "virtual.png").is_file()
+
+
+def test_extract_with_the_events_recovers_the_exact_impacts(tmp_path):
+    """The recording and events are what ``bounce extract`` reads with no --set."""
+    out = tmp_path / "v"
+    run = bounce_cli.run("virtual", set={"trials": 1, "trial_s": 10.0}, out=out)
+    exact = run.frames["impacts.csv"]
+    extracted = bounce_cli.run(
+        "extract", set={"events": str(out / "events" / "s1_virtual_t1.csv")},
+        data=out / "recordings" / "s1_virtual_t1.csv").frames["impacts.csv"]
+    both = exact.merge(extracted, on="k", suffixes=("", "_x"))
+    assert len(both) >= 8
+    assert np.allclose(both["t_s"], both["t_s_x"], atol=1e-9)
+    assert np.allclose(both["v_m_s"], both["v_m_s_x"], atol=2e-3)
+
+
+def test_replay_of_a_sine_recording_gives_the_sine_source_s_impacts(tmp_path):
+    sine = bounce_cli.run("virtual", set={"trials": 1, "trial_s": 8.0})
+    recording = sine.frames["recordings/s1_virtual_t1.csv"]
+    path = tmp_path / "racket.csv"
+    recording.to_csv(path, index=False)
+    replay = bounce_cli.run("virtual", set={"trials": 1, "trial_s": 8.0,
+                                            "racket": f"replay:{path}"})
+    a, b = sine.frames["impacts.csv"], replay.frames["impacts.csv"]
+    assert len(a) == len(b) and np.allclose(a["t_s"], b["t_s"], atol=1e-9)
+    assert np.allclose(a["v_m_s"], b["v_m_s"], atol=1e-9)
+
+
+def test_an_unknown_racket_source_is_one_line(cli, user_error, tmp_path):
+    user_error(cli("virtual", "--racket", "lsl", "--out", tmp_path / "x"), "unknown source")
+    assert not (tmp_path / "x").exists()
+    user_error(cli("virtual", "--racket", "replay:nope.csv", "--out", tmp_path / "y"),
+               "no such file")
+
+
+@pytest.mark.slow
+def test_study_analyses_the_virtual_session_with_no_step_between(tmp_path, cli):
+    out = tmp_path / "v"
+    assert cli("virtual", "--config", "configs/virtual/perturbation.yaml", "--set",
+               "trials=4", "--quiet", "--out", out).exit_code == 0
+    result = cli("study", "--manifest", out / "study.csv", "--quiet", "--out",
+                 tmp_path / "study")
+    assert result.exit_code in (0, 1)  # 1: an analysis the data cannot support, in failures.csv
+    impulse = pd.read_csv(tmp_path / "study" / "group_impulse.csv")
+    assert set(impulse["direction"]) == {"decrease", "increase"}
+    # the passive sine racket: Fig. 11's period modulation is flat
+    period = impulse[impulse["quantity"] == "racket_period_s"]
+    assert np.all(np.abs(period["mean"]) < 1e-9)
