@@ -37,6 +37,7 @@ ROOMS = (
     "bounce_cli.paper.values",
     "bounce_cli.runtime",
     "bounce_cli.data",
+    "bounce_cli.virtual",
     "bounce_cli.experiments",
     "bounce_cli.paper",
     "bounce_cli.api",
