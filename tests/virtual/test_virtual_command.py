@@ -2,17 +2,21 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
 
 import bounce_cli
 
+PROTOCOL = Path(__file__).resolve().parents[2] / "configs" / "virtual" / "perturbation.yaml"
+
 SHORT = {"trials": 2, "trial_s": 12.0, "perturbations.every": 5, "seed": 3}
 
 
 def test_perturbation_protocol_every_fifth_impact_in_the_ranges(tmp_path):
-    result = bounce_cli.run("virtual", config="configs/virtual/perturbation.yaml", set=SHORT,
+    result = bounce_cli.run("virtual", config=PROTOCOL, set=SHORT,
                             out=tmp_path / "v")
     impacts = result.frames["impacts.csv"]
     for _, trial in impacts.groupby("trial"):
@@ -72,7 +76,7 @@ def test_an_unknown_racket_source_is_one_line(cli, user_error, tmp_path):
 @pytest.mark.slow
 def test_study_analyses_the_virtual_session_with_no_step_between(tmp_path, cli):
     out = tmp_path / "v"
-    assert cli("virtual", "--config", "configs/virtual/perturbation.yaml", "--set",
+    assert cli("virtual", "--config", PROTOCOL, "--set",
                "trials=4", "--quiet", "--out", out).exit_code == 0
     result = cli("study", "--manifest", out / "study.csv", "--quiet", "--out",
                  tmp_path / "study")
