@@ -41,6 +41,7 @@ from scipy.interpolate import CubicSpline
 from scipy.signal import find_peaks
 
 from ..model.params import ModelError
+from ..model.flight import restitution_of
 
 TWO_PI = 2.0 * math.pi
 #: a racket cycle whose period differs from the trial's median by more than this fraction is
@@ -984,7 +985,7 @@ def _racket_at_impacts(t, racket: _Racket, imp: _Impacts, s: ExtractionSettings)
         if math.isfinite(here.rss) and here.dof > 0:
             racket_rss, racket_dof = racket_rss + here.rss, racket_dof + here.dof
         if math.isfinite(imp.v_in[j]) and imp.v_in[j] < here.v:  # approaching the racket
-            alpha_measured[j] = -(imp.v_k[j] - here.v) / (imp.v_in[j] - here.v)
+            alpha_measured[j] = restitution_of(imp.v_in[j], imp.v_k[j], here.v)
             if 0.0 < alpha_measured[j] < 1.0 and math.isfinite(imp.area[j]):
                 imp.weight[j] = (here.v - imp.v_in[j]) * contact_shape_factor(alpha_measured[j])
                 imp.contact[j] = math.sqrt(max(imp.area[j], 0.0) / imp.weight[j])

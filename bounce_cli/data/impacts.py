@@ -70,6 +70,16 @@ MEASURED_COLUMNS: tuple[str, ...] = ("v_in_m_s", "alpha_measured", "contact_s")
 #: what every analysis needs: the trial, the impact index, and the map's state (v, theta);
 #: theta may come as theta_rad or theta_deg
 CORE_COLUMNS: tuple[str, ...] = ("trial", "k", "v_m_s")
+
+
+def ball_apex(t, v, racket_x, next_t, g: float, mid_at):
+    """``ball_apex_m``: the highest ball position of the flight after each impact (eq. 1:
+    ``x_r(t_k) + v_k^2 / 2g``), relative to the racket's mid-position ``mid_at(time)`` at the
+    apex; NaN where the apex would come after ``next_t`` (the next impact, or the trial's end)."""
+    rise = np.maximum(v, 0.0) / g
+    apex_t = t + rise
+    apex = racket_x + np.maximum(v, 0.0) ** 2 / (2.0 * g) - mid_at(apex_t)
+    return np.where(apex_t <= next_t, apex, np.nan)
 #: what each optional column is for (named in the error when an analysis needs it)
 COLUMN_PURPOSE: dict[str, str] = {
     "racket_acc_g": "the racket acceleration at impact AC",

@@ -64,8 +64,9 @@ from typing import Any
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from ..model.flight import impact_velocity
+from ..model.flight import impact_velocity, restitution_of
 from ..model.params import ModelError, ModelParams
+from .impacts import ball_apex
 from ..model.perturbation import perturbed_impact
 
 #: a simulated session's sticking threshold, s: a hop shorter than this is an error (a lab's
@@ -530,13 +531,8 @@ def truth_rows(truth: TrialTruth) -> dict[str, np.ndarray]:
     hop = np.append(np.diff(t), np.nan)
     v_in = truth.impact_v_in
     racket_v = r.velocity(t)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        alpha_measured = -(v - racket_v) / (v_in - racket_v)  # eq. 3 at the equivalent impact
-    rise = np.maximum(v, 0.0) / g
-    apex_t = t + rise
-    apex = r.position(t) + np.maximum(v, 0.0) ** 2 / (2.0 * g) - r.drift(apex_t)
-    next_t = np.append(t[1:], truth.duration_s)
-    apex = np.where(apex_t <= next_t, apex, np.nan)
+    alpha_measured = restitution_of(v_in, v, racket_v)  # eq. 3 at the equivalent impact
+    apex = ball_apex(t, v, r.position(t), np.append(t[1:], truth.duration_s), g, r.drift)
     return {
         "k": np.arange(len(t)),
         "t_s": t,

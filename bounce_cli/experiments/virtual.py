@@ -18,6 +18,7 @@ Headless runs go as fast as the physics allows. It writes, in formats bounce alr
 
 from __future__ import annotations
 
+from dataclasses import fields
 from pathlib import Path
 from typing import Literal
 
@@ -26,10 +27,12 @@ import pandas as pd
 from pydantic import Field, model_validator
 
 from ..data.extraction import ExtractionSettings, racket_cycles
-from ..data.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
+from ..data.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS, ball_apex
 from ..data.simulated_lab import LAB_MIN_HOP_S
 from ..errors import ConfigError
+from ..model.flight import restitution_of
 from ..runtime.config import ExperimentConfig, ModelBlock, StrictModel
+from ..virtual.physics import Impact
 from ..virtual.session import Launch, Schedule, TrialRecord, run_trial
 from ..virtual.sources import open_source
 from .base import Experiment, ExperimentResult, RunOptions
@@ -121,38 +124,35 @@ def launch_of(config: VirtualConfig) -> Launch:
 def impacts_frame(record: TrialRecord, trial: int, g: float, duration_s: float) -> pd.DataFrame:
     """The trial's exact impacts in the impacts table's columns; phase, period and amplitude
     from the recorded racket's cycles (``bounce extract``'s definitions)."""
-    imp = record.impacts
-    t = np.array([i.t_s for i in imp])
-    v = np.array([i.v_m_s for i in imp])
-    settings = ExtractionSettings(g=g)
-    cycles = racket_cycles(record.t, record.racket, np.isfinite(record.racket), settings)
-    cycle, theta = cycles.locate(t) if len(t) else (np.array([], int), np.array([]))
-    inside = cycle >= 0
-    cc = np.maximum(cycle, 0)
-    periods = np.where(inside, cycles.periods[cc] if cycles.periods.size else np.nan, np.nan)
-    amplitudes = np.where(inside, cycles.amplitudes[cc] if cycles.amplitudes.size else np.nan,
-                          np.nan)
-    next_t = np.append(t[1:], duration_s)
-    rise = np.maximum(v, 0.0) / g
-    racket_x = np.array([i.racket_x_m for i in imp])
-    apex = np.where(t + rise <= next_t,
-                    racket_x + np.maximum(v, 0.0) ** 2 / (2 * g) - cycles.mid_position(t + rise)
-                    if len(t) else np.array([]), np.nan)
-    racket_v = np.array([i.racket_v_m_s for i in imp])
-    v_in = np.array([i.v_in_m_s for i in imp])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        alpha_measured = -(v - racket_v) / (v_in - racket_v)
+    imp = pd.DataFrame([vars(i) for i in record.impacts],
+                       columns=[f.name for f in fields(Impact)])
+    t, v = imp["t_s"].to_numpy(float), imp["v_m_s"].to_numpy(float)
+    cycles = racket_cycles(record.t, record.racket, np.isfinite(record.racket),
+                           ExtractionSettings(g=g))
+    cycle, theta = cycles.locate(t)
     frame = pd.DataFrame({
-        "trial": trial, "k": np.arange(len(t)), "t_s": t, "theta_rad": theta,
+        "trial": trial, "k": imp["k"], "t_s": t, "theta_rad": theta,
         "theta_deg": np.degrees(theta), "v_m_s": v,
-        "racket_acc_g": np.array([i.racket_acc_m_s2 for i in imp]) / g,
-        "racket_period_s": periods, "racket_amplitude_m": amplitudes,
-        "hop_s": np.append(np.diff(t), np.nan), "ball_apex_m": apex,
-        "alpha": [i.alpha for i in imp], "perturbed": [i.perturbed for i in imp],
-        "v_in_m_s": v_in, "alpha_measured": alpha_measured, "contact_s": 0.0,
-        "stuck": [i.stuck for i in imp],
+        "racket_acc_g": imp["racket_acc_m_s2"].to_numpy(float) / g,
+        "racket_period_s": _at(cycles.periods, cycle),
+        "racket_amplitude_m": _at(cycles.amplitudes, cycle),
+        "hop_s": np.append(np.diff(t), np.nan)[: len(t)],
+        "ball_apex_m": ball_apex(t, v, imp["racket_x_m"].to_numpy(float),
+                                 np.append(t[1:], duration_s), g, cycles.mid_position),
+        "alpha": imp["alpha"], "perturbed": imp["perturbed"].astype(bool),
+        "v_in_m_s": imp["v_in_m_s"],
+        "alpha_measured": restitution_of(imp["v_in_m_s"].to_numpy(float), v,
+                                         imp["racket_v_m_s"].to_numpy(float)),
+        "contact_s": 0.0, "stuck": imp["stuck"].astype(bool),
     })
     return frame[[*REQUIRED_COLUMNS, *EVENT_COLUMNS, *MEASURED_COLUMNS, "stuck"]]
+
+
+def _at(values: np.ndarray, cycle: np.ndarray) -> np.ndarray:
+    """``values[cycle]``, NaN where cycle is -1 (outside a complete cycle)."""
+    out = np.full(cycle.shape, np.nan)
+    out[cycle >= 0] = values[cycle[cycle >= 0]]
+    return out
 
 
 def trial_name(config: VirtualConfig, trial: int, folder: str) -> str:

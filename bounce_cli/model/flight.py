@@ -174,6 +174,13 @@ def impact_velocity(v_before: float, racket_v: float, alpha: float) -> float:
     return racket_v - alpha * (v_before - racket_v)
 
 
+def restitution_of(v_before, v_after, racket_v):
+    """Eq. 3 solved for alpha: ``-(v_b+ - v_r) / (v_b- - v_r)`` (arrays broadcast; NaN or inf
+    where the ball does not approach the racket, without a warning)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return -(v_after - racket_v) / (v_before - racket_v)
+
+
 def simulate(
     theta0: float,
     v0: float,
