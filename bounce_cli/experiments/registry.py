@@ -253,8 +253,9 @@ EXPERIMENTS: tuple[Entry, ...] = (
         "The paper's virtual set-up: a racket stream drives the model's ball (sections 6-7).",
         (("virtual.png", "The virtual set-up (sections 6-7): ball and racket of trial 1, the "
           "exact impacts' v_k and theta_k; perturbed impacts in red."),),
-        racket_help="The racket's source: sine (the model's racket, eq. 4) or replay:<file> "
-        "(the racket of a recording bounce extract reads); sets the config key `racket`.",
+        racket_help="The racket's source: sine (the model's racket, eq. 4), replay:<file> "
+        "(the racket of a recording bounce extract reads) or lsl:<stream name> (a live Lab "
+        "Streaming Layer stream); sets the config key `racket`.",
         needs_fixed_point=False, reproduce=False,
     ),
 )

@@ -34,7 +34,7 @@ from ..model.flight import restitution_of
 from ..runtime.config import ExperimentConfig, ModelBlock, StrictModel
 from ..virtual.physics import Impact
 from ..virtual.session import Launch, Schedule, TrialRecord, run_trial
-from ..virtual.sources import open_source
+from ..virtual.sources import LslSettings, open_source
 from .base import Experiment, ExperimentResult, RunOptions
 from .plotting import caption_figures, draw_fig2, publication_style
 
@@ -72,9 +72,30 @@ class PerturbationsBlock(StrictModel):
         return self
 
 
+#: metres per unit of an LSL stream's racket channel
+LSL_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+
+
+class LslBlock(StrictModel):
+    """``racket: lsl:<stream name>``: the channel holding the racket's height and its unit."""
+
+    channel: int = Field(0, ge=0, description="index of the racket height's channel")
+    units: Literal["m", "cm", "mm"] = Field("m", description="that channel's unit")
+    resolve_timeout_s: float = Field(5.0, gt=0.0, le=600.0, description="wait this long "
+                                     "for the stream to be found, s")
+    give_up_s: float = Field(5.0, gt=0.0, le=3600.0, description="a stream silent this "
+                             "long ends the trial (wall clock), s")
+
+    def settings(self) -> LslSettings:
+        return LslSettings(self.channel, LSL_UNITS[self.units], self.resolve_timeout_s,
+                           self.give_up_s)
+
+
 class VirtualConfig(ExperimentConfig):
     model: ModelBlock = ModelBlock()
-    racket: str = Field("sine", description="the racket's source: sine | replay:<file>")
+    racket: str = Field("sine", description="the racket's source: sine | replay:<file> | "
+                        "lsl:<stream name>")
+    lsl: LslBlock = LslBlock()
     sample_rate_hz: float = Field(1000.0, ge=20.0, le=100_000.0,
                                   description="sine: racket samples per second")
     subject: str = Field("s1", pattern=r"^[A-Za-z0-9._\-]+$")
@@ -162,7 +183,8 @@ def trial_name(config: VirtualConfig, trial: int, folder: str) -> str:
 def run(config: VirtualConfig, options: RunOptions) -> ExperimentResult:
     params = config.params
     source = open_source(config.racket, params.racket_amplitude, params.racket_period,
-                         config.sample_rate_hz, lambda path: _read_racket(path, options.warn))
+                         config.sample_rate_hz, lambda path: _read_racket(path, options.warn),
+                         config.lsl.settings(), config.rest_s, options.warn)
     schedule = Schedule(params.alpha, config.perturbations.every, config.perturbations.first,
                         tuple((lo, hi) for lo, hi in config.perturbations.ranges))
     launch = launch_of(config)

@@ -4,12 +4,17 @@ A source gives, for trial n (1, 2, ...), its racket samples ``(t, x)`` in s and 
 trial's start, in increasing time. ``sine``: the model's racket (eq. 4) sampled at the
 protocol's rate, the deterministic check of the physics; ``replay:<file>``: the racket column
 of any recording ``bounce extract`` reads (CSV, C3D, Vicon, QTM, Motive; the recording's
-trials in turn, cycled when the protocol has more), played at its own clock.
+trials in turn, cycled when the protocol has more), played at its own clock; ``lsl:<name>``: a
+Lab Streaming Layer stream of that name (how Vicon, Qualisys, OptiTrack and most lab sensors
+publish in real time; ``pylsl``, the ``virtual`` extra), one channel of it, at the sender's
+timestamps.
 """
 
 from __future__ import annotations
 
 import math
+import time
+from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterator, Protocol
@@ -19,7 +24,7 @@ import numpy as np
 from ..errors import ConfigError
 
 #: the sources ``--racket`` takes
-SOURCE_KINDS = ("sine", "replay:<file>")
+SOURCE_KINDS = ("sine", "replay:<file>", "lsl:<stream name>")
 
 
 class RacketSource(Protocol):
@@ -75,12 +80,110 @@ class ReplaySource:
             yield float(ti), float(xi)
 
 
+@dataclass(frozen=True)
+class LslSettings:
+    """Which channel of the stream is the racket's height, in which unit, and how long to
+    wait: for the stream to be found, and for samples before a trial is given up."""
+
+    channel: int = 0
+    metres_per_unit: float = 1.0
+    resolve_timeout_s: float = 5.0
+    give_up_s: float = 5.0
+
+
+#: samples asked for per pull, and how long one pull waits (s)
+LSL_CHUNK = 1024
+LSL_PULL_S = 0.05
+
+
+class LslSource:
+    """A Lab Streaming Layer stream: each trial takes the samples from the first one on (time
+    from its timestamp), until ``duration_s`` of stream time; the next trial starts ``rest_s``
+    of stream time after. Timestamps are the sender's (no clock post-processing), so a stall
+    shows as a jump, which the physics takes as a gap; a stream silent for ``give_up_s`` (wall
+    clock) ends the trial where it is, with a warning. Samples not later than the one before,
+    or not finite, are dropped and counted."""
+
+    def __init__(self, name: str, settings: LslSettings, rest_s: float,
+                 warn: Callable[[str], None]):
+        try:
+            import pylsl
+        except ImportError:
+            raise ConfigError("racket: lsl: needs pylsl (python -m pip install "
+                              "'bounce-cli[virtual]')") from None
+        found = pylsl.resolve_byprop("name", name, timeout=settings.resolve_timeout_s)
+        if not found:
+            raise ConfigError(f"racket: lsl:{name}: no stream of that name found within "
+                              f"{settings.resolve_timeout_s:g} s")
+        info = found[0]
+        if not 0 <= settings.channel < info.channel_count():
+            raise ConfigError(f"racket: lsl:{name}: channel {settings.channel} does not exist "
+                              f"(the stream has {info.channel_count()})")
+        self.name, self.settings, self.rest_s, self.warn = name, settings, rest_s, warn
+        self.rate_hz = info.nominal_srate()
+        self.inlet = pylsl.StreamInlet(info, max_buflen=360, processing_flags=0)
+        self.inlet.open_stream(timeout=settings.resolve_timeout_s)
+        self._next_start: float | None = None  # stream time the next trial starts at
+        self._held: deque[tuple[float, float]] = deque()  # pulled, not yet taken
+
+    @property
+    def description(self) -> str:
+        return (f"lsl: stream {self.name!r}, channel {self.settings.channel}, "
+                f"{self.settings.metres_per_unit:g} m per unit, nominal {self.rate_hz:g} Hz")
+
+    def _pulled(self) -> Iterator[tuple[float, float] | None]:
+        """Samples (stream time, metres) as they arrive; None when a pull found nothing."""
+        channel, scale = self.settings.channel, self.settings.metres_per_unit
+        while True:
+            if self._held:  # a chunk is held whole: a trial that ends inside it loses nothing
+                yield self._held.popleft()
+                continue
+            chunk, stamps = self.inlet.pull_chunk(timeout=LSL_PULL_S, max_samples=LSL_CHUNK)
+            if not stamps:
+                yield None
+                continue
+            self._held.extend((float(stamp), float(values[channel]) * scale)
+                              for values, stamp in zip(chunk, stamps))
+
+    def samples(self, trial: int, duration_s: float) -> Iterator[tuple[float, float]]:
+        t_first: float | None = None
+        last, dropped, silent_since = -math.inf, 0, time.monotonic()
+        for sample in self._pulled():
+            if sample is None:
+                if time.monotonic() - silent_since > self.settings.give_up_s:
+                    self.warn(f"lsl:{self.name}: no samples for {self.settings.give_up_s:g} s: "
+                              f"trial {trial} ends there")
+                    break
+                continue
+            silent_since = time.monotonic()
+            stamp, x = sample
+            if self._next_start is not None and stamp < self._next_start:
+                continue  # the rest between trials
+            if t_first is None:
+                t_first = stamp
+            if stamp - t_first > duration_s:
+                self._held.appendleft(sample)  # the next trial's (or its rest's)
+                break
+            if stamp <= last or not math.isfinite(x):
+                dropped += 1
+                continue
+            last = stamp
+            yield stamp - t_first, x
+        if t_first is not None:
+            self._next_start = t_first + duration_s + self.rest_s
+        if dropped:
+            self.warn(f"lsl:{self.name}: trial {trial}: {dropped} sample(s) out of order or "
+                      "not finite were dropped")
+
+
 def open_source(spec: str, amplitude_m: float, period_s: float, rate_hz: float,
-                read_racket: Callable[[Path], list[tuple[np.ndarray, np.ndarray]]]
-                ) -> RacketSource:
+                read_racket: Callable[[Path], list[tuple[np.ndarray, np.ndarray]]],
+                lsl: LslSettings = LslSettings(), rest_s: float = 0.0,
+                warn: Callable[[str], None] = lambda message: None) -> RacketSource:
     """The source a ``--racket`` text names (see ``SOURCE_KINDS``); a one-line error otherwise.
     ``read_racket(path)``: the (t, racket) arrays of a recording's trials, in SI units (the
-    experiment reads it as ``bounce extract`` does)."""
+    experiment reads it as ``bounce extract`` does); ``lsl``, ``rest_s``: an LSL stream's
+    settings and the rest between its trials."""
     if spec == "sine":
         return SineSource(amplitude_m, period_s, rate_hz)
     if spec.startswith("replay:"):
@@ -88,4 +191,6 @@ def open_source(spec: str, amplitude_m: float, period_s: float, rate_hz: float,
         if not path.is_file():
             raise ConfigError(f"racket: replay:{path}: no such file")
         return ReplaySource(path, tuple(read_racket(path)))
+    if spec.startswith("lsl:") and spec[len("lsl:"):]:
+        return LslSource(spec[len("lsl:"):], lsl, rest_s, warn)
     raise ConfigError(f"racket: unknown source {spec!r} (one of {', '.join(SOURCE_KINDS)})")

@@ -1,0 +1,74 @@
+"""The LSL source over loopback: a real outlet in the test publishing a sine racket (the
+sender's timestamps), ``bounce virtual --racket lsl:<name>`` consuming it, bounded in time."""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+import uuid
+
+import numpy as np
+import pytest
+
+import bounce_cli
+from bounce_cli.paper.values import FIG3_MODEL as P
+
+pylsl = pytest.importorskip("pylsl", reason="pylsl (the virtual extra) is not installed")
+
+RATE = 1000.0
+
+
+def publish(name: str, pieces, unit_scale: float = 1.0):
+    """An outlet named ``name`` that, once a consumer is there, pushes each piece
+    ``(t_from, t_to, pause_after_s)`` of the sine racket (times in s from a base stamp)."""
+    info = pylsl.StreamInfo(name, "Mocap", 2, RATE, "float32", str(uuid.uuid4()))
+    outlet = pylsl.StreamOutlet(info)
+
+    def run():
+        deadline = time.monotonic() + 20.0
+        while not outlet.wait_for_consumers(0.1):
+            if time.monotonic() > deadline:
+                return
+        base = pylsl.local_clock()
+        w = P.omega
+        for t_from, t_to, pause in pieces:
+            for i in range(int(round(t_from * RATE)), int(round(t_to * RATE))):
+                t = i / RATE
+                # channel 1 is the racket height (channel 0 another marker)
+                outlet.push_sample([0.0, P.racket_amplitude * math.sin(w * t) / unit_scale],
+                                   base + t)
+            time.sleep(pause)
+
+    thread = threading.Thread(target=run, daemon=True)
+    thread.start()
+    return outlet, thread
+
+
+def test_an_lsl_racket_gives_the_sine_source_s_impacts_and_a_stall_is_a_logged_gap():
+    name = f"bounce-test-{uuid.uuid4().hex[:8]}"
+    # 6 s, a 1.5 s stall (stream time and wall clock), then 4 s more: one trial of 10 s
+    outlet, thread = publish(name, [(0.0, 3.0, 0.2), (4.5, 10.5, 0.0)], unit_scale=0.001)
+    settings = {"trials": 1, "trial_s": 10.0, "lsl.channel": 1, "lsl.units": "mm",
+                "lsl.give_up_s": 3.0}
+    start = time.monotonic()
+    live = bounce_cli.run("virtual", set={**settings, "racket": f"lsl:{name}"})
+    assert time.monotonic() - start < 30.0
+    thread.join(5.0)
+    gaps = live.frames["gaps.csv"]
+    assert len(gaps) == 1
+    assert gaps["t_end_s"].iloc[0] - gaps["t_start_s"].iloc[0] == pytest.approx(1.5, abs=2e-3)
+    sine = bounce_cli.run("virtual", set={"trials": 1, "trial_s": 10.0})
+    a, b = sine.frames["impacts.csv"], live.frames["impacts.csv"]
+    before = a["t_s"] < 2.9  # before the stall the two are the same racket, sample for sample
+    n = int(before.sum())
+    assert n >= 2
+    assert np.allclose(a["t_s"][:n], b["t_s"][:n], atol=1e-6)
+    assert np.allclose(a["v_m_s"][:n], b["v_m_s"][:n], atol=1e-5)  # float32 samples in mm
+    del outlet
+
+
+def test_no_such_stream_is_one_line(cli, user_error, tmp_path):
+    user_error(cli("virtual", "--racket", "lsl:no-such-stream-here", "--set",
+                   "lsl.resolve_timeout_s=0.5", "--out", tmp_path / "x"), "no stream")
+    assert not (tmp_path / "x").exists()
