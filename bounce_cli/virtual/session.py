@@ -55,24 +55,14 @@ class TrialRecord:
     gaps: tuple[Gap, ...]
 
 
-#: impacts a trial may schedule (far above any 1-hour trial's bounces)
-MAX_IMPACTS = 100_000
-
-
 def run_trial(source: RacketSource, trial: int, duration_s: float, g: float,
               schedule: Schedule, launch: Launch, rng: np.random.Generator, *,
               min_hop_s: float, min_relative_velocity_m_s: float,
               max_gap_s: float) -> TrialRecord:
-    """One trial as fast as the physics goes (headless): every racket sample of the source
-    pushed to the ball in order."""
-    alphas: list[tuple[float, bool]] = []
-
-    def alpha_of(k: int) -> tuple[float, bool]:
-        while len(alphas) <= k:
-            alphas.append(schedule.alpha_at(len(alphas), rng))
-        return alphas[k]
-
-    ball = VirtualBall(g=g, alpha_of=alpha_of, min_hop_s=min_hop_s,
+    """One trial, headless: every racket sample of the source pushed to the ball in order (as
+    fast as the source gives them: at once for ``sine`` and ``replay``, live for a stream).
+    The ball asks for each impact's alpha once, in impact order."""
+    ball = VirtualBall(g=g, alpha_of=lambda k: schedule.alpha_at(k, rng), min_hop_s=min_hop_s,
                        min_relative_velocity_m_s=min_relative_velocity_m_s,
                        max_gap_s=max_gap_s)
     if launch.height_m is not None:
