@@ -242,6 +242,8 @@ class RacketCycles:
     def locate(self, t):
         """(cycle index or -1, phase in [0, 2 pi)) of times t."""
         t = np.atleast_1d(np.asarray(t, dtype=float))
+        if len(self.periods) == 0:  # no complete cycle: no time is inside one
+            return np.full(t.shape, -1), np.full(t.shape, np.nan)
         c = np.searchsorted(self.crossings, t, side="right") - 1
         inside = (c >= 0) & (t < self.crossings[np.maximum(c, 0)] + self.periods[np.maximum(c, 0)])
         c = np.where(inside, c, -1)
@@ -986,8 +988,11 @@ def _racket_at_impacts(t, racket: _Racket, imp: _Impacts, s: ExtractionSettings)
             racket_rss, racket_dof = racket_rss + here.rss, racket_dof + here.dof
         if math.isfinite(imp.v_in[j]) and imp.v_in[j] < here.v:  # approaching the racket
             alpha_measured[j] = restitution_of(imp.v_in[j], imp.v_k[j], here.v)
-            if 0.0 < alpha_measured[j] < 1.0 and math.isfinite(imp.area[j]):
-                imp.weight[j] = (here.v - imp.v_in[j]) * contact_shape_factor(alpha_measured[j])
+            shape = (contact_shape_factor(alpha_measured[j])
+                     if 0.0 < alpha_measured[j] < 1.0 else math.nan)
+            # K(alpha) <= 0 below alpha ~ 0.296: there the area does not measure the duration
+            if shape > 0.0 and math.isfinite(imp.area[j]):
+                imp.weight[j] = (here.v - imp.v_in[j]) * shape
                 imp.contact[j] = math.sqrt(max(imp.area[j], 0.0) / imp.weight[j])
     return cycle, theta, acc, alpha_measured, racket_rss, racket_dof
 
@@ -1109,7 +1114,9 @@ def contact_shape_factor(alpha: float) -> float:
     Returns
     -------
     float
-        K, dimensionless (> 0).
+        K, dimensionless: positive above alpha ~ 0.296, where it crosses zero (a heavily
+        damped contact's path lies inside the V as much as outside it), negative below; the
+        contact's duration is measured only where K > 0.
     """
     log = math.log(alpha)
     zeta = -log / math.sqrt(math.pi**2 + log * log)
