@@ -327,6 +327,10 @@ def warn(message: str) -> None:
     print(f"bounce: warning: {message}", file=sys.stderr, flush=True)
 
 
+def inform(message: str) -> None:
+    print(f"bounce: {message}", file=sys.stderr, flush=True)
+
+
 def run_experiment(
     entry: Entry,
     *,
@@ -363,7 +367,7 @@ def run_experiment(
                                      figure_formats=figure_formats, dpi=dpi)
         progress = make_progress() if not quiet else None
         options = run_options(entry, cfg, config, overrides, jobs=jobs or os.cpu_count() or 1,
-                              warn=warn, scheduler=scheduler)
+                              warn=warn, inform=inform, scheduler=scheduler)
         run_dir.record = options.record
         if entry.resumable:
             from ..runtime.checkpoints import PointFolder
@@ -815,6 +819,15 @@ def add_experiment_command(entry: Entry) -> None:
         events: Optional[list[Path]] = None,
         manifest: Optional[list[Path]] = None,
         racket: Optional[list[str]] = None,
+        headless: Annotated[bool, typer.Option(
+            "--headless", help="No page: the physics and the files only (config key "
+            "display.headless).")] = False,
+        realtime: Annotated[bool, typer.Option(
+            "--realtime", help="Pace a source without a clock of its own (sine, replay, "
+            "subject) to the wall clock even when headless (display.realtime).")] = False,
+        port: Annotated[Optional[int], typer.Option(
+            "--port", help="The page's port on 127.0.0.1, 0 for any free one (display.port); "
+            "the URL is printed.", min=0, max=65535)] = None,
         resume: ResumeOption = False,
         scheduler: SchedulerOption = None,
         figure_format: FigureFormatOption = None,
@@ -840,6 +853,12 @@ def add_experiment_command(entry: Entry) -> None:
         source = only_once("--racket", racket)
         if source is not None:
             overrides.append(f"racket={json.dumps(source)}")
+        if headless:
+            overrides.append("display.headless=true")
+        if realtime:
+            overrides.append("display.realtime=true")
+        if port is not None:
+            overrides.append(f"display.port={port}")
         run_experiment(entry, config=config, overrides=overrides, out=out_dir, quiet=quiet,
                        force=force, print_config=print_config, jobs=jobs, resume=resume,
                        scheduler=scheduler, figure_formats=tuple(figure_format or ["png"]),
@@ -857,7 +876,8 @@ def add_experiment_command(entry: Entry) -> None:
                                 typer.Option("--racket", help=entry.racket_help,
                                              metavar="SOURCE")]
     declared = {**{k: v is not None for k, v in file_options.items()},
-                "racket": entry.racket_help is not None,
+                "racket": entry.racket_help is not None, "headless": entry.live,
+                "realtime": entry.live, "port": entry.live,
                 "resume": entry.resumable, "scheduler": entry.cluster, "jobs": entry.parallel}
     params = [p.replace(annotation=hints[p.name])
               for p in inspect.signature(command).parameters.values()

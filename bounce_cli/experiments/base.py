@@ -103,11 +103,14 @@ class RunOptions:
     line or in their own config; a ``--data`` analysis takes the others from the data
     (``bounce_cli.data.data_parameters``; None, library use: every config value counts as set).
     ``record``: what the run adds to ``run.json`` beside the config (the CLI writes it), e.g.
-    ``model_at_data``, the values a ``--data`` analysis used and where they came from."""
+    ``model_at_data``, the values a ``--data`` analysis used and where they came from.
+    ``inform(message)``: what a live experiment tells its operator while it runs (the URL of
+    the virtual set-up's page; the CLI prints ``bounce: <message>``)."""
 
     jobs: int = 1
     progress: Progress = field(default_factory=NullProgress)
     warn: Callable[[str], None] = no_warning
+    inform: Callable[[str], None] = no_warning
     scheduler: str | None = None
     checkpoints: Checkpoints = field(default_factory=NoCheckpoints)
     model_set_by_user: frozenset[str] | None = None

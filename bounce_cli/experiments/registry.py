@@ -33,6 +33,8 @@ class Entry:
     the module's attribute holding the :class:`Experiment` (one module may define several).
     ``manifest_help``: the command takes ``--manifest FILE`` (config key ``manifest``);
     ``racket_help``: the command takes ``--racket SOURCE`` (config key ``racket``);
+    ``live``: the command shows a page and takes ``--headless``, ``--realtime`` and
+    ``--port N`` (config keys ``display.headless``, ``display.realtime``, ``display.port``);
     ``task_keys``: its resumed tasks carry keys of what they were made from and are rerun
     when those change, so ``--resume`` accepts a changed config (the experiment decides
     which tasks to keep)."""
@@ -53,6 +55,7 @@ class Entry:
     manifest_help: str | None = None
     task_keys: bool = False
     racket_help: str | None = None
+    live: bool = False
 
     def __post_init__(self) -> None:
         if not self.module:
@@ -254,9 +257,10 @@ EXPERIMENTS: tuple[Entry, ...] = (
         (("virtual.png", "The virtual set-up (sections 6-7): ball and racket of trial 1, the "
           "exact impacts' v_k and theta_k; perturbed impacts in red."),),
         racket_help="The racket's source: sine (the model's racket, eq. 4), replay:<file> "
-        "(the racket of a recording bounce extract reads) or lsl:<stream name> (a live Lab "
-        "Streaming Layer stream); sets the config key `racket`.",
-        needs_fixed_point=False, reproduce=False,
+        "(the racket of a recording bounce extract reads), lsl:<stream name> (a live Lab "
+        "Streaming Layer stream), mouse (the pointer's height on the page) or subject (a "
+        "simulated subject controlling the racket's period); sets the config key `racket`.",
+        needs_fixed_point=False, reproduce=False, live=True,
     ),
 )
 

@@ -18,6 +18,10 @@ Headless runs go as fast as the physics allows. It writes, in formats bounce alr
 
 from __future__ import annotations
 
+import itertools
+import math
+import signal
+import time
 from dataclasses import fields
 from pathlib import Path
 from typing import Literal
@@ -28,13 +32,17 @@ from pydantic import Field, model_validator
 
 from ..data.extraction import ExtractionSettings, racket_cycles
 from ..data.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS, ball_apex
+from ..data.setup_table import SETUP_FILE, SetupQuantity, setup_frame
 from ..data.simulated_lab import LAB_MIN_HOP_S
-from ..errors import ConfigError
+from ..errors import ConfigError, NoFixedPointError
 from ..model.flight import restitution_of
-from ..runtime.config import ExperimentConfig, ModelBlock, StrictModel
+from ..runtime.config import ControlBlock, ExperimentConfig, ModelBlock, StrictModel
+from ..runtime.interrupts import Interrupted
+from ..virtual.display import Display, MouseSource, View, latency_summary
 from ..virtual.physics import Impact
-from ..virtual.session import Launch, Schedule, TrialRecord, run_trial
+from ..virtual.session import Launch, Paced, Schedule, TrialRecord, run_trial
 from ..virtual.sources import LslSettings, open_source
+from ..virtual.subject import DEFAULT_GAIN, SubjectControl
 from .base import Experiment, ExperimentResult, RunOptions
 from .plotting import caption_figures, draw_fig2, publication_style
 
@@ -91,11 +99,50 @@ class LslBlock(StrictModel):
                            self.give_up_s)
 
 
+class DisplayBlock(StrictModel):
+    """The screen: a page on this machine that draws the ball and the racket."""
+
+    headless: bool = Field(False, description="no page: the physics and the files only "
+                           "(--headless)")
+    realtime: bool = Field(False, description="pace sine, replay and subject sources to the "
+                           "wall clock even when headless (--realtime; with a page they are)")
+    port: int = Field(8765, ge=0, le=65535, description="the page's port on 127.0.0.1 (0: "
+                      "any free one; --port)")
+    delay_s: float = Field(0.0, ge=0.0, le=5.0, description="the protocol's display delay: "
+                           "each frame shown this long after its racket sample, s")
+    countdown_s: float = Field(3.0, ge=0.0, le=60.0, description="the countdown on the "
+                               "screen before each trial, s")
+    view_m: tuple[float, float] | None = Field(None, description="heights from the page's "
+                                               "bottom to its top, m (default: from the "
+                                               "racket's trough to above the ball's apex)")
+    target_m: float | None = Field(None, description="a target height drawn as a line, m")
+
+    @model_validator(mode="after")
+    def _view(self):
+        if self.view_m is not None and not self.view_m[0] < self.view_m[1]:
+            raise ValueError(f"view_m must be [low, high] with low < high (got "
+                             f"{list(self.view_m)})")
+        return self
+
+
+class SubjectControlBlock(ControlBlock):
+    """``racket: subject``: the simulated subject's racket period control, ``bounce control``'s
+    ``model.control`` (``virtual.subject``); every key has its default there."""
+
+    gain: float = Field(DEFAULT_GAIN, description="K: 1 = the period follows the ball's "
+                        "flight time in full, 0 = the sine racket")
+
+
 class VirtualConfig(ExperimentConfig):
     model: ModelBlock = ModelBlock()
     racket: str = Field("sine", description="the racket's source: sine | replay:<file> | "
-                        "lsl:<stream name>")
+                        "lsl:<stream name> | mouse | subject")
     lsl: LslBlock = LslBlock()
+    subject_control: SubjectControlBlock = SubjectControlBlock()
+    display: DisplayBlock = DisplayBlock()
+    visual_gain: float = Field(1.0, gt=0.0, le=100.0, description="the virtual racket moves "
+                               "this many times the source's racket (the ball meets, and the "
+                               "recordings hold, the virtual racket)")
     sample_rate_hz: float = Field(1000.0, ge=20.0, le=100_000.0,
                                   description="sine: racket samples per second")
     subject: str = Field("s1", pattern=r"^[A-Za-z0-9._\-]+$")
@@ -116,7 +163,8 @@ class VirtualConfig(ExperimentConfig):
 
     @model_validator(mode="after")
     def _size(self):
-        if self.racket == "sine" and self.trials * self.trial_s * self.sample_rate_hz > 2e7:
+        if (self.racket in ("sine", "subject")
+                and self.trials * self.trial_s * self.sample_rate_hz > 2e7):
             raise ValueError("trials x trial_s x sample_rate_hz exceeds 2e7 racket samples")
         return self
 
@@ -166,6 +214,9 @@ def impacts_frame(record: TrialRecord, trial: int, g: float, duration_s: float) 
                                          imp["racket_v_m_s"].to_numpy(float)),
         "contact_s": 0.0, "stuck": imp["stuck"].astype(bool),
     })
+    # as bounce extract does: an impact outside a complete racket cycle has no phase, and the
+    # table leaves it out (its k stays a gap); the events keep every impact
+    frame = frame[np.isfinite(theta)].reset_index(drop=True)
     return frame[[*REQUIRED_COLUMNS, *EVENT_COLUMNS, *MEASURED_COLUMNS, "stuck"]]
 
 
@@ -176,44 +227,140 @@ def _at(values: np.ndarray, cycle: np.ndarray) -> np.ndarray:
     return out
 
 
+def subject_control_of(config: VirtualConfig) -> SubjectControl:
+    """``racket: subject``'s controller: ``subject_control`` in the model's g and alpha."""
+    c = config.subject_control
+    return SubjectControl(c.gain, c.rate, c.switch, config.model.g, config.model.alpha)
+
+
 def trial_name(config: VirtualConfig, trial: int, folder: str) -> str:
     return f"{folder}/{config.subject}_{config.condition}_t{trial}.csv"
 
 
+def view_of(config: VirtualConfig) -> View:
+    """The heights the page shows: ``display.view_m``, or from below the (gained) racket's
+    trough to above the fixed point's apex (eqs. 7, 8)."""
+    if config.display.view_m is not None:
+        low, high = config.display.view_m
+        return View(low, high, config.display.target_m)
+    params = config.params
+    racket = config.visual_gain * params.racket_amplitude
+    try:
+        fixed = params.fixed_point()
+        top = racket * math.sin(fixed.theta_rad) + fixed.v_m_s ** 2 / (2.0 * params.g)
+    except NoFixedPointError:
+        top = racket + 1.0
+    top = max(top, racket, config.display.target_m or -math.inf)
+    span = top + racket
+    return View(-racket - 0.12 * span, top + 0.15 * span, config.display.target_m)
+
+
+#: latency.csv: per drawn frame, the delay from racket sample to drawn frame
+LATENCY_COLUMNS = ["trial", "sample", "t_s", "connection", "delay_ms", "round_trip_ms"]
+
+
 def run(config: VirtualConfig, options: RunOptions) -> ExperimentResult:
     params = config.params
-    source = open_source(config.racket, params.racket_amplitude, params.racket_period,
-                         config.sample_rate_hz, lambda path: _read_racket(path, options.warn),
-                         config.lsl.settings(), config.rest_s, options.warn)
+    display = None
+    if config.racket == "mouse" and config.display.headless:
+        raise ConfigError("racket: mouse is the pointer on the page: run without --headless")
+    source = None
+    if config.racket != "mouse":  # a source that cannot be opened stops the run before a page
+        source = open_source(config.racket, params.racket_amplitude, params.racket_period,
+                             config.sample_rate_hz,
+                             lambda path: _read_racket(path, options.warn),
+                             config.lsl.settings(), config.rest_s, options.warn,
+                             subject_control_of(config))
+    if not config.display.headless:
+        display = Display(view_of(config), mouse=config.racket == "mouse",
+                          port=config.display.port, delay_s=config.display.delay_s)
+    try:
+        if display is not None:
+            url = display.start()
+            options.inform(f"the set-up's page is at {url} (open it on the subject's screen; "
+                           "click or press F for full screen)")
+        if source is None:
+            assert display is not None  # mouse without a page was refused above
+            source = MouseSource(display)
+        if (display is not None or config.display.realtime) and not getattr(
+                source, "live", False):
+            source = Paced(source)
+        return _session(config, options, source, display)
+    finally:
+        if display is not None:
+            display.stop()
+
+
+def _session(config: VirtualConfig, options: RunOptions, source, display) -> ExperimentResult:
+    """The trials in turn (with a page: the wait for it, each trial's countdown, the rests);
+    Ctrl-C ends the session at the trial it interrupts and keeps the finished ones."""
+    params = config.params
     schedule = Schedule(params.alpha, config.perturbations.every, config.perturbations.first,
                         tuple((lo, hi) for lo, hi in config.perturbations.ranges))
     launch = launch_of(config)
     streams = np.random.SeedSequence(config.seed).spawn(config.trials)
     frames: dict[str, pd.DataFrame] = {}
     impacts, gaps = [], []
+    finished = 0
+    stopped = ""
     options.progress.start(config.trials, "virtual")
-    for n in range(1, config.trials + 1):
-        record = run_trial(source, n, config.trial_s, params.g, schedule, launch,
-                           np.random.default_rng(streams[n - 1]), min_hop_s=config.min_hop_s,
-                           min_relative_velocity_m_s=config.min_relative_velocity_m_s,
-                           max_gap_s=config.max_gap_s)
-        if record.t.size < 4:
-            raise ConfigError(f"racket: {source.description}: trial {n} has fewer than 4 "
-                              "samples")
-        frames[trial_name(config, n, "recordings")] = pd.DataFrame({
-            "trial": n, "t_s": record.t, "racket_x_m": record.racket,
-            "ball_x_m": record.ball})
-        table = impacts_frame(record, n, params.g, float(record.t[-1]))
-        frames[trial_name(config, n, "events")] = table[["trial", "t_s", "alpha"]]
-        impacts.append(table)
-        gaps += [{"trial": n, "t_start_s": gap.t_start_s, "t_end_s": gap.t_end_s}
-                 for gap in record.gaps]
-        options.progress.advance(1)
+    try:
+        if display is not None:
+            display.show_status(phase="waiting", trials=config.trials,
+                                message="waiting for the set-up to start")
+            if not display.wait_for_page(0.0):
+                options.inform("waiting for the page to connect (Ctrl-C to stop)")
+            display.wait_for_page()
+        for n in range(1, config.trials + 1):
+            on_sample = None
+            if display is not None:
+                on_sample = _screen(display, config, n)
+                getattr(source, "skip_to_now", lambda: None)()  # a stream's backlog
+            record = run_trial(source, n, config.trial_s, params.g, schedule, launch,
+                               np.random.default_rng(streams[n - 1]),
+                               min_hop_s=config.min_hop_s,
+                               min_relative_velocity_m_s=config.min_relative_velocity_m_s,
+                               max_gap_s=config.max_gap_s, racket_gain=config.visual_gain,
+                               on_sample=on_sample)
+            if record.t.size < 4:
+                raise ConfigError(f"racket: {source.description}: trial {n} has fewer than 4 "
+                                  "samples")
+            frames[trial_name(config, n, "recordings")] = pd.DataFrame({
+                "trial": n, "t_s": record.t, "racket_x_m": record.racket,
+                "ball_x_m": record.ball})
+            table = impacts_frame(record, n, params.g, float(record.t[-1]))
+            frames[trial_name(config, n, "events")] = pd.DataFrame(
+                {"trial": n, "t_s": [i.t_s for i in record.impacts],
+                 "alpha": [i.alpha for i in record.impacts]}, columns=["trial", "t_s", "alpha"])
+            impacts.append(table)
+            gaps += [{"trial": n, "t_start_s": gap.t_start_s, "t_end_s": gap.t_end_s}
+                     for gap in record.gaps]
+            finished = n
+            options.progress.advance(1)
+            if display is not None:
+                display.show_status(best=max(display.status.best, display.status.score))
+                if n < config.trials and config.rest_s > 0.0:
+                    display.show_status(phase="rest", remaining_s=config.rest_s)
+                    time.sleep(config.rest_s)
+        if display is not None:
+            display.show_status(phase="done", message="done: thank you")
+    except (KeyboardInterrupt, Interrupted) as stop:
+        if finished == 0 or (isinstance(stop, Interrupted) and stop.signum != signal.SIGINT):
+            raise
+        stopped = (f"; stopped by Ctrl-C in trial {finished + 1}: trials 1-{finished} kept, "
+                   "the interrupted one left out")
+    trials = range(1, finished + 1)
     impacts_table = pd.concat(impacts, ignore_index=True)
-    trials = range(1, config.trials + 1)
+    latency = pd.DataFrame(display.latency if display is not None else [],
+                           columns=LATENCY_COLUMNS)
     frames.update({
         "impacts.csv": impacts_table,
         "gaps.csv": pd.DataFrame(gaps, columns=["trial", "t_start_s", "t_end_s"]),
+        "latency.csv": latency,
+        # beside impacts.csv, as bounce extract writes it: --data analyses take g from here
+        SETUP_FILE: setup_frame([SetupQuantity(
+            "g_m_s2", params.g, 0.0, len(impacts_table),
+            "the virtual ball's gravity (model.g): exact")]),
         "study.csv": pd.DataFrame({
             "file": [trial_name(config, n, "recordings") for n in trials],
             "events": [trial_name(config, n, "events") for n in trials],
@@ -221,15 +368,36 @@ def run(config: VirtualConfig, options: RunOptions) -> ExperimentResult:
     })
     options.record["racket_source"] = source.description
     figures = draw(frames)
-    caption_figures(figures, params, f"{config.trials} trials x {config.trial_s:g} s, "
+    caption_figures(figures, params, f"{finished} trials x {config.trial_s:g} s, "
                     f"{source.description}, seed {config.seed}")
     stuck = int(impacts_table["stuck"].sum())
     summary = [
-        f"{config.trials} trials x {config.trial_s:g} s ({source.description}): "
+        f"{finished} trials x {config.trial_s:g} s ({source.description}): "
         f"{len(impacts_table)} impacts ({int(impacts_table['perturbed'].sum())} perturbed"
         + (f", {stuck} left the ball on the racket" if stuck else "") + f"), {len(gaps)} "
-        "stream gap(s); run `bounce study --manifest <out>/study.csv`"]
+        f"stream gap(s){stopped}; run `bounce study --manifest <out>/study.csv`"]
+    if display is not None:
+        summary.append(latency_summary(display.latency) + " (latency.csv)")
     return ExperimentResult(frames=frames, figures=figures, summary=summary)
+
+
+def _screen(display: Display, config: VirtualConfig, trial: int):
+    """Trial ``trial`` on the page: its countdown, then every racket sample's frame (the
+    score: the trial's bounces, impacts that left the ball off the racket)."""
+    if config.display.countdown_s > 0.0:
+        display.show_status(phase="countdown", trial=trial, score=0,
+                            remaining_s=config.display.countdown_s)
+        time.sleep(config.display.countdown_s)
+    display.show_status(phase="trial", trial=trial, score=0, duration_s=config.trial_s)
+    samples = itertools.count()
+
+    def on_sample(t: float, racket: float, ball: float, new: list[Impact]) -> None:
+        if new:
+            display.status.score += sum(not impact.stuck for impact in new)
+        display.publish(trial, next(samples), t, racket, ball, time.perf_counter(),
+                        impact=bool(new))
+
+    return on_sample
 
 
 @publication_style

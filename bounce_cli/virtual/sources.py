@@ -2,12 +2,13 @@
 
 A source gives, for trial n (1, 2, ...), its racket samples ``(t, x)`` in s and m, time from the
 trial's start, in increasing time. ``sine``: the model's racket (eq. 4) sampled at the
-protocol's rate, the deterministic check of the physics; ``replay:<file>``: the racket column
-of any recording ``bounce extract`` reads (CSV, C3D, Vicon, QTM, Motive; the recording's
-trials in turn, cycled when the protocol has more), played at its own clock; ``lsl:<name>``: a
-Lab Streaming Layer stream of that name (how Vicon, Qualisys, OptiTrack and most lab sensors
-publish in real time; ``pylsl``, the ``virtual`` extra), one channel of it, at the sender's
-timestamps.
+protocol's rate, the deterministic check of the physics; ``subject``: that racket with its
+period controlled impact by impact (a simulated subject, ``virtual.subject``);
+``replay:<file>``: the racket column of any recording ``bounce extract`` reads (CSV, C3D,
+Vicon, QTM, Motive; the recording's trials in turn, cycled when the protocol has more), played
+at its own clock; ``lsl:<name>``: a Lab Streaming Layer stream of that name (how Vicon,
+Qualisys, OptiTrack and most lab sensors publish in real time; ``pylsl``, the ``virtual``
+extra), one channel of it, at the sender's timestamps.
 """
 
 from __future__ import annotations
@@ -22,9 +23,10 @@ from typing import Callable, Iterator, Protocol
 import numpy as np
 
 from ..errors import ConfigError
+from .subject import NOMINAL_SUBJECT, SubjectControl, SubjectSource
 
 #: the sources ``--racket`` takes
-SOURCE_KINDS = ("sine", "replay:<file>", "lsl:<stream name>")
+SOURCE_KINDS = ("sine", "subject", "replay:<file>", "lsl:<stream name>", "mouse")
 
 
 class RacketSource(Protocol):
@@ -104,6 +106,8 @@ class LslSource:
     clock) ends the trial where it is, with a warning. Samples not later than the one before,
     or not finite, are dropped and counted."""
 
+    live = True  # the stream's own clock paces it
+
     def __init__(self, name: str, settings: LslSettings, rest_s: float,
                  warn: Callable[[str], None]):
         try:
@@ -130,6 +134,14 @@ class LslSource:
     def description(self) -> str:
         return (f"lsl: stream {self.name!r}, channel {self.settings.channel}, "
                 f"{self.settings.metres_per_unit:g} m per unit, nominal {self.rate_hz:g} Hz")
+
+    def skip_to_now(self) -> None:
+        """Drop what the stream sent before now: a trial shown live (after a countdown or a
+        rest on the screen) starts at the next sample, not at the backlog."""
+        self._held.clear()
+        while self.inlet.pull_chunk(timeout=0.0, max_samples=LSL_CHUNK)[1]:
+            pass
+        self._next_start = None
 
     def _pulled(self) -> Iterator[tuple[float, float] | None]:
         """Samples (stream time, metres) as they arrive; None when a pull found nothing."""
@@ -179,13 +191,17 @@ class LslSource:
 def open_source(spec: str, amplitude_m: float, period_s: float, rate_hz: float,
                 read_racket: Callable[[Path], list[tuple[np.ndarray, np.ndarray]]],
                 lsl: LslSettings = LslSettings(), rest_s: float = 0.0,
-                warn: Callable[[str], None] = lambda message: None) -> RacketSource:
+                warn: Callable[[str], None] = lambda message: None,
+                subject: SubjectControl = NOMINAL_SUBJECT) -> RacketSource:
     """The source a ``--racket`` text names (see ``SOURCE_KINDS``); a one-line error otherwise.
     ``read_racket(path)``: the (t, racket) arrays of a recording's trials, in SI units (the
     experiment reads it as ``bounce extract`` does); ``lsl``, ``rest_s``: an LSL stream's
-    settings and the rest between its trials."""
+    settings and the rest between its trials; ``subject``: the period control of the
+    ``subject`` source (``virtual.subject``)."""
     if spec == "sine":
         return SineSource(amplitude_m, period_s, rate_hz)
+    if spec == "subject":
+        return SubjectSource(amplitude_m, period_s, rate_hz, subject)
     if spec.startswith("replay:"):
         path = Path(spec[len("replay:"):])
         if not path.is_file():

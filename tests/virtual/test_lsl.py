@@ -49,7 +49,8 @@ def test_an_lsl_racket_gives_the_sine_source_s_impacts_and_a_stall_is_a_logged_g
     name = f"bounce-test-{uuid.uuid4().hex[:8]}"
     # 6 s, a 1.5 s stall (stream time and wall clock), then 4 s more: one trial of 10 s
     outlet, thread = publish(name, [(0.0, 3.0, 0.2), (4.5, 10.5, 0.0)], unit_scale=0.001)
-    settings = {"trials": 1, "trial_s": 10.0, "lsl.channel": 1, "lsl.units": "mm",
+    settings = {"display.headless": True, "trials": 1, "trial_s": 10.0, "lsl.channel": 1,
+                "lsl.units": "mm",
                 "lsl.give_up_s": 3.0}
     start = time.monotonic()
     live = bounce_cli.run("virtual", set={**settings, "racket": f"lsl:{name}"})
@@ -58,7 +59,7 @@ def test_an_lsl_racket_gives_the_sine_source_s_impacts_and_a_stall_is_a_logged_g
     gaps = live.frames["gaps.csv"]
     assert len(gaps) == 1
     assert gaps["t_end_s"].iloc[0] - gaps["t_start_s"].iloc[0] == pytest.approx(1.5, abs=2e-3)
-    sine = bounce_cli.run("virtual", set={"trials": 1, "trial_s": 10.0})
+    sine = bounce_cli.run("virtual", set={"display.headless": True, "trials": 1, "trial_s": 10.0})
     a, b = sine.frames["impacts.csv"], live.frames["impacts.csv"]
     before = a["t_s"] < 2.9  # before the stall the two are the same racket, sample for sample
     n = int(before.sum())
@@ -69,6 +70,6 @@ def test_an_lsl_racket_gives_the_sine_source_s_impacts_and_a_stall_is_a_logged_g
 
 
 def test_no_such_stream_is_one_line(cli, user_error, tmp_path):
-    user_error(cli("virtual", "--racket", "lsl:no-such-stream-here", "--set",
+    user_error(cli("virtual", "--headless", "--racket", "lsl:no-such-stream-here", "--set",
                    "lsl.resolve_timeout_s=0.5", "--out", tmp_path / "x"), "no stream")
     assert not (tmp_path / "x").exists()

@@ -12,7 +12,9 @@ import bounce_cli
 
 PROTOCOL = Path(__file__).resolve().parents[2] / "configs" / "virtual" / "perturbation.yaml"
 
-SHORT = {"trials": 2, "trial_s": 12.0, "perturbations.every": 5, "seed": 3}
+#: the tests run without a page (--headless); the page has a test of its own
+HEADLESS = {"display.headless": True}
+SHORT = {**HEADLESS, "trials": 2, "trial_s": 12.0, "perturbations.every": 5, "seed": 3}
 
 
 def test_perturbation_protocol_every_fifth_impact_in_the_ranges(tmp_path):
@@ -43,7 +45,7 @@ def test_perturbation_protocol_every_fifth_impact_in_the_ranges(tmp_path):
 def test_extract_with_the_events_recovers_the_exact_impacts(tmp_path):
     """The recording and events are what ``bounce extract`` reads with no --set."""
     out = tmp_path / "v"
-    run = bounce_cli.run("virtual", set={"trials": 1, "trial_s": 10.0}, out=out)
+    run = bounce_cli.run("virtual", set={**HEADLESS, "trials": 1, "trial_s": 10.0}, out=out)
     exact = run.frames["impacts.csv"]
     extracted = bounce_cli.run(
         "extract", set={"events": str(out / "events" / "s1_virtual_t1.csv")},
@@ -55,11 +57,11 @@ def test_extract_with_the_events_recovers_the_exact_impacts(tmp_path):
 
 
 def test_replay_of_a_sine_recording_gives_the_sine_source_s_impacts(tmp_path):
-    sine = bounce_cli.run("virtual", set={"trials": 1, "trial_s": 8.0})
+    sine = bounce_cli.run("virtual", set={**HEADLESS, "trials": 1, "trial_s": 8.0})
     recording = sine.frames["recordings/s1_virtual_t1.csv"]
     path = tmp_path / "racket.csv"
     recording.to_csv(path, index=False)
-    replay = bounce_cli.run("virtual", set={"trials": 1, "trial_s": 8.0,
+    replay = bounce_cli.run("virtual", set={**HEADLESS, "trials": 1, "trial_s": 8.0,
                                             "racket": f"replay:{path}"})
     a, b = sine.frames["impacts.csv"], replay.frames["impacts.csv"]
     assert len(a) == len(b) and np.allclose(a["t_s"], b["t_s"], atol=1e-9)
@@ -67,16 +69,18 @@ def test_replay_of_a_sine_recording_gives_the_sine_source_s_impacts(tmp_path):
 
 
 def test_an_unknown_racket_source_is_one_line(cli, user_error, tmp_path):
-    user_error(cli("virtual", "--racket", "lsl", "--out", tmp_path / "x"), "unknown source")
+    user_error(cli("virtual", "--headless", "--racket", "lsl", "--out", tmp_path / "x"),
+               "unknown source")
     assert not (tmp_path / "x").exists()
-    user_error(cli("virtual", "--racket", "replay:nope.csv", "--out", tmp_path / "y"),
+    user_error(cli("virtual", "--headless", "--racket", "replay:nope.csv", "--out",
+                   tmp_path / "y"),
                "no such file")
 
 
 @pytest.mark.slow
 def test_study_analyses_the_virtual_session_with_no_step_between(tmp_path, cli):
     out = tmp_path / "v"
-    assert cli("virtual", "--config", PROTOCOL, "--set",
+    assert cli("virtual", "--headless", "--config", PROTOCOL, "--set",
                "trials=4", "--quiet", "--out", out).exit_code == 0
     result = cli("study", "--manifest", out / "study.csv", "--quiet", "--out",
                  tmp_path / "study")
@@ -86,3 +90,44 @@ def test_study_analyses_the_virtual_session_with_no_step_between(tmp_path, cli):
     # the passive sine racket: Fig. 11's period modulation is flat
     period = impulse[impulse["quantity"] == "racket_period_s"]
     assert np.all(np.abs(period["mean"]) < 1e-9)
+
+
+def test_extract_at_a_restitution_below_the_contact_factor_s_zero(tmp_path):
+    """alpha 0.25: K(alpha) of the contact's area is negative there; the impacts are still
+    extracted (alpha measured by eq. 3), the contact duration is not measured (NaN)."""
+    out = tmp_path / "v"
+    bounce_cli.run("virtual", set={**HEADLESS, "trials": 1, "trial_s": 20.0, "model.alpha": 0.25,
+                                   "model.racket_amplitude": 0.5}, out=out)
+    impacts = bounce_cli.run("extract", data=out / "recordings" / "s1_virtual_t1.csv"
+                             ).frames["impacts.csv"]
+    assert len(impacts) >= 15
+    measured = impacts["alpha_measured"].dropna()  # the first impact has no flight before it
+    assert len(measured) >= len(impacts) - 1 and np.allclose(measured, 0.25, atol=2e-3)
+    assert impacts["contact_s"].isna().all()
+
+
+@pytest.mark.slow
+def test_fig9_from_the_virtual_session_is_the_model_s_impulse_response(tmp_path):
+    """Section 7's protocol on the passive sine racket with one size of perturbation each way
+    (0.4, 0.6: inside the basin) and 40 impacts between them (relaxed to 0.5^35): the data
+    side's Fig. 9 (``impulse --data`` on the session's impacts) is the full map's response at
+    the data's parameters. What is left is the data side's reading of the sampled racket (its
+    phase from the cycles' crossings, its amplitude and period measured): 7e-6 m/s and
+    2.6e-4 deg at 1 kHz; the set-up's impacts themselves equal the map to 2e-7 m/s
+    (test_physics)."""
+    out = tmp_path / "v"
+    bounce_cli.run("virtual", config=PROTOCOL, out=out, set={
+        **HEADLESS, "trials": 10, "perturbations.every": 40, "perturbations.first": 5,
+        "perturbations.ranges": [[0.6, 0.6], [0.4, 0.4]]})
+    result = bounce_cli.run("impulse", data=out / "impacts.csv",
+                            set={"data_analysis.settle_after_perturbation": 30})
+    aligned, model = result.frames["aligned.csv"], result.frames["model_response.csv"]
+    for side, alpha_p in (("decrease", 0.4), ("increase", 0.6)):
+        curve = model[model["direction"] == side].sort_values("k")
+        assert curve["alpha_p"].iloc[0] == pytest.approx(alpha_p, abs=1e-12)
+        for quantity, column, tolerance in (("v_m_s", "dv_m_s", 2e-5),
+                                            ("theta_deg", "dtheta_deg", 1e-3)):
+            data = aligned[(aligned["quantity"] == quantity)
+                           & (aligned["direction"] == side)].sort_values("k")
+            assert len(data) == len(curve) >= 10 and data["n"].min() >= 4
+            assert np.max(np.abs(data["mean"].to_numpy() - curve[column].to_numpy())) < tolerance

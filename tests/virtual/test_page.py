@@ -1,0 +1,118 @@
+"""The set-up's page for real: ``bounce virtual`` serving on 127.0.0.1, headless Chromium
+drawing it, the latency log, a reload mid-session, the mouse as the racket."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+import threading
+import time
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import bounce_cli
+
+pytestmark = pytest.mark.slow
+
+#: the ball's and the racket's colours on the page (page.html)
+BALL_RGB = (0xF0, 0xA0, 0x20)
+RACKET_RGB = (0xD8, 0xDD, 0xE3)
+
+
+def start_session(out, *settings: str):
+    """``bounce virtual`` with a page on a free port, as a user starts it; (process, url,
+    stderr lines so far: a list that fills while it runs)."""
+    args = [sys.executable, "-m", "bounce_cli", "virtual", "--port", "0",
+            "--out", str(out)]
+    for setting in settings:
+        args += ["--set", setting]
+    process = subprocess.Popen(args, stderr=subprocess.PIPE, stdout=subprocess.PIPE,
+                               text=True)
+    lines: list[str] = []
+    found = threading.Event()
+
+    def read():
+        for line in process.stderr:
+            lines.append(line)
+            if "http://127.0.0.1:" in line:
+                found.set()
+
+    process.reader = threading.Thread(target=read, daemon=True)
+    process.reader.start()
+    if not found.wait(60.0):
+        process.kill()
+        raise AssertionError("no URL printed: " + "".join(lines))
+    url = re.search(r"http://127\.0\.0\.1:\d+/", "".join(lines)).group(0)
+    return process, url, lines
+
+
+def colour_share(path, rgb) -> float:
+    import matplotlib.image
+
+    image = (matplotlib.image.imread(path)[..., :3] * 255).round()
+    return float(np.mean(np.all(np.abs(image - rgb) < 8, axis=-1)))
+
+
+def test_the_page_draws_ball_and_racket_logs_latency_and_survives_a_reload(browser, tmp_path):
+    out = tmp_path / "v"
+    process, url, lines = start_session(
+        out, "trials=2", "trial_s=4", "rest_s=1", "display.countdown_s=1")
+    page = browser(url)
+    time.sleep(2.5)  # the countdown, then the first trial's bounces
+    shot = page.screenshot(tmp_path / "page.png")
+    time.sleep(1.0)
+    page.reload()  # mid-session: the page reconnects and the session goes on
+    try:
+        process.wait(60.0)
+    finally:
+        process.kill()
+    assert process.returncode == 0, "".join(lines)
+    assert colour_share(shot, BALL_RGB) > 1e-4 and colour_share(shot, RACKET_RGB) > 1e-3
+    latency = pd.read_csv(out / "latency.csv")
+    assert list(latency.columns) == ["trial", "sample", "t_s", "connection", "delay_ms",
+                                     "round_trip_ms"]
+    assert set(latency["trial"]) == {1, 2} and latency["connection"].nunique() >= 2
+    assert len(latency) > 100  # frames drawn at the screen's refresh over 8 s of trials
+    delay = latency["delay_ms"].to_numpy()
+    assert np.all(np.isfinite(delay)) and np.median(delay) < 250.0
+    process.reader.join(10.0)
+    summary = "".join(lines) + process.stdout.read()
+    assert "sample to drawn frame: median" in summary, summary
+    print(summary)
+    # the page and the pacing do not touch the physics: the headless run's impacts
+    headless = bounce_cli.run("virtual", set={"display.headless": True, "trials": 2,
+                                              "trial_s": 4.0})
+    a, b = headless.frames["impacts.csv"], pd.read_csv(out / "impacts.csv")
+    assert len(a) == len(b) and np.allclose(a["t_s"], b["t_s"], atol=1e-9)
+
+
+def test_the_mouse_is_the_racket(browser, tmp_path):
+    """Pointer moves dispatched to the page (as a mouse would) are the recorded racket."""
+    out = tmp_path / "m"
+    low, high = -0.5, 1.5
+    process, url, lines = start_session(
+        out, "racket=mouse", "trials=1", "trial_s=3", "display.countdown_s=0",
+        f"display.view_m=[{low},{high}]",
+        "launch.mode=drop", "launch.height_m=1.0")
+    page = browser(url, width=800, height=600)
+    start = time.monotonic()
+    try:
+        while process.poll() is None and time.monotonic() - start < 30.0:
+            t = time.monotonic() - start
+            height = 0.2 * np.sin(2 * np.pi * t / 0.9)  # a racket of 0.2 m at 0.9 s
+            height_px = page.evaluate("window.innerHeight")  # as the page maps it now
+            page.move_pointer(400, height_px * (1 - (height - low) / (high - low)))
+            time.sleep(0.01)
+        process.wait(30.0)
+    finally:
+        process.kill()
+    assert process.returncode == 0, "".join(lines)
+    recording = pd.read_csv(out / "recordings" / "s1_virtual_t1.csv")
+    racket = recording["racket_x_m"].to_numpy()
+    assert len(racket) > 60  # the page's frames over 3 s
+    assert np.all(np.abs(racket) < 0.2 + 0.01)  # the pointer's heights, within a pixel
+    assert racket.max() > 0.1 and racket.min() < -0.1
+    assert np.all(np.diff(recording["t_s"]) > 0)
