@@ -56,6 +56,8 @@ class LaunchBlock(StrictModel):
         "height_m")
     theta_deg: float = Field(40.0, description="state: the racket's phase at launch, deg "
                              "(t = theta / omega_r of the model's racket)")
+    t_s: float | None = Field(None, ge=0.0, description="state: the launch's time in the "
+                              "trial instead, s (a replayed recording's first impact)")
     v_m_s: float = Field(4.5, description="state: the ball's velocity at launch, m/s")
     height_m: float = Field(1.0, description="drop: the ball's height at rest, m")
 
@@ -184,8 +186,9 @@ def launch_of(config: VirtualConfig) -> Launch:
     if config.launch.mode == "drop":
         return Launch(None, None, config.launch.height_m)
     if config.launch.mode == "state":
-        return Launch(np.radians(config.launch.theta_deg) / params.omega,
-                      config.launch.v_m_s, None)
+        t_s = config.launch.t_s
+        return Launch(np.radians(config.launch.theta_deg) / params.omega if t_s is None
+                      else t_s, config.launch.v_m_s, None)
     fixed = params.fixed_point()
     return Launch(fixed.theta_rad / params.omega, fixed.v_m_s, None)
 

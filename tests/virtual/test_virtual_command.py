@@ -131,3 +131,45 @@ def test_fig9_from_the_virtual_session_is_the_model_s_impulse_response(tmp_path)
                            & (aligned["direction"] == side)].sort_values("k")
             assert len(data) == len(curve) >= 10 and data["n"].min() >= 4
             assert np.max(np.abs(data["mean"].to_numpy() - curve[column].to_numpy())) < tolerance
+
+
+def _simulated_session(tmp_path, rounded: bool):
+    """A simulate-recording session at 1 kHz without noise, its racket varied cycle by cycle
+    (period and amplitude SD 1 cm / 10 ms), alpha 0.6 at every 8th impact: the recording's
+    file (positions at full precision, or rounded to 0.1 micrometre as simulate-recording
+    writes them) and the truth's impacts."""
+    from bounce_cli.data.simulated_lab import simulate_session, truth_rows
+    from bounce_cli.experiments.simulate_recording import POSITION_DECIMALS, RecordingConfig
+
+    config = RecordingConfig.model_validate({
+        "sample_rate_hz": 1000.0, "position_noise_m": 0.0, "velocity_noise_m_s": 0.0,
+        "racket": {"period_sd_s": 0.01, "amplitude_sd_m": 0.01}, "trials": 1,
+        "duration_s": 20.0, "perturbations": {"every": 8, "first": 4, "alphas": [0.6]}})
+    (truth, (t, racket, ball)), = simulate_session(config.params, config.session())
+    if rounded:
+        racket, ball = np.round(racket, POSITION_DECIMALS), np.round(ball, POSITION_DECIMALS)
+    path = tmp_path / ("rounded.csv" if rounded else "full.csv")
+    pd.DataFrame({"trial": 1, "t_s": t, "racket_x_m": racket, "ball_x_m": ball}).to_csv(
+        path, index=False, float_format="%.17g")
+    return path, pd.DataFrame(truth_rows(truth))
+
+
+@pytest.mark.parametrize("rounded, t_tol, v_tol", [
+    (False, 1e-6, 1e-6),
+    # 0.1 micrometre steps in the racket: its interpolated velocity is uncertain by about
+    # 7 q / h = 7e-4 m/s at 1 kHz, and the impacts with it
+    (True, 2e-4, 2e-3)])
+def test_replay_of_a_simulated_recording_gives_its_truth(tmp_path, rounded, t_tol, v_tol):
+    path, truth = _simulated_session(tmp_path, rounded)
+    launch = truth.iloc[0]  # the ball leaves the racket at the truth's first impact
+    replay = bounce_cli.run("virtual", set={
+        **HEADLESS, "racket": f"replay:{path}", "trials": 1, "trial_s": 20.0,
+        "launch.mode": "state", "launch.t_s": float(launch["t_s"]),
+        "launch.v_m_s": float(launch["v_m_s"]), "perturbations.every": 8,
+        "perturbations.first": 3, "perturbations.ranges": [[0.6, 0.6]]}).frames["impacts.csv"]
+    later = truth.iloc[1:].reset_index(drop=True)  # replay's impact k is the truth's k + 1
+    both = later.assign(k=later["k"] - 1).merge(replay, on="k", suffixes=("", "_virtual"))
+    assert len(both) >= len(later) - 1 >= 18
+    assert np.all(both["alpha"] == both["alpha_virtual"]) and both["perturbed"].sum() >= 2
+    assert np.max(np.abs(both["t_s"] - both["t_s_virtual"])) < t_tol
+    assert np.max(np.abs(both["v_m_s"] - both["v_m_s_virtual"])) < v_tol
