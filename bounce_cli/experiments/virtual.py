@@ -306,6 +306,7 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
     impacts, gaps = [], []
     finished = 0
     stopped = ""
+    live = display is not None or getattr(source, "live", False)  # in real time: say so
     options.progress.start(config.trials, "virtual")
     try:
         if display is not None:
@@ -340,6 +341,10 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
                      for gap in record.gaps]
             finished = n
             options.progress.advance(1)
+            if live:
+                bounces = sum(not impact.stuck for impact in record.impacts)
+                options.inform(f"trial {n} of {config.trials} done: {bounces} bounces"
+                               + (f", {len(record.gaps)} stream gap(s)" if record.gaps else ""))
             if display is not None:
                 display.show_status(best=max(display.status.best, display.status.score))
                 if n < config.trials and config.rest_s > 0.0:

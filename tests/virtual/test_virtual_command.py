@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -173,3 +177,38 @@ def test_replay_of_a_simulated_recording_gives_its_truth(tmp_path, rounded, t_to
     assert np.all(both["alpha"] == both["alpha_virtual"]) and both["perturbed"].sum() >= 2
     assert np.max(np.abs(both["t_s"] - both["t_s_virtual"])) < t_tol
     assert np.max(np.abs(both["v_m_s"] - both["v_m_s_virtual"])) < v_tol
+
+
+def test_realtime_paces_a_headless_sine_and_leaves_the_physics_alone():
+    settings = {**HEADLESS, "trials": 1, "trial_s": 2.5}
+    start = time.monotonic()
+    paced = bounce_cli.run("virtual", set={**settings, "display.realtime": True})
+    assert time.monotonic() - start >= 2.5
+    fast = bounce_cli.run("virtual", set=settings)
+    a, b = fast.frames["impacts.csv"], paced.frames["impacts.csv"]
+    assert len(a) == len(b) >= 1 and np.array_equal(a["t_s"], b["t_s"])
+
+
+@pytest.mark.slow
+def test_ctrl_c_keeps_the_finished_trials(tmp_path):
+    """SIGINT in trial 2 of a paced session: trial 1 is written whole, trial 2 left out."""
+    out = tmp_path / "v"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "bounce_cli", "virtual", "--headless", "--realtime", "--set",
+         "trials=3", "--set", "trial_s=2", "--out", str(out)],
+        stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    seen = ""
+    while "trial 1 of 3 done" not in seen:  # what a live session tells its operator
+        line = process.stderr.readline()
+        assert line, seen
+        seen += line
+    time.sleep(0.5)
+    process.send_signal(signal.SIGINT)
+    stdout, stderr = process.communicate(timeout=60)
+    assert process.returncode == 0, stderr
+    assert "stopped by Ctrl-C in trial 2" in stdout + stderr
+    assert sorted(p.name for p in (out / "recordings").iterdir()) == ["s1_virtual_t1.csv"]
+    manifest = pd.read_csv(out / "study.csv")
+    assert list(manifest["trial"]) == [1]
+    recording = pd.read_csv(out / "recordings" / "s1_virtual_t1.csv")
+    assert recording["t_s"].iloc[-1] == pytest.approx(2.0)
