@@ -222,6 +222,17 @@ EXPERIMENTS: tuple[Entry, ...] = (
         parallel=True,
     ),
     Entry(
+        "attractors",
+        "Every basin point named: attractors by recurrence, fractions, entropy, continuation.",
+        (("attractors.png", "Beyond the paper (section 3's Fig. 4, every start named): the "
+          "basins of the attractors found by recurrence on the exact map, the attractors as "
+          "markers, each one's share of the starts."),
+         ("attractors_continuation.png", "Beyond the paper: the attractors' basin fractions "
+          "continued over Gamma (stacked), eq. 8's existence and eq. 14's flip of the period-1 "
+          "orbit marked.")),
+        needs_fixed_point=False, reproduce=False,
+    ),
+    Entry(
         "sweep",
         "Basin atlas over a grid of parameters: fractions, basin entropy, stability (Fig. 4 x 5).",
         (("sweep.png", "Beyond the paper (section 3's basin over section 4's plane): at each "

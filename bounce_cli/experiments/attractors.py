@@ -1,0 +1,393 @@
+"""``bounce attractors``: every start of a basin named by the attractor it reaches.
+
+The Fig. 4 grid (or any configured region) labelled by recurrence (``analysis.attractors``):
+the coexisting attractors (periodic orbits with their multipliers, chaotic attractors with
+their Lyapunov exponent, exact sticking's locked orbit), each one's share of the region with
+its interval, the basin entropy and boundary basin entropy (Daza et al. 2016) and the
+uncertainty exponent of the boundaries (``analysis.basin_measures``), and the shares
+continued over a racket parameter (Gamma by default) as a stacked plot, with eq. 8's
+existence and eq. 14's flip of the period-1 orbit marked. Section 3's three classes are the
+same result seen coarser: ``paper_class`` in ``basin.csv``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Literal
+
+import numpy as np
+import pandas as pd
+from pydantic import Field, model_validator
+
+from ..analysis.attractors import (
+    OTHER_LABELS,
+    UNDECIDED,
+    Attractor,
+    AttractorFinder,
+    RecurrenceSettings,
+    basin_fractions,
+)
+from ..analysis.basin_measures import basin_entropy, uncertainty_exponent
+from ..analysis.bifurcation import SWEEPABLE, parameter_point, period1_thresholds
+from ..model.params import MIN_HOP_S, phase_difference
+from ..runtime.config import ExperimentConfig, ModelBlock, StrictModel
+from .base import Experiment, ExperimentResult, RunOptions
+from .basin import GridBlock
+from .plotting import caption_figures, publication_style
+
+
+class RecurrenceBlock(StrictModel):
+    """The tessellation of (theta mod 2 pi, v) and the recurrence's budgets."""
+
+    cells_theta: int = Field(200, ge=4, le=5000, description="cells across the phase")
+    cells_v: int = Field(200, ge=4, le=5000, description="cells across v_range_m_s")
+    v_range_m_s: tuple[float, float] = Field((0.0, 12.0), description="velocities the cells "
+                                             "cover, m/s (beyond: one cell each side)")
+    consecutive: int = Field(8, ge=1, le=1000, description="impacts in a row in one "
+                             "attractor's cells that put a start in its basin")
+    max_impacts: int = Field(300, ge=1, le=100_000, description="impacts a start is followed "
+                             "before it is discovered anew")
+    transient: int = Field(1000, ge=0, le=1_000_000)
+    window: int = Field(256, ge=4, le=100_000, description="impacts recorded after the "
+                        "transient (>= 2 max_period)")
+    max_period: int = Field(64, ge=1, le=10_000)
+    period_tolerance: float = Field(1e-7, gt=0.0, description="m/s and rad")
+    sample: int = Field(500, ge=1, le=1_000_000, description="starts the first discovery "
+                        "follows")
+    recurrence: int = Field(100, ge=1, description="impacts in a row in visited cells that "
+                            "make an orbit without a period recurrent")
+    recurrence_impacts: int = Field(20000, ge=1, le=10_000_000)
+    min_hop_s: float = Field(MIN_HOP_S, ge=0.0, description="section 3's sticking rule, s (0: "
+                             "exact sticking, model.chatter)")
+
+    @model_validator(mode="after")
+    def _checks(self):
+        if self.window < 2 * self.max_period:
+            raise ValueError("window must be at least 2 max_period")
+        if not self.v_range_m_s[0] < self.v_range_m_s[1]:
+            raise ValueError("v_range_m_s must be [low, high] with low < high")
+        return self
+
+    def settings(self) -> RecurrenceSettings:
+        return RecurrenceSettings(
+            cells_theta=self.cells_theta, cells_v=self.cells_v, v_range=self.v_range_m_s,
+            consecutive=self.consecutive, max_impacts=self.max_impacts,
+            transient=self.transient, window=self.window, max_period=self.max_period,
+            period_tolerance=self.period_tolerance, sample=self.sample,
+            min_hop_s=self.min_hop_s, recurrence=self.recurrence,
+            recurrence_impacts=self.recurrence_impacts)
+
+
+class MeasuresBlock(StrictModel):
+    """Basin entropy over boxes of ``box`` x ``box`` grid points; the uncertainty exponent
+    from ``samples`` random starts per eps (fractions of the region's spans)."""
+
+    box: int = Field(5, ge=1, le=1000)
+    eps: list[float] = Field(default_factory=lambda: [0.002, 0.004, 0.008, 0.016, 0.032])
+    samples: int = Field(1000, ge=10, le=1_000_000)
+    seed: int = Field(0, ge=0)
+
+    @model_validator(mode="after")
+    def _eps(self):
+        if len(self.eps) < 2 or any(not 0.0 < e < 1.0 for e in self.eps):
+            raise ValueError("eps: at least two values in (0, 1)")
+        return self
+
+
+class ContinuationBlock(StrictModel):
+    """The shares of the attractors continued over a racket parameter (``values: {start,
+    stop, num}``, linspace) on a coarser grid; ``num: 0`` for none."""
+
+    parameter: Literal["gamma", "racket_amplitude", "racket_period"] = "gamma"
+    start: float = 1.40
+    stop: float = 1.80
+    num: int = Field(9, ge=0, le=1000)
+
+    @model_validator(mode="after")
+    def _range(self):
+        if self.num > 1 and not self.stop > self.start:
+            raise ValueError("stop must be greater than start")
+        return self
+    grid: GridBlock = GridBlock.model_validate({
+        "theta0_deg": {"start": 0.0, "stop": 360.0, "num": 90},
+        "v0_m_s": {"start": 0.0, "stop": 10.0, "num": 90}})
+
+
+class AttractorsConfig(ExperimentConfig):
+    model: ModelBlock = ModelBlock()
+    grid: GridBlock = GridBlock()
+    recurrence: RecurrenceBlock = RecurrenceBlock()
+    measures: MeasuresBlock = MeasuresBlock()
+    continuation: ContinuationBlock = ContinuationBlock()
+    max_points: int = Field(4_000_000, ge=1, description="largest grid accepted")
+
+    @model_validator(mode="after")
+    def _size(self):
+        n = self.grid.theta0_deg.num * self.grid.v0_m_s.num
+        if n > self.max_points:
+            raise ValueError(f"the grid has {n} points, more than max_points = "
+                             f"{self.max_points}")
+        return self
+
+
+# -- tables -------------------------------------------------------------------------------------
+def attractor_rows(attractors: list[Attractor], fractions: dict[int, tuple]) -> pd.DataFrame:
+    rows = []
+    for a in attractors:
+        moduli = np.sort(np.abs(a.multipliers))[::-1]
+        share = fractions.get(a.index, (0, 0.0, 0.0, 0.0))
+        rows.append({
+            "attractor": a.index, "name": a.name, "kind": a.kind, "period": a.period,
+            "cycles": a.cycles,
+            "theta_deg": float(np.degrees(a.theta[0])) if a.theta.size else math.nan,
+            "v_m_s": float(a.v[0]) if a.v.size else math.nan, "points": int(a.theta.size),
+            "cells": int(np.unique(a.cells).size),
+            "multiplier1_abs": float(moduli[0]) if moduli.size else math.nan,
+            "multiplier2_abs": float(moduli[1]) if moduli.size > 1 else math.nan,
+            "lyapunov_per_impact": a.lyapunov, "refined": a.refined,
+            "basin_count": share[0], "basin_fraction": share[1], "fraction_low": share[2],
+            "fraction_high": share[3]})
+    return pd.DataFrame(rows, columns=[
+        "attractor", "name", "kind", "period", "cycles", "theta_deg", "v_m_s", "points",
+        "cells", "multiplier1_abs", "multiplier2_abs", "lyapunov_per_impact", "refined",
+        "basin_count", "basin_fraction", "fraction_low", "fraction_high"])
+
+
+def label_name(label: int, attractors: list[Attractor]) -> str:
+    return OTHER_LABELS[label] if label < 0 else attractors[label].name
+
+
+def paper_class(label: int, attractors: list[Attractor]) -> str:
+    """Section 3's classes of the same result: period1 (eq. 8's orbit), sticking, below the
+    racket, undecided (everything else the paper's rules cannot name)."""
+    if label < 0:
+        return {"below_racket": "below_racket", "sticking": "sticking"}.get(
+            OTHER_LABELS[label], "undecided")
+    a = attractors[label]
+    if a.kind == "periodic" and a.period == 1 and a.cycles == 1:
+        return "period1"
+    return "locked" if a.kind == "locked" else "undecided"
+
+
+def _fractions_frame(labels, attractors) -> tuple[pd.DataFrame, dict[int, tuple]]:
+    fr = basin_fractions(labels)
+    frame = pd.DataFrame([{"label": f.label, "name": label_name(f.label, attractors),
+                           "count": f.count, "fraction": f.fraction, "low": f.low,
+                           "high": f.high} for f in fr])
+    return frame, {f.label: (f.count, f.fraction, f.low, f.high) for f in fr}
+
+
+# -- continuation -------------------------------------------------------------------------------
+def _same(a: Attractor, b: Attractor) -> bool:
+    """b continues a across a parameter step: the same kind and period, and (periodic) a
+    point of b near a point of a (0.3 rad, 0.5 m/s)."""
+    if a.kind != b.kind or a.period != b.period or a.cycles != b.cycles:
+        return False
+    if a.kind != "periodic":
+        return True
+    dth = np.abs(phase_difference(a.theta[:, None], b.theta[None, :]))
+    return bool(np.any((dth < 0.3) & (np.abs(a.v[:, None] - b.v[None, :]) < 0.5)))
+
+
+def continue_fractions(config: AttractorsConfig, options: RunOptions) -> pd.DataFrame:
+    """The shares of every attractor at each parameter value, an attractor continued from one
+    value to the next where ``_same`` holds (its ``branch`` number kept)."""
+    c = config.continuation
+    values = np.linspace(c.start, c.stop, c.num)
+    th, vv = np.meshgrid(np.radians(c.grid.theta0_deg.values()), c.grid.v0_m_s.values())
+    settings = config.recurrence.settings()
+    rows: list[dict] = []
+    previous: list[tuple[int, Attractor]] = []
+    branches = 0
+    options.progress.start(len(values), "continuation")
+    for value in values:
+        params = parameter_point(config.params, c.parameter, float(value))
+        finder = AttractorFinder(params, settings)
+        rng = np.random.default_rng(config.measures.seed)
+        pick = rng.choice(th.size, size=min(settings.sample, th.size), replace=False)
+        finder.discover(th.ravel()[pick], vv.ravel()[pick])
+        labels, _ = finder.label(th, vv)
+        current: list[tuple[int, Attractor]] = []
+        for a in finder.attractors:
+            match = next((b for b, old in previous if _same(old, a)), None)
+            if match is None:
+                match, branches = branches, branches + 1
+            current.append((match, a))
+        branch_of = {a.index: b for b, a in current}
+        for f in basin_fractions(labels):
+            rows.append({c.parameter: float(value), "label": f.label,
+                         "branch": branch_of.get(f.label, f.label),
+                         "name": label_name(f.label, finder.attractors), "fraction": f.fraction,
+                         "low": f.low, "high": f.high})
+        previous = current
+        options.progress.advance(1)
+    return pd.DataFrame(rows, columns=[c.parameter, "label", "branch", "name", "fraction",
+                                       "low", "high"])
+
+
+# -- the run ------------------------------------------------------------------------------------
+def run(config: AttractorsConfig, options: RunOptions) -> ExperimentResult:
+    params = config.params
+    settings = config.recurrence.settings()
+    theta_deg, v0 = config.grid.theta0_deg.values(), config.grid.v0_m_s.values()
+    th, vv = np.meshgrid(np.radians(theta_deg), v0)
+    finder = AttractorFinder(params, settings)
+    rng = np.random.default_rng(config.measures.seed)
+    pick = rng.choice(th.size, size=min(settings.sample, th.size), replace=False)
+    finder.discover(th.ravel()[pick], vv.ravel()[pick])
+    labels, impacts = finder.label(th, vv)
+    attractors = finder.attractors
+    fractions, shares = _fractions_frame(labels, attractors)
+    names = np.array([label_name(x, attractors) for x in range(-4, len(attractors))],
+                     dtype=object)
+    classes = np.array([paper_class(x, attractors) for x in range(-4, len(attractors))],
+                       dtype=object)
+    basin = pd.DataFrame({
+        "theta0_deg": np.broadcast_to(theta_deg[None, :], th.shape).ravel(),
+        "v0_m_s": np.broadcast_to(v0[:, None], th.shape).ravel(),
+        "label": labels.ravel(), "attractor": names[labels.ravel() + 4],
+        "paper_class": classes[labels.ravel() + 4], "impacts": impacts.ravel()})
+    points = pd.DataFrame([{"attractor": a.index, "name": a.name, "theta_deg": math.degrees(t),
+                            "v_m_s": v} for a in attractors for t, v in zip(a.theta, a.v)],
+                          columns=["attractor", "name", "theta_deg", "v_m_s"])
+    measures = _measures(config, finder, labels, theta_deg, v0)
+    frames = {"attractors.csv": attractor_rows(attractors, shares),
+              "attractor_points.csv": points, "fractions.csv": fractions, "basin.csv": basin,
+              "measures.csv": measures[0], "uncertainty.csv": measures[1]}
+    if config.continuation.num:
+        frames["continuation.csv"] = continue_fractions(config, options)
+    figures = draw(frames, config)
+    caption_figures(figures, params, f"{th.shape[1]} x {th.shape[0]} starts")
+    undecided = int(np.sum(labels == UNDECIDED))
+    summary = [f"{len(attractors)} attractor(s): " + ", ".join(
+        f"{a.name} {shares.get(a.index, (0, 0.0))[1]:.1%}" for a in attractors),
+        f"undecided: {undecided} of {labels.size} starts ({undecided / labels.size:.2%}); "
+        f"{finder.rediscovered} needed a second discovery"]
+    return ExperimentResult(frames=frames, figures=figures, summary=summary)
+
+
+def _measures(config: AttractorsConfig, finder: AttractorFinder, labels, theta_deg, v0):
+    """(measures.csv, uncertainty.csv): basin entropy, boundary basin entropy (Daza et al.
+    2016) and the uncertainty exponent with its SE (McDonald et al. 1985)."""
+    m = config.measures
+    rows = []
+    if min(labels.shape) >= m.box:
+        be = basin_entropy(labels, m.box)
+        rows += [{"quantity": "basin_entropy", "value": be.basin_entropy, "se": math.nan,
+                  "note": f"{be.boxes} boxes of {m.box} x {m.box} starts"},
+                 {"quantity": "boundary_basin_entropy", "value": be.boundary_basin_entropy,
+                  "se": math.nan, "note": f"{be.boundary_boxes} boundary boxes; > ln 2 = "
+                  "0.693: a fractal boundary (sufficient)"}]
+    x_range = (math.radians(theta_deg[0]), math.radians(theta_deg[-1]))
+    y_range = (float(v0[0]), float(v0[-1]))
+    if x_range[1] > x_range[0] and y_range[1] > y_range[0]:
+        ue = uncertainty_exponent(lambda x, y: finder.label(x, y)[0], x_range, y_range,
+                                  np.asarray(m.eps), m.samples, np.random.default_rng(m.seed))
+        rows.append({"quantity": "uncertainty_exponent", "value": ue.alpha, "se": ue.alpha_se,
+                     "note": "f(eps) ~ eps^alpha; 1: a smooth boundary, < 1: fractal "
+                     f"(dimension 2 - alpha); {m.samples} starts per eps"})
+        uncertainty = pd.DataFrame({"eps": ue.eps, "uncertain_fraction": ue.uncertain_fraction})
+    else:
+        uncertainty = pd.DataFrame(columns=["eps", "uncertain_fraction"])
+    undecided = float(np.mean(labels == UNDECIDED))
+    rows.append({"quantity": "undecided_fraction", "value": undecided, "se": math.nan,
+                 "note": "starts no attractor was found for within the budgets"})
+    return pd.DataFrame(rows, columns=["quantity", "value", "se", "note"]), uncertainty
+
+
+# -- figures ------------------------------------------------------------------------------------
+OTHER_COLOURS = {"below_racket": "#000000", "sticking": "#9a9a9a", "undecided": "#d62728",
+                 "resting": "#8c564b"}
+PALETTE = ["#4c72b0", "#dd8452", "#55a868", "#8172b3", "#937860", "#da8bc3", "#ccb974",
+           "#64b5cd", "#c44e52", "#a1c9f4", "#ffb482", "#8de5a1", "#d0bbff", "#1f77b4"]
+
+
+def _colours(names: list[str]) -> dict[str, str]:
+    out, k = {}, 0
+    for name in names:
+        if name in OTHER_COLOURS:
+            out[name] = OTHER_COLOURS[name]
+        else:
+            out[name] = PALETTE[k % len(PALETTE)]
+            k += 1
+    return out
+
+
+@publication_style
+def draw(frames: dict[str, pd.DataFrame], config: AttractorsConfig | None = None) -> dict:
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import ListedColormap
+    from matplotlib.patches import Patch
+
+    figures = {}
+    basin, fractions = frames["basin.csv"], frames["fractions.csv"]
+    points = frames["attractor_points.csv"]
+    theta = np.unique(basin["theta0_deg"])
+    v = np.unique(basin["v0_m_s"])
+    order = list(fractions["name"])
+    colours = _colours(order)
+    code = {name: i for i, name in enumerate(order)}
+    grid = basin["attractor"].map(code).to_numpy().reshape(v.size, theta.size)
+    fig, ax = plt.subplots(figsize=(7.0, 5.6), layout="constrained")
+    ax.imshow(grid, origin="lower", aspect="auto", interpolation="nearest",
+              extent=(theta[0], theta[-1], v[0], v[-1]),
+              cmap=ListedColormap([colours[n] for n in order]), vmin=-0.5,
+              vmax=len(order) - 0.5)
+    for name, part in points.groupby("name", sort=False):
+        ax.plot(part["theta_deg"], part["v_m_s"], "o" if len(part) < 100 else ".",
+                ms=5 if len(part) < 100 else 1.5, mfc=colours.get(name, "k"), mec="w",
+                mew=0.8, ls="none")
+    ax.set_xlabel(r"initial phase $\theta_0$ (deg)")
+    ax.set_ylabel(r"initial velocity $v_0$ (m/s)")
+    ax.set_title("Basins of the attractors found by recurrence (markers: the attractors)")
+    handles = [Patch(facecolor=colours[row.name], edgecolor="0.3",
+                     label=f"{row.name}: {row.fraction:.1%}")
+               for row in fractions.itertuples()]
+    fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=8,
+               frameon=False)
+    figures["attractors.png"] = fig
+    if "continuation.csv" in frames and len(frames["continuation.csv"]):
+        figures["attractors_continuation.png"] = _draw_continuation(
+            frames["continuation.csv"], config)
+    return figures
+
+
+def _draw_continuation(table: pd.DataFrame, config: AttractorsConfig | None):
+    import matplotlib.pyplot as plt
+
+    parameter = next(c for c in table.columns if c in SWEEPABLE)
+    values = np.unique(table[parameter])
+    table = table.assign(key=np.where(table["label"] < 0, table["name"],
+                                      "b" + table["branch"].astype(str)))
+    keys = list(dict.fromkeys(table.sort_values([parameter, "label"])["key"]))
+    first_name = {k: table.loc[table["key"] == k, "name"].iloc[0] for k in keys}
+    colours = _colours([first_name[k] if not k.startswith("b") else k for k in keys])
+    stack = np.zeros((len(keys), values.size))
+    for i, k in enumerate(keys):
+        part = table[table["key"] == k].groupby(parameter)["fraction"].sum()
+        stack[i] = part.reindex(values, fill_value=0.0).to_numpy()
+    fig, ax = plt.subplots(figsize=(7.0, 4.6), layout="constrained")
+    repeated = {n for n in first_name.values() if list(first_name.values()).count(n) > 1}
+    labels = [first_name[k] + (f" (branch {k[1:]})" if first_name[k] in repeated else "")
+              for k in keys]
+    ax.stackplot(values, stack, colors=[colours[first_name[k] if not k.startswith("b") else k]
+                                        for k in keys],
+                 labels=labels, edgecolor="w", linewidth=0.3)
+    if config is not None:
+        th = period1_thresholds(config.params, parameter)
+        for x, text in ((th.existence, "eq. 8: period-1 exists"),
+                        (th.flip, "eq. 14: period-1 flips")):
+            if math.isfinite(x) and values[0] <= x <= values[-1]:
+                ax.axvline(x, color="k", ls="--", lw=0.8)
+                ax.text(x, 1.01, text, rotation=0, ha="center", va="bottom", fontsize=7,
+                        transform=ax.get_xaxis_transform())
+    ax.set_xlim(values[0], values[-1])
+    ax.set_ylim(0.0, 1.0)
+    ax.set_xlabel(SWEEPABLE[parameter][1])
+    ax.set_ylabel("share of the starts (basin fraction)")
+    ax.set_title("Basin fractions continued over the racket", pad=14)
+    fig.legend(loc="outside right upper", fontsize=7, frameon=False)
+    return fig
+
+
+EXPERIMENT = Experiment(name="attractors", schema=AttractorsConfig, run=run, draw=draw)

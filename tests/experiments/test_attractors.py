@@ -1,0 +1,61 @@
+"""``bounce attractors``: the tables, the figures, section 3's classes of the same result."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import bounce_cli
+
+SMALL = {"grid.theta0_deg.num": 60, "grid.v0_m_s.num": 60, "recurrence.transient": 500,
+         "recurrence.window": 128, "recurrence.max_period": 32, "recurrence.sample": 200,
+         "measures.samples": 300, "continuation.num": 3, "continuation.start": 1.45,
+         "continuation.stop": 1.6, "continuation.grid.theta0_deg.num": 30,
+         "continuation.grid.v0_m_s.num": 30}
+
+
+def test_section_3_s_classes_are_the_attractors_seen_coarser(tmp_path):
+    quick = {**SMALL, "grid.theta0_deg.num": 40, "grid.v0_m_s.num": 40, "continuation.num": 0,
+             "measures.samples": 100}
+    result = bounce_cli.run("attractors", set=quick)
+    basin = result.frames["basin.csv"]
+    today = bounce_cli.run("basin", set={"grid.theta0_deg.num": 40, "grid.v0_m_s.num": 40}
+                           ).frames["basin.csv"]
+    assert np.array_equal(basin["paper_class"].to_numpy(), today["outcome"].to_numpy())
+    table = result.frames["attractors.csv"]
+    assert list(table["name"]) == ["period-1"] and table["basin_fraction"].iloc[0] == \
+        pytest.approx(float(np.mean(today["outcome"] == "period1")))
+    assert "continuation.csv" not in result.frames and "attractors.png" in result.figures
+
+
+@pytest.mark.slow
+def test_attractors_writes_every_table_and_section_3_s_classes_agree(tmp_path):
+    out = tmp_path / "a"
+    result = bounce_cli.run("attractors", set=SMALL, out=out)
+    for name in ("attractors.csv", "attractor_points.csv", "fractions.csv", "basin.csv",
+                 "measures.csv", "uncertainty.csv", "continuation.csv", "attractors.png",
+                 "attractors_continuation.png"):
+        assert (out / name).is_file(), name
+    fractions = pd.read_csv(out / "fractions.csv")
+    assert fractions["fraction"].sum() == pytest.approx(1.0)
+    basin = pd.read_csv(out / "basin.csv")
+    today = bounce_cli.run("basin", set={"grid.theta0_deg.num": 60, "grid.v0_m_s.num": 60}
+                           ).frames["basin.csv"]
+    assert np.array_equal(basin["paper_class"].to_numpy(), today["outcome"].to_numpy())
+    measures = pd.read_csv(out / "measures.csv").set_index("quantity")["value"]
+    assert measures["undecided_fraction"] == 0.0
+    assert 0.0 < measures["basin_entropy"] < measures["boundary_basin_entropy"] < 1.1
+    continued = pd.read_csv(out / "continuation.csv")
+    for _, at in continued.groupby("gamma"):
+        assert at["fraction"].sum() == pytest.approx(1.0)
+    # past eq. 14's flip (Gamma 1.5268) the period-1 orbit's basin has gone to period 2
+    late = continued[continued["gamma"] == continued["gamma"].max()]
+    assert "period-1" not in set(late["name"]) and "period-2" in set(late["name"])
+    assert "undecided: 0 of 3600" in " ".join(result.summary)
+
+
+def test_a_grid_above_max_points_is_one_line(cli, user_error, tmp_path):
+    user_error(cli("attractors", "--set", "grid.theta0_deg.num=3000", "--set",
+                   "grid.v0_m_s.num=3000", "--out", tmp_path / "x"), "max_points")
+    assert not (tmp_path / "x").exists()
