@@ -39,8 +39,10 @@ Labels: an attractor's index (0, 1, ...), or one of the negative codes ``UNDECID
 
 from __future__ import annotations
 
+import builtins
 import math
 from dataclasses import dataclass, field
+from typing import Callable
 
 import numpy as np
 
@@ -48,6 +50,7 @@ from ..model.chatter import iterate_exact_orbit, release_fate, release_phase
 from ..model.maps import PassiveMap, State
 from ..model.params import MIN_HOP_S, ModelError, ModelParams, phase_difference
 from .bifurcation import SweepSettings, detect_period, iterate_sweep, sweep_parameters
+from .classify import DEFAULT_TILE_POINTS, tile_slices
 from .continuation import evaluate_orbit
 
 TWO_PI = 2.0 * math.pi
@@ -469,6 +472,14 @@ def _label(cat: _Catalogue, impact_map: PassiveMap, theta, v, stick_label: int):
     return labels, impacts, final_th, final_v
 
 
+def label_tile(args):
+    """One task of :meth:`AttractorFinder.label`: (catalogue, map, theta0, v0, stick label)
+    -> ``_label``'s (labels, impacts, final theta, final v); module-level, so that worker
+    processes can receive it."""
+    catalogue, impact_map, theta0, v0, stick = args
+    return _label(catalogue, impact_map, theta0, v0, stick)
+
+
 def _stick_label(cat: _Catalogue, impact_map: PassiveMap) -> int:
     """The label of a start that sticks: ``STICKING`` under section 3's rule; with exact
     sticking every orbit that sticks is released in one state (``model.chatter``), so it
@@ -529,14 +540,25 @@ class AttractorFinder:
         _, theta0, v0, flies = self._flat(theta0, v0)
         _discover(self.catalogue, self.map, theta0[flies], v0[flies], self.stick)
 
-    def label(self, theta0, v0) -> tuple[np.ndarray, np.ndarray]:
-        """(labels, impacts followed) of starts (arrays broadcast), in their shape."""
+    def label(self, theta0, v0, *, map: Callable = builtins.map, workers: int = 1,
+              tile_points: int = DEFAULT_TILE_POINTS) -> tuple[np.ndarray, np.ndarray]:
+        """(labels, impacts followed) of starts (arrays broadcast), in their shape. The
+        labelling pass runs in tiles through ``map`` (an executor's: worker processes),
+        the discovery of what it leaves here, so that the catalogue is one; the result is
+        the same for any ``map``, ``workers`` and ``tile_points``."""
         shape, theta0, v0, flies = self._flat(theta0, v0)
         s = self.settings
         labels = np.full(theta0.size, BELOW_RACKET, dtype=np.int64)
         impacts = np.zeros(theta0.size, dtype=np.int64)
         idx = np.flatnonzero(flies)
-        got, used, th, vv = _label(self.catalogue, self.map, theta0[idx], v0[idx], self.stick)
+        got = np.empty(idx.size, dtype=np.int64)
+        used = np.empty(idx.size, dtype=np.int64)
+        th, vv = np.empty(idx.size), np.empty(idx.size)
+        tiles = tile_slices(idx.size, tile_points, workers)
+        tasks = ((self.catalogue, self.map, theta0[idx[t]], v0[idx[t]], self.stick)
+                 for t in tiles)
+        for t, part in zip(tiles, map(label_tile, tasks)):
+            got[t], used[t], th[t], vv[t] = part
         labels[idx], impacts[idx] = got, used
         left = np.flatnonzero(got == UNDECIDED)
         if left.size:

@@ -32,7 +32,8 @@ from ..analysis.bifurcation import SWEEPABLE, parameter_point, period1_threshold
 from ..model.params import MIN_HOP_S, phase_difference
 from ..runtime.config import ExperimentConfig, ModelBlock, StrictModel
 from .base import Experiment, ExperimentResult, RunOptions
-from .basin import GridBlock
+from ..runtime import parallel
+from .basin import POOL_MIN_POINTS, GridBlock
 from .plotting import caption_figures, publication_style
 
 
@@ -235,7 +236,9 @@ def run(config: AttractorsConfig, options: RunOptions) -> ExperimentResult:
     rng = np.random.default_rng(config.measures.seed)
     pick = rng.choice(th.size, size=min(settings.sample, th.size), replace=False)
     finder.discover(th.ravel()[pick], vv.ravel()[pick])
-    labels, impacts = finder.label(th, vv)
+    jobs = options.jobs if th.size >= POOL_MIN_POINTS else 1
+    with parallel.executor(jobs) as executor:
+        labels, impacts = finder.label(th, vv, map=executor.map, workers=executor.workers)
     attractors = finder.attractors
     fractions, shares = _fractions_frame(labels, attractors)
     names = np.array([label_name(x, attractors) for x in range(-4, len(attractors))],

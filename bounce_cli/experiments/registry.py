@@ -230,7 +230,7 @@ EXPERIMENTS: tuple[Entry, ...] = (
          ("attractors_continuation.png", "Beyond the paper: the attractors' basin fractions "
           "continued over Gamma (stacked), eq. 8's existence and eq. 14's flip of the period-1 "
           "orbit marked.")),
-        needs_fixed_point=False, reproduce=False,
+        needs_fixed_point=False, reproduce=False, parallel=True,
     ),
     Entry(
         "sweep",
