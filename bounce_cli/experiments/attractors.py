@@ -102,7 +102,7 @@ class ContinuationBlock(StrictModel):
     parameter: Literal["gamma", "racket_amplitude", "racket_period"] = "gamma"
     start: float = 1.40
     stop: float = 1.80
-    num: int = Field(9, ge=0, le=1000)
+    num: int = Field(17, ge=0, le=1000)
 
     @model_validator(mode="after")
     def _range(self):
