@@ -98,6 +98,23 @@ LSL_CHUNK = 1024
 LSL_PULL_S = 0.05
 
 
+def _quiet_liblsl() -> None:
+    """liblsl logs INFO lines on stderr; unless the user points ``LSLAPICFG`` at a config of
+    their own, give it one that logs errors only (liblsl reads it when it starts)."""
+    import os
+    import tempfile
+
+    if "LSLAPICFG" in os.environ:
+        return
+    path = Path(tempfile.gettempdir()) / "bounce-liblsl-errors-only.cfg"
+    try:
+        if not path.is_file():
+            path.write_text("[log]\nlevel = -2\n", encoding="ascii")
+    except OSError:
+        return
+    os.environ["LSLAPICFG"] = str(path)
+
+
 class LslSource:
     """A Lab Streaming Layer stream: each trial takes the samples from the first one on (time
     from its timestamp), until ``duration_s`` of stream time; the next trial starts ``rest_s``
@@ -110,6 +127,7 @@ class LslSource:
 
     def __init__(self, name: str, settings: LslSettings, rest_s: float,
                  warn: Callable[[str], None]):
+        _quiet_liblsl()
         try:
             import pylsl
         except ImportError:
