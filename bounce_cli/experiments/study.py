@@ -43,6 +43,7 @@ from ..runtime.config import (
     StrictModel,
     apply_overrides,
     bundled_config_path,
+    did_you_mean,
     read_yaml,
     validate,
 )
@@ -116,7 +117,8 @@ class StudyConfig(ExperimentConfig):
         unknown = [k for k in self.settings if k not in ANALYSES]
         if unknown:
             raise ValueError(f"settings: {unknown[0]!r} is not an analysis (one of "
-                             f"{', '.join(ANALYSES)})")
+                             f"{', '.join(ANALYSES)})"
+                             f"{did_you_mean(str(unknown[0]), list(ANALYSES))}")
         if len(set(self.analyses)) != len(self.analyses):
             raise ValueError("analyses: each analysis once")
         extraction_config({"extract": self.extract}, ())  # unknown keys fail now
