@@ -219,8 +219,41 @@ def frame_from_json(data: dict[str, Any]) -> pd.DataFrame:
     return pd.DataFrame(columns, columns=data["columns"])
 
 
-def row_label(row: ManifestRow) -> str:
-    return row.factors.get("trial") or row.file.stem
+def recording_names(unit: Unit) -> list[str]:
+    """A name for each recording of ``unit`` (in its rows' order) that no other of its
+    recordings has: the file's stem, and where several share one (``A/t.csv``, ``B/t.csv``)
+    the stem and the manifest line, ``t-line3``. Its per-recording outputs
+    (``<unit>/extract/<name>/``) and its trials' labels are keyed by it, so that no two
+    recordings overwrite or merge into each other.
+
+    Parameters
+    ----------
+    unit : Unit
+        The unit, its rows as the study reads them.
+
+    Returns
+    -------
+    list of str
+        One name per row, all different.
+    """
+    stems = [row.file.stem for row in unit.rows]
+    taken = {stem for stem in stems if stems.count(stem) == 1}
+    names = []
+    for row, stem in zip(unit.rows, stems):
+        name = stem
+        if stems.count(stem) > 1:
+            name = f"{stem}-line{row.line}"
+            while name in taken:  # a file really named so: lengthen until free
+                name += "-"
+            taken.add(name)
+        names.append(name)
+    return names
+
+
+def row_label(row: ManifestRow, name: str) -> str:
+    """The trial label of a recording: its ``trial`` factor, else its name (as
+    :func:`recording_names` gives it)."""
+    return row.factors.get("trial") or name
 
 
 def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures: list[dict],
@@ -236,8 +269,8 @@ def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures:
     unit = task.unit
     tables, setups = [], []
     user_g = cfg["model"].get("g")
-    for row in unit.rows:
-        label = row_label(row)
+    for row, name in zip(unit.rows, recording_names(unit)):
+        label = row_label(row, name)
         try:
             if is_impacts_table(str(row.file)):
                 table = read_impacts(str(row.file)).frame
@@ -245,9 +278,9 @@ def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures:
             else:
                 ex_cfg = extraction_config(cfg, row.overrides, row.file, row.events, user_g)
                 result = extract.run(ex_cfg, RunOptions())
-                stem = f"{unit.folder}/extract/{row.file.stem}"
-                for name, frame in result.frames.items():
-                    frames[f"{stem}/{name}"] = frame
+                stem = f"{unit.folder}/extract/{name}"
+                for file_name, frame in result.frames.items():
+                    frames[f"{stem}/{file_name}"] = frame
                 table = result.frames["impacts.csv"]
                 setup_frame = result.frames.get("setup.csv")
                 setup = ({} if setup_frame is None else

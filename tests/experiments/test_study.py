@@ -176,6 +176,37 @@ def test_a_damaged_file_is_one_failure_row_and_exit_1(tmp_path, cli_module):
     assert (out / "s2" / "a" / "regression" / "fit.csv").is_file()
 
 
+def test_two_recordings_with_one_stem_in_a_unit_keep_their_own_outputs(tiny, tmp_path,
+                                                                        cli_module):
+    """``A/t.csv`` and ``B/t.csv`` of one subject and condition (issue 36: one's files were
+    overwritten by the other's, and their impacts pooled as one trial)."""
+    for folder, trial in (("A", 1), ("B", 2)):
+        (tmp_path / folder).mkdir()
+        shutil.copy(tiny / "recordings" / f"s1_a_t{trial}.csv", tmp_path / folder / "t.csv")
+    (tmp_path / "study.csv").write_text("file,subject,condition\nA/t.csv,s1,a\nB/t.csv,s1,a\n")
+    out = tmp_path / "out"
+    cli_module("study", "--manifest", tmp_path / "study.csv", "--out", out, "--quiet",
+               "--set", "analyses=[regression]", "--set", "report.unit_figures=false", *FAST)
+    extracted = out / "s1" / "a" / "extract"
+    assert sorted(p.name for p in extracted.iterdir()) == ["t-line2", "t-line3"]
+    first, second = (pd.read_csv(extracted / name / "impacts.csv")
+                     for name in ("t-line2", "t-line3"))
+    assert not first["t_s"].equals(second["t_s"])
+    pooled = pd.read_csv(out / "s1" / "a" / "impacts.csv")
+    assert len(pooled) == len(first) + len(second)
+    assert sorted(set(pooled["trial"])) == ["t-line2:1", "t-line3:1"]
+
+
+def test_recording_names_are_the_stems_unless_two_share_one(tmp_path):
+    from bounce_cli.data.study_manifest import ManifestRow, Unit
+
+    rows = tuple(ManifestRow(line, tmp_path / path, None, {"subject": "s1"})
+                 for line, path in ((2, "A/t.csv"), (3, "u.csv"), (4, "B/t.csv"),
+                                    (5, "t-line4.csv")))
+    names = study.recording_names(Unit(("s1",), ("subject",), rows))
+    assert names == ["t-line2", "u", "t-line4-", "t-line4"]
+
+
 def manifest(tmp_path, text, files=("a.csv",)):
     for name in files:
         (tmp_path / name).write_text("trial,t_s,racket_x_m,ball_x_m\n")
