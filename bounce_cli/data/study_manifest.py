@@ -15,8 +15,9 @@ column                     the factor's value ``""`` (printed as ``-``)
                            ``extract.markers.ball`` (an empty cell: no override)
 =========================  =====================================================================
 
-Read before anything runs: a missing column, a file that does not exist, a duplicate row or a
-factor value that cannot name a folder is one line naming the manifest, the line and the reason.
+Read before anything runs: a missing column, a column given twice, a file that does not exist,
+a duplicate row or a factor value that cannot name a folder is one line naming the manifest,
+the line and the reason.
 """
 
 from __future__ import annotations
@@ -139,14 +140,16 @@ def read_manifest(path: str | Path) -> Manifest:
     except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise ConfigError(f"{where}: cannot read as CSV: {first}") from None
-    frame.columns = [str(c).strip() for c in frame.columns]
+    header = _header(path, where)
+    twice = sorted({c for c in header if header.count(c) > 1})
+    if twice:  # pandas has renamed the second one (subject.1): this header as written
+        raise ConfigError(f"{where}: column(s) {', '.join(twice)} given twice (give each "
+                          "column once)")
+    frame.columns = header
     missing = [c for c in REQUIRED_COLUMNS if c not in frame.columns]
     if missing:
         raise ConfigError(f"{where}: missing column(s) {', '.join(missing)} (a manifest has "
                           f"one row per recording: file, subject[, condition, trial, ...])")
-    twice = sorted({c for c in frame.columns if list(frame.columns).count(c) > 1})
-    if twice:
-        raise ConfigError(f"{where}: column(s) {', '.join(twice)} given twice")
     if frame.empty:
         raise ConfigError(f"{where}: no rows (one row per recording)")
     overrides = [c for c in frame.columns if c.startswith(OVERRIDE_PREFIX)]
@@ -186,6 +189,17 @@ def read_manifest(path: str | Path) -> Manifest:
         seen[identity] = i
         rows.append(ManifestRow(i, file, events, values, tuple(texts)))
     return Manifest(path, tuple(rows), factors)
+
+
+def _header(path: Path, where: str) -> list[str]:
+    """The manifest's column names as written, stripped (``pd.read_csv`` renames a second
+    ``subject`` to ``subject.1``, hiding that it was given twice)."""
+    try:
+        first = pd.read_csv(path, header=None, nrows=1, dtype=str, keep_default_na=False,
+                            skipinitialspace=True)
+    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError):
+        raise ConfigError(f"{where}: cannot read its header as CSV") from None
+    return [str(c).strip() for c in first.iloc[0]]
 
 
 def _existing(base: Path, text: str, where: str, line: int, column: str) -> Path:

@@ -222,6 +222,9 @@ def manifest(tmp_path, text, files=("a.csv",)):
     ("file,subject\na.csv,s/1\n", "line 2: subject 's/1': a factor value names a folder"),
     ("file,subject\n", "no rows"),
     ("file,subject,extract.units.length\na.csv,s1,[mm\n", "cannot parse"),
+    # pandas renames the second subject to subject.1 (issue 36: it passed)
+    ("file,subject,subject\na.csv,s1,s2\n", "column(s) subject given twice"),
+    ("file,subject, condition,condition\na.csv,s1,x,y\n", "column(s) condition given twice"),
 ])
 def test_manifest_errors_are_one_line_before_anything_runs(tmp_path, cli, user_error, text,
                                                            needle):
