@@ -235,6 +235,36 @@ def test_manifest_errors_are_one_line_before_anything_runs(tmp_path, cli, user_e
     assert not out.exists()
 
 
+@pytest.mark.parametrize("target", ["/etc/passwd", "/etc/hostname", "/proc/self/status"])
+@pytest.mark.parametrize("linked", [False, True])
+def test_a_system_file_in_the_manifest_is_refused_without_its_content(tmp_path, cli, user_error,
+                                                                      target, linked):
+    """Issue 36: /etc/passwd's first line reached failures.csv and report.html (as the
+    columns "the file has"). Refused before anything runs, by its name, never its bytes."""
+    if not Path(target).is_file():
+        pytest.skip(f"no {target} here")
+    cell = target
+    if linked:
+        (tmp_path / "t.csv").symlink_to(target)
+        cell = "t.csv"
+    path = tmp_path / "study.csv"
+    path.write_text(f"file,subject,condition\n{cell},s1,a\n")
+    out = tmp_path / "out"
+    result = cli("study", "--manifest", path, "--out", out, *FAST)
+    user_error(result, "line 2", f"file {cell!r}", "a system file, not a recording")
+    first = Path(target).read_text().splitlines()[0].strip()
+    assert first not in result.output
+    assert not out.exists()
+
+
+def test_a_device_in_the_manifest_is_not_a_recording(tmp_path, cli, user_error):
+    path = tmp_path / "study.csv"
+    path.write_text("file,subject,condition\na.csv,s1,a\n")
+    (tmp_path / "a.csv").mkdir()
+    user_error(cli("study", "--manifest", path, "--out", tmp_path / "out", *FAST),
+               "line 2", "file 'a.csv'", "not a regular file")
+
+
 def test_a_grouping_factor_the_manifest_lacks_is_one_line(tmp_path, cli, user_error):
     result = cli("study", "--manifest", manifest(tmp_path, "file,subject\na.csv,s1\n"),
                  "--out", tmp_path / "out")
