@@ -277,6 +277,36 @@ def test_replacing_a_run_removes_the_files_only_the_old_run_wrote(tmp_path):
     assert json.loads((out / "run.json").read_text())["files"] == ["both.csv"]
 
 
+def test_the_next_run_removes_the_staging_files_a_killed_run_left(tmp_path):
+    """Issue 36: a run killed while staging leaves ``.<name>.<8 random>.tmp`` files, which no
+    later run removed. The next run into that --out removes those of its folders that are
+    older than itself; every other file, a link and a folder so named are left alone."""
+    out = tmp_path / "r"
+    (out / "sub").mkdir(parents=True)
+    outside = tmp_path / "outside.txt"
+    outside.write_text("not the run's")
+    stale = [out / ".data.csv.k2j3h4g5.tmp", out / ".run.json.abc_1234.tmp",
+             out / "sub" / ".b.csv.zzzz9999.tmp", out / ".other.png.q1w2e3r4.tmp"]
+    kept = [out / ".data.csv.tmp", out / "data.csv.k2j3h4g5.tmp", out / "keep.tmp",
+            out / ".x.ABCDEFGH.tmp", out / ".notes.abcdefgh.tmp.bak", out / "notes.txt"]
+    for path in stale + kept:
+        path.write_text("left")
+    (out / ".link.csv.abcdefgh.tmp").symlink_to(outside)
+    (out / ".folder.abcdefgh.tmp").mkdir()
+    elsewhere = tmp_path / ".data.csv.k2j3h4g5.tmp"  # beside --out, not in it
+    elsewhere.write_text("left")
+    run = make_run(out, {"a": 1})
+    fresh = out / ".data.csv.newer123.tmp"  # made after the run began: not a killed run's
+    fresh.write_text("in use")
+    run.add_csv("data.csv", pd.DataFrame({"x_m": [1.0, 2.0]}))
+    run.add_csv("sub/b.csv", pd.DataFrame({"x_m": [1.0, 2.0]}))
+    run.commit()
+    assert not [p for p in stale if p.exists()]
+    assert all(p.is_file() for p in kept + [fresh, elsewhere])
+    assert (out / ".link.csv.abcdefgh.tmp").is_symlink() and outside.read_text() == "not the run's"
+    assert (out / ".folder.abcdefgh.tmp").is_dir()
+
+
 def test_replacing_a_run_never_deletes_the_file_it_reads(tmp_path, cli):
     """`--force` into the folder of the run that wrote the --data file: the old run's files
     are replaced, but not the input the new run reads (the new-user review lost impacts.csv)."""

@@ -72,6 +72,49 @@ def staging(path: Path) -> Iterator[Path]:
         raise
 
 
+#: a staging file's name as :func:`reserve` makes it: mkstemp's ``.<name>.``, its 8 random
+#: characters (lower-case letters, digits, ``_``) and ``.tmp``
+STAGING_NAME = re.compile(r"^\..+\.[a-z0-9_]{8}\.tmp$")
+
+
+def remove_stale_staging(folders, before: float) -> list[Path]:
+    """Remove the staging files a killed run left in ``folders``: regular files (not links,
+    not folders) named as :data:`STAGING_NAME` says and last modified before ``before``.
+
+    Parameters
+    ----------
+    folders : iterable of Path
+        The folders to look in (not below them); a missing one is skipped.
+    before : float
+        A time (seconds since the epoch): the start of the run that cleans up, which holds
+        the directory's lock, so that no file a live run stages is older.
+
+    Returns
+    -------
+    list of Path
+        The files removed.
+    """
+    import stat
+
+    removed = []
+    for folder in folders:
+        try:
+            entries = list(os.scandir(folder))
+        except OSError:
+            continue
+        for entry in entries:
+            if not STAGING_NAME.match(entry.name):
+                continue
+            try:
+                info = entry.stat(follow_symlinks=False)
+                if stat.S_ISREG(info.st_mode) and info.st_mtime < before:
+                    os.unlink(entry.path)
+                    removed.append(Path(entry.path))
+            except OSError:
+                continue
+    return removed
+
+
 def reserve(path: Path) -> Path:
     """A new empty temporary file beside ``path`` (its staging name), readable as results
     are (mkstemp makes 0600)."""
@@ -496,6 +539,14 @@ class RunDirectory:
         figures = list(self._figures)
         return [tables] + ([figures[len(figures) // 2:]] if len(figures) >= 2 else [])
 
+    def _folders(self, names) -> list[Path]:
+        """The run directory and the folders of ``names`` and of the previous run's files
+        (those inside the directory)."""
+        files = [*names, *self.previous.get("files", [])]
+        inside = [Path(n) for n in files
+                  if isinstance(n, str) and not Path(n).is_absolute() and ".." not in Path(n).parts]
+        return sorted({self.out_dir, *(self.out_dir / n.parent for n in inside)})
+
     def manifest_text(self, results_unchanged: bool) -> str:
         """``run.json``'s text. A rerun whose every result file is byte for byte the previous
         run's, and whose record differs from the previous one only in package versions, keeps
@@ -541,6 +592,8 @@ class RunDirectory:
             writers[name] = functools.partial(save_figure, figure, kind=kind, dpi=self.dpi,
                                               source=f"bounce {self.command}",
                                               png_options=PNG_OPTIONS)
+        # what a run killed while staging left (this run holds the lock: no live run's)
+        remove_stale_staging(self._folders(written), self.started.timestamp())
         staged: list[tuple[Path, Path]] = []
         children: list[_ChildWriter] = []
 
