@@ -423,6 +423,103 @@ def test_perturbations_come_with_events_and_give_impulse_responses(tmp_path, cli
     assert pd.read_csv(out / "group.csv")["relax_impacts_decrease"].notna().all()
 
 
+def var1_impacts(seed, n_trials=5, n=35, burn=200):
+    """An impacts table of ``n_trials`` trials of ``n`` impacts: eq. 19's VAR(1) at the
+    model of a study's unit (alpha 0.5, radius 0.5) about its fixed point, racket cycles
+    varying a little. Seed 94 of 5 x 35 gives a jackknifed lag-2 radius of 22 from an
+    ill-conditioned fit (issue 36: a simulated study's unit gave 34.7)."""
+    from bounce_cli.model.linear import jacobian
+    from bounce_cli.model.params import ModelParams
+
+    params = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.094, racket_period=0.564)
+    jac, fp = jacobian(params), params.fixed_point()
+    chol = np.linalg.cholesky(np.diag([0.05**2, 0.01**2]))
+    rng = np.random.default_rng(seed)
+    y = np.zeros((n_trials, 2))
+    out = np.empty((n_trials, n, 2))
+    for k in range(burn + n):
+        y = y @ jac.T + rng.standard_normal((n_trials, 2)) @ chol.T
+        if k >= burn:
+            out[:, k - burn] = y
+    racket = np.random.default_rng(seed + 1000)
+    return pd.DataFrame({
+        "trial": np.repeat(np.arange(1, n_trials + 1), n), "k": np.tile(np.arange(n), n_trials),
+        "theta_rad": fp.theta_rad + out[..., 1].ravel(), "v_m_s": fp.v_m_s + out[..., 0].ravel(),
+        "racket_period_s": 0.564 + 4e-4 * racket.standard_normal(n_trials * n),
+        "racket_amplitude_m": 0.094 + 1e-4 * racket.standard_normal(n_trials * n)})
+
+
+def test_a_wild_lag2_estimate_is_nan_with_its_reason_in_every_table_and_the_report(
+        tmp_path, cli_module):
+    """Issue 36: a unit's lag-2 radius of 34.74 reached group.csv and report.html, said only
+    on stderr. Now NaN in every table with the reason in a note, counted and listed in the
+    report's warnings, left out of the group statistics; the other unit's estimates stay."""
+    for subject, seed in (("s1", 94), ("s2", 3)):
+        var1_impacts(seed).to_csv(tmp_path / f"{subject}_impacts.csv", index=False)
+    (tmp_path / "study.csv").write_text("file,subject,condition\ns1_impacts.csv,s1,a\n"
+                                        "s2_impacts.csv,s2,a\n")
+    out = tmp_path / "out"
+    result = cli_module("study", "--manifest", tmp_path / "study.csv", "--out", out,
+                        "--set", "analyses=[acf]", "--set", "report.unit_figures=false",
+                        "--set", "settings.acf.data_analysis.model_sessions=4", *FAST)
+    assert result.exit_code == 0, result.output
+    group = pd.read_csv(out / "group.csv", keep_default_na=False, na_values=[""]).set_index(
+        "subject")
+    assert math.isnan(group.loc["s1", "radius_lag2"])
+    assert math.isnan(group.loc["s1", "radius_lag2_ci_low"])
+    note = group.loc["s1", "radius_lag2_note"]
+    assert note.startswith("spectral radius withheld: ") and "ill-conditioned" in note
+    assert 0.0 < group.loc["s2", "radius_lag2"] < 1.5 and pd.isna(group.loc["s2",
+                                                                            "radius_lag2_note"])
+    assert 0.0 < group.loc["s1", "radius_ols"] < 1.5  # OLS of the same data is an estimate
+    stab = pd.read_csv(out / "s1" / "a" / "acf" / "stability_data.csv")
+    row = stab[(stab["quantity"] == "spectral_radius") & (stab["source"] == "lag2")].iloc[0]
+    assert math.isnan(row["estimate"]) and row["note"] == note
+    stability = pd.read_csv(out / "group_stability.csv").set_index("estimate")
+    assert stability.loc["lag2", "units_withheld"] == 1
+    assert stability.loc["ols", "units_withheld"] == 0
+    # no table holds a radius above 1.5 (or a non-finite one) without its note
+    for path in out.rglob("*.csv"):
+        table = pd.read_csv(path)
+        columns = [c for c in table.columns if str(c).startswith("radius_")
+                   and not str(c).endswith("_note")]
+        if "quantity" in table.columns:
+            columns.append("estimate")
+            table = table[table["quantity"] == "spectral_radius"]
+        for column in columns:
+            values = pd.to_numeric(table[column], errors="coerce")
+            assert not (values > 1.5).any(), (path, column)
+    # the report counts and lists the warning; stderr has it, and not the wild estimate
+    report = (out / "report.html").read_text()
+    warned = [line for line in result.stderr.splitlines() if "spectral radius withheld" in line]
+    assert warned and all("bounce: warning: " in line for line in warned)
+    assert f"{len(warned)} warning(s)" in report
+    assert "<h2>Warnings</h2>" in report and "spectral radius withheld" in report
+    assert "22.39" not in result.stderr and "without," not in result.stderr
+
+
+def test_a_radius_that_is_no_estimate_never_enters_a_group_statistic():
+    """A wild value with an interval (a row of an older run, resumed) or a withheld one is
+    left out of the paired difference and counted as withheld."""
+    from bounce_cli.data.study_manifest import Unit
+
+    group = pd.DataFrame({
+        "subject": ["s1", "s2", "s3", "s4"], "condition": "a",
+        "model_spectral_radius": [0.5, 0.5, 0.5, 0.5],
+        "radius_ols": [0.40, 0.42, 3.0, np.nan], "radius_ols_ci_low": [0.3, 0.32, 2.5, np.nan],
+        "radius_ols_ci_high": [0.5, 0.52, 3.5, np.nan],
+        "radius_ols_note": ["", "", "", "spectral radius withheld: the estimate is not finite"],
+        "radius_lag2": [0.4, 0.45, np.inf, 0.5], "radius_lag2_ci_low": [0.2, 0.3, 0.1, 0.3],
+        "radius_lag2_ci_high": [0.6, 0.6, np.inf, 0.7], "radius_lag2_note": ""})
+    units = [Unit((s, "a"), ("subject", "condition")) for s in group["subject"]]
+    table = study.group_tables({"group.csv": group}, units, study_config(Path("unused")))[
+        "group_stability.csv"].set_index("estimate")
+    assert table.loc["ols", "units"] == 2 and table.loc["ols", "units_withheld"] == 2
+    assert table.loc["ols", "data_mean"] == pytest.approx(0.41)
+    assert table.loc["lag2", "units"] == 3 and table.loc["lag2", "units_withheld"] == 1
+    assert table.loc["ols", "units_without_interval"] == 0
+
+
 def test_estimates_without_an_interval_are_left_out_of_the_paired_difference():
     """A unit whose data were too few for an interval (its estimate can be anything) does not
     enter the test of data against model."""
@@ -431,9 +528,9 @@ def test_estimates_without_an_interval_are_left_out_of_the_paired_difference():
     group = pd.DataFrame({
         "subject": ["s1", "s2", "s3"], "condition": "a",
         "model_spectral_radius": [0.5, 0.5, 0.5],
-        "radius_ols": [0.40, 0.42, 30.0], "radius_ols_ci_low": [0.3, 0.32, np.nan],
+        "radius_ols": [0.40, 0.42, 0.9], "radius_ols_ci_low": [0.3, 0.32, np.nan],
         "radius_ols_ci_high": [0.5, 0.52, np.nan],
-        "radius_lag2": [0.4, np.nan, 9.0], "radius_lag2_ci_low": [0.2, np.nan, np.nan],
+        "radius_lag2": [0.4, np.nan, 0.9], "radius_lag2_ci_low": [0.2, np.nan, np.nan],
         "radius_lag2_ci_high": [0.6, np.nan, np.nan]})
     units = [Unit((s, "a"), ("subject", "condition")) for s in group["subject"]]
     config = study_config(Path("unused"))
