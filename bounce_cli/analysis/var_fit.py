@@ -36,6 +36,12 @@ and impulse configs' J, 400 data sets per size: the nominal 95 % interval covers
 from 200 pairs for OLS, only from 1200 triples for lag2, whose ratio of covariances is
 heavy-tailed on short data).
 
+A spectral radius estimate that is not finite, above ``MAX_PLAUSIBLE_RADIUS`` (1.5: a ball
+that kept bouncing cannot have it) or from an ill-conditioned fit (lag 2's instrument nearly
+uncorrelated with the regressors: ``Var1Fit.instrument_det`` below ``MIN_INSTRUMENT_DET``) is
+no estimate: :meth:`Var1Fit.radius_problem` says why, and the tables write it as NaN with that
+reason (``experiments.data_side``, ``experiments.study``).
+
 Exogenous inputs (VARX): with ``exog`` (each trial's (N_i, m) inputs u_k, e.g. the racket
 period and amplitude of impact k's cycle), both estimators fit
 
@@ -67,6 +73,14 @@ ESTIMATORS = ("ols", "lag2")
 #: per estimator, fewer (y_k, y_{k+1}) pairs than this: no intervals (module docstring: the
 #: delta method's 95 % interval covers at least 90 % from there on)
 MIN_PAIRS_FOR_INTERVAL = {"ols": 200, "lag2": 1200}
+#: a spectral radius estimate above this is no estimate: a ball that kept bouncing for the
+#: recording cannot have it (its impacts diverge by this factor per bounce)
+MAX_PLAUSIBLE_RADIUS = 1.5
+#: a lag-2 fit whose instrument strength (``Var1Fit.instrument_det``) is below this is
+#: ill-conditioned: on linear VAR(1) data at a study's J (radius 0.5, 1500 data sets per
+#: size), the jackknifed lag-2 fits below it had a radius above 1.5 in 6 of 6 with 5 trials
+#: of 35 impacts, in 22 of 25 with 3 trials of 35; none fell below it with 10 trials of 60
+MIN_INSTRUMENT_DET = 0.01
 
 
 @dataclass(frozen=True)
@@ -84,6 +98,10 @@ class Var1Fit:
     exog_se: np.ndarray = field(default_factory=lambda: np.zeros((2, 0)))
     #: residuals per trial (rows k = 0.. of that trial's design), for diagnostics
     residuals: tuple[np.ndarray, ...] = ()
+    #: |det Z'X| / sqrt(det Z'Z det X'X) of the instruments Z and regressors X (the product of
+    #: their canonical correlations, in [0, 1]): 1 for OLS, near 0 where lag 2's C(1) is
+    #: nearly singular; with the jackknife the least of the three fits'
+    instrument_det: float = 1.0
 
     @property
     def jacobian_se(self) -> np.ndarray:
@@ -98,6 +116,22 @@ class Var1Fit:
     def has_interval(self) -> bool:
         """Enough pairs for the intervals (``MIN_PAIRS_FOR_INTERVAL``)."""
         return self.n_pairs >= self.min_pairs_for_interval
+
+    def radius_problem(self) -> str:
+        """Why this fit's spectral radius is no estimate, or '' when it is one: the radius is
+        not finite or above ``MAX_PLAUSIBLE_RADIUS`` (:func:`radius_problem`), or the fit is
+        ill-conditioned (``instrument_det`` below ``MIN_INSTRUMENT_DET``).
+
+        Returns
+        -------
+        str
+            A reason that reads after "spectral radius withheld: ", or ''.
+        """
+        if not self.instrument_det >= MIN_INSTRUMENT_DET:
+            return (f"the lag-2 fit is ill-conditioned (its instrument's normalised "
+                    f"determinant is {self.instrument_det:.2g}, below {MIN_INSTRUMENT_DET:g}: "
+                    "C(1) nearly singular; too few bounces)")
+        return radius_problem(float(_eigen_quantities(self.jacobian)[0]))
 
     def eigen_summary(
         self, confidence: float = 0.95
@@ -123,6 +157,27 @@ class Var1Fit:
                 low, high = value - z * se, value + z * se
             out[name] = (value, se, low, high)
         return out
+
+
+def radius_problem(value: float) -> str:
+    """Why a spectral radius estimate is none, or '' when it is one.
+
+    Parameters
+    ----------
+    value : float
+        A spectral radius estimated from data (any estimator).
+
+    Returns
+    -------
+    str
+        ``not finite`` or ``<value> above 1.5 ...`` (``MAX_PLAUSIBLE_RADIUS``), or ''.
+    """
+    if not math.isfinite(value):
+        return "the estimate is not finite"
+    if value > MAX_PLAUSIBLE_RADIUS:
+        return (f"the estimate {value:.4g} is above {MAX_PLAUSIBLE_RADIUS:g}, which a ball that "
+                "kept bouncing cannot have")
+    return ""
 
 
 def log_scale_interval(value: float, se: float, z: float) -> tuple[float, float]:
@@ -254,6 +309,7 @@ def _fit(method: str, y, x, x_next, instruments, inputs, trial_of) -> Var1Fit:
             if method == "ols" else
             "the lag-1 covariance C(1) is (nearly) singular: the lag-2 estimate of J is not "
             "identified (too few bounces, or no serial correlation)")
+    strength = 1.0 if method == "ols" else instrument_strength(z, regressors, a)
     b = np.linalg.solve(a, z.T @ x_next)  # b = [J, B]^T
     resid = x_next - regressors @ b
     sigma = resid.T @ resid / dof
@@ -275,7 +331,33 @@ def _fit(method: str, y, x, x_next, instruments, inputs, trial_of) -> Var1Fit:
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None)).reshape(2, p)
     per_trial = tuple(resid[trial_of == i] for i in range(n_trials))
     return Var1Fit(method, b[:2].T, cov[np.ix_(j_index, j_index)], sigma, n, n_trials,
-                   exog_coef=b[2:].T, exog_se=se[:, 2:], residuals=per_trial)
+                   exog_coef=b[2:].T, exog_se=se[:, 2:], residuals=per_trial,
+                   instrument_det=strength)
+
+
+def instrument_strength(z: np.ndarray, x: np.ndarray, a: np.ndarray | None = None) -> float:
+    """|det Z'X| / sqrt(det Z'Z det X'X): the product of the canonical correlations of the
+    instruments ``z`` and the regressors ``x`` (same shape), in [0, 1]; scale-free, so that
+    "near zero" means the same at any units and sample size.
+
+    Parameters
+    ----------
+    z, x : (n, p) arrays
+        Instruments and regressors.
+    a : (p, p) array, optional
+        ``z.T @ x``, if already computed.
+
+    Returns
+    -------
+    float
+        0 where Z'X is singular.
+    """
+    sign, log_a = np.linalg.slogdet(z.T @ x if a is None else a)
+    sign_z, log_z = np.linalg.slogdet(z.T @ z)
+    sign_x, log_x = np.linalg.slogdet(x.T @ x)
+    if sign == 0 or sign_z <= 0 or sign_x <= 0:
+        return 0.0
+    return float(min(1.0, math.exp(log_a - 0.5 * (log_z + log_x))))
 
 
 # -- estimators ------------------------------------------------------------------------------
@@ -344,7 +426,9 @@ def split_jackknife(fitter: Fitter, trials: Sequence[np.ndarray],
     coef = 2.0 * full.exog_coef - 0.5 * (first.exog_coef + second.exog_coef)
     return Var1Fit(full.method + "+jackknife", jac, full.cov_vec, full.noise_cov,
                    full.n_pairs, full.n_trials, exog_coef=coef, exog_se=full.exog_se,
-                   residuals=full.residuals)
+                   residuals=full.residuals,
+                   instrument_det=min(full.instrument_det, first.instrument_det,
+                                      second.instrument_det))
 
 
 def fit_var1(trials: Sequence[np.ndarray], method: str = "ols", jackknife: bool = True,

@@ -52,6 +52,7 @@ from ..runtime.config import (
     bundled_config_path,
     parse_override,
     read_yaml,
+    refuse_unknown_blocks,
     to_yaml,
     validate,
 )
@@ -432,6 +433,9 @@ def load_model_block(config: Path | None, overrides: list[str] | None, *,
         if keys[0] != "model":
             raise ConfigError(f"--set {'.'.join(keys)}: this command only uses the model block")
     data = apply_overrides(read_yaml(path), overrides)
+    others = {key: value for key, value in data.items() if key != "model"}
+    if others:  # read no further, but a misspelt block must not pass unseen (issue 36)
+        refuse_unknown_blocks(others, str(path), [e.load().schema for e in EXPERIMENTS])
     cfg = validate(ModelOnlyConfig, {"model": data.get("model") or {}}, str(path), overrides)
     warn_if_implausible_racket(cfg.model, warn)
     if need_fixed_point:

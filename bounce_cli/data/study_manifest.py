@@ -15,8 +15,10 @@ column                     the factor's value ``""`` (printed as ``-``)
                            ``extract.markers.ball`` (an empty cell: no override)
 =========================  =====================================================================
 
-Read before anything runs: a missing column, a file that does not exist, a duplicate row or a
-factor value that cannot name a folder is one line naming the manifest, the line and the reason.
+Read before anything runs: a missing column, a column given twice, a file that does not exist
+or is not a recording (a folder, a device, a system file), a duplicate row or a factor value
+that cannot name a folder is one line naming the manifest, the line and the reason (never the
+bytes of a file).
 """
 
 from __future__ import annotations
@@ -36,6 +38,10 @@ REQUIRED_COLUMNS = ("file", "subject")
 FILE_COLUMNS = ("file", "events")
 #: prefix of the columns that override the extraction's settings per row
 OVERRIDE_PREFIX = "extract."
+#: folders of the operating system's own files: a manifest row pointing into one (or a link
+#: resolving there, e.g. to /etc/passwd) is refused before the file is read
+SYSTEM_FOLDERS = ("/etc", "/proc", "/sys", "/dev", "/boot", "/run", "/var/log", "/private/etc",
+                  "/private/var/log")
 #: a factor value names a folder: letters, digits and . _ - (and spaces inside)
 _SAFE = re.compile(r"^[A-Za-z0-9._\-][A-Za-z0-9._\- ]*$")
 
@@ -139,14 +145,16 @@ def read_manifest(path: str | Path) -> Manifest:
     except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise ConfigError(f"{where}: cannot read as CSV: {first}") from None
-    frame.columns = [str(c).strip() for c in frame.columns]
+    header = _header(path, where)
+    twice = sorted({c for c in header if header.count(c) > 1})
+    if twice:  # pandas has renamed the second one (subject.1): this header as written
+        raise ConfigError(f"{where}: column(s) {', '.join(twice)} given twice (give each "
+                          "column once)")
+    frame.columns = header
     missing = [c for c in REQUIRED_COLUMNS if c not in frame.columns]
     if missing:
         raise ConfigError(f"{where}: missing column(s) {', '.join(missing)} (a manifest has "
                           f"one row per recording: file, subject[, condition, trial, ...])")
-    twice = sorted({c for c in frame.columns if list(frame.columns).count(c) > 1})
-    if twice:
-        raise ConfigError(f"{where}: column(s) {', '.join(twice)} given twice")
     if frame.empty:
         raise ConfigError(f"{where}: no rows (one row per recording)")
     overrides = [c for c in frame.columns if c.startswith(OVERRIDE_PREFIX)]
@@ -188,10 +196,33 @@ def read_manifest(path: str | Path) -> Manifest:
     return Manifest(path, tuple(rows), factors)
 
 
+def _header(path: Path, where: str) -> list[str]:
+    """The manifest's column names as written, stripped (``pd.read_csv`` renames a second
+    ``subject`` to ``subject.1``, hiding that it was given twice)."""
+    try:
+        first = pd.read_csv(path, header=None, nrows=1, dtype=str, keep_default_na=False,
+                            skipinitialspace=True)
+    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError):
+        raise ConfigError(f"{where}: cannot read its header as CSV") from None
+    return [str(c).strip() for c in first.iloc[0]]
+
+
 def _existing(base: Path, text: str, where: str, line: int, column: str) -> Path:
+    """The row's file, resolved (symbolic links followed); one line naming the manifest's line
+    and the cell where it does not exist, is no regular file, or is a system file (under
+    :data:`SYSTEM_FOLDERS`). The file is not opened here: no message holds its bytes."""
     file = Path(text)
     file = file if file.is_absolute() else base / file
-    if not file.is_file():
+    if not file.exists():
         raise ConfigError(f"{where}: line {line}: {column} {text!r}: no such file "
                           f"(paths are relative to the manifest's folder)")
-    return file.resolve()
+    resolved = file.resolve()
+    system = next((f for f in SYSTEM_FOLDERS if resolved.is_relative_to(f)), None)
+    if system is not None:
+        link = f" (a link to {resolved})" if str(resolved) != text else ""
+        raise ConfigError(f"{where}: line {line}: {column} {text!r}{link}: a system file, not "
+                          f"a recording (under {system}); give the recording's path")
+    if not resolved.is_file():
+        raise ConfigError(f"{where}: line {line}: {column} {text!r}: not a regular file (a "
+                          "folder, a device or a pipe); give a recording's path")
+    return resolved

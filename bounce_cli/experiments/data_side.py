@@ -326,9 +326,12 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
     for method in ("ols", "lag2"):
         for label, exog in ((method, None), (f"varx_{method}", racket)):
             try:
-                fits[label] = fit_var1(trials, method, jackknife=d.jackknife, exog=exog)
+                fits[label] = plausible_fit(fit_var1(trials, method, jackknife=d.jackknife,
+                                                     exog=exog))
             except ModelError as exc:
                 fits[label] = exc
+                if str(exc).startswith(WITHHELD):
+                    options.warn(f"{label}: {exc}; written as NaN")
         options.progress.advance(1)
     st = stability(params)
     fp = params.fixed_point()
@@ -457,6 +460,37 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
     return frames, lines
 
 
+#: how the note of a spectral radius that is no estimate begins (``plausible_fit``)
+WITHHELD = "spectral radius withheld: "
+
+
+def plausible_fit(fit: Var1Fit) -> Var1Fit:
+    """``fit``, unless its spectral radius is no estimate (:meth:`Var1Fit.radius_problem`:
+    not finite, above 1.5, or an ill-conditioned fit): then a ModelError saying why, so that
+    the fit is treated as one that failed (its rows NaN with the reason as their note, left
+    out of every comparison, prediction and warning that reads the fits).
+
+    Parameters
+    ----------
+    fit : Var1Fit
+        A fit of the data, or of a session simulated like them.
+
+    Returns
+    -------
+    Var1Fit
+        ``fit`` itself.
+
+    Raises
+    ------
+    ModelError
+        ``spectral radius withheld: <reason>``.
+    """
+    problem = fit.radius_problem()
+    if problem:
+        raise ModelError(f"{WITHHELD}{problem}")
+    return fit
+
+
 # -- the model's prediction for the VARX estimates ---------------------------------------------
 def simulated_trials(runs) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """(v, theta) and (period, amplitude) of simulated runs (``racket_inputs.SimulatedRun``)
@@ -546,8 +580,8 @@ def varx_prediction(params: ModelParams, fits: dict, trials: list[np.ndarray],
         sim_trials, sim_racket = simulated_trials(runs)
         for label in labels:
             try:
-                fit = fit_var1(sim_trials, label.removeprefix("varx_"),
-                               jackknife=block.jackknife, exog=sim_racket)
+                fit = plausible_fit(fit_var1(sim_trials, label.removeprefix("varx_"),
+                                             jackknife=block.jackknife, exog=sim_racket))
             except ModelError:
                 continue
             radius = fit.eigen_summary()["spectral_radius"][0]
@@ -824,6 +858,8 @@ def _stability_figure(stab: pd.DataFrame, trust: pd.DataFrame | None):
                  f"radius {radius['estimate']:.3f}")
         if np.isfinite(radius["ci_low"]):
             label += f" [{radius['ci_low']:.3f}, {radius['ci_high']:.3f}]"
+        elif not np.isfinite(radius["estimate"]):
+            label = f"{names[method]}: no estimate (stability_data.csv's note says why)"
         elif src != "model_eq10":
             label += " (too few bounces for an interval)"
         for lam in ("lambda_plus", "lambda_minus"):

@@ -43,6 +43,7 @@ from ..runtime.config import (
     StrictModel,
     apply_overrides,
     bundled_config_path,
+    did_you_mean,
     read_yaml,
     validate,
 )
@@ -116,7 +117,8 @@ class StudyConfig(ExperimentConfig):
         unknown = [k for k in self.settings if k not in ANALYSES]
         if unknown:
             raise ValueError(f"settings: {unknown[0]!r} is not an analysis (one of "
-                             f"{', '.join(ANALYSES)})")
+                             f"{', '.join(ANALYSES)})"
+                             f"{did_you_mean(str(unknown[0]), list(ANALYSES))}")
         if len(set(self.analyses)) != len(self.analyses):
             raise ValueError("analyses: each analysis once")
         extraction_config({"extract": self.extract}, ())  # unknown keys fail now
@@ -217,8 +219,41 @@ def frame_from_json(data: dict[str, Any]) -> pd.DataFrame:
     return pd.DataFrame(columns, columns=data["columns"])
 
 
-def row_label(row: ManifestRow) -> str:
-    return row.factors.get("trial") or row.file.stem
+def recording_names(unit: Unit) -> list[str]:
+    """A name for each recording of ``unit`` (in its rows' order) that no other of its
+    recordings has: the file's stem, and where several share one (``A/t.csv``, ``B/t.csv``)
+    the stem and the manifest line, ``t-line3``. Its per-recording outputs
+    (``<unit>/extract/<name>/``) and its trials' labels are keyed by it, so that no two
+    recordings overwrite or merge into each other.
+
+    Parameters
+    ----------
+    unit : Unit
+        The unit, its rows as the study reads them.
+
+    Returns
+    -------
+    list of str
+        One name per row, all different.
+    """
+    stems = [row.file.stem for row in unit.rows]
+    taken = {stem for stem in stems if stems.count(stem) == 1}
+    names = []
+    for row, stem in zip(unit.rows, stems):
+        name = stem
+        if stems.count(stem) > 1:
+            name = f"{stem}-line{row.line}"
+            while name in taken:  # a file really named so: lengthen until free
+                name += "-"
+            taken.add(name)
+        names.append(name)
+    return names
+
+
+def row_label(row: ManifestRow, name: str) -> str:
+    """The trial label of a recording: its ``trial`` factor, else its name (as
+    :func:`recording_names` gives it)."""
+    return row.factors.get("trial") or name
 
 
 def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures: list[dict],
@@ -234,8 +269,8 @@ def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures:
     unit = task.unit
     tables, setups = [], []
     user_g = cfg["model"].get("g")
-    for row in unit.rows:
-        label = row_label(row)
+    for row, name in zip(unit.rows, recording_names(unit)):
+        label = row_label(row, name)
         try:
             if is_impacts_table(str(row.file)):
                 table = read_impacts(str(row.file)).frame
@@ -243,9 +278,9 @@ def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures:
             else:
                 ex_cfg = extraction_config(cfg, row.overrides, row.file, row.events, user_g)
                 result = extract.run(ex_cfg, RunOptions())
-                stem = f"{unit.folder}/extract/{row.file.stem}"
-                for name, frame in result.frames.items():
-                    frames[f"{stem}/{name}"] = frame
+                stem = f"{unit.folder}/extract/{name}"
+                for file_name, frame in result.frames.items():
+                    frames[f"{stem}/{file_name}"] = frame
                 table = result.frames["impacts.csv"]
                 setup_frame = result.frames.get("setup.csv")
                 setup = ({} if setup_frame is None else
@@ -425,13 +460,15 @@ def unit_row(pooled: pd.DataFrame, frames: dict[str, pd.DataFrame], unit: Unit,
     for method in ("ols", "lag2"):
         for field in ("estimate", "ci_low", "ci_high"):
             out[f"radius_{method}" + ("" if field == "estimate" else f"_{field}")] = math.nan
+        out[f"radius_{method}_note"] = ""
         if stab is not None:
             rows = stab[(stab["quantity"] == "spectral_radius")
                         & stab["source"].astype(str).str.startswith(method)]
             if len(rows):
-                out[f"radius_{method}"] = float(rows["estimate"].iloc[0])
-                out[f"radius_{method}_ci_low"] = float(rows["ci_low"].iloc[0])
-                out[f"radius_{method}_ci_high"] = float(rows["ci_high"].iloc[0])
+                out.update(radius_entries(method, float(rows["estimate"].iloc[0]),
+                                          float(rows["ci_low"].iloc[0]),
+                                          float(rows["ci_high"].iloc[0]),
+                                          str(rows["note"].iloc[0])))
     relax = frames.get(f"{unit.folder}/impulse/relaxation_data.csv")
     for direction in ("decrease", "increase"):
         value = math.nan
@@ -449,6 +486,39 @@ def unit_row(pooled: pd.DataFrame, frames: dict[str, pd.DataFrame], unit: Unit,
                 value = float(rows["estimate"].iloc[-1])
         out[name] = value
     return out
+
+
+def radius_entries(method: str, estimate: float, low: float, high: float,
+                   note: str) -> dict[str, Any]:
+    """group.csv's ``radius_<method>``, its interval and ``radius_<method>_note`` from a
+    unit's stability_data.csv row: an estimate that is none (NaN there, or not finite or above
+    1.5 here: :func:`bounce_cli.analysis.var_fit.radius_problem`) is NaN with the reason in
+    the note; an estimate is given with an empty note.
+
+    Parameters
+    ----------
+    method : str
+        ``ols`` or ``lag2``.
+    estimate, low, high : float
+        The row's estimate and interval.
+    note : str
+        The row's note (why there is no estimate, where there is none).
+
+    Returns
+    -------
+    dict
+        The four columns of group.csv.
+    """
+    from ..analysis.var_fit import radius_problem
+
+    name = f"radius_{method}"
+    problem = radius_problem(estimate)
+    if problem:
+        why = note if math.isnan(estimate) and note and note != "nan" else (
+            f"spectral radius withheld: {problem}")
+        return {name: math.nan, f"{name}_ci_low": math.nan, f"{name}_ci_high": math.nan,
+                f"{name}_note": why}
+    return {name: estimate, f"{name}_ci_low": low, f"{name}_ci_high": high, f"{name}_note": ""}
 
 
 # -- the study -----------------------------------------------------------------------------------
@@ -473,9 +543,9 @@ def run(config: StudyConfig, options: RunOptions) -> ExperimentResult:
                 done[result["index"]] = result
                 options.progress.advance()
     results = [done[t.index] for t in tasks]
-    for result in results:
-        for message in result["warnings"]:
-            options.warn(message)
+    warnings = [message for result in results for message in result["warnings"]]
+    for message in warnings:
+        options.warn(message)
     frames: dict[str, pd.DataFrame] = {}
     for result in results:
         for name, data in result["frames"].items():
@@ -491,7 +561,7 @@ def run(config: StudyConfig, options: RunOptions) -> ExperimentResult:
     pngs = {name: png_bytes(fig) for name, fig in draw(frames).items()}
     for result in results:
         pngs.update({name: base64.b64decode(data) for name, data in result["pngs"].items()})
-    files = report_files(frames, pngs, units, manifest.path, config)
+    files = report_files(frames, pngs, units, manifest.path, config, warnings)
     summary = [f"study: {len(units)} unit(s) ({' x '.join(config.grouping)}) of "
                f"{len(manifest.rows)} recording(s)"
                + (f"; {len(tasks) - len(todo)} resumed" if len(todo) < len(tasks) else "")]
@@ -607,12 +677,15 @@ def group_tables(frames: dict[str, pd.DataFrame], units: list[Unit],
             for method in ("ols", "lag2"):
                 # a unit's estimate counts only where its data were enough for an interval
                 # (acf --data gives none below its stated minimum of bounces: such an estimate
-                # can be anything, e.g. a lag-2 radius of 30 on 170 bounces)
+                # can be anything, e.g. a lag-2 radius of 30 on 170 bounces), and never where
+                # it is no estimate (withheld: NaN with its note; or not finite, above 1.5)
+                withheld = withheld_radii(part, method)
                 radius = part[f"radius_{method}"].where(
-                    np.isfinite(part[f"radius_{method}_ci_low"]))
+                    np.isfinite(part[f"radius_{method}_ci_low"]) & ~withheld)
                 d = paired_difference(radius, part["model_spectral_radius"], conf)
                 rows.append({"condition": condition, "estimate": method, "units": d.n,
-                             "units_without_interval": int(radius.isna().sum()),
+                             "units_without_interval": int((radius.isna() & ~withheld).sum()),
+                             "units_withheld": int(withheld.sum()),
                              "data_mean": float(radius.mean()),
                              "model_mean": float(part.loc[radius.notna(),
                                                           "model_spectral_radius"].mean()),
@@ -643,6 +716,18 @@ def group_tables(frames: dict[str, pd.DataFrame], units: list[Unit],
     return out
 
 
+def withheld_radii(group: pd.DataFrame, method: str) -> pd.Series:
+    """Which units' ``radius_<method>`` is no estimate: withheld by the fit (its note says
+    so), or a value not finite or above 1.5 (a row of an older run, resumed)."""
+    from ..analysis.var_fit import radius_problem
+
+    note = group.get(f"radius_{method}_note", pd.Series("", index=group.index))
+    said = note.fillna("").astype(str).str.startswith("spectral radius withheld")
+    value = group[f"radius_{method}"].astype(float)
+    wild = value.map(lambda r: not math.isnan(r) and bool(radius_problem(r)))
+    return (said | wild).astype(bool)
+
+
 def _regression_line(r: dict) -> str | None:
     """Fig. 7 of one condition (none where its fit has no slope)."""
     if not ("slope" in r and isinstance(r["slope"], float) and math.isfinite(r["slope"])):
@@ -669,7 +754,9 @@ def _stability_line(r: dict) -> str:
     """The stability of one condition and estimate, data against the model."""
     return (f"stability ({r['condition']}, {r['estimate']}, {r['units']} units"
             + (f"; {r['units_without_interval']} without an interval, left out"
-               if r["units_without_interval"] else "") + "): "
+               if r["units_without_interval"] else "")
+            + (f"; {r['units_withheld']} withheld (no estimate), left out"
+               if r.get("units_withheld") else "") + "): "
             f"data {r['data_mean']:.3f} vs model {r['model_mean']:.3f}, difference "
             f"{r['difference_mean']:.3f} [{r['ci_low']:.3f}, {r['ci_high']:.3f}]: "
             f"{r['verdict']}")
@@ -747,20 +834,28 @@ def png_bytes(fig) -> bytes:
 
 
 def report_files(frames, rendered: dict[str, bytes], units: list[Unit], manifest_path: Path,
-                 config: StudyConfig) -> dict[str, bytes]:
+                 config: StudyConfig, warnings: list[str] | None = None) -> dict[str, bytes]:
     """``report.html`` (the study) and ``<subject>/report.html`` (each subject), each one
-    self-contained: the figures (``rendered``: name -> PNG bytes) embedded."""
+    self-contained: the figures (``rendered``: name -> PNG bytes) embedded; ``warnings``
+    (the units' analyses', e.g. an estimate withheld as no estimate) counted in the overview
+    and listed in a section of their own."""
+    warnings = warnings or []
     group = frames["group.csv"]
     failures = frames["failures.csv"]
     impacts = int(group["impacts"].sum()) if "impacts" in group else 0
     overview = Section("Study", [
         f"<p>{len(units)} unit(s) ({' x '.join(config.grouping)}) from "
-        f"{html_escape(str(manifest_path))}; {impacts} impacts; {len(failures)} failure(s).</p>",
+        f"{html_escape(str(manifest_path))}; {impacts} impacts; {len(failures)} failure(s); "
+        f"{len(warnings)} warning(s).</p>",
         html_table(group, digits=4),
     ])
     sections = [overview]
     if len(failures):
         sections.append(Section("Failures", [html_table(failures)]))
+    if warnings:
+        sections.append(Section("Warnings", [
+            "<ul class='warn'>" + "".join(f"<li>{html_escape(w)}</li>" for w in warnings)
+            + "</ul>"]))
     titles = {"group_regression.png": "Fig. 7 over the study",
               "group_learning.png": "Fig. 6 over the study (mixed model)",
               "group_stability.png": "Stability: the data against the model (eq. 10)",

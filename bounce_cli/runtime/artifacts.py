@@ -72,6 +72,49 @@ def staging(path: Path) -> Iterator[Path]:
         raise
 
 
+#: a staging file's name as :func:`reserve` makes it: mkstemp's ``.<name>.``, its 8 random
+#: characters (lower-case letters, digits, ``_``) and ``.tmp``
+STAGING_NAME = re.compile(r"^\..+\.[a-z0-9_]{8}\.tmp$")
+
+
+def remove_stale_staging(folders, before: float) -> list[Path]:
+    """Remove the staging files a killed run left in ``folders``: regular files (not links,
+    not folders) named as :data:`STAGING_NAME` says and last modified before ``before``.
+
+    Parameters
+    ----------
+    folders : iterable of Path
+        The folders to look in (not below them); a missing one is skipped.
+    before : float
+        A time (seconds since the epoch): the start of the run that cleans up, which holds
+        the directory's lock, so that no file a live run stages is older.
+
+    Returns
+    -------
+    list of Path
+        The files removed.
+    """
+    import stat
+
+    removed = []
+    for folder in folders:
+        try:
+            entries = list(os.scandir(folder))
+        except OSError:
+            continue
+        for entry in entries:
+            if not STAGING_NAME.match(entry.name):
+                continue
+            try:
+                info = entry.stat(follow_symlinks=False)
+                if stat.S_ISREG(info.st_mode) and info.st_mtime < before:
+                    os.unlink(entry.path)
+                    removed.append(Path(entry.path))
+            except OSError:
+                continue
+    return removed
+
+
 def reserve(path: Path) -> Path:
     """A new empty temporary file beside ``path`` (its staging name), readable as results
     are (mkstemp makes 0600)."""
@@ -496,6 +539,14 @@ class RunDirectory:
         figures = list(self._figures)
         return [tables] + ([figures[len(figures) // 2:]] if len(figures) >= 2 else [])
 
+    def _folders(self, names) -> list[Path]:
+        """The run directory and the folders of ``names`` and of the previous run's files
+        (those inside the directory)."""
+        files = [*names, *self.previous.get("files", [])]
+        inside = [Path(n) for n in files
+                  if isinstance(n, str) and not Path(n).is_absolute() and ".." not in Path(n).parts]
+        return sorted({self.out_dir, *(self.out_dir / n.parent for n in inside)})
+
     def manifest_text(self, results_unchanged: bool) -> str:
         """``run.json``'s text. A rerun whose every result file is byte for byte the previous
         run's, and whose record differs from the previous one only in package versions, keeps
@@ -541,6 +592,8 @@ class RunDirectory:
             writers[name] = functools.partial(save_figure, figure, kind=kind, dpi=self.dpi,
                                               source=f"bounce {self.command}",
                                               png_options=PNG_OPTIONS)
+        # what a run killed while staging left (this run holds the lock: no live run's)
+        remove_stale_staging(self._folders(written), self.started.timestamp())
         staged: list[tuple[Path, Path]] = []
         children: list[_ChildWriter] = []
 
@@ -661,7 +714,11 @@ def write_csv(frame: pd.DataFrame, path: Path) -> None:
     Measured on the shared 2-core EPYC (min of 5): the 1000 x 1000 basin.csv (10^6 rows,
     67 MB) 0.10 s, was 0.40 s with pandas.factorize on every column and a per-row
     ``",".join``; a synthetic 4000 x 4000 grid (1.09 GB, one run each) 3.2 s, was 8.3 s, with
-    the same peak memory."""
+    the same peak memory.
+
+    Text cells a spreadsheet would run as a formula are written as text first
+    (:func:`defuse_formulas`)."""
+    frame = defuse_formulas(frame)
     if _fast_columns(frame.iloc[:0]) is None:
         frame.to_csv(path, index=False)
         return
@@ -677,6 +734,74 @@ def write_csv(frame: pd.DataFrame, path: Path) -> None:
         else:
             return
     frame.to_csv(path, index=False)
+
+
+#: the first characters that make a spreadsheet read a cell as a formula (OWASP, CSV injection)
+FORMULA_STARTS = ("=", "+", "-", "@")
+
+
+def _runs_as_formula(value: object) -> bool:
+    """A text a spreadsheet would run: it begins with a ``FORMULA_STARTS`` character and is
+    not a number (``-1.5`` written as text stays as it is)."""
+    if not (isinstance(value, str) and value.startswith(FORMULA_STARTS)):
+        return False
+    try:
+        float(value)
+    except ValueError:
+        return True
+    return False
+
+
+def defuse_formulas(frame: pd.DataFrame) -> pd.DataFrame:
+    """``frame`` with each text cell that a spreadsheet would run as a formula (``=``, ``+``,
+    ``-`` or ``@`` first, e.g. a trial label ``=HYPERLINK(...)``) prefixed with ``'``, as
+    OWASP's CSV-injection advice says: opened in a spreadsheet, the cell is text.
+
+    Parameters
+    ----------
+    frame : pandas.DataFrame
+        A table about to be written as CSV.
+
+    Returns
+    -------
+    pandas.DataFrame
+        ``frame`` itself when no cell needs it (the usual case: no copy), else a copy with
+        those cells changed. Only text columns (objects, strings, categories) are looked at:
+        numbers, also negative ones, stay numbers; so do texts that are numbers.
+    """
+    import pandas as pd
+
+    changed: dict[int, pd.Series] = {}
+    for j in range(frame.shape[1]):
+        column = frame.iloc[:, j]
+        dtype = column.dtype
+        if isinstance(dtype, pd.CategoricalDtype):
+            categories = list(dtype.categories)
+            if any(_runs_as_formula(c) for c in categories):
+                renamed = ["'" + c if _runs_as_formula(c) else c for c in categories]
+                if len(set(renamed)) == len(renamed):
+                    changed[j] = column.cat.rename_categories(renamed)
+                    continue
+                column = column.astype(object)  # "'=a" was there already: as text
+            else:
+                continue
+        elif not (isinstance(dtype, pd.StringDtype)
+                  or (isinstance(dtype, np.dtype) and dtype.kind == "O")):
+            continue
+        values = column.to_numpy(dtype=object)
+        try:
+            distinct = pd.unique(values)
+        except TypeError:  # unhashable cells (lists): every cell looked at
+            distinct = values
+        if any(_runs_as_formula(v) for v in distinct):
+            changed[j] = pd.Series(["'" + v if _runs_as_formula(v) else v for v in values],
+                                   index=column.index, dtype=column.dtype)
+    if not changed:
+        return frame
+    out = frame.copy(deep=False)
+    for j, column in changed.items():
+        out.isetitem(j, column)
+    return out
 
 
 #: rows joined and written at once: a couple of MB, reused while in cache (the 10^6 rows of

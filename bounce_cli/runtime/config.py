@@ -492,6 +492,51 @@ def other_command_of(schema: type[BaseModel], data: dict[str, Any], source: str,
             f"{here} --print-config")
 
 
+def refuse_unknown_blocks(data: dict[str, Any], source: str,
+                          schemas: Sequence[type[BaseModel]]) -> None:
+    """Refuse a key no command's config has, at any level, in blocks a command reads no
+    further (``fixed-point`` and ``orbit`` read only the ``model`` block of any command's
+    config: a misspelt block would be ignored without a word).
+
+    Parameters
+    ----------
+    data : dict
+        The config's blocks other than the one the command validates itself.
+    source : str
+        The config file, as messages name it.
+    schemas : sequence of pydantic model classes
+        Every command's config schema. ``data`` is accepted when one schema holding all its
+        top-level keys finds no unknown key in it (other problems, such as a missing
+        required key, are that command's, not this one's).
+
+    Raises
+    ------
+    ConfigError
+        One line: the first unknown key, dotted, with the closest known key if any.
+    """
+    found: tuple[tuple, type[BaseModel]] | None = None
+    for schema in schemas:
+        if not set(data) <= set(schema.model_fields):
+            continue
+        try:
+            schema.model_validate(data)
+        except ValidationError as exc:
+            unknown = [e["loc"] for e in exc.errors() if e["type"] == "extra_forbidden"]
+            if not unknown:
+                return
+            found = found or (tuple(unknown[0]), schema)
+        else:
+            return
+    if found is None:  # a top-level key of no command's config
+        key = sorted(set(data) - {k for s in schemas for k in s.model_fields})[0]
+        known = sorted({k for s in schemas for k in s.model_fields})
+        raise ConfigError(f"{source}: {key}: unknown key{did_you_mean(key, known)}")
+    loc, schema = found
+    key = ".".join(str(part) for part in loc)
+    raise ConfigError(f"{source}: {key}: unknown key"
+                      f"{did_you_mean(key, keys_at(schema, loc[:-1]))}")
+
+
 def load_config(schema: type[C], path: Path, overrides: list[str] | None = None,
                 commands: Sequence[Any] = ()) -> C:
     """Read ``path``, apply ``--set`` overrides, validate against ``schema`` (``commands``: as

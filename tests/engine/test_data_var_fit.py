@@ -244,6 +244,51 @@ def test_errors_are_model_errors():
         fit_var1_ols([np.full((10, 2), np.nan)])
 
 
+#: a study unit's model (alpha 0.5, radius 0.5) and noise; seed 94 of 5 trials x 35 impacts
+#: gives a jackknifed lag-2 radius of 22 (issue 36: a simulated study's unit had 34.7)
+UNIT = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.094, racket_period=0.564)
+UNIT_Q = np.diag([0.05**2, 0.01**2])
+
+
+def test_a_radius_that_is_no_estimate_says_why():
+    from bounce_cli.analysis.var_fit import MAX_PLAUSIBLE_RADIUS, radius_problem
+
+    assert radius_problem(0.5) == "" and radius_problem(MAX_PLAUSIBLE_RADIUS) == ""
+    assert "not finite" in radius_problem(math.nan)
+    assert "not finite" in radius_problem(math.inf)
+    assert "34.74 is above 1.5" in radius_problem(34.738)
+
+
+def test_a_wild_lag2_fit_of_a_short_study_unit_is_no_estimate():
+    from bounce_cli.analysis.var_fit import MIN_INSTRUMENT_DET
+
+    trials = list(var1_series(jacobian(UNIT), UNIT_Q, 5, 35, np.random.default_rng(94)))
+    lag2 = fit_var1(trials, "lag2")
+    assert lag2.eigen_summary()["spectral_radius"][0] > 1.5  # the estimator's own answer
+    assert lag2.instrument_det < MIN_INSTRUMENT_DET  # one half's C(1) nearly singular
+    assert "ill-conditioned" in lag2.radius_problem()
+    ols = fit_var1(trials, "ols")
+    assert ols.instrument_det == 1.0 and ols.radius_problem() == ""
+    # the same model with enough bounces: an estimate
+    long = list(var1_series(jacobian(UNIT), UNIT_Q, 10, 200, np.random.default_rng(94)))
+    good = fit_var1(long, "lag2")
+    assert good.radius_problem() == "" and good.instrument_det > 0.1
+
+
+def test_instrument_strength_is_the_product_of_the_canonical_correlations():
+    from bounce_cli.analysis.var_fit import Var1Fit, instrument_strength
+
+    rng = np.random.default_rng(0)
+    x = rng.standard_normal((500, 2))
+    assert instrument_strength(x, x) == pytest.approx(1.0)
+    assert instrument_strength(3.0 * x, x * [1e-3, 10.0]) == pytest.approx(1.0)  # scale-free
+    weak = np.column_stack([x[:, 0], rng.standard_normal(500)])  # nothing of x's 2nd column
+    assert instrument_strength(weak, x) < 0.1
+    fit = Var1Fit("lag2", 0.5 * np.eye(2), np.zeros((4, 4)), np.eye(2), 100, 5,
+                  instrument_det=0.002)
+    assert "ill-conditioned" in fit.radius_problem() and "0.002" in fit.radius_problem()
+
+
 def var2_series(j1, j2, n_trials, n, rng, burn=100):
     """y_{k+1} = J1 y_k + J2 y_{k-1} + eps_k (eps ~ N(0, Q)): (T, n, 2)."""
     chol = np.linalg.cholesky(Q)

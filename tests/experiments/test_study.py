@@ -176,6 +176,37 @@ def test_a_damaged_file_is_one_failure_row_and_exit_1(tmp_path, cli_module):
     assert (out / "s2" / "a" / "regression" / "fit.csv").is_file()
 
 
+def test_two_recordings_with_one_stem_in_a_unit_keep_their_own_outputs(tiny, tmp_path,
+                                                                        cli_module):
+    """``A/t.csv`` and ``B/t.csv`` of one subject and condition (issue 36: one's files were
+    overwritten by the other's, and their impacts pooled as one trial)."""
+    for folder, trial in (("A", 1), ("B", 2)):
+        (tmp_path / folder).mkdir()
+        shutil.copy(tiny / "recordings" / f"s1_a_t{trial}.csv", tmp_path / folder / "t.csv")
+    (tmp_path / "study.csv").write_text("file,subject,condition\nA/t.csv,s1,a\nB/t.csv,s1,a\n")
+    out = tmp_path / "out"
+    cli_module("study", "--manifest", tmp_path / "study.csv", "--out", out, "--quiet",
+               "--set", "analyses=[regression]", "--set", "report.unit_figures=false", *FAST)
+    extracted = out / "s1" / "a" / "extract"
+    assert sorted(p.name for p in extracted.iterdir()) == ["t-line2", "t-line3"]
+    first, second = (pd.read_csv(extracted / name / "impacts.csv")
+                     for name in ("t-line2", "t-line3"))
+    assert not first["t_s"].equals(second["t_s"])
+    pooled = pd.read_csv(out / "s1" / "a" / "impacts.csv")
+    assert len(pooled) == len(first) + len(second)
+    assert sorted(set(pooled["trial"])) == ["t-line2:1", "t-line3:1"]
+
+
+def test_recording_names_are_the_stems_unless_two_share_one(tmp_path):
+    from bounce_cli.data.study_manifest import ManifestRow, Unit
+
+    rows = tuple(ManifestRow(line, tmp_path / path, None, {"subject": "s1"})
+                 for line, path in ((2, "A/t.csv"), (3, "u.csv"), (4, "B/t.csv"),
+                                    (5, "t-line4.csv")))
+    names = study.recording_names(Unit(("s1",), ("subject",), rows))
+    assert names == ["t-line2", "u", "t-line4-", "t-line4"]
+
+
 def manifest(tmp_path, text, files=("a.csv",)):
     for name in files:
         (tmp_path / name).write_text("trial,t_s,racket_x_m,ball_x_m\n")
@@ -191,6 +222,9 @@ def manifest(tmp_path, text, files=("a.csv",)):
     ("file,subject\na.csv,s/1\n", "line 2: subject 's/1': a factor value names a folder"),
     ("file,subject\n", "no rows"),
     ("file,subject,extract.units.length\na.csv,s1,[mm\n", "cannot parse"),
+    # pandas renames the second subject to subject.1 (issue 36: it passed)
+    ("file,subject,subject\na.csv,s1,s2\n", "column(s) subject given twice"),
+    ("file,subject, condition,condition\na.csv,s1,x,y\n", "column(s) condition given twice"),
 ])
 def test_manifest_errors_are_one_line_before_anything_runs(tmp_path, cli, user_error, text,
                                                            needle):
@@ -199,6 +233,36 @@ def test_manifest_errors_are_one_line_before_anything_runs(tmp_path, cli, user_e
                  "--set", "model.alpha=0.5", "--set", "model.g=9.81")
     user_error(result, "manifest", needle)
     assert not out.exists()
+
+
+@pytest.mark.parametrize("target", ["/etc/passwd", "/etc/hostname", "/proc/self/status"])
+@pytest.mark.parametrize("linked", [False, True])
+def test_a_system_file_in_the_manifest_is_refused_without_its_content(tmp_path, cli, user_error,
+                                                                      target, linked):
+    """Issue 36: /etc/passwd's first line reached failures.csv and report.html (as the
+    columns "the file has"). Refused before anything runs, by its name, never its bytes."""
+    if not Path(target).is_file():
+        pytest.skip(f"no {target} here")
+    cell = target
+    if linked:
+        (tmp_path / "t.csv").symlink_to(target)
+        cell = "t.csv"
+    path = tmp_path / "study.csv"
+    path.write_text(f"file,subject,condition\n{cell},s1,a\n")
+    out = tmp_path / "out"
+    result = cli("study", "--manifest", path, "--out", out, *FAST)
+    user_error(result, "line 2", f"file {cell!r}", "a system file, not a recording")
+    first = Path(target).read_text().splitlines()[0].strip()
+    assert first not in result.output
+    assert not out.exists()
+
+
+def test_a_device_in_the_manifest_is_not_a_recording(tmp_path, cli, user_error):
+    path = tmp_path / "study.csv"
+    path.write_text("file,subject,condition\na.csv,s1,a\n")
+    (tmp_path / "a.csv").mkdir()
+    user_error(cli("study", "--manifest", path, "--out", tmp_path / "out", *FAST),
+               "line 2", "file 'a.csv'", "not a regular file")
 
 
 def test_a_grouping_factor_the_manifest_lacks_is_one_line(tmp_path, cli, user_error):
@@ -359,6 +423,103 @@ def test_perturbations_come_with_events_and_give_impulse_responses(tmp_path, cli
     assert pd.read_csv(out / "group.csv")["relax_impacts_decrease"].notna().all()
 
 
+def var1_impacts(seed, n_trials=5, n=35, burn=200):
+    """An impacts table of ``n_trials`` trials of ``n`` impacts: eq. 19's VAR(1) at the
+    model of a study's unit (alpha 0.5, radius 0.5) about its fixed point, racket cycles
+    varying a little. Seed 94 of 5 x 35 gives a jackknifed lag-2 radius of 22 from an
+    ill-conditioned fit (issue 36: a simulated study's unit gave 34.7)."""
+    from bounce_cli.model.linear import jacobian
+    from bounce_cli.model.params import ModelParams
+
+    params = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.094, racket_period=0.564)
+    jac, fp = jacobian(params), params.fixed_point()
+    chol = np.linalg.cholesky(np.diag([0.05**2, 0.01**2]))
+    rng = np.random.default_rng(seed)
+    y = np.zeros((n_trials, 2))
+    out = np.empty((n_trials, n, 2))
+    for k in range(burn + n):
+        y = y @ jac.T + rng.standard_normal((n_trials, 2)) @ chol.T
+        if k >= burn:
+            out[:, k - burn] = y
+    racket = np.random.default_rng(seed + 1000)
+    return pd.DataFrame({
+        "trial": np.repeat(np.arange(1, n_trials + 1), n), "k": np.tile(np.arange(n), n_trials),
+        "theta_rad": fp.theta_rad + out[..., 1].ravel(), "v_m_s": fp.v_m_s + out[..., 0].ravel(),
+        "racket_period_s": 0.564 + 4e-4 * racket.standard_normal(n_trials * n),
+        "racket_amplitude_m": 0.094 + 1e-4 * racket.standard_normal(n_trials * n)})
+
+
+def test_a_wild_lag2_estimate_is_nan_with_its_reason_in_every_table_and_the_report(
+        tmp_path, cli_module):
+    """Issue 36: a unit's lag-2 radius of 34.74 reached group.csv and report.html, said only
+    on stderr. Now NaN in every table with the reason in a note, counted and listed in the
+    report's warnings, left out of the group statistics; the other unit's estimates stay."""
+    for subject, seed in (("s1", 94), ("s2", 3)):
+        var1_impacts(seed).to_csv(tmp_path / f"{subject}_impacts.csv", index=False)
+    (tmp_path / "study.csv").write_text("file,subject,condition\ns1_impacts.csv,s1,a\n"
+                                        "s2_impacts.csv,s2,a\n")
+    out = tmp_path / "out"
+    result = cli_module("study", "--manifest", tmp_path / "study.csv", "--out", out,
+                        "--set", "analyses=[acf]", "--set", "report.unit_figures=false",
+                        "--set", "settings.acf.data_analysis.model_sessions=4", *FAST)
+    assert result.exit_code == 0, result.output
+    group = pd.read_csv(out / "group.csv", keep_default_na=False, na_values=[""]).set_index(
+        "subject")
+    assert math.isnan(group.loc["s1", "radius_lag2"])
+    assert math.isnan(group.loc["s1", "radius_lag2_ci_low"])
+    note = group.loc["s1", "radius_lag2_note"]
+    assert note.startswith("spectral radius withheld: ") and "ill-conditioned" in note
+    assert 0.0 < group.loc["s2", "radius_lag2"] < 1.5 and pd.isna(group.loc["s2",
+                                                                            "radius_lag2_note"])
+    assert 0.0 < group.loc["s1", "radius_ols"] < 1.5  # OLS of the same data is an estimate
+    stab = pd.read_csv(out / "s1" / "a" / "acf" / "stability_data.csv")
+    row = stab[(stab["quantity"] == "spectral_radius") & (stab["source"] == "lag2")].iloc[0]
+    assert math.isnan(row["estimate"]) and row["note"] == note
+    stability = pd.read_csv(out / "group_stability.csv").set_index("estimate")
+    assert stability.loc["lag2", "units_withheld"] == 1
+    assert stability.loc["ols", "units_withheld"] == 0
+    # no table holds a radius above 1.5 (or a non-finite one) without its note
+    for path in out.rglob("*.csv"):
+        table = pd.read_csv(path)
+        columns = [c for c in table.columns if str(c).startswith("radius_")
+                   and not str(c).endswith("_note")]
+        if "quantity" in table.columns:
+            columns.append("estimate")
+            table = table[table["quantity"] == "spectral_radius"]
+        for column in columns:
+            values = pd.to_numeric(table[column], errors="coerce")
+            assert not (values > 1.5).any(), (path, column)
+    # the report counts and lists the warning; stderr has it, and not the wild estimate
+    report = (out / "report.html").read_text()
+    warned = [line for line in result.stderr.splitlines() if "spectral radius withheld" in line]
+    assert warned and all("bounce: warning: " in line for line in warned)
+    assert f"{len(warned)} warning(s)" in report
+    assert "<h2>Warnings</h2>" in report and "spectral radius withheld" in report
+    assert "22.39" not in result.stderr and "without," not in result.stderr
+
+
+def test_a_radius_that_is_no_estimate_never_enters_a_group_statistic():
+    """A wild value with an interval (a row of an older run, resumed) or a withheld one is
+    left out of the paired difference and counted as withheld."""
+    from bounce_cli.data.study_manifest import Unit
+
+    group = pd.DataFrame({
+        "subject": ["s1", "s2", "s3", "s4"], "condition": "a",
+        "model_spectral_radius": [0.5, 0.5, 0.5, 0.5],
+        "radius_ols": [0.40, 0.42, 3.0, np.nan], "radius_ols_ci_low": [0.3, 0.32, 2.5, np.nan],
+        "radius_ols_ci_high": [0.5, 0.52, 3.5, np.nan],
+        "radius_ols_note": ["", "", "", "spectral radius withheld: the estimate is not finite"],
+        "radius_lag2": [0.4, 0.45, np.inf, 0.5], "radius_lag2_ci_low": [0.2, 0.3, 0.1, 0.3],
+        "radius_lag2_ci_high": [0.6, 0.6, np.inf, 0.7], "radius_lag2_note": ""})
+    units = [Unit((s, "a"), ("subject", "condition")) for s in group["subject"]]
+    table = study.group_tables({"group.csv": group}, units, study_config(Path("unused")))[
+        "group_stability.csv"].set_index("estimate")
+    assert table.loc["ols", "units"] == 2 and table.loc["ols", "units_withheld"] == 2
+    assert table.loc["ols", "data_mean"] == pytest.approx(0.41)
+    assert table.loc["lag2", "units"] == 3 and table.loc["lag2", "units_withheld"] == 1
+    assert table.loc["ols", "units_without_interval"] == 0
+
+
 def test_estimates_without_an_interval_are_left_out_of_the_paired_difference():
     """A unit whose data were too few for an interval (its estimate can be anything) does not
     enter the test of data against model."""
@@ -367,9 +528,9 @@ def test_estimates_without_an_interval_are_left_out_of_the_paired_difference():
     group = pd.DataFrame({
         "subject": ["s1", "s2", "s3"], "condition": "a",
         "model_spectral_radius": [0.5, 0.5, 0.5],
-        "radius_ols": [0.40, 0.42, 30.0], "radius_ols_ci_low": [0.3, 0.32, np.nan],
+        "radius_ols": [0.40, 0.42, 0.9], "radius_ols_ci_low": [0.3, 0.32, np.nan],
         "radius_ols_ci_high": [0.5, 0.52, np.nan],
-        "radius_lag2": [0.4, np.nan, 9.0], "radius_lag2_ci_low": [0.2, np.nan, np.nan],
+        "radius_lag2": [0.4, np.nan, 0.9], "radius_lag2_ci_low": [0.2, np.nan, np.nan],
         "radius_lag2_ci_high": [0.6, np.nan, np.nan]})
     units = [Unit((s, "a"), ("subject", "condition")) for s in group["subject"]]
     config = study_config(Path("unused"))
