@@ -270,4 +270,5 @@ def test_jobs_is_offered_only_where_it_spreads_work(command):
     from bounce_cli.experiments.registry import entry
 
     offered = "--jobs" in run(command, "--help").stdout
-    assert offered == (command in ("basin", "control", "sweep", "study")) == entry(command).parallel
+    assert offered == (command in ("basin", "control", "sweep", "study", "attractors")) == \
+        entry(command).parallel
