@@ -264,3 +264,33 @@ def test_the_btkdata_collection_is_read():
             error = np.nanmax(np.abs(other.xyz - reference.xyz))
             assert error <= (0.0 if name.startswith("sgi_int") or name == "Eb015si"
                              else step + 1e-3), name
+
+
+@pytest.mark.parametrize("stored, metres", [("mete", 1.0), ("mil", 0.001), ("centim", 0.01),
+                                            ("millimeters", 0.001)])
+def test_a_truncated_unit_that_names_one_length_unit_is_read_with_a_warning(tmp_path, stored,
+                                                                            metres):
+    """A field file's POINT:UNITS cut short ('mete' for metres): a unique prefix of one length
+    unit's name is that unit, with one warning naming the file and the string stored."""
+    xyz = truth_xyz(60, 2)
+    path = tmp_path / "t.c3d"
+    write_c3d(path, ["racket", "ball"], xyz, units=stored)
+    cfg = settings()
+    notes: list[str] = []
+    (trial,) = read_recording(path, cfg.columns, cfg.units, cfg.markers, warn=notes.append)
+    np.testing.assert_allclose(trial.ball[6:], xyz[6:, 1, 2] * metres, rtol=1e-6)
+    assert len(notes) == 1 and str(path) in notes[0] and repr(stored) in notes[0], notes
+
+
+@pytest.mark.parametrize("stored", ["mi", "furlong", "milesx"])
+def test_an_ambiguous_or_unknown_unit_is_still_refused(tmp_path, stored):
+    """'mi' begins millimetres and micrometres alike: refused, as an unknown string is."""
+    path = tmp_path / "u.c3d"
+    write_c3d(path, ["racket", "ball"], truth_xyz(60, 2), units=stored)
+    cfg = settings()
+    with pytest.raises(ConfigError) as info:
+        read_recording(path, cfg.columns, cfg.units, cfg.markers)
+    message = str(info.value)
+    assert "\n" not in message and str(path) in message
+    assert f"POINT:UNITS is {stored!r}" in message and "set markers.units" in message
+

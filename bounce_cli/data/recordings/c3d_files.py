@@ -12,6 +12,9 @@ field files carry and the package's own ``Reader`` refuses; each tolerance is on
 * header and parameters that disagree on the analog words per frame or the point count (Peak
   Performance, MotionMonitor): the count that fits the file's data section is used; on the
   scale or the rate: the parameter (``POINT:SCALE``, ``POINT:RATE``) is used.
+* ``POINT:UNITS`` cut short (``'mete'``) or spelt out (``'millimeters'``): the start of the
+  names of one length unit only is that unit (``length_unit``); one that begins the names of
+  several (``'mi'``: millimetres, micrometres) is refused like an unknown one.
 
 The data section is read in one piece (``read_points``): integer words times ``POINT:SCALE``,
 or floats (IEEE, DEC or big-endian); a negative residual word or a non-finite coordinate is a
@@ -38,6 +41,18 @@ from ...runtime.config import ConfigError
 
 #: length units a C3D file's POINT:UNITS may give, in metres
 C3D_LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+#: the names a POINT:UNITS string may be (the start of, when a writer cut it short: 'mete'),
+#: each with its unit: a unit of C3D_LENGTH_UNITS, or None for a length unit bounce does not
+#: read (there only so that a prefix of its name and of a known one, 'mi', is ambiguous)
+UNIT_SPELLINGS: dict[str, str | None] = {
+    **{f"{stem}{end}": unit for unit, stems in (("m", ("metre", "meter")),
+                                                ("cm", ("centimetre", "centimeter")),
+                                                ("mm", ("millimetre", "millimeter")))
+       for stem in stems for end in ("", "s")},
+    **{name: None for name in ("micrometre", "micrometres", "micrometer", "micrometers",
+                               "micron", "microns", "decimetre", "decimeter", "kilometre",
+                               "kilometer", "inch", "inches", "foot", "feet")},
+}
 #: POINT groups that hold channels other than positions (Vicon's model outputs); a file may
 #: name more in POINT:TYPE_GROUPS
 NON_POSITION_GROUPS = ("ANGLES", "FORCES", "MOMENTS", "POWERS", "SCALARS", "REACTIONS")
@@ -349,6 +364,33 @@ def point_labels(parameters: dict[str, Any], points: int) -> list[str]:
     return (labels + [""] * points)[:points]
 
 
+def length_unit(stored: str) -> str | None:
+    """The unit of :data:`C3D_LENGTH_UNITS` a POINT:UNITS string names: the unit itself
+    (``'mm'``), or a name of one (``'millimeters'``) or the start of names of one unit only
+    (``'mete'``, ``'mil'``: a writer that cut the string short); None for a string that
+    begins names of several units (``'mi'``: millimetres or micrometres) or of none.
+
+    Parameters
+    ----------
+    stored : str
+        POINT:UNITS as stored, stripped of its padding, in lower case.
+
+    Returns
+    -------
+    str or None
+        ``'m'``, ``'cm'``, ``'mm'``, or None.
+
+    Examples
+    --------
+    >>> length_unit("mete"), length_unit("mil"), length_unit("mi")
+    ('m', 'mm', None)
+    """
+    if stored in C3D_LENGTH_UNITS:
+        return stored
+    units = {unit for name, unit in UNIT_SPELLINGS.items() if stored and name.startswith(stored)}
+    return units.pop() if len(units) == 1 else None
+
+
 def read_c3d_markers(path: Path, units: str | None, warn: Callable[[str], None]):
     """A C3D file's markers as a ``MarkerSet`` in metres (the unit from POINT:UNITS, or
     ``units`` when set), with the points of non-position groups marked.
@@ -374,11 +416,14 @@ def read_c3d_markers(path: Path, units: str | None, warn: Callable[[str], None])
         if not file_units:
             raise ConfigError(f"{path}: the file has no POINT:UNITS, so the positions' length "
                               "unit is unknown: set markers.units (m | cm | mm)")
-        if file_units not in C3D_LENGTH_UNITS:
+        units = length_unit(file_units)
+        if units is None:
             raise ConfigError(f"{path}: POINT:UNITS is {file_units!r}, not a length unit "
                               f"({', '.join(C3D_LENGTH_UNITS)}): if the positions are in one, "
                               "set markers.units")
-        units = file_units
+        if units != file_units:
+            warn(f"{path}: POINT:UNITS is {file_units!r}, read as {units} (the start of one "
+                 "length unit's name); set markers.units if it is another")
     elif file_units and file_units != units:
         warn(f"{path}: POINT:UNITS is {file_units!r}; markers.units = {units} used")
     groups = dict.fromkeys(NON_POSITION_GROUPS + tuple(
