@@ -294,3 +294,29 @@ def test_an_ambiguous_or_unknown_unit_is_still_refused(tmp_path, stored):
     assert "\n" not in message and str(path) in message
     assert f"POINT:UNITS is {stored!r}" in message and "set markers.units" in message
 
+
+def with_rate(raw: bytes, group: int, name: bytes, value: float) -> bytes:
+    """``raw`` with the float parameter ``name`` of group ``group`` set to ``value``."""
+    at = record_at(raw, group, name) + 2 + len(name) + 2
+    assert raw[at:at + 2] == bytes([4, 0])  # a float scalar: type 4, no dimensions
+    return raw[:at + 2] + struct.pack("<f", value) + raw[at + 6:]
+
+
+@pytest.mark.parametrize("group, value", [("POINT", float("inf")), ("POINT", float("nan")),
+                                          ("ANALOG", float("inf")), ("ANALOG", float("nan"))])
+def test_a_rate_that_is_not_finite_is_one_line(tmp_path, cli, user_error, group, value):
+    """POINT:RATE or ANALOG:RATE inf or NaN (a damaged file): one line naming the parameter,
+    exit 2, nothing written (was an OverflowError or ValueError in the reader)."""
+    holder = {}
+
+    def edit(writer):
+        holder["id"] = group_id(writer, group)
+
+    path = tmp_path / "r.c3d"
+    raw = write_c3d(path, ["racket", "ball"], truth_xyz(60, 2), analog=3, edit=edit)
+    path.write_bytes(with_rate(raw, holder["id"], b"RATE", value))
+    out = tmp_path / "out"
+    result = cli("extract", "--data", path, "--out", out, "--set", "markers.racket=racket",
+                 "--set", "markers.ball=ball")
+    user_error(result, str(path), f"{group}:RATE", "not a finite")
+    assert not out.exists()

@@ -21,15 +21,17 @@ or floats (IEEE, DEC or big-endian); a negative residual word or a non-finite co
 gap. Labels come from ``POINT:LABELS``, ``POINT:LABELS2``, ... in order. Time is
 ``(frame - 1) / POINT:RATE`` on the capture clock: the first frame is
 ``TRIAL:ACTUAL_START_FIELD`` (two 16-bit words) or the header's. Refused, each with its reason:
-a file that is empty or not C3D, a truncated data section, no points, no or a non-length
-``POINT:UNITS`` (unless ``c3d.units`` is set), a marker named twice, a marker that is a
-non-position channel (listed in ``POINT:ANGLES``, ``FORCES``, ``MOMENTS``, ``POWERS`` or another
-group named in ``POINT:TYPE_GROUPS``).
+a file that is empty or not C3D, a truncated data section, no points, a rate, scale or count
+parameter that is inf or NaN, no or a non-length ``POINT:UNITS`` (unless ``c3d.units`` is
+set), a marker named twice, a marker that is a non-position channel (listed in
+``POINT:ANGLES``, ``FORCES``, ``MOMENTS``, ``POWERS`` or another group named in
+``POINT:TYPE_GROUPS``).
 """
 
 from __future__ import annotations
 
 import io
+import math
 import struct
 from dataclasses import dataclass
 from pathlib import Path
@@ -247,13 +249,22 @@ def _points(c3d, path: Path, raw: bytes, header, dtypes, parameters, processor: 
     def note(message: str) -> None:
         warn(f"{path}: {message}")
 
-    scale = _value(parameters, "POINT:SCALE", float(header.scale_factor), note)
+    def finite(key: str, value: float) -> float:
+        """``value`` of parameter ``key``; inf or NaN (a damaged file) is one line."""
+        if not math.isfinite(value):
+            raise ConfigError(f"{path}: {key} is {value:g}, not a finite number: the file is "
+                              "damaged (export it again from the capture software)")
+        return value
+
+    scale = finite("POINT:SCALE", _value(parameters, "POINT:SCALE",
+                                         float(header.scale_factor), note))
     if not np.isclose(scale, header.scale_factor, rtol=1e-6):
         warn(f"{path}: POINT:SCALE {scale:g} differs from the header's {header.scale_factor:g}; "
              "POINT:SCALE used")
-    rate = _value(parameters, "POINT:RATE", float(header.frame_rate), note)
+    rate = finite("POINT:RATE", _value(parameters, "POINT:RATE", float(header.frame_rate),
+                                       note))
     if not rate > 0.0:
-        rate = float(header.frame_rate)
+        rate = finite("POINT:RATE", float(header.frame_rate))
     if not np.isclose(rate, header.frame_rate, rtol=1e-6):
         warn(f"{path}: POINT:RATE {rate:g} Hz differs from the header's "
              f"{header.frame_rate:g} Hz; POINT:RATE used")
@@ -269,20 +280,22 @@ def _points(c3d, path: Path, raw: bytes, header, dtypes, parameters, processor: 
         last = max(last, int(words[0]) + 65536 * int(words[1]))
     if last >= 65535:
         # the header's 16-bit last frame overflowed (a long capture): POINT:FRAMES counts them
-        last = max(last, first - 1 + int(_value(parameters, "POINT:FRAMES", 0)))
+        last = max(last, first - 1 + int(finite("POINT:FRAMES",
+                                                _value(parameters, "POINT:FRAMES", 0))))
     frames = max(last - first + 1, 0)
     is_float = scale < 0.0
     word = 4 if is_float else 2
-    data_start = (int(_value(parameters, "POINT:DATA_START", header.data_block, note)) - 1) \
-        * 512
+    data_start = (int(finite("POINT:DATA_START", _value(
+        parameters, "POINT:DATA_START", header.data_block, note))) - 1) * 512
     if not 0 < data_start < len(raw):
         data_start = (header.data_block - 1) * 512
     available = len(raw) - data_start
-    used = int(_value(parameters, "POINT:USED", header.point_count, note))
-    analog_rate = _value(parameters, "ANALOG:RATE", header.analog_per_frame * rate, note)
+    used = int(finite("POINT:USED", _value(parameters, "POINT:USED", header.point_count, note)))
+    analog_rate = finite("ANALOG:RATE", _value(parameters, "ANALOG:RATE",
+                                               header.analog_per_frame * rate, note))
     per_frame = rate and analog_rate / rate
-    channels = _value(parameters, "ANALOG:USED",
-                      header.analog_count // max(header.analog_per_frame, 1), note)
+    channels = finite("ANALOG:USED", _value(
+        parameters, "ANALOG:USED", header.analog_count // max(header.analog_per_frame, 1), note))
     analog_words = int(channels * round(per_frame))
     counts = dict.fromkeys([(used, analog_words), (used, int(header.analog_count)),
                             (int(header.point_count), analog_words),
