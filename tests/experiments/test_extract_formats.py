@@ -173,6 +173,22 @@ def test_one_racket_marker_alone_is_off_by_its_offset(session, tmp_path):
     ("NO_OF_FRAMES\t2\nFREQUENCY\t200\nFrame\tTime\n", ("no MARKER_NAMES",)),
     ("Format Version,1.23,Export Frame Rate,200\n,Name,a,a,a\n,,Position,Position,Position\n"
      "Frame,Time (Seconds),X,Y,Z\n" + "0,0,1,2,3\n" * 60, ("no 'Length Units'",)),
+    # issue 36: each of these was a traceback (ValueError, pandas' ParserError)
+    ("Format Version,1.23,Export Frame Rate,fast,Length Units,Millimeters\n,Name,a,a,a\n"
+     ",,Position,Position,Position\nFrame,Sample,X,Y,Z\n" + "0,0,1,2,3\n" * 60,
+     ("Export Frame Rate", "'fast'", "not a number")),
+    ("NO_OF_FRAMES\t60\nFREQUENCY\t200\nMARKER_NAMES\t\t\n" + "1\t2\t3\n" * 60,
+     ("MARKER_NAMES", "names no marker")),
+    ("Trajectories\n200\n,,S:a,,\nFrame,Sub Frame,X,Y,Z\n,,mm,mm,mm\n" + "1,0,1,2,3\n" * 30
+     + "31,0,1,2,3,4,5\n" + "1,0,1,2,3\n" * 30, ("line 36", "7 cells", "5 columns")),
+    ("NO_OF_FRAMES\t60\nFREQUENCY\t200\nMARKER_NAMES\ta\nFrame\tTime\ta X\ta Y\ta Z\n"
+     + "1\t0\t1\t2\t3\n" * 10 + "1\t0\t1\t2\t3\t4\n" + "1\t0\t1\t2\t3\n" * 50,
+     ("line 15", "6 cells", "5 columns")),
+    ("Format Version,1.23,Export Frame Rate,200,Length Units,Millimeters\n,Name,a,a,a\n"
+     ",,Position,Position,Position\nFrame,Time (Seconds),X,Y,Z\n" + "0,0,1,2,3\n" * 20
+     + "0,0,1,2,3,,9\n" + "0,0,1,2,3\n" * 40, ("line 25", "7 cells", "5 columns")),
+    ("Trajectories\n0\n,,S:a,,\nFrame,Sub Frame,X,Y,Z\n,,mm,mm,mm\n" + "1,0,1,2,3\n" * 60,
+     ("frame rate", "0", "not a rate")),
 ])
 def test_bad_exports_are_one_line_errors(tmp_path, content, needles):
     path = tmp_path / "take.csv"
