@@ -24,6 +24,8 @@ from __future__ import annotations
 import csv
 import io
 import math
+import os
+import stat
 from pathlib import Path
 from typing import Callable
 
@@ -40,8 +42,38 @@ UNIT_NAMES = {"m": 1.0, "cm": 0.01, "mm": 0.001, "meters": 1.0, "centimeters": 0
 DEFAULT_VERTICAL = {"c3d": "z", "vicon": "z", "qtm": "z", "motive": "y"}
 
 
+#: the largest recording read, bytes: each is read whole into memory (and a table parsed takes
+#: several times its size); an hour at 1 kHz of 100 markers is about 1 GB of text
+MAX_RECORDING_BYTES = 2_000_000_000
+
+
+def check_recording_file(path: Path) -> None:
+    """Refuse, before reading it, a recording that is not a regular file (a device such as
+    ``/dev/zero``, a folder) or is larger than :data:`MAX_RECORDING_BYTES`, in one line with
+    its size; a missing file is left to the reader (its own message).
+
+    Parameters
+    ----------
+    path : Path
+        The recording (or events or impacts table).
+    """
+    try:
+        info = os.stat(path)
+    except OSError:
+        return
+    if not stat.S_ISREG(info.st_mode):
+        raise ConfigError(f"{path}: not a regular file (a device, a pipe or a folder): give a "
+                          "recording file")
+    if info.st_size > MAX_RECORDING_BYTES:
+        raise ConfigError(f"{path}: {info.st_size:,} bytes ({info.st_size / 1e9:.1f} GB), "
+                          f"larger than a recording may be ({MAX_RECORDING_BYTES / 1e9:g} GB): "
+                          "split it into files of a few trials each")
+
+
 def read_bytes(path: Path) -> bytes:
-    """A file's bytes; a missing or unreadable file is a one-line ConfigError."""
+    """A file's bytes; a missing or unreadable file, or one ``check_recording_file`` refuses,
+    is a one-line ConfigError."""
+    check_recording_file(path)
     try:
         return path.read_bytes()
     except FileNotFoundError:
@@ -77,6 +109,7 @@ def detect_format(path: Path) -> str:
     (``Format Version``), else ``csv``."""
     if path.suffix.lower() == ".c3d":
         return "c3d"
+    check_recording_file(path)
     try:
         with open(path, "rb") as handle:
             head = handle.read(4096)
