@@ -217,8 +217,40 @@ def frame_from_json(data: dict[str, Any]) -> pd.DataFrame:
     return pd.DataFrame(columns, columns=data["columns"])
 
 
-def row_label(row: ManifestRow) -> str:
-    return row.factors.get("trial") or row.file.stem
+def row_label(row: ManifestRow, folder: str | None = None) -> str:
+    """A recording's trial label: its ``trial`` factor, else its folder's name
+    (:func:`recording_folders`; the file's stem when not given)."""
+    return row.factors.get("trial") or folder or row.file.stem
+
+
+def recording_folders(rows) -> dict[int, str]:
+    """The folder of each recording's extraction outputs under ``<unit>/extract/``, by its
+    manifest line: the file's stem; where that cannot name a folder (``'.'``, ``'..'``: a file
+    named ``...csv``) or two recordings of the unit share it (``A/t.csv`` and ``B/t.csv``),
+    the stem and the manifest line (``t-line3``), so that no recording's outputs leave the
+    unit's folder or overwrite another's.
+
+    Parameters
+    ----------
+    rows : sequence of ManifestRow
+        The unit's recordings.
+
+    Returns
+    -------
+    dict of int to str
+        Manifest line -> folder name.
+    """
+    counts: dict[str, int] = {}
+    for row in rows:
+        counts[row.file.stem] = counts.get(row.file.stem, 0) + 1
+    folders = {}
+    for row in rows:
+        stem = row.file.stem
+        if counts[stem] == 1 and stem.strip("."):
+            folders[row.line] = stem
+        else:
+            folders[row.line] = f"{stem.strip('.') or 'file'}-line{row.line}"
+    return folders
 
 
 def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures: list[dict],
@@ -234,8 +266,9 @@ def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures:
     unit = task.unit
     tables, setups = [], []
     user_g = cfg["model"].get("g")
+    folders = recording_folders(unit.rows)
     for row in unit.rows:
-        label = row_label(row)
+        label = row_label(row, folders[row.line])
         try:
             if is_impacts_table(str(row.file)):
                 table = read_impacts(str(row.file)).frame
@@ -243,7 +276,7 @@ def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures:
             else:
                 ex_cfg = extraction_config(cfg, row.overrides, row.file, row.events, user_g)
                 result = extract.run(ex_cfg, RunOptions())
-                stem = f"{unit.folder}/extract/{row.file.stem}"
+                stem = f"{unit.folder}/extract/{folders[row.line]}"
                 for name, frame in result.frames.items():
                     frames[f"{stem}/{name}"] = frame
                 table = result.frames["impacts.csv"]
