@@ -296,3 +296,30 @@ def test_exact_sticking_with_racket_control_is_a_one_line_error(cli, user_error,
     user_error(cli("trajectory", "--set", "sticking.min_hop_s=0", *control, "--out",
                    tmp_path / "t", "--quiet"), "sticking.min_hop_s", "model.control")
     assert not (tmp_path / "b").exists() and not (tmp_path / "t").exists()
+
+
+@pytest.mark.parametrize("command", [["fixed-point"], ["orbit", "--theta0-deg", "30", "--v0", "3"]])
+@pytest.mark.parametrize("settings", [["model.g=1e308", "model.racket_period=1e-300"],
+                                      ["model.racket_period=1e-170"],
+                                      ["model.racket_period=1e300"]])
+def test_extreme_parameters_are_one_line_naming_them(cli, user_error, command, settings):
+    args = [a for s in settings for a in ("--set", s)]
+    user_error(cli(*command, *args), "racket_period", "SI units")
+
+
+@pytest.mark.parametrize("args", [["fixed-point"], ["fixed-point", "--json"],
+                                  ["orbit", "--theta0-deg", "30", "--v0", "3", "--csv"],
+                                  ["basin", "--print-config"]])
+def test_stdout_to_a_full_device_is_one_line(args):
+    """``bounce fixed-point > /dev/full``: one line and exit 2, not a traceback."""
+    import subprocess
+    import sys
+
+    with open("/dev/full", "w") as full:
+        done = subprocess.run([sys.executable, "-m", "bounce_cli", *args], stdout=full,
+                              stderr=subprocess.PIPE, text=True, timeout=120)
+    lines = done.stderr.strip().splitlines()
+    assert done.returncode == 2 and len(lines) == 1, done.stderr[-3000:]
+    assert lines[0] == "bounce: error: cannot write to standard output: No space left on " \
+        "device", lines[0]
+

@@ -6,6 +6,7 @@ from pathlib import Path
 import pytest
 
 from bounce_cli.runtime.config import (
+    MAX_CONFIG_BYTES,
     ConfigError,
     ModelOnlyConfig,
     apply_overrides,
@@ -119,3 +120,44 @@ def test_empty_file_gives_defaults_and_resolved_yaml_roundtrips(tmp_path):
     cfg = load_config(ModelOnlyConfig, write(tmp_path, ""))
     again = load_config(ModelOnlyConfig, write(tmp_path, to_yaml(cfg), "again.yaml"))
     assert again == cfg
+
+
+@pytest.mark.parametrize("command", ["fixed-point", "basin"])
+def test_a_config_that_is_not_utf8_is_one_line(tmp_path, cli, user_error, command):
+    path = tmp_path / "latin.yaml"
+    path.write_bytes(b"model:\n  alpha: 0.5  # r\xe9sum\xe9\n")
+    out = tmp_path / "out"
+    result = cli(command, "--config", path, *(["--out", out] if command == "basin" else []))
+    user_error(result, str(path), "not UTF-8", "0xe9", "save it as UTF-8")
+    assert not out.exists()
+
+
+def test_a_config_larger_than_the_limit_is_refused_before_it_is_read(tmp_path, cli, user_error):
+    path = tmp_path / "huge.yaml"
+    with open(path, "wb") as handle:
+        handle.write(b"model: {}\n")
+        handle.truncate(MAX_CONFIG_BYTES + 1)  # sparse: no disk, and all NUL bytes past line 1
+    user_error(cli("fixed-point", "--config", path), str(path), "10 MB", "larger than")
+    out = tmp_path / "out"
+    user_error(cli("basin", "--config", path, "--out", out), "larger than")
+    assert not out.exists()
+
+
+def test_a_device_or_a_folder_as_config_is_one_line(tmp_path):
+    """``--config /dev/zero`` must not read forever: refused as not a regular file (run in a
+    child with bounded memory and time, so that a reader that reads it whole fails fast)."""
+    import resource
+    import subprocess
+    import sys
+
+    def bounded():
+        resource.setrlimit(resource.RLIMIT_AS, (2 * 2**30, 2 * 2**30))
+
+    for given in ("/dev/zero", str(tmp_path)):
+        done = subprocess.run([sys.executable, "-m", "bounce_cli", "fixed-point", "--config",
+                               given], capture_output=True, text=True, timeout=120,
+                              preexec_fn=bounded)
+        lines = done.stderr.strip().splitlines()
+        assert done.returncode == 2 and len(lines) == 1, done.stderr[-2000:]
+        assert lines[0].startswith(f"bounce: error: {given}: ") and "not a regular file" \
+            in lines[0], lines[0]

@@ -272,3 +272,35 @@ def test_jobs_is_offered_only_where_it_spreads_work(command):
     offered = "--jobs" in run(command, "--help").stdout
     assert offered == (command in ("basin", "control", "sweep", "study", "attractors")) == \
         entry(command).parallel
+
+
+@pytest.mark.parametrize("command, settings, needles", [
+    ("basin", ["grid.theta0_deg.num=1000000000"], ["grid.theta0_deg", "8 GB"]),
+    ("basin", ["grid.theta0_deg.num=40000", "grid.v0_m_s.num=40000"],
+     ["limits.max_points", "304.0 GB"]),
+    ("sweep", ["basin.v0_m_s.num=1000000000"], ["basin.v0_m_s", "8 GB"]),
+    ("stability", ["grid.n_ac=1000000000"], ["n_alpha x n_ac", "968 GB"]),
+    ("stability", ["predictions.n_ac=1000000000"], ["predictions", "8 GB"]),
+    ("learning", ["ac_points=1000000000"], ["ac_points", "8 GB"]),
+    ("bifurcation", ["flip.probes=1000000000"], ["flip", "probes", "8 GB"]),
+    ("continuation", ["diagram.recorded_impacts=1000000000"], ["recorded_impacts", "11.5 TB"]),
+    ("simulate-recording", ["rest_s=1000000000"], ["rest_s", "1.6 TB"]),
+    ("control", ["radius.gain.num=100000", "radius.rate.num=100000"], ["radius", "80 GB"]),
+    ("control", ["basin.theta0_deg.num=100000", "basin.v0_m_s.num=100000"], ["basin", "80 GB"]),
+    ("control", ["fit.simulate.impacts_per_trial=1000000000"], ["fit.simulate", "480 GB"]),
+    ("control", ["correlations.bounces=1000000000"], ["correlations", "960 GB"]),
+    ("acf", ["max_lag=1000000000"], ["max_lag", "32 GB"]),
+    ("acf", ["trials.duration_s=1000000000"], ["stochastic map", "87.3 GB", "duration_s"]),
+    ("acf", ["long_runs.bounces=1000000000"], ["stochastic map", "1.6 TB"]),
+    ("regression", ["stochastic_map.duration_s=1000000000"], ["stochastic map", "28.8 GB"]),
+])
+def test_a_size_that_would_not_fit_in_memory_is_refused_before_allocating(
+        tmp_path, command, settings, needles):
+    """A config value that sizes an array (a grid's points, a run's bounces, lags, samples):
+    one line with the memory it would need, exit 2, nothing written; before, each was a
+    MemoryError traceback (or an allocation of many GB)."""
+    out = tmp_path / "out"
+    result = run(command, "--quiet", "--out", out, *[a for s in settings for a in ("--set", s)])
+    one_error_line(result, "would need" if "max_points" not in needles[0] else "memory",
+                   *needles)
+    assert not out.exists()

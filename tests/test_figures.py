@@ -282,3 +282,34 @@ def test_a_figure_redrawn_from_csv_writes_as_pdf(tmp_path):
     save_figure(fig, buffer, "pdf", dpi=150, source="test")  # type: ignore[arg-type]
     assert buffer.getvalue()[:5] == b"%PDF-"
     assert math.isfinite(paper.FIG3_MODEL.alpha)
+
+
+@pytest.mark.parametrize("folder, env", [
+    ("d\u00e4t\u00e4".encode(), {"LC_ALL": "C", "PYTHONUTF8": "0"}),  # UTF-8 bytes, ASCII locale
+    (b"d\xe4t", {"LC_ALL": "C"}),  # a Latin-1 file name: not UTF-8 at all
+])
+def test_a_non_ascii_path_in_the_c_locale_goes_into_the_png_metadata(tmp_path, cli, folder,
+                                                                     env):
+    """``LC_ALL=C`` and a data path the command line cannot decode: the figure is written with
+    the path in its metadata (the bytes as UTF-8, else U+FFFD), not a UnicodeEncodeError."""
+    import os
+    import subprocess
+    import sys
+
+    from PIL import Image
+
+    sim = tmp_path / "sim"
+    assert cli("simulate-recording", "--quiet", "--out", sim, "--set", "trials=1",
+               "--set", "duration_s=6").exit_code == 0
+    data = os.fsencode(tmp_path) + b"/" + folder
+    os.mkdir(data)
+    with open(data + b"/rec.csv", "wb") as handle:
+        handle.write((sim / "recording.csv").read_bytes())
+    out = data + b"/\xc3\xb6ut"
+    done = subprocess.run([sys.executable, "-m", "bounce_cli", "extract", "--quiet", "--data",
+                           data + b"/rec.csv", "--out", out], capture_output=True, timeout=300,
+                          env={**os.environ, **env})
+    assert done.returncode == 0, done.stderr.decode(errors="replace")[-3000:]
+    caption = Image.open(out + b"/fig2.png").text["Description"]
+    shown = "d\u00e4t\u00e4" if folder == "d\u00e4t\u00e4".encode() else "d\ufffdt"
+    assert f"{shown}/rec.csv" in caption, caption

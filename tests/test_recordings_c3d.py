@@ -264,3 +264,59 @@ def test_the_btkdata_collection_is_read():
             error = np.nanmax(np.abs(other.xyz - reference.xyz))
             assert error <= (0.0 if name.startswith("sgi_int") or name == "Eb015si"
                              else step + 1e-3), name
+
+
+@pytest.mark.parametrize("stored, metres", [("mete", 1.0), ("mil", 0.001), ("centim", 0.01),
+                                            ("millimeters", 0.001)])
+def test_a_truncated_unit_that_names_one_length_unit_is_read_with_a_warning(tmp_path, stored,
+                                                                            metres):
+    """A field file's POINT:UNITS cut short ('mete' for metres): a unique prefix of one length
+    unit's name is that unit, with one warning naming the file and the string stored."""
+    xyz = truth_xyz(60, 2)
+    path = tmp_path / "t.c3d"
+    write_c3d(path, ["racket", "ball"], xyz, units=stored)
+    cfg = settings()
+    notes: list[str] = []
+    (trial,) = read_recording(path, cfg.columns, cfg.units, cfg.markers, warn=notes.append)
+    np.testing.assert_allclose(trial.ball[6:], xyz[6:, 1, 2] * metres, rtol=1e-6)
+    assert len(notes) == 1 and str(path) in notes[0] and repr(stored) in notes[0], notes
+
+
+@pytest.mark.parametrize("stored", ["mi", "furlong", "milesx"])
+def test_an_ambiguous_or_unknown_unit_is_still_refused(tmp_path, stored):
+    """'mi' begins millimetres and micrometres alike: refused, as an unknown string is."""
+    path = tmp_path / "u.c3d"
+    write_c3d(path, ["racket", "ball"], truth_xyz(60, 2), units=stored)
+    cfg = settings()
+    with pytest.raises(ConfigError) as info:
+        read_recording(path, cfg.columns, cfg.units, cfg.markers)
+    message = str(info.value)
+    assert "\n" not in message and str(path) in message
+    assert f"POINT:UNITS is {stored!r}" in message and "set markers.units" in message
+
+
+def with_rate(raw: bytes, group: int, name: bytes, value: float) -> bytes:
+    """``raw`` with the float parameter ``name`` of group ``group`` set to ``value``."""
+    at = record_at(raw, group, name) + 2 + len(name) + 2
+    assert raw[at:at + 2] == bytes([4, 0])  # a float scalar: type 4, no dimensions
+    return raw[:at + 2] + struct.pack("<f", value) + raw[at + 6:]
+
+
+@pytest.mark.parametrize("group, value", [("POINT", float("inf")), ("POINT", float("nan")),
+                                          ("ANALOG", float("inf")), ("ANALOG", float("nan"))])
+def test_a_rate_that_is_not_finite_is_one_line(tmp_path, cli, user_error, group, value):
+    """POINT:RATE or ANALOG:RATE inf or NaN (a damaged file): one line naming the parameter,
+    exit 2, nothing written (was an OverflowError or ValueError in the reader)."""
+    holder = {}
+
+    def edit(writer):
+        holder["id"] = group_id(writer, group)
+
+    path = tmp_path / "r.c3d"
+    raw = write_c3d(path, ["racket", "ball"], truth_xyz(60, 2), analog=3, edit=edit)
+    path.write_bytes(with_rate(raw, holder["id"], b"RATE", value))
+    out = tmp_path / "out"
+    result = cli("extract", "--data", path, "--out", out, "--set", "markers.racket=racket",
+                 "--set", "markers.ball=ball")
+    user_error(result, str(path), f"{group}:RATE", "not a finite")
+    assert not out.exists()

@@ -28,6 +28,7 @@ import numpy as np
 from scipy.linalg import solve_discrete_lyapunov
 
 from ..errors import NotStableError
+from ..runtime.memory import check_array_memory
 from .classify import ClassifySettings
 from ..model.linear import is_stable, jacobian
 from ..model.impact import next_impact_phase
@@ -98,7 +99,10 @@ def stationary_covariance(jac: np.ndarray, noise_cov: np.ndarray) -> np.ndarray:
 
 
 def lagged_covariances(jac: np.ndarray, cov0: np.ndarray, max_lag: int) -> np.ndarray:
-    """R(l) = J^l R(0) for l = 0..max_lag, shape (max_lag + 1, 2, 2)."""
+    """R(l) = J^l R(0) for l = 0..max_lag, shape (max_lag + 1, 2, 2); a max_lag whose
+    array would not fit in memory is a one-line ConfigError (``runtime.memory``)."""
+    check_array_memory((max_lag + 1) * cov0.size, f"max_lag = {max_lag:,} lags",
+                       "reduce max_lag")
     out = np.empty((max_lag + 1,) + cov0.shape)
     out[0] = cov0
     for lag in range(1, max_lag + 1):
@@ -214,6 +218,9 @@ def simulate_stochastic_map(
     check_velocity_phase(velocity_phase)
     fp = params.fixed_point()
     runs = len(seeds)
+    check_array_memory(2 * runs * n_bounces, f"the stochastic map's {runs:,} runs x "
+                       f"{n_bounces:,} bounces", "shorten the trials (duration_s) or the runs "
+                       "(bounces), or run fewer")
     rngs = [np.random.default_rng(s) for s in seeds]
     total = burn_in + n_bounces
     theta = np.full(runs, wrap_phase(fp.theta_rad))

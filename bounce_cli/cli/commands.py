@@ -62,6 +62,7 @@ from ..model.linear import stability
 from ..errors import BounceError, ConfigError, NoFixedPointError
 from ..analysis.classify import ClassifySettings
 from ..runtime.interrupts import Interrupted, report as report_interrupt
+from .console import stdout_failed
 from ..experiments.registry import EXPERIMENTS, Entry
 
 
@@ -395,7 +396,7 @@ def run_experiment(
             run_dir.discard()
         if isinstance(exc, BounceError):
             fail(str(exc))
-        if isinstance(exc, OSError):  # e.g. the disk filled up while writing
+        if isinstance(exc, OSError) and not stdout_failed():  # e.g. the disk filled up
             fail(f"writing {exc.filename or 'results'}: {exc.strerror or exc}")
         raise
     if not quiet:

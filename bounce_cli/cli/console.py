@@ -1,8 +1,11 @@
 """The ``bounce`` console script: the signal handlers first (:mod:`bounce_cli.runtime.interrupts`,
-standard library only), then the typer app's imports and run (:mod:`bounce_cli.cli.commands`)."""
+standard library only), then the typer app's imports and run (:mod:`bounce_cli.cli.commands`).
+Standard output is watched (:class:`WatchedStdout`): when it cannot be written (``> /dev/full``)
+the run ends with one line ``bounce: error: cannot write to standard output: ...``, exit 2."""
 
 from __future__ import annotations
 
+import errno
 import gc
 import os
 import sys
@@ -10,13 +13,74 @@ import sys
 from ..runtime.interrupts import Interrupted, install, report
 
 
+class WatchedStdout:
+    """Standard output as the commands see it (``sys.stdout`` during :func:`main`): the same
+    stream, remembering a write or flush that failed (a full disk or ``/dev/full``, a closed
+    pipe), so that :func:`main` can tell that failure from one of a results file."""
+
+    def __init__(self, stream) -> None:
+        self._stream = stream
+        self.failure: OSError | None = None
+
+    def write(self, text: str) -> int:
+        try:
+            return self._stream.write(text)
+        except OSError as exc:
+            self.failure = exc
+            raise
+
+    def flush(self) -> None:
+        try:
+            self._stream.flush()
+        except OSError as exc:
+            self.failure = exc
+            raise
+
+    def __getattr__(self, name: str):
+        return getattr(self._stream, name)
+
+
+def stdout_failed() -> bool:
+    """Whether a write to standard output failed in this run (:class:`WatchedStdout`)."""
+    return isinstance(sys.stdout, WatchedStdout) and sys.stdout.failure is not None
+
+
+def _report_stdout_failure(failure: OSError) -> int:
+    """Standard output cannot be written: one line and status 2 (a closed pipe, ``| head``:
+    no line and status 1, as click ends a command whose reader left), and the rest of the
+    output goes to the null device so that the interpreter's last flush does not fail again.
+    Returns the exit status."""
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, sys.stdout.fileno())
+        os.close(null)
+    except (OSError, ValueError):
+        pass
+    if failure.errno == errno.EPIPE:
+        return 1
+    print(f"bounce: error: cannot write to standard output: "
+          f"{failure.strerror or failure}", file=sys.stderr, flush=True)
+    return 2
+
+
 def main() -> None:
     """The ``bounce`` console script: handlers first, then the CLI's imports and run."""
     install()
+    watched = sys.stdout = WatchedStdout(sys.stdout)
     try:
         from .commands import app
 
-        app(prog_name="bounce")
+        try:
+            app(prog_name="bounce")
+        except SystemExit:
+            # what is still buffered is written here, where a failure is reported (at the
+            # interpreter's exit it would be an "Exception ignored" and status 120)
+            sys.stdout.flush()
+            raise
+    except OSError:
+        if watched.failure is None:
+            raise
+        sys.exit(_report_stdout_failure(watched.failure))
     except Interrupted as exc:
         code = report(exc)
         # what the run must undo was undone on the way here (staged files removed, worker

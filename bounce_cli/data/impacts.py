@@ -129,7 +129,11 @@ PERTURBED_VALUES = {"true": True, "false": False, "1": True, "0": False, "1.0": 
 
 def read_data_csv(path: Path) -> pd.DataFrame:
     """A ``--data`` CSV as a DataFrame with stripped column names; an unreadable file is one
-    line naming ``data`` and the file."""
+    line naming ``data`` and the file (so is a device or a file above the recordings' size
+    limit, ``recordings.text_exports.check_recording_file``)."""
+    from .recordings.text_exports import check_recording_file
+
+    check_recording_file(Path(path))
     try:
         # only an empty cell is missing: a cell such as 'n/a' stays text, so that an error
         # can show what the file holds

@@ -22,6 +22,7 @@ import pandas as pd
 from pydantic import Field, model_validator
 
 from ..runtime.config import ConfigError, ExperimentConfig, StrictModel
+from ..runtime.memory import check_array_memory
 from ..model.params import MIN_HOP_S, ModelError, ModelParams
 from ..analysis.bifurcation import (
     SWEEPABLE,
@@ -98,6 +99,12 @@ class FlipBlock(StrictModel):
     transient_impacts: int = Field(5000, ge=0, description="longer: slow convergence at a flip")
     probes: int = Field(15, ge=1, description="values per multisection round")
     rounds: int = Field(2, ge=0)
+
+    @model_validator(mode="after")
+    def _fits_in_memory(self):
+        check_array_memory(self.probes + 2, f"probes = {self.probes:,} values",
+                           "reduce probes")
+        return self
 
 
 class LimitsBlock(StrictModel):

@@ -23,6 +23,7 @@ import pandas as pd
 from pydantic import Field, model_validator
 
 from ..runtime.config import ConfigError, ExperimentConfig, StrictModel
+from ..runtime.memory import check_array_memory
 from ..model.params import MIN_HOP_S, ModelError
 from ..analysis.bifurcation import (
     SWEEPABLE,
@@ -114,6 +115,15 @@ class DiagramBlock(StrictModel):
     transient_impacts: int = Field(600, ge=0)
     recorded_impacts: int = Field(64, ge=2)
     min_hop_s: float = Field(MIN_HOP_S, ge=0.0, description="s, shorter hops are sticking")
+
+    @model_validator(mode="after")
+    def _fits_in_memory(self):
+        orbits = self.num * len(self.theta0_deg) * len(self.v0_m_s)
+        check_array_memory(orbits * self.recorded_impacts,
+                           f"num x initial conditions x recorded_impacts = {self.num:,} x "
+                           f"{len(self.theta0_deg) * len(self.v0_m_s):,} x "
+                           f"{self.recorded_impacts:,} impacts", "reduce them")
+        return self
 
 
 class ContinuationConfig(ExperimentConfig):

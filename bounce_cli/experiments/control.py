@@ -17,10 +17,11 @@ from typing import Annotated, Optional
 
 import numpy as np
 import pandas as pd
-from pydantic import Field
+from pydantic import Field, model_validator
 
 from ..data.data_parameters import model_for_data
 from ..data.impacts import Impacts, read_impacts as shared_read_impacts
+from ..runtime.memory import check_array_memory
 from ..runtime.config import (
     DataFiles,
     data_text,
@@ -101,6 +102,14 @@ class RadiusBlock(StrictModel):
     zoom_half_width: float = Field(0.08, gt=0.0, description="K and c around the fastest")
     zoom_num: int = Field(121, ge=2, description="grid points per axis of the zoom")
 
+    @model_validator(mode="after")
+    def _grids_fit_in_memory(self):
+        check_array_memory(self.gain.num * self.rate.num, f"gain.num x rate.num = "
+                           f"{self.gain.num:,} x {self.rate.num:,} points", "reduce them")
+        check_array_memory(self.zoom_num ** 2, f"zoom_num^2 = {self.zoom_num:,}^2 points",
+                           "reduce zoom_num")
+        return self
+
 
 class ImpulseBlock(StrictModel):
     alpha_p: list[Annotated[float, Field(ge=0.0, lt=1.0)]] = Field([0.4, 0.6, 0.35, 0.65],
@@ -117,6 +126,13 @@ class BasinGridBlock(StrictModel):
     theta0_deg: GridAxis = GridAxis(start=0.0, stop=360.0, num=120)
     v0_m_s: GridAxis = GridAxis(start=0.0, stop=10.0, num=120)
 
+    @model_validator(mode="after")
+    def _fits_in_memory(self):
+        check_array_memory(self.theta0_deg.num * self.v0_m_s.num,
+                           f"theta0_deg.num x v0_m_s.num = {self.theta0_deg.num:,} x "
+                           f"{self.v0_m_s.num:,} points", "reduce them")
+        return self
+
 
 class SimulateBlock(StrictModel):
     """Perturbation trials of the configured controller (when no ``data`` is given): section
@@ -132,6 +148,13 @@ class SimulateBlock(StrictModel):
     period_noise_sd_s: float = Field(0.005, ge=0.0)
     seed: int = Field(1, ge=0)
 
+    @model_validator(mode="after")
+    def _fits_in_memory(self):
+        check_array_memory(3 * self.trials * self.impacts_per_trial,
+                           f"trials x impacts_per_trial = {self.trials:,} x "
+                           f"{self.impacts_per_trial:,} impacts (3 numbers each)", "reduce them")
+        return self
+
 
 class FitBlock(StrictModel):
     impacts_after: int = Field(4, ge=1, description="impacts after the perturbed one fitted")
@@ -142,6 +165,12 @@ class FitBlock(StrictModel):
         None, gt=0.0, description="with data: the controller's set point tau_bar, s (null: the "
         "data's mean racket period, which control shifts: +4 ms in the README's example)")
     simulate: SimulateBlock = SimulateBlock()
+
+    @model_validator(mode="after")
+    def _fits_in_memory(self):
+        check_array_memory(self.impacts_after + 1, f"impacts_after = {self.impacts_after:,} "
+                           "impacts", "reduce impacts_after")
+        return self
 
 
 class CorrelationsBlock(StrictModel):
@@ -157,6 +186,16 @@ class CorrelationsBlock(StrictModel):
     bounces: int = Field(1000, ge=20, description="bounces per run after burn-in")
     burn_in: int = Field(50, ge=0)
     seed: int = Field(0, ge=0)
+
+    @model_validator(mode="after")
+    def _fits_in_memory(self):
+        check_array_memory(3 * self.runs * (self.burn_in + self.bounces),
+                           f"runs x (burn_in + bounces) = {self.runs:,} x "
+                           f"{self.burn_in + self.bounces:,} impacts (3 numbers each)",
+                           "reduce them")
+        check_array_memory(9 * (self.max_lag + 1), f"max_lag = {self.max_lag:,} lags",
+                           "reduce max_lag")
+        return self
 
 
 class ControlConfig(ExperimentConfig):

@@ -21,8 +21,9 @@ import math
 
 import numpy as np
 import pandas as pd
-from pydantic import Field
+from pydantic import Field, field_validator
 
+from ..runtime.memory import check_array_memory
 from ..runtime.config import (
     ConfigError,
     DataFiles,
@@ -63,6 +64,12 @@ class LearningConfig(ExperimentConfig):
     model: ModelBlock = ModelBlock()
     noise: LearningNoiseBlock = LearningNoiseBlock()
     ac_points: int = Field(81, ge=5, description="AC values on the model curve")
+
+    @field_validator("ac_points")
+    @classmethod
+    def _curve_fits_in_memory(cls, value: int) -> int:
+        check_array_memory(value, f"{value:,} points", "reduce ac_points")
+        return value
     min_bounces: int = Field(10, ge=3, description="fewest impacts a trial may have")
     settle_after_perturbation: int = Field(
         4, ge=0, description="with --data: impacts after a perturbed one left out of the "

@@ -21,6 +21,7 @@ import pandas as pd
 from pydantic import Field, model_validator
 
 from ..runtime.config import ControllableModelBlock, ExperimentConfig, StrictModel
+from ..runtime.memory import check_array_memory
 from ..data.simulated_lab import LAB_MIN_HOP_S, SessionSettings, simulate_session, truth_rows
 from ..data.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
 from .plotting import caption_figures, centred_deg, draw_fig2, publication_style
@@ -87,6 +88,10 @@ class RecordingConfig(ExperimentConfig):
 
     @model_validator(mode="after")
     def _limits(self):
+        check_array_memory((self.rest_s + self.duration_s) * self.sample_rate_hz,
+                           f"(rest_s + duration_s) x sample_rate_hz = ({self.rest_s:g} + "
+                           f"{self.duration_s:g}) s x {self.sample_rate_hz:g} Hz samples a "
+                           "trial", "reduce rest_s")
         if self.racket.period_sd_s > 0.1 * self.model.racket_period:
             raise ValueError("racket.period_sd_s must be at most 10% of model.racket_period")
         if abs(self.racket.harmonic2_m) > 0.25 * self.model.racket_amplitude:

@@ -16,6 +16,7 @@ from pydantic import Field, model_validator
 
 from ..paper import values as paper
 from ..runtime.config import ExperimentConfig, StrictModel
+from ..runtime.memory import check_array_memory
 from ..model.linear import (
     complex_boundaries_g,
     eigenvalues,
@@ -51,6 +52,8 @@ class GridBlock(StrictModel):
             raise ValueError("alpha_max must be greater than alpha_min")
         if self.n_ac > 1 and self.ac_max_g <= self.ac_min_g:
             raise ValueError("ac_max_g must be greater than ac_min_g")
+        check_array_memory(self.n_alpha * self.n_ac, f"n_alpha x n_ac = {self.n_alpha:,} x "
+                           f"{self.n_ac:,} points", "reduce them")
         return self
 
 
@@ -59,6 +62,11 @@ class PredictionsBlock(StrictModel):
     human_ac_g: tuple[float, float] = Field(
         (-0.5, -0.3), description="range of mean AC observed by Schaal et al. (section 5)"
     )
+
+    @model_validator(mode="after")
+    def _fits_in_memory(self):
+        check_array_memory(self.n_ac, f"n_ac = {self.n_ac:,} points", "reduce n_ac")
+        return self
 
 
 class CrosscheckPoint(StrictModel):

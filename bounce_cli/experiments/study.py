@@ -222,7 +222,8 @@ def frame_from_json(data: dict[str, Any]) -> pd.DataFrame:
 def recording_names(unit: Unit) -> list[str]:
     """A name for each recording of ``unit`` (in its rows' order) that no other of its
     recordings has: the file's stem, and where several share one (``A/t.csv``, ``B/t.csv``)
-    the stem and the manifest line, ``t-line3``. Its per-recording outputs
+    the stem and the manifest line, ``t-line3`` (also where the stem names no folder: a
+    file ``...csv`` has the stem ``..``, and gets ``file-line3``). Its per-recording outputs
     (``<unit>/extract/<name>/``) and its trials' labels are keyed by it, so that no two
     recordings overwrite or merge into each other.
 
@@ -237,12 +238,13 @@ def recording_names(unit: Unit) -> list[str]:
         One name per row, all different.
     """
     stems = [row.file.stem for row in unit.rows]
-    taken = {stem for stem in stems if stems.count(stem) == 1}
+    taken = {stem for stem in stems if stems.count(stem) == 1 and stem.strip(".")}
     names = []
     for row, stem in zip(unit.rows, stems):
         name = stem
-        if stems.count(stem) > 1:
-            name = f"{stem}-line{row.line}"
+        # shared, or no folder's name ('.', '..': a file named ...csv would leave the unit)
+        if stems.count(stem) > 1 or not stem.strip("."):
+            name = f"{stem.strip('.') or 'file'}-line{row.line}"
             while name in taken:  # a file really named so: lengthen until free
                 name += "-"
             taken.add(name)

@@ -13,6 +13,11 @@ import numpy as np
 
 from ..errors import ModelError, NoFixedPointError
 
+#: the largest power of ten a term of eq. 8 (omega_r, omega_r^2 a_r, v~, a_r omega_r^2 / g) may
+#: reach, either way: beyond it the map's products (squares of velocities, the Jacobian of
+#: eq. 9) overflow or underflow to inf, 0 or NaN; physical values are within 1e+-6
+MAX_TERM_EXPONENT = 100
+
 #: section 3's sticking threshold: a hop (time between two impacts) shorter than this, s, is
 #: sticking (grey in Fig. 4); the default of every ``min_hop_s`` on the map's side
 MIN_HOP_S = 1e-3
@@ -60,6 +65,29 @@ class ModelParams:
             value = getattr(self, name)
             if not (ok and math.isfinite(value)):
                 raise ModelError(f"{name} {reason} (got {value!r})")
+        self._check_terms()
+
+    def _check_terms(self) -> None:
+        """Eq. 8's terms, as powers of ten (no overflow on the way): each within
+        +-:data:`MAX_TERM_EXPONENT`, else one ModelError naming the parameters."""
+        log_omega = math.log10(2.0 * math.pi) - math.log10(self.racket_period)
+        log_acceleration = 2.0 * log_omega + math.log10(self.racket_amplitude)
+        terms = (
+            ("omega_r = 2 pi / racket_period", " rad/s", log_omega),
+            ("omega_r^2 a_r", " m/s^2", log_acceleration),
+            ("v~ = pi g / omega_r (eq. 7)", " m/s",
+             math.log10(math.pi) + math.log10(self.g) - log_omega),
+            ("a_r omega_r^2 / g", "", log_acceleration - math.log10(self.g)),
+        )
+        for term, unit, exponent in terms:
+            if abs(exponent) > MAX_TERM_EXPONENT:
+                raise ModelError(
+                    f"model parameters out of range: g = {self.g:.3g} m/s^2, racket_amplitude = "
+                    f"{self.racket_amplitude:.3g} m, racket_period = {self.racket_period:.3g} s "
+                    f"make {term} about 1e{exponent:+.0f}{unit}, beyond the 1e+-"
+                    f"{MAX_TERM_EXPONENT} within which eq. 8 is evaluated without overflow; "
+                    "give model.g, model.racket_amplitude and model.racket_period in SI units "
+                    "(m/s^2, m, s)")
 
     # -- racket motion (eq. 4) ---------------------------------------------------------
     @property

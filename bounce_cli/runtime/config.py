@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import copy
 import difflib
+import os
+import stat
 import typing
 from importlib import resources
 from pathlib import Path
@@ -209,15 +211,55 @@ UniqueKeyLoader.add_constructor(
 )
 
 
-def read_yaml(path: Path) -> dict[str, Any]:
-    """Parse a YAML config file (safe loader, duplicate keys refused); errors name the file
-    and line."""
+#: the largest config file read, bytes (a config is a few kB; a larger one is a mistake, and
+#: its YAML would take many times its size in memory)
+MAX_CONFIG_BYTES = 10_000_000
+
+
+def read_config_text(path: Path) -> str:
+    """A config file's text: a regular file of at most :data:`MAX_CONFIG_BYTES`, UTF-8;
+    anything else (missing, a device such as ``/dev/zero``, a folder, larger, not UTF-8) is
+    a one-line ConfigError, raised before the file is read whole.
+
+    Parameters
+    ----------
+    path : Path
+        The config file.
+
+    Returns
+    -------
+    str
+        Its text.
+    """
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        # stat before open: opening a FIFO without a writer would wait for one
+        info = os.stat(path)
+        if not stat.S_ISREG(info.st_mode):
+            raise ConfigError(f"{path}: not a regular file (a device, a pipe or a folder): "
+                              "give a YAML config file")
+        if info.st_size > MAX_CONFIG_BYTES:
+            raise ConfigError(f"{path}: {info.st_size:,} bytes, larger than a config may be "
+                              f"({MAX_CONFIG_BYTES // 1_000_000} MB): give a YAML config file")
+        with open(path, "rb") as handle:
+            raw = handle.read(MAX_CONFIG_BYTES + 1)
     except FileNotFoundError:
         raise ConfigError(f"{path}: config file not found") from None
     except OSError as exc:
         raise ConfigError(f"{path}: cannot read config: {exc.strerror}") from None
+    if len(raw) > MAX_CONFIG_BYTES:  # it grew after the check
+        raise ConfigError(f"{path}: larger than a config may be "
+                          f"({MAX_CONFIG_BYTES // 1_000_000} MB): give a YAML config file")
+    try:
+        return raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        raise ConfigError(f"{path}: not UTF-8 text (byte {raw[exc.start]:#04x} at offset "
+                          f"{exc.start}): save it as UTF-8") from None
+
+
+def read_yaml(path: Path) -> dict[str, Any]:
+    """Parse a YAML config file (safe loader, duplicate keys refused); errors name the file
+    and line (reading: :func:`read_config_text`)."""
+    text = read_config_text(Path(path))
     try:
         data = yaml.load(text, Loader=UniqueKeyLoader)
     except DuplicateKeyError as exc:

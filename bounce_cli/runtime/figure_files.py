@@ -49,7 +49,27 @@ def figure_metadata(fig: Figure, kind: str, source: str) -> dict[str, Any]:
         meta = {"Title": title, "Subject": caption, "Creator": source, "CreationDate": None}
     else:
         meta = {"Title": title, "Description": caption, "Creator": source, "Date": None}
-    return {k: v for k, v in meta.items() if v != ""}
+    return {k: encodable(v) for k, v in meta.items() if v != ""}
+
+
+def encodable(value: Any) -> Any:
+    """A metadata text that UTF-8 can encode: a path the command line could not decode (its
+    bytes kept as surrogates, e.g. under ``LC_ALL=C`` without UTF-8 mode, or a file name in
+    another encoding) is decoded as UTF-8 again, a byte that is not UTF-8 shown as U+FFFD;
+    other values unchanged.
+
+    Parameters
+    ----------
+    value : str or None
+        A title, caption or source.
+
+    Returns
+    -------
+    str or None
+    """
+    if not isinstance(value, str):
+        return value
+    return value.encode("utf-8", "surrogateescape").decode("utf-8", "replace")
 
 
 def save_figure(fig: Figure, path: Path, kind: str, *, dpi: float, source: str,

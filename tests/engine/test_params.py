@@ -84,3 +84,29 @@ def test_wrapping_helpers():
     assert phase_difference(0.7 + 20 * math.pi, 0.7) == pytest.approx(0.0, abs=1e-12)
     # across the 0/2pi seam the difference is small, not ~2 pi
     assert phase_difference(0.01, 2 * math.pi - 0.01) == pytest.approx(0.02, abs=1e-12)
+
+
+@pytest.mark.parametrize("kwargs, names", [
+    (dict(g=1e308, racket_period=1e-300), ("racket_period = 1e-300 s", "g = 1e+308")),
+    (dict(racket_period=1e300), ("racket_period = 1e+300",)),
+    (dict(racket_amplitude=1e308), ("racket_amplitude = 1e+308",)),
+    (dict(g=5e-324), ("g = 4.94e-324",)),
+])
+def test_parameters_whose_eq8_terms_overflow_are_refused_naming_them(kwargs, names):
+    """Eq. 8's terms (omega_r, omega_r^2 a_r, v~, the acceleration ratio) beyond 1e+-100:
+    one ModelError naming the parameters, not an OverflowError or a NaN radius later."""
+    base = dict(alpha=0.5, g=9.81, racket_amplitude=0.3, racket_period=0.92)
+    base.update(kwargs)
+    with pytest.raises(ModelError) as info:
+        ModelParams(**base)
+    message = str(info.value)
+    assert "\n" not in message and "SI units" in message
+    for name in names:
+        assert name in message, message
+
+
+def test_far_but_representable_parameters_are_still_accepted():
+    """The map is scale-free in a_r omega_r^2 / g: a lab on the Moon or a racket of 1 um are
+    values, not errors."""
+    ModelParams(0.5, 1.62, 0.05, 0.92).fixed_point()
+    ModelParams(0.5, 9.81e-6, 1e-6, 0.92).fixed_point()

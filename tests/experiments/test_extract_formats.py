@@ -173,6 +173,22 @@ def test_one_racket_marker_alone_is_off_by_its_offset(session, tmp_path):
     ("NO_OF_FRAMES\t2\nFREQUENCY\t200\nFrame\tTime\n", ("no MARKER_NAMES",)),
     ("Format Version,1.23,Export Frame Rate,200\n,Name,a,a,a\n,,Position,Position,Position\n"
      "Frame,Time (Seconds),X,Y,Z\n" + "0,0,1,2,3\n" * 60, ("no 'Length Units'",)),
+    # issue 36: each of these was a traceback (ValueError, pandas' ParserError)
+    ("Format Version,1.23,Export Frame Rate,fast,Length Units,Millimeters\n,Name,a,a,a\n"
+     ",,Position,Position,Position\nFrame,Sample,X,Y,Z\n" + "0,0,1,2,3\n" * 60,
+     ("Export Frame Rate", "'fast'", "not a number")),
+    ("NO_OF_FRAMES\t60\nFREQUENCY\t200\nMARKER_NAMES\t\t\n" + "1\t2\t3\n" * 60,
+     ("MARKER_NAMES", "names no marker")),
+    ("Trajectories\n200\n,,S:a,,\nFrame,Sub Frame,X,Y,Z\n,,mm,mm,mm\n" + "1,0,1,2,3\n" * 30
+     + "31,0,1,2,3,4,5\n" + "1,0,1,2,3\n" * 30, ("line 36", "7 cells", "5 columns")),
+    ("NO_OF_FRAMES\t60\nFREQUENCY\t200\nMARKER_NAMES\ta\nFrame\tTime\ta X\ta Y\ta Z\n"
+     + "1\t0\t1\t2\t3\n" * 10 + "1\t0\t1\t2\t3\t4\n" + "1\t0\t1\t2\t3\n" * 50,
+     ("line 15", "6 cells", "5 columns")),
+    ("Format Version,1.23,Export Frame Rate,200,Length Units,Millimeters\n,Name,a,a,a\n"
+     ",,Position,Position,Position\nFrame,Time (Seconds),X,Y,Z\n" + "0,0,1,2,3\n" * 20
+     + "0,0,1,2,3,,9\n" + "0,0,1,2,3\n" * 40, ("line 25", "7 cells", "5 columns")),
+    ("Trajectories\n0\n,,S:a,,\nFrame,Sub Frame,X,Y,Z\n,,mm,mm,mm\n" + "1,0,1,2,3\n" * 60,
+     ("frame rate", "0", "not a rate")),
 ])
 def test_bad_exports_are_one_line_errors(tmp_path, content, needles):
     path = tmp_path / "take.csv"
@@ -197,3 +213,30 @@ def test_a_binary_file_given_as_csv_is_one_line(tmp_path):
     result = runner.invoke(app, ["extract", "--data", str(latin), "--out", str(tmp_path / "p")])
     assert result.exit_code == 2 and "codec" not in result.stderr
     assert "not UTF-8 text" in result.stderr and len(result.stderr.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize("name, head", [
+    ("big.csv", "trial,t_s,racket_x_m,ball_x_m\n" + "1,0.0,0.0,0.5\n" * 6000),
+    ("big.c3d", "\x02\x50" + "\x00" * 510),
+    ("vicon.csv", "Trajectories\n200\n,,S:a,,\nFrame,Sub Frame,X,Y,Z\n,,mm,mm,mm\n"
+     + "1,0,1,2,3\n" * 8000),
+])
+def test_a_recording_larger_than_the_limit_is_refused_before_it_is_read(tmp_path, cli,
+                                                                        user_error, name, head):
+    """A 3 GiB recording (sparse: no disk) is one line with its size, exit 2, nothing written:
+    before, it was read whole (MemoryError, or minutes of parsing)."""
+    path = tmp_path / name
+    with open(path, "w") as handle:
+        handle.write(head)
+        handle.truncate(3 * 2**30)
+    out = tmp_path / "out"
+    user_error(cli("extract", "--data", path, "--out", out), str(path), "3,221,225,472 bytes",
+               "2 GB")
+    assert not out.exists()
+
+
+def test_a_device_as_recording_is_one_line(tmp_path, cli, user_error):
+    out = tmp_path / "out"
+    user_error(cli("extract", "--data", "/dev/zero", "--out", out), "/dev/zero",
+               "not a regular file")
+    assert not out.exists()

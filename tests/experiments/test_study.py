@@ -539,3 +539,44 @@ def test_estimates_without_an_interval_are_left_out_of_the_paired_difference():
     assert ols["units"] == 2 and ols["units_without_interval"] == 1
     assert ols["difference_mean"] == pytest.approx(-0.09)
     assert table.set_index("estimate").loc["lag2", "verdict"] == "too few units with an interval"
+
+
+def test_each_recording_gets_its_own_folder_inside_the_unit():
+    """A stem that is '..' (a file named ``...csv``) or '.' would put a recording's outputs
+    outside ``<unit>/extract/`` (onto the unit's own impacts.csv); two recordings ``A/t.csv``,
+    ``B/t.csv`` would share one folder and one trial label."""
+    from bounce_cli.data.study_manifest import ManifestRow, Unit
+
+    rows = [ManifestRow(line, Path(f"/x/{name}"), None, {"subject": "s1"})
+            for line, name in ((2, "A/t.csv"), (3, "B/t.csv"), (4, "...csv"), (5, "..csv"),
+                               (6, "u.c3d"))]
+    names = study.recording_names(Unit(("s1",), ("subject",), rows))
+    assert names == ["t-line2", "t-line3", "file-line4", "file-line5", "u"]
+    assert [study.row_label(r, n) for r, n in zip(rows, names)][:2] == ["t-line2", "t-line3"]
+
+
+@pytest.mark.slow
+def test_recordings_named_dot_dot_or_alike_keep_their_own_outputs(tmp_path, cli_module):
+    """End to end: ``...csv`` was a traceback after the whole extraction ("not a path inside
+    the run directory"), and ``A/t.csv`` with ``B/t.csv`` left one's files and merged their
+    trials."""
+    sim = tmp_path / "sim"
+    assert cli_module("simulate-study", "--quiet", "--out", sim, "--set", "subjects.count=1",
+                      "--set", "conditions=[{name: a}]", "--set", "trials=3",
+                      "--set", "duration_s=10").exit_code == 0
+    for folder, name, trial in (("A", "t.csv", 1), ("B", "t.csv", 2), (".", "...csv", 3)):
+        (sim / folder).mkdir(exist_ok=True)
+        shutil.copy(sim / "recordings" / f"s1_a_t{trial}.csv", sim / folder / name)
+    (sim / "m.csv").write_text("file,subject,condition\nA/t.csv,s1,a\nB/t.csv,s1,a\n"
+                               "...csv,s1,a\n")
+    out = tmp_path / "study"
+    result = cli_module("study", "--manifest", sim / "m.csv", "--out", out, "--set",
+                        "analyses=[regression]", "--set", "report.unit_figures=false", *FAST)
+    assert result.exit_code == 0, result.output
+    unit = out / "s1" / "a"
+    assert sorted(p.name for p in (unit / "extract").iterdir()) == [
+        "file-line4", "t-line2", "t-line3"]
+    pooled = pd.read_csv(unit / "impacts.csv")
+    assert pooled["trial"].nunique() == 3
+    per_file = sum(len(pd.read_csv(p)) for p in (unit / "extract").glob("*/impacts.csv"))
+    assert per_file == len(pooled)

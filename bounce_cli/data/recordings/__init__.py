@@ -31,6 +31,7 @@ from .c3d_files import read_c3d_markers
 from .markers import MarkerSet, marker_heights
 from .text_exports import (
     DEFAULT_VERTICAL,
+    check_recording_file,
     check_text,
     detect_format,
     read_motive_csv,
@@ -70,6 +71,7 @@ def read_table(path: Path, csv_format: Any = None) -> pd.DataFrame:
     separator = "," if csv_format is None else csv_format.separator
     decimal = "." if csv_format is None else csv_format.decimal
     skip = 0 if csv_format is None else csv_format.skip_rows
+    check_recording_file(path)
     try:
         with open(path, "rb") as handle:
             check_text(path, handle.read(65536))

@@ -12,21 +12,26 @@ field files carry and the package's own ``Reader`` refuses; each tolerance is on
 * header and parameters that disagree on the analog words per frame or the point count (Peak
   Performance, MotionMonitor): the count that fits the file's data section is used; on the
   scale or the rate: the parameter (``POINT:SCALE``, ``POINT:RATE``) is used.
+* ``POINT:UNITS`` cut short (``'mete'``) or spelt out (``'millimeters'``): the start of the
+  names of one length unit only is that unit (``length_unit``); one that begins the names of
+  several (``'mi'``: millimetres, micrometres) is refused like an unknown one.
 
 The data section is read in one piece (``read_points``): integer words times ``POINT:SCALE``,
 or floats (IEEE, DEC or big-endian); a negative residual word or a non-finite coordinate is a
 gap. Labels come from ``POINT:LABELS``, ``POINT:LABELS2``, ... in order. Time is
 ``(frame - 1) / POINT:RATE`` on the capture clock: the first frame is
 ``TRIAL:ACTUAL_START_FIELD`` (two 16-bit words) or the header's. Refused, each with its reason:
-a file that is empty or not C3D, a truncated data section, no points, no or a non-length
-``POINT:UNITS`` (unless ``c3d.units`` is set), a marker named twice, a marker that is a
-non-position channel (listed in ``POINT:ANGLES``, ``FORCES``, ``MOMENTS``, ``POWERS`` or another
-group named in ``POINT:TYPE_GROUPS``).
+a file that is empty or not C3D, a truncated data section, no points, a rate, scale or count
+parameter that is inf or NaN, no or a non-length ``POINT:UNITS`` (unless ``c3d.units`` is
+set), a marker named twice, a marker that is a non-position channel (listed in
+``POINT:ANGLES``, ``FORCES``, ``MOMENTS``, ``POWERS`` or another group named in
+``POINT:TYPE_GROUPS``).
 """
 
 from __future__ import annotations
 
 import io
+import math
 import struct
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,6 +43,18 @@ from ...runtime.config import ConfigError
 
 #: length units a C3D file's POINT:UNITS may give, in metres
 C3D_LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001}
+#: the names a POINT:UNITS string may be (the start of, when a writer cut it short: 'mete'),
+#: each with its unit: a unit of C3D_LENGTH_UNITS, or None for a length unit bounce does not
+#: read (there only so that a prefix of its name and of a known one, 'mi', is ambiguous)
+UNIT_SPELLINGS: dict[str, str | None] = {
+    **{f"{stem}{end}": unit for unit, stems in (("m", ("metre", "meter")),
+                                                ("cm", ("centimetre", "centimeter")),
+                                                ("mm", ("millimetre", "millimeter")))
+       for stem in stems for end in ("", "s")},
+    **{name: None for name in ("micrometre", "micrometres", "micrometer", "micrometers",
+                               "micron", "microns", "decimetre", "decimeter", "kilometre",
+                               "kilometer", "inch", "inches", "foot", "feet")},
+}
 #: POINT groups that hold channels other than positions (Vicon's model outputs); a file may
 #: name more in POINT:TYPE_GROUPS
 NON_POSITION_GROUPS = ("ANGLES", "FORCES", "MOMENTS", "POWERS", "SCALARS", "REACTIONS")
@@ -232,13 +249,22 @@ def _points(c3d, path: Path, raw: bytes, header, dtypes, parameters, processor: 
     def note(message: str) -> None:
         warn(f"{path}: {message}")
 
-    scale = _value(parameters, "POINT:SCALE", float(header.scale_factor), note)
+    def finite(key: str, value: float) -> float:
+        """``value`` of parameter ``key``; inf or NaN (a damaged file) is one line."""
+        if not math.isfinite(value):
+            raise ConfigError(f"{path}: {key} is {value:g}, not a finite number: the file is "
+                              "damaged (export it again from the capture software)")
+        return value
+
+    scale = finite("POINT:SCALE", _value(parameters, "POINT:SCALE",
+                                         float(header.scale_factor), note))
     if not np.isclose(scale, header.scale_factor, rtol=1e-6):
         warn(f"{path}: POINT:SCALE {scale:g} differs from the header's {header.scale_factor:g}; "
              "POINT:SCALE used")
-    rate = _value(parameters, "POINT:RATE", float(header.frame_rate), note)
+    rate = finite("POINT:RATE", _value(parameters, "POINT:RATE", float(header.frame_rate),
+                                       note))
     if not rate > 0.0:
-        rate = float(header.frame_rate)
+        rate = finite("POINT:RATE", float(header.frame_rate))
     if not np.isclose(rate, header.frame_rate, rtol=1e-6):
         warn(f"{path}: POINT:RATE {rate:g} Hz differs from the header's "
              f"{header.frame_rate:g} Hz; POINT:RATE used")
@@ -254,20 +280,22 @@ def _points(c3d, path: Path, raw: bytes, header, dtypes, parameters, processor: 
         last = max(last, int(words[0]) + 65536 * int(words[1]))
     if last >= 65535:
         # the header's 16-bit last frame overflowed (a long capture): POINT:FRAMES counts them
-        last = max(last, first - 1 + int(_value(parameters, "POINT:FRAMES", 0)))
+        last = max(last, first - 1 + int(finite("POINT:FRAMES",
+                                                _value(parameters, "POINT:FRAMES", 0))))
     frames = max(last - first + 1, 0)
     is_float = scale < 0.0
     word = 4 if is_float else 2
-    data_start = (int(_value(parameters, "POINT:DATA_START", header.data_block, note)) - 1) \
-        * 512
+    data_start = (int(finite("POINT:DATA_START", _value(
+        parameters, "POINT:DATA_START", header.data_block, note))) - 1) * 512
     if not 0 < data_start < len(raw):
         data_start = (header.data_block - 1) * 512
     available = len(raw) - data_start
-    used = int(_value(parameters, "POINT:USED", header.point_count, note))
-    analog_rate = _value(parameters, "ANALOG:RATE", header.analog_per_frame * rate, note)
+    used = int(finite("POINT:USED", _value(parameters, "POINT:USED", header.point_count, note)))
+    analog_rate = finite("ANALOG:RATE", _value(parameters, "ANALOG:RATE",
+                                               header.analog_per_frame * rate, note))
     per_frame = rate and analog_rate / rate
-    channels = _value(parameters, "ANALOG:USED",
-                      header.analog_count // max(header.analog_per_frame, 1), note)
+    channels = finite("ANALOG:USED", _value(
+        parameters, "ANALOG:USED", header.analog_count // max(header.analog_per_frame, 1), note))
     analog_words = int(channels * round(per_frame))
     counts = dict.fromkeys([(used, analog_words), (used, int(header.analog_count)),
                             (int(header.point_count), analog_words),
@@ -349,6 +377,33 @@ def point_labels(parameters: dict[str, Any], points: int) -> list[str]:
     return (labels + [""] * points)[:points]
 
 
+def length_unit(stored: str) -> str | None:
+    """The unit of :data:`C3D_LENGTH_UNITS` a POINT:UNITS string names: the unit itself
+    (``'mm'``), or a name of one (``'millimeters'``) or the start of names of one unit only
+    (``'mete'``, ``'mil'``: a writer that cut the string short); None for a string that
+    begins names of several units (``'mi'``: millimetres or micrometres) or of none.
+
+    Parameters
+    ----------
+    stored : str
+        POINT:UNITS as stored, stripped of its padding, in lower case.
+
+    Returns
+    -------
+    str or None
+        ``'m'``, ``'cm'``, ``'mm'``, or None.
+
+    Examples
+    --------
+    >>> length_unit("mete"), length_unit("mil"), length_unit("mi")
+    ('m', 'mm', None)
+    """
+    if stored in C3D_LENGTH_UNITS:
+        return stored
+    units = {unit for name, unit in UNIT_SPELLINGS.items() if stored and name.startswith(stored)}
+    return units.pop() if len(units) == 1 else None
+
+
 def read_c3d_markers(path: Path, units: str | None, warn: Callable[[str], None]):
     """A C3D file's markers as a ``MarkerSet`` in metres (the unit from POINT:UNITS, or
     ``units`` when set), with the points of non-position groups marked.
@@ -374,11 +429,14 @@ def read_c3d_markers(path: Path, units: str | None, warn: Callable[[str], None])
         if not file_units:
             raise ConfigError(f"{path}: the file has no POINT:UNITS, so the positions' length "
                               "unit is unknown: set markers.units (m | cm | mm)")
-        if file_units not in C3D_LENGTH_UNITS:
+        units = length_unit(file_units)
+        if units is None:
             raise ConfigError(f"{path}: POINT:UNITS is {file_units!r}, not a length unit "
                               f"({', '.join(C3D_LENGTH_UNITS)}): if the positions are in one, "
                               "set markers.units")
-        units = file_units
+        if units != file_units:
+            warn(f"{path}: POINT:UNITS is {file_units!r}, read as {units} (the start of one "
+                 "length unit's name); set markers.units if it is another")
     elif file_units and file_units != units:
         warn(f"{path}: POINT:UNITS is {file_units!r}; markers.units = {units} used")
     groups = dict.fromkeys(NON_POSITION_GROUPS + tuple(

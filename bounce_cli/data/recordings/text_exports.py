@@ -23,6 +23,9 @@ from __future__ import annotations
 
 import csv
 import io
+import math
+import os
+import stat
 from pathlib import Path
 from typing import Callable
 
@@ -39,8 +42,38 @@ UNIT_NAMES = {"m": 1.0, "cm": 0.01, "mm": 0.001, "meters": 1.0, "centimeters": 0
 DEFAULT_VERTICAL = {"c3d": "z", "vicon": "z", "qtm": "z", "motive": "y"}
 
 
+#: the largest recording read, bytes: each is read whole into memory (and a table parsed takes
+#: several times its size); an hour at 1 kHz of 100 markers is about 1 GB of text
+MAX_RECORDING_BYTES = 2_000_000_000
+
+
+def check_recording_file(path: Path) -> None:
+    """Refuse, before reading it, a recording that is not a regular file (a device such as
+    ``/dev/zero``, a folder) or is larger than :data:`MAX_RECORDING_BYTES`, in one line with
+    its size; a missing file is left to the reader (its own message).
+
+    Parameters
+    ----------
+    path : Path
+        The recording (or events or impacts table).
+    """
+    try:
+        info = os.stat(path)
+    except OSError:
+        return
+    if not stat.S_ISREG(info.st_mode):
+        raise ConfigError(f"{path}: not a regular file (a device, a pipe or a folder): give a "
+                          "recording file")
+    if info.st_size > MAX_RECORDING_BYTES:
+        raise ConfigError(f"{path}: {info.st_size:,} bytes ({info.st_size / 1e9:.1f} GB), "
+                          f"larger than a recording may be ({MAX_RECORDING_BYTES / 1e9:g} GB): "
+                          "split it into files of a few trials each")
+
+
 def read_bytes(path: Path) -> bytes:
-    """A file's bytes; a missing or unreadable file is a one-line ConfigError."""
+    """A file's bytes; a missing or unreadable file, or one ``check_recording_file`` refuses,
+    is a one-line ConfigError."""
+    check_recording_file(path)
     try:
         return path.read_bytes()
     except FileNotFoundError:
@@ -76,6 +109,7 @@ def detect_format(path: Path) -> str:
     (``Format Version``), else ``csv``."""
     if path.suffix.lower() == ".c3d":
         return "c3d"
+    check_recording_file(path)
     try:
         with open(path, "rb") as handle:
             head = handle.read(4096)
@@ -94,11 +128,21 @@ def detect_format(path: Path) -> str:
 
 
 def _numbers(path: Path, lines: list[str], first_line: int, width: int, sep: str) -> np.ndarray:
-    """Data lines as a float array (lines, width); empty cells NaN, other text an error
-    naming the line."""
-    frame = pd.read_csv(io.StringIO("\n".join(lines)), sep=sep, header=None,
-                        names=range(width), dtype=str, keep_default_na=False,
-                        skip_blank_lines=False, engine="python")
+    """Data lines as a float array (lines, width); empty cells NaN, other text or a line of
+    more cells than ``width`` (a ragged row) an error naming the line."""
+    try:
+        frame = pd.read_csv(io.StringIO("\n".join(lines)), sep=sep, header=None,
+                            names=range(width), dtype=str, keep_default_na=False,
+                            skip_blank_lines=False, engine="python")
+    except pd.errors.ParserError as exc:
+        ragged = next(((k, len(cells)) for k, cells in enumerate(csv.reader(
+            lines, delimiter=sep)) if len(cells) > width), None)
+        if ragged is None:  # another problem (an open quote): pandas' words for it
+            raise ConfigError(f"{path}: cannot read the data lines: "
+                              f"{str(exc).strip().splitlines()[0]}") from None
+        raise ConfigError(f"{path}: line {first_line + ragged[0]}: {ragged[1]} cells, more "
+                          f"than the {width} columns of the header (a ragged row: export the "
+                          "file again, or mend that line)") from None
     cells = frame.apply(lambda c: c.str.strip())
     values = cells.apply(pd.to_numeric, errors="coerce")
     bad = values.isna() & (cells != "") & cells.notna()
@@ -107,6 +151,20 @@ def _numbers(path: Path, lines: list[str], first_line: int, width: int, sep: str
         raise ConfigError(f"{path}: line {first_line + row}, column {col + 1}: not a number "
                           f"({cells.iat[row, col]!r})")
     return values.to_numpy(float)
+
+
+def _rate(path: Path, text: str, where: str) -> float:
+    """A frame rate as the file writes it (Hz): a finite number > 0, else one line naming
+    ``where`` it is."""
+    try:
+        rate = float(text)
+    except ValueError:
+        raise ConfigError(f"{path}: {where} is {text.strip()!r}, not a number (the frame "
+                          "rate in Hz)") from None
+    if not (math.isfinite(rate) and rate > 0.0):
+        raise ConfigError(f"{path}: {where} is {text.strip()!r}, not a rate (a frame rate in "
+                          "Hz is a number > 0)")
+    return rate
 
 
 def _unit(path: Path, name: str, where: str) -> float:
@@ -128,11 +186,7 @@ def read_vicon_csv(path: Path, units: str | None, warn: Callable[[str], None]) -
     s = starts[0]
     if len(lines) < s + 6:
         raise ConfigError(f"{path}: the 'Trajectories' section ends before its data")
-    try:
-        rate = float(lines[s + 1].split(",")[0])
-    except ValueError:
-        raise ConfigError(f"{path}: line {s + 2}: the frame rate is "
-                          f"{lines[s + 1].split(',')[0]!r}, not a number") from None
+    rate = _rate(path, lines[s + 1].split(",")[0], f"line {s + 2}: the frame rate")
     names, header, unit_row = (next(csv.reader([lines[s + k]])) for k in (2, 3, 4))
     if header[:2] != ["Frame", "Sub Frame"]:
         raise ConfigError(f"{path}: line {s + 4}: expected 'Frame,Sub Frame,X,Y,Z,...', found "
@@ -150,6 +204,8 @@ def read_vicon_csv(path: Path, units: str | None, warn: Callable[[str], None]) -
         columns.append(j)
         scales.append(UNIT_NAMES[units] if units is not None else _unit(
             path, unit_row[j] if j < len(unit_row) else "", f"the unit of {name.strip()!r}"))
+    if not labels:
+        raise ConfigError(f"{path}: line {s + 3}: no marker names over the X,Y,Z columns")
     xyz = np.stack([data[:, j:j + 3] * scale for j, scale in zip(columns, scales)], axis=1)
     t = (data[:, 0] - 1.0) / rate
     return MarkerSet(labels, xyz, t)
@@ -171,12 +227,11 @@ def read_qtm_tsv(path: Path, units: str | None, warn: Callable[[str], None]) -> 
     for key in ("FREQUENCY", "MARKER_NAMES"):
         if not header.get(key):
             raise ConfigError(f"{path}: no {key} line in the QTM header")
-    try:
-        rate = float(header["FREQUENCY"][0])
-    except ValueError:
-        raise ConfigError(f"{path}: FREQUENCY is {header['FREQUENCY'][0]!r}, not a "
-                          "number") from None
+    rate = _rate(path, header["FREQUENCY"][0], "FREQUENCY")
     labels = [name for name in header["MARKER_NAMES"] if name]
+    if not labels:
+        raise ConfigError(f"{path}: MARKER_NAMES names no marker (export the 3D data with "
+                          "its labelled trajectories)")
     scale = UNIT_NAMES[units] if units is not None else 0.001
     columns = None
     if i < len(lines) and lines[i].split("\t")[0].strip() == "Frame":
@@ -252,6 +307,9 @@ def read_motive_csv(path: Path, units: str | None, warn: Callable[[str], None]) 
     if time_column is not None:
         t = data[:, time_column]
     else:
-        rate = float(meta.get("Export Frame Rate", meta.get("Capture Frame Rate", "nan")))
-        t = data[:, 0] / rate
+        key = next((k for k in ("Export Frame Rate", "Capture Frame Rate") if k in meta), None)
+        if key is None:
+            raise ConfigError(f"{path}: no 'Time (Seconds)' column and no 'Export Frame Rate' "
+                              "in the metadata line: export the time column")
+        t = data[:, 0] / _rate(path, meta[key], key)
     return MarkerSet(labels, xyz, t)
