@@ -28,7 +28,7 @@ import numpy as np
 from scipy.linalg import solve_discrete_lyapunov
 
 from ..errors import NotStableError
-from ..runtime.memory import check_array_memory
+from ..memory import check_array_memory
 from .classify import ClassifySettings
 from ..model.linear import is_stable, jacobian
 from ..model.impact import next_impact_phase
@@ -100,7 +100,7 @@ def stationary_covariance(jac: np.ndarray, noise_cov: np.ndarray) -> np.ndarray:
 
 def lagged_covariances(jac: np.ndarray, cov0: np.ndarray, max_lag: int) -> np.ndarray:
     """R(l) = J^l R(0) for l = 0..max_lag, shape (max_lag + 1, 2, 2); a max_lag whose
-    array would not fit in memory is a one-line ConfigError (``runtime.memory``)."""
+    array would not fit in memory is a one-line ConfigError (``bounce_cli.memory``)."""
     check_array_memory((max_lag + 1) * cov0.size, f"max_lag = {max_lag:,} lags",
                        "reduce max_lag")
     out = np.empty((max_lag + 1,) + cov0.shape)

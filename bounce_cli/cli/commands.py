@@ -62,7 +62,7 @@ from ..model.linear import stability
 from ..errors import BounceError, ConfigError, NoFixedPointError
 from ..analysis.classify import ClassifySettings
 from ..runtime.interrupts import Interrupted, report as report_interrupt
-from .console import stdout_failed
+from .stdout import stdout_failed
 from ..experiments.registry import EXPERIMENTS, Entry
 
 

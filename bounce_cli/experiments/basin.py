@@ -19,7 +19,7 @@ from pydantic import Field, model_validator
 
 from ..paper import values as paper
 from ..runtime import parallel
-from ..runtime.memory import check_array_memory
+from ..memory import check_array_memory
 from ..runtime.config import (
     ClassifyBlock,
     ConfigError,

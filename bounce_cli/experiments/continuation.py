@@ -23,7 +23,7 @@ import pandas as pd
 from pydantic import Field, model_validator
 
 from ..runtime.config import ConfigError, ExperimentConfig, StrictModel
-from ..runtime.memory import check_array_memory
+from ..memory import check_array_memory
 from ..model.params import MIN_HOP_S, ModelError
 from ..analysis.bifurcation import (
     SWEEPABLE,

@@ -21,7 +21,7 @@ from pydantic import Field, model_validator
 
 from ..data.data_parameters import model_for_data
 from ..data.impacts import Impacts, read_impacts as shared_read_impacts
-from ..runtime.memory import check_array_memory
+from ..memory import check_array_memory
 from ..runtime.config import (
     DataFiles,
     data_text,

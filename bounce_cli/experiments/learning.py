@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 from pydantic import Field, field_validator
 
-from ..runtime.memory import check_array_memory
+from ..memory import check_array_memory
 from ..runtime.config import (
     ConfigError,
     DataFiles,

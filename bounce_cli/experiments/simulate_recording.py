@@ -21,7 +21,7 @@ import pandas as pd
 from pydantic import Field, model_validator
 
 from ..runtime.config import ControllableModelBlock, ExperimentConfig, StrictModel
-from ..runtime.memory import check_array_memory
+from ..memory import check_array_memory
 from ..data.simulated_lab import LAB_MIN_HOP_S, SessionSettings, simulate_session, truth_rows
 from ..data.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
 from .plotting import caption_figures, centred_deg, draw_fig2, publication_style

@@ -16,7 +16,7 @@ from pydantic import Field, model_validator
 
 from ..paper import values as paper
 from ..runtime.config import ExperimentConfig, StrictModel
-from ..runtime.memory import check_array_memory
+from ..memory import check_array_memory
 from ..model.linear import (
     complex_boundaries_g,
     eigenvalues,

@@ -2,12 +2,13 @@
 that a mistyped count (a grid of 1e9 points, a run of 1e9 bounces) is one line naming it and
 the memory it would need, not a ``MemoryError`` or a machine swapping.
 
-Standard library only (the engine's modules call it as well as the configs' validators).
+Standard library only, and a room of its own below the model (the engine's modules call it as
+well as the configs' validators).
 """
 
 from __future__ import annotations
 
-from ..errors import ConfigError
+from .errors import ConfigError
 
 #: the most memory one array sized by config values may take, bytes: far above any run of the
 #: paper (its largest array, a 1000 x 1000 basin's column, is 8 MB), below the machines' memory
