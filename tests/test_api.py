@@ -42,6 +42,7 @@ def test_importing_the_package_imports_no_numerics():
         bounce_cli.no_such_name  # noqa: B018
 
 
+@pytest.mark.slow
 def test_run_returns_what_the_cli_writes_and_out_writes_the_same_files(cli, tmp_path):
     """The frames in memory are the CSVs the command writes; with out= the API writes the
     command's files (manifest included), through the same run directory."""
@@ -102,6 +103,7 @@ def test_user_errors_raise_the_cli_message_instead_of_exiting(cli, user_error):
         bounce_cli.run("basin", set={**SMALL_BASIN, "model.racket_amplitude": 0.01})
 
 
+@pytest.mark.slow
 def test_an_unstable_fixed_point_is_a_python_warning_with_the_cli_text(cli, tmp_path):
     unstable = {**SMALL_BASIN, "model.racket_period": 0.5}
     with pytest.warns(UserWarning, match="linearly unstable at these parameters") as caught:

@@ -307,6 +307,7 @@ def test_the_next_run_removes_the_staging_files_a_killed_run_left(tmp_path):
     assert (out / ".folder.abcdefgh.tmp").is_dir()
 
 
+@pytest.mark.slow
 def test_replacing_a_run_never_deletes_the_file_it_reads(tmp_path, cli):
     """`--force` into the folder of the run that wrote the --data file: the old run's files
     are replaced, but not the input the new run reads (the new-user review lost impacts.csv)."""
@@ -451,6 +452,7 @@ def test_text_cells_a_spreadsheet_would_run_are_written_as_text(tmp_path, extra)
     assert frame["label"].iloc[0] == FORMULAS[0]  # the caller's frame is left as it was
 
 
+@pytest.mark.slow
 def test_a_trial_label_that_is_a_formula_is_text_in_the_extracted_tables(tmp_path, cli):
     sim = tmp_path / "sim"
     assert cli("simulate-recording", "--quiet", "--out", sim,
@@ -465,6 +467,7 @@ def test_a_trial_label_that_is_a_formula_is_text_in_the_extracted_tables(tmp_pat
     assert not any(str(c).startswith(("=", "+", "@")) for c in impacts.to_numpy().ravel())
 
 
+@pytest.mark.slow
 def test_every_committed_csv_is_rewritten_byte_for_byte(tmp_path):
     """The committed results stay byte-identical under the fast writer: each CSV read back and
     written again gives its own bytes."""

@@ -60,6 +60,7 @@ def small_bifurcation():
     return run_frames("bifurcation", **SMALL_BIFURCATION)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("ulps", [-2, 1, 3])
 def test_a_bifurcation_moved_by_ulps_is_reproduced_value_by_value_it_is_not(
         small_bifurcation, ulps):
@@ -76,6 +77,7 @@ def test_a_bifurcation_moved_by_ulps_is_reproduced_value_by_value_it_is_not(
         t: [] for t in small_bifurcation}
 
 
+@pytest.mark.slow
 def test_a_racket_period_sweep_moved_by_ulps_is_reproduced():
     """Another swept parameter (the racket period: its column first, gamma second), with an
     intermittent chaotic orbit whose exponent is 14 standard errors off at 3 ulps and an
@@ -93,6 +95,7 @@ def test_a_racket_period_sweep_moved_by_ulps_is_reproduced():
 
 @pytest.mark.parametrize("change", [{"model.alpha": 0.5 * (1 + 1e-6)},
                                     {"model.g": 9.81 * (1 + 1e-6)}])
+@pytest.mark.slow
 def test_a_real_change_of_the_model_is_a_drift(small_bifurcation, change):
     moved = run_frames("bifurcation", **SMALL_BIFURCATION, **change)
     drift = drift_by_table("bifurcation", moved, small_bifurcation)
@@ -104,6 +107,7 @@ def chaotic_rows(frames):
     return attractors.attractor == "chaotic"
 
 
+@pytest.mark.slow
 def test_chaos_lost_is_a_drift_though_each_orbit_may_stick_late():
     """Every chaotic orbit of the committed diagram stuck at impact 999 instead: each one is
     a late outcome, but all going one way is not a last bit's reshuffling."""
@@ -125,6 +129,7 @@ def test_chaos_lost_is_a_drift_though_each_orbit_may_stick_late():
     assert drift_by_table("bifurcation", fresh, frames)["attractors.csv"] == []
 
 
+@pytest.mark.slow
 def test_chaotic_exponents_ten_percent_off_are_a_drift():
     frames = committed("bifurcation")
     fresh = dict(frames)
@@ -143,6 +148,7 @@ def test_chaotic_exponents_ten_percent_off_are_a_drift():
     assert drift_by_table("bifurcation", fresh, frames)["attractors.csv"] == []
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("change", ["velocities 5 % higher", "phases 10 deg later"])
 def test_an_attractor_moved_is_a_drift(change):
     frames = committed("bifurcation")
@@ -181,6 +187,7 @@ def test_the_tests_of_chance():
     assert aggregate_drift("t", "w", [14.0, 0.3, -0.5, 0.2, -1.1]) == []  # one outlier
 
 
+@pytest.mark.slow
 def test_a_continuation_diagram_moved_by_ulps_is_reproduced():
     small = {"starts": [{"at": 1.7, "cycles": 1}], "steps.max_period": 4, "range.low": 1.65,
              "range.high": 1.8, "diagram.num": 12, "diagram.transient_impacts": 300}
@@ -359,6 +366,7 @@ def test_basin_fractions_moved_one_way_at_every_point_are_a_drift():
     assert not any("1 + 4 sqrt" in line for line in drift)  # no point beyond its allowance
 
 
+@pytest.mark.slow
 def test_a_sweep_with_the_uncertainty_exponent_moved_by_ulps_is_reproduced():
     small = {"sweep.x": {"parameter": "alpha", "start": 0.3, "stop": 0.4, "num": 2},
              "sweep.y": {"parameter": "ac_g", "start": -1.6, "stop": -1.5, "num": 2},
@@ -435,6 +443,7 @@ def test_reproduce_leaves_a_bifurcation_moved_by_ulps_as_committed(tmp_path):
                                   "continuation diagram with exact sticking",
                                   pytest.param("sweep with exact sticking",
                                                marks=pytest.mark.slow)])  # 3 s
+@pytest.mark.slow
 def test_other_settings_moved_by_ulps_are_reproduced(case):
     """Settings a review found refused before (each at the ulps it was refused at): chaotic
     transients that end on one cycle, another or the racket; recordings of one batch (no
@@ -485,6 +494,7 @@ def _nested(settings):
 @pytest.mark.parametrize("regression", [
     "exponents' standard errors x10", "impacts renumbered", "chaotic orbits cut to 16 impacts",
     "boundary entropy 0 where many points are late"])
+@pytest.mark.slow
 def test_regressions_in_what_the_statistical_rules_read_are_drifts(regression):
     name = "sweep" if "entropy" in regression else "bifurcation"
     frames = committed(name)

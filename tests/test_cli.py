@@ -155,6 +155,7 @@ def test_python_dash_m_entry_point():
     assert out.returncode == 0 and __version__ in out.stdout
 
 
+@pytest.mark.slow
 def test_unstable_fixed_point_warns_in_one_line(tmp_path, cli):
     # period 0.8 s: AC = -1.57 g, beyond the flip boundary -1.11 g (eq. 14)
     result = cli("basin", "--set", "model.racket_period=0.8", "--set", "grid.theta0_deg.num=6",
@@ -251,6 +252,7 @@ def test_a_rule_between_keys_broken_by_set_blames_set_not_the_file(cli, user_err
     assert "sweep.yaml" not in result.output and "top level" not in result.output
 
 
+@pytest.mark.slow
 def test_the_summary_is_not_wrapped_when_not_on_a_terminal(cli, tmp_path):
     """A log file (stderr redirected) keeps one line per result, however long."""
     out = tmp_path / ("a-long-folder-name-" * 4)
@@ -310,6 +312,7 @@ def test_extreme_parameters_are_one_line_naming_them(cli, user_error, command, s
 @pytest.mark.parametrize("args", [["fixed-point"], ["fixed-point", "--json"],
                                   ["orbit", "--theta0-deg", "30", "--v0", "3", "--csv"],
                                   ["basin", "--print-config"]])
+@pytest.mark.slow
 def test_stdout_to_a_full_device_is_one_line(args):
     """``bounce fixed-point > /dev/full``: one line and exit 2, not a traceback."""
     import subprocess

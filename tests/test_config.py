@@ -143,6 +143,7 @@ def test_a_config_larger_than_the_limit_is_refused_before_it_is_read(tmp_path, c
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_a_device_or_a_folder_as_config_is_one_line(tmp_path):
     """``--config /dev/zero`` must not read forever: refused as not a regular file (run in a
     child with bounded memory and time, so that a reader that reads it whole fails fast)."""

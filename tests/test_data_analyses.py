@@ -133,6 +133,7 @@ def acf_data(tmp_path_factory, cli):
     return path, out
 
 
+@pytest.mark.slow
 def test_acf_data_files_and_manifest(acf_data):
     path, out = acf_data
     names = sorted(p.name for p in out.iterdir())
@@ -200,6 +201,7 @@ def test_acf_data_figures_redraw_from_csvs(acf_data):
         assert any(ax.get_xlabel() for ax in fig.axes)
 
 
+@pytest.mark.slow
 def test_acf_data_without_a_fixed_point_is_one_line(acf_data, tmp_path, cli, user_error):
     path, _ = acf_data
     small = tmp_path / "small.csv"
@@ -256,6 +258,7 @@ def impulse_data(tmp_path_factory, cli):
     return path, out
 
 
+@pytest.mark.slow
 def test_aligned_data_match_the_model_response(impulse_data):
     _, out = impulse_data
     aligned = pd.read_csv(out / "aligned.csv")
@@ -279,6 +282,7 @@ def test_aligned_data_match_the_model_response(impulse_data):
     assert relax["criterion"].str.contains("SE").all()
 
 
+@pytest.mark.slow
 def test_close_perturbations_do_not_contaminate_each_other(tmp_path, cli):
     alpha = perturbation_schedule(4, 60, 5, 0.5, [(0.38, 0.40), (0.60, 0.62)], seed=41)
     sim = simulate_impacts(PAPER, 0.003, 0.003, 4, 60, seed=42, alpha=alpha)
@@ -291,6 +295,7 @@ def test_close_perturbations_do_not_contaminate_each_other(tmp_path, cli):
     assert (aligned.loc[aligned.k < 5, "n"] > 0).all()
 
 
+@pytest.mark.slow
 def test_impacts_to_relax_need_enough_windows_per_impact(impulse_data, tmp_path, cli):
     """One trial holds 2 and 3 perturbations of each sign: no verdict ("too few perturbations"), the
     CSV's relaxation_impacts empty for the data (the model's stays); with the whole file the
@@ -392,6 +397,7 @@ def test_acf_data_reports_the_data_means_beside_eqs_7_8(acf_data):
     assert stab.loc[("alpha", "data_eq8"), "estimate"] == pytest.approx(0.42, abs=0.01)
 
 
+@pytest.mark.slow
 def test_racket_period_modulation_is_recovered(impulse_data, tmp_path, cli):
     """Fig. 11: a subject who lengthens the racket period by 20 ms at the impact after an
     increase of alpha and shortens it by 20 ms after a decrease (amplitude untouched)."""
@@ -413,6 +419,7 @@ def test_racket_period_modulation_is_recovered(impulse_data, tmp_path, cli):
     assert np.allclose(a["racket_amplitude_m"].to_numpy(), 0.0, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_acf_data_says_when_the_sds_cannot_be_matched(acf_data, tmp_path, cli):
     """v's deviations shrunk tenfold: no positive noise at the model's J gives these SDs. The
     fallback is named in the summary and in stability_data.csv (a new-user review found it
@@ -445,6 +452,7 @@ def test_regression_refuses_equal_periods_without_a_numpy_warning(tmp_path, cli,
     assert "RuntimeWarning" not in result.output
 
 
+@pytest.mark.slow
 def test_acf_data_on_29_bounces_says_there_are_too_few_for_an_interval(tmp_path, cli):
     """The issue's case: 29 bounces gave 0.455 [-1.126, 2.036]. Now the OLS estimate comes
     without an interval and the summary says why; no interval in the CSV leaves [0, inf).
@@ -581,6 +589,7 @@ def test_a_steady_racket_raises_no_racket_warning(acf_data):
     assert len(varx) and varx.estimate.isna().all()
 
 
+@pytest.mark.slow
 def test_the_trust_study_runs_at_the_datas_measurement_noise(acf_data, tmp_path, cli):
     """With a setup.csv beside the impacts (the extraction's measured noise of v_k and
     theta_k) the trust study simulates that noise and says so; without one it uses the

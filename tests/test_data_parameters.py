@@ -45,6 +45,7 @@ def summary(result) -> str:
     return " ".join(result.stderr.split())
 
 
+@pytest.mark.slow
 def test_acf_data_runs_the_model_at_the_datas_alpha_and_g(tmp_path, cli):
     """The bundled acf config (alpha 0.42, g 5.8) is not the user's: with --data the model is
     the data's (events' alpha 0.55, setup.csv's g 9.5), printed and recorded in run.json."""
@@ -68,6 +69,7 @@ def test_acf_data_runs_the_model_at_the_datas_alpha_and_g(tmp_path, cli):
     assert manifest["model_at_data"]["g"]["value"] == 9.5
 
 
+@pytest.mark.slow
 def test_a_value_the_user_sets_wins_and_is_printed_as_set(tmp_path, cli):
     path = lab_table(tmp_path)
     out = tmp_path / "out"
@@ -88,6 +90,7 @@ def test_a_value_the_user_sets_wins_and_is_printed_as_set(tmp_path, cli):
     assert "alpha 0.55 (events, median of 480 impacts), g 9.60 m/s^2 (set)" in summary(result)
 
 
+@pytest.mark.slow
 def test_neither_in_the_data_nor_set_is_one_line_naming_both_ways(tmp_path, cli, user_error):
     path = lab_table(tmp_path, with_setup=False)
     bare = tmp_path / "bare.csv"
@@ -168,6 +171,7 @@ def test_a_config_file_sets_only_the_keys_that_differ_from_the_bundled_one(tmp_p
     assert keys_set_by_user(own, []) >= {"model.alpha", "model.g"}  # no defaults: every leaf
 
 
+@pytest.mark.slow
 def test_a_printed_config_loaded_back_leaves_the_data_its_alpha_and_g(tmp_path, cli):
     """--print-config writes every key of the resolved config, model.alpha and model.g among
     them; loaded back with --config they counted as set by the user, so the data's alpha 0.55
@@ -230,6 +234,7 @@ def test_control_data_computes_everything_at_the_datas_racket(tmp_path, cli):
 
 
 # -- several --data files, repeated --set and --out ----------------------------------------------
+@pytest.mark.slow
 def test_several_data_files_are_the_trials_of_one_session(tmp_path, cli):
     """Two files whose trials are both labelled 1-4: eight trials, labelled by file (before,
     the last --data alone was read: "4 trial(s)")."""

@@ -241,6 +241,7 @@ def test_a_typo_in_another_block_of_a_config_fixed_point_reads_is_refused(tmp_pa
     one_error_line(run("fixed-point", "--config", config), needle)
 
 
+@pytest.mark.slow
 def test_fixed_point_still_reads_any_commands_bundled_config():
     from bounce_cli.runtime.config import bundled_config_path
 

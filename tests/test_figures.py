@@ -61,6 +61,7 @@ ASCII_MATH = re.compile(r"\^|\[k|\b[A-Za-z]+_[A-Za-z0-9{]|\b(alpha|theta|lambda|
                         r"\b|\+-|>=|<=|\||\b\dx\d\b|->|\b[a-z]+0\b")
 
 
+@pytest.mark.slow
 def test_no_ascii_math_in_any_figure(figures):
     found = []
     for name, fig in figures.items():
@@ -248,6 +249,7 @@ def test_run_metadata_goes_into_the_files_not_into_the_titles(tmp_path, cli):
     assert not any("seed" in t or "g = 9.81" in t for t in texts(fig))
 
 
+@pytest.mark.slow
 def test_the_pdf_embeds_its_fonts_as_truetype_not_type3(tmp_path, cli):
     out = tmp_path / "s"
     assert cli("stability", *SMALL_STABILITY, "--out", out, "--quiet",
@@ -274,6 +276,7 @@ def test_every_experiment_command_offers_the_figure_options(cli):
         assert "--figure-format" in text and "--dpi" in text, e.name
 
 
+@pytest.mark.slow
 def test_a_figure_redrawn_from_csv_writes_as_pdf(tmp_path):
     from bounce_cli.runtime.figure_files import save_figure
 
@@ -288,6 +291,7 @@ def test_a_figure_redrawn_from_csv_writes_as_pdf(tmp_path):
     ("d\u00e4t\u00e4".encode(), {"LC_ALL": "C", "PYTHONUTF8": "0"}),  # UTF-8 bytes, ASCII locale
     (b"d\xe4t", {"LC_ALL": "C"}),  # a Latin-1 file name: not UTF-8 at all
 ])
+@pytest.mark.slow
 def test_a_non_ascii_path_in_the_c_locale_goes_into_the_png_metadata(tmp_path, cli, folder,
                                                                      env):
     """``LC_ALL=C`` and a data path the command line cannot decode: the figure is written with

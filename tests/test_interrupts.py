@@ -196,6 +196,7 @@ MOMENTS = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 @pytest.mark.parametrize("moment", list(MOMENTS))
 def test_interrupt_stops_cleanly(tmp_path, previous_run, moment, signum):
@@ -234,6 +235,7 @@ def test_interrupt_stops_cleanly(tmp_path, previous_run, moment, signum):
     assert not (tmp_path / "new").exists(), "the run left the output folder it created"
 
 
+@pytest.mark.slow
 def test_sigkill_of_the_main_process_takes_the_workers_down(tmp_path):
     """No clean-up can run after SIGKILL: the workers must still not outlive the run."""
     proc = subprocess.Popen(
@@ -260,6 +262,7 @@ def thread_count(pid: int) -> int:
         return 0
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_interrupt_while_threads_classify(tmp_path, previous_run, signum):
     """The compiled kernel classifies in two threads of the main process (which cannot be

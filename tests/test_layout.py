@@ -167,6 +167,7 @@ def room_of(module: str) -> int:
     return ROOMS.index(best)
 
 
+@pytest.mark.slow
 def test_the_graph_reads_imports_inside_functions_and_skips_type_checking(tmp_path):
     graph = import_graph()
     # a function-level import (cli.console imports the typer app inside main)
@@ -176,6 +177,7 @@ def test_the_graph_reads_imports_inside_functions_and_skips_type_checking(tmp_pa
     assert cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
 
 
+@pytest.mark.slow
 def test_no_import_cycles():
     assert cycles(import_graph()) == []
 
@@ -204,6 +206,7 @@ def old_path_of(target: str, names: list[str]) -> str | None:
     return None
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("folder", ["bounce_cli", "tests", "benchmarks"])
 def test_nothing_imports_an_old_path(folder):
     here = Path(__file__).resolve()

@@ -32,6 +32,7 @@ def kill_myself(_):
     os.kill(os.getpid(), signal.SIGKILL)
 
 
+@pytest.mark.slow
 def test_results_in_task_order_for_every_executor():
     expected = [x * x for x in range(12)]
     assert list(parallel.InProcess().map(slow_square, range(12))) == expected
@@ -78,6 +79,7 @@ def test_a_dead_worker_is_an_error_not_a_hang():
     assert time.monotonic() - start < 10
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("pool", [parallel.LocalPool, parallel.Threads])
 def test_the_engine_classifies_through_any_executor_identically(paper_params, pool):
     np = pytest.importorskip("numpy")
@@ -111,6 +113,7 @@ def slow_first(x):
     return x
 
 
+@pytest.mark.slow
 def test_results_held_for_a_slow_first_task_are_bounded():
     """Tasks are read lazily and at most AHEAD per worker run past the next result, so a slow
     task does not make the pool read (and hold) the whole task list."""

@@ -38,6 +38,7 @@ def cluster():
         yield local
 
 
+@pytest.mark.slow
 def test_results_in_task_order_and_workers_counted(cluster):
     with parallel.executor(1, scheduler=cluster.scheduler_address) as executor:
         assert isinstance(executor, parallel.DaskCluster)
@@ -84,6 +85,7 @@ def die_once(args):
     return x * 10
 
 
+@pytest.mark.slow
 def test_a_task_on_a_lost_worker_is_rerun_and_nothing_is_lost(cluster, tmp_path):
     marker = str(tmp_path / "died")
     with parallel.DaskCluster(cluster.scheduler_address) as executor:

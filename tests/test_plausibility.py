@@ -58,6 +58,7 @@ def test_regression_warns_of_trial_amplitudes_in_mm_under_an_m_column(tmp_path, 
     ("racket_amplitude_m", 1000.0, "millimetres (0.11 m) typed for metres?"),
     ("racket_period_s", 1000.0, "milliseconds (0.6 s) typed for seconds?"),
 ])
+@pytest.mark.slow
 def test_an_impacts_table_in_the_wrong_unit_is_warned_about(tmp_path, cli, column, scale,
                                                             needle):
     from test_data_parameters import lab_table

@@ -61,6 +61,7 @@ def test_bundled_config_reproduces_committed_results(name):
     assert sorted(result.figures) == sorted(png for png, _ in entry(name).figures)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", experiment_params(SLOW_REDRAWS))
 def test_every_figure_redraws_from_its_csvs_alone(name, tmp_path):
     figures = entry(name).load().draw(committed_frames(name))
@@ -118,6 +119,7 @@ def test_reproduce_gallery_lists_every_figure_and_flags_missing_ones(tmp_path):
         RESULTS, markdown_table(verify(RESULTS)))
 
 
+@pytest.mark.slow
 def test_verify_refuses_results_made_from_another_config(tmp_path):
     copy = tmp_path / "results"
     shutil.copytree(RESULTS, copy, ignore=shutil.ignore_patterns("*.png"))
@@ -131,6 +133,7 @@ def test_verify_refuses_results_made_from_another_config(tmp_path):
     assert "other config" in result.stdout
 
 
+@pytest.mark.slow
 def test_registry_is_the_one_list_the_cli_and_experiments_follow():
     from bounce_cli.runtime.config import ExperimentConfig
     from bounce_cli.experiments.registry import EXPERIMENTS

@@ -32,6 +32,7 @@ def small_basin_config(n_theta=12, n_v=10):
 
 
 # -- run.json and timing.json -----------------------------------------------------------------
+@pytest.mark.slow
 def test_rerunning_a_config_rewrites_run_json_byte_for_byte(tmp_path):
     out = tmp_path / "b"
     assert run("basin", *SMALL, "--out", out, "--quiet").exit_code == 0
@@ -204,6 +205,7 @@ def test_the_compiled_kernel_classifies_large_grids_in_threads(monkeypatch):
         pd.testing.assert_frame_equal(threaded.frames[name], numpy_run.frames[name])
 
 
+@pytest.mark.slow
 def test_rerunning_a_bundled_config_changes_no_committed_byte_of_its_manifest(tmp_path):
     """What keeps `git status` clean after `bounce reproduce` on a clean checkout: rerun over
     the committed results, run.json comes out byte-identical to results/, also where the

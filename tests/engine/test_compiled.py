@@ -150,6 +150,7 @@ def test_a_compiled_module_that_does_not_import_falls_back_to_numpy(monkeypatch)
 
 
 # -- the controlled map (engine.control.ControlledMap): the same kernel loop over its step ----
+@pytest.mark.slow
 @pytest.mark.parametrize("params", PARAMETERS[:4], ids=["fig4", "rigid", "dead", "large"])
 @pytest.mark.parametrize("gain, rate", [(0.6, 0.9), (0.0, 1.0), (-0.4, 0.5), (1.6, 1.3)])
 def test_controlled_map_compiled_is_numpy_point_for_point(params, gain, rate):
@@ -170,6 +171,7 @@ def test_controlled_map_compiled_is_numpy_point_for_point(params, gain, rate):
     assert len(np.unique(numpy_result.outcome)) >= 2
 
 
+@pytest.mark.slow
 def test_controlled_basin_compiled_in_threads_is_one_process():
     """``classify_grid`` of the controlled map on the compiled kernel in threads (as
     ``bounce basin`` with model.control runs it) and the numpy kernel in this process."""

@@ -330,6 +330,7 @@ def test_fit_recovers_known_gain_and_rate(simulated_fit):
     assert fit.spectral_radius == pytest.approx(true_radius, abs=0.05)
 
 
+@pytest.mark.slow
 def test_fit_of_passive_trials_finds_no_period_control():
     """Passive trials (K = 0): the period never answers the ball, so the fitted immediate
     period response 2 c K / g is nil and K's interval holds 0 (with c -> 0 K is not
@@ -380,6 +381,7 @@ def test_grid_tiles_and_orbit_agree_with_the_batch(paper_params):
         assert np.array_equal(a, b)
 
 
+@pytest.mark.slow
 def test_fit_survives_a_labs_degradations():
     """Trials as a lab's table comes: rows missing (tracking gaps), a calibration offset on v,
     a constant phase offset (another zero of the racket cycle), the period measured with

@@ -113,6 +113,7 @@ def binomial_band(p, reps, z=3.5):
     return z * math.sqrt(p * (1 - p) / reps)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["ols", "lag2"])
 def test_intervals_cover_eq9_jacobian_at_nominal_rate(method):
     """Coverage over 400 data sets of 4 trials x 302 bounces (1200 lag-2 triples, linear VAR at
@@ -125,6 +126,7 @@ def test_intervals_cover_eq9_jacobian_at_nominal_rate(method):
     assert abs(radius_rate - 0.95) < band, radius_rate
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["ols", "lag2"])
 def test_the_radius_interval_covers_and_never_leaves_its_range(method):
     """200 data sets of linear VAR(1) data with eq. 9's J at section 7's parameters (radius

@@ -52,6 +52,7 @@ def test_at_fig4_every_decided_start_is_today_s_class(paper_params):
     assert all(f.low <= f.fraction <= f.high for f in shares)
 
 
+@pytest.mark.slow
 def test_exact_sticking_s_locked_orbit_owns_what_sticks(paper_params):
     """With exact sticking every orbit that sticks is released in one state: where that
     state's orbit sticks again (a locked orbit), the starts that stick are its basin, as the
@@ -115,6 +116,7 @@ def test_a_region_of_one_attractor_has_no_basin_entropy(paper_params):
     assert measured.basin_entropy == 0.0 and measured.boundary_basin_entropy == 0.0
 
 
+@pytest.mark.slow
 def test_a_smooth_boundary_has_uncertainty_exponent_one(paper_params):
     """Below 1.8 m/s at 30-80 deg the only boundary is the racket's velocity curve v0 =
     a_r w cos(theta0) (below it the ball cannot leave): smooth, so alpha = 1."""

@@ -28,6 +28,7 @@ def paper_grid(n_theta=400, n_v=400):
     return np.meshgrid(th, v)
 
 
+@pytest.mark.slow
 def test_matches_scalar_brentq_reference_point_by_point(paper_params):
     """Random points of the paper's 400 x 400 grid: same outcome AND same impact count."""
     rng = np.random.default_rng(2024)
@@ -134,6 +135,7 @@ def test_tolerance_and_sticking_interval_are_used(paper_params):
     assert not np.any(never_stick.outcome[base.outcome == STICKING] == STICKING)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("jobs, tile_points", [(1, 7), (1, 333), (2, 250), (2, 10_000)])
 def test_grid_results_independent_of_tiles_and_jobs(paper_params, jobs, tile_points):
     from bounce_cli.runtime import parallel

@@ -96,6 +96,7 @@ def test_sample_estimator_on_a_linear_var1_matches_theory():
         assert np.all(np.abs(s[name].mean(axis=0) - th.correlations[name]) < 4 * se + bias), name
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("velocity_phase", ["theta", "phi"])
 def test_stochastic_map_sample_matches_linear_theory_at_small_noise(velocity_phase):
     """Long runs of eqs. 16-18 agree with eq. 19 (with the noise covariance the map induces)

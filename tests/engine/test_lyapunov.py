@@ -66,6 +66,7 @@ def test_orbit_jacobian_at_the_fixed_point_is_eq9(paper_params):
         np.testing.assert_allclose(general, jacobian(params), rtol=1e-12, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_jacobian_determinant_is_the_impact_law_area_contraction():
     """det J = alpha (v_k - v_r(theta_k)) / (v_r(theta_{k+1}) - v^-): the relative velocity
     leaving impact k over the relative velocity arriving at impact k+1. Along an orbit the
@@ -115,6 +116,7 @@ def test_exponent_at_the_stable_period1_orbit_is_ln_of_eq10_radius(paper_params)
     np.testing.assert_allclose(exponents, math.log(0.5), atol=2e-3)
 
 
+@pytest.mark.slow
 def test_exponent_matches_eq10_in_the_real_regime_too(paper_params):
     """Real eigenvalues, near the fold (Gamma 1.05: -0.111 < AC < 0) and near the flip (1.45,
     1.5: AC below -1): the exponent is ln max |lambda| of eq. 10, not ln alpha. Started 5 %
@@ -167,6 +169,7 @@ def two_orbit_exponent(params, theta, v, transient, measured, separation=1e-9):
     return total / measured
 
 
+@pytest.mark.slow
 def test_chaotic_exponent_agrees_with_two_nearby_orbits():
     """At Gamma = 1.75 (alpha 0.5) the attractor is chaotic: positive exponent, and the
     Jacobian route agrees with the divergence of two orbits of the map."""
@@ -207,6 +210,7 @@ def test_batch_means_standard_error_by_hand_and_for_independent_growth():
     assert np.mean(se**2) == pytest.approx(sigma**2 / measured, rel=0.05)
 
 
+@pytest.mark.slow
 def test_exponent_standard_error_matches_the_scatter_of_exponents_on_one_chaotic_attractor():
     """Independent route: 40 orbits on the chaotic attractor at Gamma = 1.75 give 40
     finite-time exponents whose scatter is what each orbit's batch-means error says; a

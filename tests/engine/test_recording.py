@@ -280,6 +280,7 @@ def test_the_second_harmonic_keeps_the_crossing_and_has_its_amplitude():
     np.testing.assert_allclose(rows["racket_acc_g"][:5] * 9.81, fd, atol=1e-3)
 
 
+@pytest.mark.slow
 def test_the_racket_disturbance_starts_at_each_release_and_is_gone_after_its_duration():
     session = SessionSettings(n_trials=1, duration_s=8.0, disturbance_m=0.003,
                               disturbance_s=0.1, contact_s=0.01)

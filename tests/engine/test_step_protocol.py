@@ -23,6 +23,7 @@ def assert_same_classification(a, b):
     assert np.array_equal(a.iterations, b.iterations)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("rate", [0.0, 0.5, 1.0])
 def test_zero_gain_orbits_are_the_passive_ones_bit_for_bit(paper_params, rate):
     rng = np.random.default_rng(11)
@@ -40,6 +41,7 @@ def test_zero_gain_orbits_are_the_passive_ones_bit_for_bit(paper_params, rate):
     assert reasons == {"", "below_racket", "sticking"}  # every way an orbit ends was run
 
 
+@pytest.mark.slow
 def test_zero_gain_grid_on_the_pool_is_the_passive_basin(paper_params):
     theta, v = grid()
     passive = classify_batch(theta, v, paper_params, kernel="numpy")
@@ -51,6 +53,7 @@ def test_zero_gain_grid_on_the_pool_is_the_passive_basin(paper_params):
     assert_same_classification(passive, pooled)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("switch", ["impact", "cycle"])
 def test_controlled_basin_is_the_same_on_any_executor(paper_params, switch):
     """The controlled map (and the racket that switches period at its next cycle) on the

@@ -18,6 +18,7 @@ def small_run(tmp_path_factory, cli):
     return out
 
 
+@pytest.mark.slow
 def test_files_and_columns(small_run):
     frame = pd.read_csv(small_run / "acf.csv")
     assert list(frame.columns) == ["lag", "pair", "theory", "theory_map", "sample_mean",
@@ -37,6 +38,7 @@ def test_files_and_columns(small_run):
     assert manifest["seed"] == 2009 and manifest["config"]["noise"]["q_v"] == 0.04
 
 
+@pytest.mark.slow
 def test_same_seed_same_numbers_other_seed_differs(small_run, tmp_path, cli):
     again = tmp_path / "again"
     assert cli("acf", "--out", again, "--quiet", *SMALL).exit_code == 0
@@ -75,6 +77,7 @@ def test_every_run_lost_is_a_one_line_error(tmp_path, cli, user_error):
     assert not (tmp_path / "o" / "acf.csv").exists()
 
 
+@pytest.mark.slow
 def test_paper_values_only_at_the_papers_parameters(small_run, tmp_path, cli):
     summary = pd.read_csv(small_run / "summary.csv")
     theory = summary[summary.source == "theory_eq19"].set_index("quantity")

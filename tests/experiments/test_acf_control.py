@@ -17,6 +17,7 @@ def run(overrides):
     return config, acf.run(config, RunOptions())
 
 
+@pytest.mark.slow
 def test_gain_zero_is_the_passive_run_byte_for_byte():
     _, passive = run([])
     config, zero = run(["model.control.gain=0", "model.control.rate=0.5"])

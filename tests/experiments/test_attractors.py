@@ -15,6 +15,7 @@ SMALL = {"grid.theta0_deg.num": 60, "grid.v0_m_s.num": 60, "recurrence.transient
          "continuation.grid.v0_m_s.num": 30}
 
 
+@pytest.mark.slow
 def test_section_3_s_classes_are_the_attractors_seen_coarser(tmp_path):
     quick = {**SMALL, "grid.theta0_deg.num": 40, "grid.v0_m_s.num": 40, "continuation.num": 0,
              "measures.samples": 100}

@@ -11,6 +11,7 @@ from bounce_cli.experiments import basin
 SMALL = ["--set", "grid.theta0_deg.num=40", "--set", "grid.v0_m_s.num=40"]
 
 
+@pytest.mark.slow
 def test_basin_cli_small_grid_jobs_independent(tmp_path, paper_params, cli):
     out1, out2 = tmp_path / "j1", tmp_path / "j2"
     r1 = cli("basin", *SMALL, "--jobs", 1, "--out", out1, "--quiet")
@@ -160,6 +161,7 @@ def test_one_value_axes_run_and_draw(tmp_path, paper_params, cli):
     assert list(point.outcome) == ["sticking"]  # Fig. 3's bottom panel
 
 
+@pytest.mark.slow
 def test_paper_statements_only_at_the_papers_parameters(tmp_path, cli):
     small = [*SMALL, "--jobs", 1]
     at_paper = cli("basin", *small, "--out", tmp_path / "p")
@@ -175,6 +177,7 @@ def test_paper_statements_only_at_the_papers_parameters(tmp_path, cli):
     assert not any("Fig. 3" in t.get_text() for t in labels)
 
 
+@pytest.mark.slow
 def test_binary_tables_hold_what_the_csv_holds_and_redraw(tmp_path, cli, user_error,
                                                           monkeypatch):
     """output.format npz / parquet: basin.npz / basin.parquet instead of basin.csv, the same
@@ -219,6 +222,7 @@ def test_canonical_axes_found_without_sorting_or_refused():
     assert basin._canonical_axes(np.array([0.0, 1.0, 0.0]), np.array([1.0, 1.0, 2.0])) is None
 
 
+@pytest.mark.slow
 def test_exact_sticking_basin_separates_locked_orbits_with_their_period(tmp_path, cli):
     """classify.min_hop_s=0: the grey of Fig. 4 becomes the locked sticking solution (period
     1 racket cycle at the paper's model), drawn and labelled with its period; redrawn from
@@ -242,6 +246,7 @@ def test_exact_sticking_basin_separates_locked_orbits_with_their_period(tmp_path
     assert any("locked" in t and "period 1 racket cycle" in t for t in labels)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kernel", ["numpy", "auto"])
 def test_controlled_basin_cli_jobs_2_is_jobs_1(tmp_path, cli, monkeypatch, kernel):
     """``bounce basin`` with racket period control on two worker processes (numpy kernel) or

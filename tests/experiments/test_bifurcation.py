@@ -115,6 +115,7 @@ def classify(gammas, theta0_deg, v0, alpha=0.5, **settings):
     return names, orbits
 
 
+@pytest.mark.slow
 def test_attractors_along_the_cascade_and_sticking_is_not_chaos():
     """alpha 0.5: no period-1 orbit below Gamma = 1.047 (eq. 8) -- the ball sticks; period 1
     at the paper's Gamma 1.426; period 2 past the flip (1.527); chaos at 1.75; sticking again
@@ -130,6 +131,7 @@ def test_attractors_along_the_cascade_and_sticking_is_not_chaos():
     assert list(names0) == ["sticking"]
 
 
+@pytest.mark.slow
 def test_period1_orbits_hop_one_or_two_racket_cycles():
     """Gamma 2.2 (alpha 0.5): besides sticking, the period-1 orbit that flies two racket cycles
     (eqs. 7, 8 with 2 pi -> 4 pi: v = 2 pi g / w = 9.03 m/s, cos theta = 2 pi/3 / Gamma) is an
@@ -278,6 +280,7 @@ def test_the_cli_reports_only_real_flips(tmp_path):
     assert (located.relative_difference.abs() < 1e-3).all(), located
 
 
+@pytest.mark.slow
 def test_the_flip_is_supercritical():
     """Past the flip the period-2 orbit grows continuously from the period-1 orbit, its
     splitting like sqrt(distance): quadrupling the distance doubles it (no jump)."""
@@ -298,6 +301,7 @@ SMALL = ["--set", "sweep.start=1.40", "--set", "sweep.stop=1.80", "--set", "swee
          "--set", "flip.locate=false"]
 
 
+@pytest.mark.slow
 def test_cli_small_sweep_files_and_columns(tmp_path):
     result = runner.invoke(app, ["bifurcation", *SMALL, "--out", str(tmp_path), "--quiet"])
     assert result.exit_code == 0, result.output
@@ -324,6 +328,7 @@ def test_cli_small_sweep_files_and_columns(tmp_path):
     assert thresholds.located_gamma.isna().sum() >= 2  # nothing located with flip.locate=false
 
 
+@pytest.mark.slow
 def test_cli_sweeps_where_no_period1_orbit_exists(tmp_path):
     """needs_fixed_point=False: a sweep in alpha at a_r = 0.1 m (Gamma 0.475 < pi (1-a)/(1+a)
     for every alpha < 0.74) runs without error or warning; the orbits stick."""
@@ -414,6 +419,7 @@ def test_baseline_sticking_where_no_period1_orbit_exists(baseline):
     assert len(below) > 5 and (below.attractors == "sticking").all()
 
 
+@pytest.mark.slow
 def test_exact_sticking_sweep_resolves_the_grey_bands_into_locked_orbits(paper_params):
     """min_hop_s 0: where the 1 ms rule stops ("sticking"), the orbit is followed through
     its sticks and releases: a locked orbit whose period in racket cycles is the exact

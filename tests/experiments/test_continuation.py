@@ -32,6 +32,7 @@ def run_small(cli, out, *extra):
     return {p.name: pd.read_csv(p) for p in out.glob("*.csv")}
 
 
+@pytest.mark.slow
 def test_cli_small_run_files_columns_and_numbers(cli, tmp_path):
     frames = run_small(cli, tmp_path)
     assert sorted(frames) == ["bifurcations.csv", "branches.csv", "diagram.csv",
@@ -72,6 +73,7 @@ def test_cli_small_run_files_columns_and_numbers(cli, tmp_path):
     assert cascade.delta.notna().sum() == 1
 
 
+@pytest.mark.slow
 def test_figure_redrawn_from_the_csvs(cli, tmp_path):
     frames = run_small(cli, tmp_path)
     fig = draw(frames)["continuation.png"]

@@ -57,6 +57,7 @@ def test_frames_and_figures(result):
         assert part.fraction.sum() == pytest.approx(1.0)
 
 
+@pytest.mark.slow
 def test_eigen_rows(result, paper_params):
     eigen = result.frames["eigen.csv"].set_index("model")
     assert eigen.loc["passive", "spectral_radius"] == pytest.approx(0.5, abs=1e-12)  # eq. 12
@@ -191,6 +192,7 @@ def test_cli_fits_a_labs_impacts_table(tmp_path):
     assert fit.loc["model_racket_period", "estimate"] == pytest.approx(0.92, abs=0.01)
 
 
+@pytest.mark.slow
 def test_data_without_alpha_uses_the_sign_of_the_velocity(tmp_path):
     path = impacts_csv(tmp_path, alpha=True)
     frames = exp.fit_frames(load([f"data={path}"]))
@@ -235,6 +237,7 @@ def test_cli_bad_controller_is_one_line(tmp_path, setting, needle):
     assert needle in result.stderr and "Traceback" not in result.output
 
 
+@pytest.mark.slow
 def test_correlations_theory_matches_the_controlled_stochastic_map(result):
     """eq. 19 with the 3 x 3 Jacobian vs runs of the controlled map of eqs. 16-18 (same noise
     covariance): within 3 standard errors plus 0.01 (the map is not linear)."""
@@ -252,6 +255,7 @@ def test_zero_gain_correlations_are_the_passive_ones():
                                atol=1e-12)
 
 
+@pytest.mark.slow
 def test_the_controlled_basin_runs_on_the_worker_pool(monkeypatch):
     """``bounce control --jobs 2``: the passive and controlled basins on two worker processes
     (the basin command's classifier), the same tables as in one process."""

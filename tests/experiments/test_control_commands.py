@@ -75,6 +75,7 @@ def run_impulse(*overrides):
     return impulse.run(cfg, RunOptions())
 
 
+@pytest.mark.slow
 def test_impulse_with_zero_gain_is_the_passive_impulse():
     passive = run_impulse()
     zero = run_impulse("model.control.gain=0", "model.control.rate=0.4")

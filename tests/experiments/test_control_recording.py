@@ -115,6 +115,7 @@ def test_without_noise_control_data_returns_k_and_c_exactly(tmp_path):
     assert fit.loc["rate_c", "estimate"] == pytest.approx(0.3, abs=0.01)
 
 
+@pytest.mark.slow
 def test_control_data_returns_k_and_c_of_a_recorded_controller(extracted):
     """With eq. 16's velocity noise (0.04 m/s), 12 trials of 60 s: K = 0.185 [0.172, 0.199],
     c = 0.319 [0.296, 0.341] for the truth 0.2, 0.3 with the set point 0.92 s given. K's
@@ -127,6 +128,7 @@ def test_control_data_returns_k_and_c_of_a_recorded_controller(extracted):
         else 0.76, abs=0.03)
 
 
+@pytest.mark.slow
 def test_with_the_datas_mean_period_as_set_point_the_fit_is_worse(extracted):
     """Under control the racket's mean period is 924 ms, not the set point 920 ms: the model
     built on it gives K = 0.16 [0.12, 0.20] (wider, further from 0.2)."""

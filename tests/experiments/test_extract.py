@@ -244,6 +244,7 @@ def test_a_racket_resting_at_its_mid_position_starts_its_cycle_whatever_the_last
     (ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.103, racket_period=0.57),
      1000.0, 0.001, 0.2),           # measured 0.11; a short racket period: slow separation
 ], ids=["1kHz-0.5mm", "500Hz-0.5mm", "250Hz-2mm", "short-racket-1kHz-1mm"])
+@pytest.mark.slow
 def test_noise_at_high_sampling_rates_makes_no_spurious_contacts(params, rate, noise, rms_theta):
     """The ball's velocity jump over one sample: 0.5 mm of noise at 1 kHz is 1.2 m/s (SD),
     above the 1 m/s threshold near the racket, and the spurious contacts split the flights
@@ -264,6 +265,7 @@ def test_noise_at_high_sampling_rates_makes_no_spurious_contacts(params, rate, n
             reason == "outside a complete racket cycle" for _, reason in result.excluded)
 
 
+@pytest.mark.slow
 def test_a_recording_ending_before_the_last_peak_keeps_the_cycle_before():
     """40 s at 1 kHz: the racket's last upward crossing (39.79 s) comes less than a quarter
     cycle before the end, so no peak follows it; it still closes the cycle before it, whose
@@ -312,6 +314,7 @@ def test_chatter_is_flagged_not_reported():
 
 
 # -- round trip with bounce trajectory --------------------------------------------------------
+@pytest.mark.slow
 def test_round_trip_with_bounce_trajectorys_csv(tmp_path):
     out = tmp_path / "traj"
     made = runner.invoke(app, ["trajectory", "--out", str(out), "--quiet"])
@@ -358,6 +361,7 @@ def extract_cli(tmp_path, *args):
     return result, out
 
 
+@pytest.mark.slow
 def test_researcher_workflow_mm_ms_other_names_and_events(simulated, tmp_path):
     """`bounce extract --data my_lab.csv --events my_events.csv --set units.length=mm`."""
     rec = pd.read_csv(simulated / "recording.csv")
@@ -391,6 +395,7 @@ def test_researcher_workflow_mm_ms_other_names_and_events(simulated, tmp_path):
     assert (out / "fig2.png").stat().st_size > 10_000
 
 
+@pytest.mark.slow
 def test_truth_gives_accuracy_csv(simulated, tmp_path):
     result, out = extract_cli(tmp_path, "--data", str(simulated / "recording.csv"),
                               "--set", f"truth={simulated / 'truth.csv'}",
@@ -538,6 +543,7 @@ def test_a_truth_on_another_time_base_is_an_error_not_nan_accuracy(simulated, tm
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_an_impact_lost_to_a_racket_gap_says_gap(simulated, tmp_path):
     """A 60 ms hole in the racket column alone (longer than max_gap_s) removes its cycle: the
     impact in it was listed as "outside a complete racket cycle" (a new-user review)."""
@@ -558,6 +564,7 @@ def test_an_impact_lost_to_a_racket_gap_says_gap(simulated, tmp_path):
     (dict(sep=" "), ["csv.separator=space"]),
     (dict(units_row=True), ["csv.skip_rows=1"]),
 ], ids=["semicolon-decimal-comma", "tab", "spaces", "units-row"])
+@pytest.mark.slow
 def test_other_csv_dialects_give_the_same_impacts(simulated, tmp_path, write, settings):
     """A European spreadsheet's export (; and a decimal comma), tabs, spaces, a row of units
     under the header: the same impacts as the plain file (new-user review: no way to read
@@ -586,6 +593,7 @@ FAULT_SESSION = SessionSettings(n_trials=1, duration_s=20.0, sample_rate_hz=200.
                                 position_noise_m=0.0005, velocity_noise_m_s=0.04, seed=3)
 
 
+@pytest.mark.slow
 def test_a_40ms_ball_gap_at_an_impact_keeps_the_impact_and_its_k():
     """A gap shorter than max_gap_s is bridged by a spline for detection; across a contact
     the spline smeared the velocity jump into a spurious contact at the gap's edge (listed as

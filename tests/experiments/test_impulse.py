@@ -94,6 +94,7 @@ def test_tables(result):
         (1 + 2 * up.alpha_p_threshold - 0.5) / 1.5 * math.pi * 9.81 * 0.92 / (2 * math.pi))
 
 
+@pytest.mark.slow
 def test_figures_redraw_from_csv(result, tmp_path):
     for name, frame in result.frames.items():
         frame.to_csv(tmp_path / name, index=False)
@@ -105,6 +106,7 @@ def test_figures_redraw_from_csv(result, tmp_path):
         fig.savefig(tmp_path / "x.png")
 
 
+@pytest.mark.slow
 def test_cli(tmp_path):
     runner = CliRunner()
     args = ["impulse", "--out", str(tmp_path / "o"), "--quiet"]
@@ -119,6 +121,7 @@ def test_cli(tmp_path):
     assert bad.exit_code == 2 and "relaxation.tolerance_v_m_s" in bad.stderr
 
 
+@pytest.mark.slow
 def test_paper_values_only_at_the_papers_parameters(tmp_path, cli):
     fast = [a for s in FAST for a in ("--set", s)]
     at_paper = cli("impulse", "--out", tmp_path / "p", *fast)
@@ -130,6 +133,7 @@ def test_paper_values_only_at_the_papers_parameters(tmp_path, cli):
     assert pd.read_csv(tmp_path / "o" / "threshold.csv").paper_alpha_p.isna().all()
 
 
+@pytest.mark.slow
 def test_summary_says_in_words_when_the_response_never_leaves_the_basin(tmp_path, cli):
     """With strong period control the upward scan never leaves the basin: the summary says so
     (no 'nan'), and no paper value is quoted for a controlled run."""

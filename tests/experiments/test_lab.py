@@ -92,6 +92,7 @@ def test_acf_data_gives_the_same_fit_on_extracted_and_exact_impacts():
     assert np.allclose(ca.data_mean, cb.data_mean, atol=0.03)
 
 
+@pytest.mark.slow
 def test_impulse_data_aligned_responses_follow_the_model_and_the_exact_impacts():
     config, result = run_bundled("impulse-data")
     aligned, model = result.frames["aligned.csv"], result.frames["model_response.csv"]
@@ -139,6 +140,7 @@ def test_regression_data_recovers_eq15_from_extracted_trials():
         assert np.allclose(t.theta_deg, 35.0, atol=2.0)
 
 
+@pytest.mark.slow
 def test_learning_data_recovers_the_ac_trend_and_eq19s_variability():
     config, result = run_bundled("learning-data")
     trials = result.frames["trials.csv"]

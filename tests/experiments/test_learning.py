@@ -28,6 +28,7 @@ def test_model_curve_spans_the_stable_range_and_sets_ac():
     assert curve["apex_sd_m"].iloc[0] > 2 * curve["apex_sd_m"].iloc[i]
 
 
+@pytest.mark.slow
 def test_apex_sd_of_long_simulations_matches_eq19_with_the_maps_noise():
     """Eq. 19's apex SD (with the printed map's noise covariance) against 20 x 1000 bounces
     of eqs. 16-18: within 3 %."""
@@ -60,6 +61,7 @@ def learning_run(tmp_path_factory, cli):
     return path, out
 
 
+@pytest.mark.slow
 def test_learning_trend_recovers_the_known_drift(learning_run):
     _, out = learning_run
     trials = pd.read_csv(out / "trials.csv")
@@ -83,6 +85,7 @@ def test_learning_figure_and_redraw(learning_run):
     assert "trial number" in labels and "racket acceleration at impact AC (g)" in labels
 
 
+@pytest.mark.slow
 def test_the_model_curve_runs_at_the_datas_noise_not_the_configs(learning_run, tmp_path,
                                                                   cli):
     """The trials were simulated with q_v 0.04 m/s, q_theta 0.05 rad; the config says 0.2 and
@@ -105,6 +108,7 @@ def test_the_model_curve_runs_at_the_datas_noise_not_the_configs(learning_run, t
     assert pd.read_csv(tmp_path / "m" / "model_curve.csv")["q_v_m_s"].iloc[0] == 0.2
 
 
+@pytest.mark.slow
 def test_model_only_without_data(tmp_path, cli):
     result = cli("learning", "--out", tmp_path, "--quiet")
     assert result.exit_code == 0, result.output
@@ -130,6 +134,7 @@ def test_learning_errors(learning_run, tmp_path, cli, user_error):
     assert not any((tmp_path / d).exists() and any((tmp_path / d).iterdir()) for d in "abc")
 
 
+@pytest.mark.slow
 def test_data_statistics_leave_out_the_relaxation_after_perturbations(tmp_path, cli):
     """The per-trial SDs describe the stationary state: the perturbed impacts AND the
     relaxation after each are left out (settle_after_perturbation, as acf --data). On the

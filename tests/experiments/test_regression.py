@@ -117,6 +117,7 @@ def test_figure_redraws_from_csvs(small_run):
     assert len(ax.get_lines()) >= 3
 
 
+@pytest.mark.slow
 def test_trials_at_one_period_warn_that_the_slope_is_undetermined(tmp_path, cli):
     """All trials at (nearly) the same racket period: tau^2 spans nothing, eq. 15's slope is
     not determined; the fit is written with its (wide) interval and a warning says why."""

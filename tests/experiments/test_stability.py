@@ -159,6 +159,7 @@ def test_figure_redraws_from_csv(result, tmp_path):
     assert "Fig. 5" in ax.get_title() and "AC" in ax.get_ylabel()
 
 
+@pytest.mark.slow
 def test_cli_writes_files_and_rejects_bad_grid(tmp_path):
     runner = CliRunner()
     args = ["stability", "--out", str(tmp_path / "o"), "--quiet"]
@@ -177,6 +178,7 @@ def test_cli_writes_files_and_rejects_bad_grid(tmp_path):
     assert bad.exit_code == 2 and "grid.alpha_min" in bad.stderr
 
 
+@pytest.mark.slow
 def test_paper_range_only_at_the_alpha_it_is_given_for(tmp_path, cli):
     small = [a for s in SMALL for a in ("--set", s)]
     for alpha, quoted in ((0.5, -1.11), (0.8, None)):
@@ -193,6 +195,7 @@ def test_paper_range_only_at_the_alpha_it_is_given_for(tmp_path, cli):
             assert "(paper: -1.11 to 0)" in result.stderr
 
 
+@pytest.mark.slow
 def test_one_value_grid_axes_draw(tmp_path, cli):
     """n_alpha: 1 is one column of the diagram: its regions as a band, its boundaries as
     points on that line (the 3D surface as a curve)."""

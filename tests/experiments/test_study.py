@@ -137,6 +137,7 @@ def test_the_data_are_as_fast_as_the_model_that_made_them(studied):
     assert ((ols["ci_low"] <= 0) & (ols["ci_high"] >= 0)).all(), ols
 
 
+@pytest.mark.slow
 def test_the_report_is_self_contained(tiny_study):
     out = tiny_study
     text = (out / "report.html").read_text()
@@ -277,6 +278,7 @@ def test_an_unknown_setting_fails_before_anything_runs(tmp_path, cli, user_error
     user_error(result, "max_lagg")
 
 
+@pytest.mark.slow
 def test_without_alpha_and_g_the_data_must_show_them(tiny, tmp_path, cli_module):
     """Recordings without events or a measured set-up and no model.alpha/model.g: each
     unit is a failure naming both ways to give them (nothing silently at a default)."""
@@ -320,6 +322,7 @@ def study_config(simulated, *overrides):
                         "grouping=[subject]", "report.unit_figures=false", *overrides])
 
 
+@pytest.mark.slow
 def test_an_interrupted_study_resumed_gives_the_same_tables(tiny):
     config = study_config(tiny)
     whole = study.run(config, RunOptions())
@@ -449,6 +452,7 @@ def var1_impacts(seed, n_trials=5, n=35, burn=200):
         "racket_amplitude_m": 0.094 + 1e-4 * racket.standard_normal(n_trials * n)})
 
 
+@pytest.mark.slow
 def test_a_wild_lag2_estimate_is_nan_with_its_reason_in_every_table_and_the_report(
         tmp_path, cli_module):
     """Issue 36: a unit's lag-2 radius of 34.74 reached group.csv and report.html, said only

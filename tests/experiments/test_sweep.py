@@ -92,6 +92,7 @@ def test_a_line_across_the_existence_threshold(cli, tmp_path, paper_params):
     assert set(sweep_experiment.draw(frames)) == {"sweep.png"}
 
 
+@pytest.mark.slow
 def test_an_interrupted_sweep_resumes_to_the_same_result(cli, tmp_path, monkeypatch, user_error):
     reference = tmp_path / "reference"
     assert run_sweep(cli, reference, "--jobs", "1").exit_code == 0
@@ -138,6 +139,7 @@ def test_an_interrupted_sweep_resumes_to_the_same_result(cli, tmp_path, monkeypa
     assert not (out / "points").exists()
 
 
+@pytest.mark.slow
 def test_force_starts_over_and_resume_without_points_just_runs(cli, tmp_path):
     out = tmp_path / "o"
     folder = checkpoints.PointFolder(out, {"command": "sweep", "config": {"old": 1}},
@@ -231,6 +233,7 @@ def not_a_scheduler(request):
     ("silent", "no answer as a Dask scheduler within 1.5 s"),
     ("http", "a service answers there, but not as a Dask scheduler"),
 ], indirect=["not_a_scheduler"], ids=["silent", "http"])
+@pytest.mark.slow
 def test_a_service_that_is_not_a_scheduler_is_one_line(cli, user_error, tmp_path, monkeypatch,
                                                        not_a_scheduler, needle):
     """A port that accepts connections but is not Dask: a silent one kept the client waiting
@@ -249,6 +252,7 @@ def test_a_service_that_is_not_a_scheduler_is_one_line(cli, user_error, tmp_path
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("not_a_scheduler", ["silent"], indirect=True)
 def test_ctrl_c_while_waiting_for_a_silent_scheduler(tmp_path, not_a_scheduler):
     pytest.importorskip("distributed")

@@ -85,6 +85,7 @@ def test_figure_redrawn_from_csvs_alone(out, paper_params):
     assert original.axes[2].lines[1].get_ydata()[0] == pytest.approx(fp.theta_deg)
 
 
+@pytest.mark.slow
 def test_rk4_integrator_from_the_command_line(tmp_path, out, cli):
     result = cli("trajectory", "--set", "duration_s=4", "--set", "integrator=rk4",
                  "--out", tmp_path, "--quiet")
@@ -123,6 +124,7 @@ def test_case_needs_exactly_one_phase(tmp_path, cli):
     assert "cases.0" in result.stderr and "exactly one of" in result.stderr
 
 
+@pytest.mark.slow
 def test_exact_sticking_trajectory_marks_the_accumulation_points(tmp_path, cli, user_error,
                                                                  paper_params):
     """sticking.min_hop_s=0: the continuous motion of Fig. 3's sticking case without a cut;

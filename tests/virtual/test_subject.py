@@ -74,6 +74,7 @@ def test_the_defaults_are_bounce_control_s_controller():
                                      SubjectControl(gain=0.0, rate=0.4),
                                      SubjectControl(gain=0.0, switch="cycle")],
                          ids=["K0", "K0-c0.4", "K0-cycle"])
+@pytest.mark.slow
 def test_gain_zero_is_the_sine_source_sample_for_sample(control):
     """In closed loop on the perturbation protocol, every impact observed: the period stays
     tau_bar bit for bit, so the samples are SineSource's, and so are the impacts."""
@@ -164,6 +165,7 @@ def period_modulation(impacts: pd.DataFrame) -> pd.DataFrame:
     return frame.assign(direction=np.where(frame["alpha"] > 0.5, "increase", "decrease"))
 
 
+@pytest.mark.slow
 def test_the_subject_modulates_its_period_and_keeps_the_ball_in_period_one():
     """Section 7's protocol: with the passive sine the perturbations leave the period-1 basin
     (chatter, sticking) and the racket period is flat; the controlled subject lengthens the

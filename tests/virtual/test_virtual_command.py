@@ -21,6 +21,7 @@ HEADLESS = {"display.headless": True}
 SHORT = {**HEADLESS, "trials": 2, "trial_s": 12.0, "perturbations.every": 5, "seed": 3}
 
 
+@pytest.mark.slow
 def test_perturbation_protocol_every_fifth_impact_in_the_ranges(tmp_path):
     result = bounce_cli.run("virtual", config=PROTOCOL, set=SHORT,
                             out=tmp_path / "v")
@@ -46,6 +47,7 @@ def test_perturbation_protocol_every_fifth_impact_in_the_ranges(tmp_path):
     assert (tmp_path / "v" / "virtual.png").is_file()
 
 
+@pytest.mark.slow
 def test_extract_with_the_events_recovers_the_exact_impacts(tmp_path):
     """The recording and events are what ``bounce extract`` reads with no --set."""
     out = tmp_path / "v"
@@ -96,6 +98,7 @@ def test_study_analyses_the_virtual_session_with_no_step_between(tmp_path, cli):
     assert np.all(np.abs(period["mean"]) < 1e-9)
 
 
+@pytest.mark.slow
 def test_extract_at_a_restitution_below_the_contact_factor_s_zero(tmp_path):
     """alpha 0.25: K(alpha) of the contact's area is negative there; the impacts are still
     extracted (alpha measured by eq. 3), the contact duration is not measured (NaN)."""
@@ -163,6 +166,7 @@ def _simulated_session(tmp_path, rounded: bool):
     # 0.1 micrometre steps in the racket: its interpolated velocity is uncertain by about
     # 7 q / h = 7e-4 m/s at 1 kHz, and the impacts with it
     (True, 2e-4, 2e-3)])
+@pytest.mark.slow
 def test_replay_of_a_simulated_recording_gives_its_truth(tmp_path, rounded, t_tol, v_tol):
     path, truth = _simulated_session(tmp_path, rounded)
     launch = truth.iloc[0]  # the ball leaves the racket at the truth's first impact
@@ -179,6 +183,7 @@ def test_replay_of_a_simulated_recording_gives_its_truth(tmp_path, rounded, t_to
     assert np.max(np.abs(both["v_m_s"] - both["v_m_s_virtual"])) < v_tol
 
 
+@pytest.mark.slow
 def test_realtime_paces_a_headless_sine_and_leaves_the_physics_alone():
     settings = {**HEADLESS, "trials": 1, "trial_s": 2.5}
     start = time.monotonic()
