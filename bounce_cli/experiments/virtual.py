@@ -34,7 +34,7 @@ from ..data.extraction import ExtractionSettings, racket_cycles
 from ..data.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS, ball_apex
 from ..data.setup_table import SETUP_FILE, SetupQuantity, setup_frame
 from ..data.simulated_lab import LAB_MIN_HOP_S
-from ..errors import ConfigError, NoFixedPointError
+from ..errors import ConfigError, ModelError, NoFixedPointError
 from ..model.flight import restitution_of
 from ..runtime.config import ControlBlock, ExperimentConfig, ModelBlock, StrictModel
 from ..runtime.interrupts import Interrupted
@@ -199,8 +199,12 @@ def impacts_frame(record: TrialRecord, trial: int, g: float, duration_s: float) 
     imp = pd.DataFrame([vars(i) for i in record.impacts],
                        columns=[f.name for f in fields(Impact)])
     t, v = imp["t_s"].to_numpy(float), imp["v_m_s"].to_numpy(float)
-    cycles = racket_cycles(record.t, record.racket, np.isfinite(record.racket),
-                           ExtractionSettings(g=g))
+    columns = [*REQUIRED_COLUMNS, *EVENT_COLUMNS, *MEASURED_COLUMNS, "stuck"]
+    try:
+        cycles = racket_cycles(record.t, record.racket, np.isfinite(record.racket),
+                               ExtractionSettings(g=g))
+    except ModelError:  # a racket that never moved: no cycle, so no impact has a phase
+        return pd.DataFrame(columns=columns)
     cycle, theta = cycles.locate(t)
     frame = pd.DataFrame({
         "trial": trial, "k": imp["k"], "t_s": t, "theta_rad": theta,
@@ -220,7 +224,7 @@ def impacts_frame(record: TrialRecord, trial: int, g: float, duration_s: float) 
     # as bounce extract does: an impact outside a complete racket cycle has no phase, and the
     # table leaves it out (its k stays a gap); the events keep every impact
     frame = frame[np.isfinite(theta)].reset_index(drop=True)
-    return frame[[*REQUIRED_COLUMNS, *EVENT_COLUMNS, *MEASURED_COLUMNS, "stuck"]]
+    return frame[columns]
 
 
 def _at(values: np.ndarray, cycle: np.ndarray) -> np.ndarray:
@@ -305,6 +309,8 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
     frames: dict[str, pd.DataFrame] = {}
     impacts, gaps = [], []
     finished = 0
+    kept: list[int] = []  # the trials recorded (a live trial without samples is left out)
+    every_impact: list[Impact] = []  # impacts.csv leaves out those without a phase
     stopped = ""
     live = display is not None or getattr(source, "live", False)  # in real time: say so
     options.progress.start(config.trials, "virtual")
@@ -327,8 +333,16 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
                                max_gap_s=config.max_gap_s, racket_gain=config.visual_gain,
                                on_sample=on_sample)
             if record.t.size < 4:
-                raise ConfigError(f"racket: {source.description}: trial {n} has fewer than 4 "
-                                  "samples")
+                if not live:
+                    raise ConfigError(f"racket: {source.description}: trial {n} has fewer "
+                                      "than 4 samples")
+                # a live trial without a racket (the page closed, the stream silent): the
+                # session goes on without it
+                options.warn(f"trial {n}: fewer than 4 racket samples came ({source.description}"
+                             "): it is left out")
+                finished = n
+                options.progress.advance(1)
+                continue
             frames[trial_name(config, n, "recordings")] = pd.DataFrame({
                 "trial": n, "t_s": record.t, "racket_x_m": record.racket,
                 "ball_x_m": record.ball})
@@ -337,6 +351,8 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
                 {"trial": n, "t_s": [i.t_s for i in record.impacts],
                  "alpha": [i.alpha for i in record.impacts]}, columns=["trial", "t_s", "alpha"])
             impacts.append(table)
+            kept.append(n)
+            every_impact += list(record.impacts)
             gaps += [{"trial": n, "t_start_s": gap.t_start_s, "t_end_s": gap.t_end_s}
                      for gap in record.gaps]
             finished = n
@@ -353,11 +369,14 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
         if display is not None:
             display.show_status(phase="done", message="done: thank you")
     except (KeyboardInterrupt, Interrupted) as stop:
-        if finished == 0 or (isinstance(stop, Interrupted) and stop.signum != signal.SIGINT):
+        if not impacts or (isinstance(stop, Interrupted) and stop.signum != signal.SIGINT):
             raise
-        stopped = (f"; stopped by Ctrl-C in trial {finished + 1}: trials 1-{finished} kept, "
-                   "the interrupted one left out")
-    trials = range(1, finished + 1)
+        stopped = (f"; stopped by Ctrl-C in trial {finished + 1}: {len(kept)} finished "
+                   "trial(s) kept, the interrupted one left out")
+    if not impacts:
+        raise ConfigError(f"racket: {source.description}: no trial had racket samples (was the "
+                          "page open, the stream sending?)")
+    trials = kept
     impacts_table = pd.concat(impacts, ignore_index=True)
     latency = pd.DataFrame(display.latency if display is not None else [],
                            columns=LATENCY_COLUMNS)
@@ -376,12 +395,12 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
     })
     options.record["racket_source"] = source.description
     figures = draw(frames)
-    caption_figures(figures, params, f"{finished} trials x {config.trial_s:g} s, "
+    caption_figures(figures, params, f"{len(kept)} trials x {config.trial_s:g} s, "
                     f"{source.description}, seed {config.seed}")
-    stuck = int(impacts_table["stuck"].sum())
+    stuck = sum(bool(i.stuck) for i in every_impact)
     summary = [
-        f"{finished} trials x {config.trial_s:g} s ({source.description}): "
-        f"{len(impacts_table)} impacts ({int(impacts_table['perturbed'].sum())} perturbed"
+        f"{len(kept)} trial(s) x {config.trial_s:g} s ({source.description}): "
+        f"{len(every_impact)} impacts ({sum(bool(i.perturbed) for i in every_impact)} perturbed"
         + (f", {stuck} left the ball on the racket" if stuck else "") + f"), {len(gaps)} "
         f"stream gap(s){stopped}; run `bounce study --manifest <out>/study.csv`"]
     if display is not None:

@@ -116,3 +116,31 @@ def test_the_mouse_is_the_racket(browser, tmp_path):
     assert np.all(np.abs(racket) < 0.2 + 0.01)  # the pointer's heights, within a pixel
     assert racket.max() > 0.1 and racket.min() < -0.1
     assert np.all(np.diff(recording["t_s"]) > 0)
+
+
+def test_a_mouse_that_never_moves_is_a_racket_at_rest_and_a_closed_page_a_left_out_trial(
+        browser, tmp_path):
+    """The page sends the pointer's height from the start (the racket's rest, height 0) even
+    before the mouse moves; a trial during which no page is open has no racket samples: it is
+    left out with a warning and the session goes on."""
+    out = tmp_path / "r"
+    process, url, lines = start_session(out, "racket=mouse", "trials=2", "trial_s=2",
+                                        "display.countdown_s=0")
+    page = browser(url, width=800, height=600)
+    deadline = time.monotonic() + 30.0
+    while not any("trial 1 of 2 done" in line for line in lines):
+        assert time.monotonic() < deadline, "".join(lines)
+        time.sleep(0.05)
+    page.close()  # trial 2 runs with no page
+    try:
+        process.wait(30.0)
+    finally:
+        process.kill()
+    process.reader.join(10.0)
+    text = "".join(lines)
+    assert process.returncode == 0, text
+    assert "trial 2: fewer than 4 racket samples came" in text
+    recordings = sorted(p.name for p in (out / "recordings").iterdir())
+    assert recordings == ["s1_virtual_t1.csv"]
+    racket = pd.read_csv(out / "recordings" / recordings[0])["racket_x_m"].to_numpy()
+    assert len(racket) > 60 and np.all(np.abs(racket) < 0.02)  # at rest, within a pixel
