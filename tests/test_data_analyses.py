@@ -464,7 +464,9 @@ def test_acf_data_on_29_bounces_says_there_are_too_few_for_an_interval(tmp_path,
     result = cli("acf", "--data", path, "--out", tmp_path / "o", "--set", "max_lag=5", *FAST,
                  "--set", "model.alpha=0.5", "--set", "model.g=9.81")
     assert result.exit_code == 0, result.output
-    assert result.output.count("too few bounces for an interval") == 1, result.output
+    assert result.output.count("no interval (28 pairs, fewer than the 200 the ols interval "
+                               "needs without a check; the trust study at this size: the 95% "
+                               "interval covers the truth in") == 1, result.output
     assert "lag2: spectral radius withheld: the estimate 8.752 is above 1.5" in result.output
     stab = pd.read_csv(tmp_path / "o" / "stability_data.csv")
     fitted = stab[stab.source.str.contains("jackknife")]
@@ -624,3 +626,59 @@ def test_the_trust_study_runs_at_the_datas_measurement_noise(acf_data, tmp_path,
     result = cli("acf", "--data", folder / "impacts.csv", "--out", tmp_path / "p", *ACF_MODEL,
                  *FAST)
     assert "0.03 m/s, 1 deg measurement noise, assumed" in result.output
+
+
+def test_the_trust_study_fitted_at_once_is_the_one_by_one_route():
+    """trust_frame fits each size's repetitions in one stacked solve (analysis/var_stacked);
+    the reference route fits them one by one with fit_var1, as before (issue 35): the same
+    estimates to 1e-9 and the same coverage, at every size, both estimators."""
+    import types
+
+    from bounce_cli.analysis.stochastic import paper_noise_covariance
+    from bounce_cli.analysis.var_fit import fit_var1
+    from bounce_cli.experiments import data_side
+    from bounce_cli.experiments.data_side import AcfDataBlock, MeasurementNoise, trust_frame
+    from bounce_cli.model.linear import jacobian
+    from bounce_cli.model.params import ModelError, ModelParams
+
+    params = ModelParams(0.6, 9.81, 0.05, 0.5)
+    block = AcfDataBlock(trust_bounces=[60, 200, 400], trust_repetitions=30, trust_seed=3)
+    config = types.SimpleNamespace(data_analysis=block)
+    segments = [(None, np.zeros(n)) for n in (40, 35, 45)]
+    noise = MeasurementNoise(0.01, 0.005, "assumed")
+    progress = types.SimpleNamespace(advance=lambda n: None)
+    frame = trust_frame(params, 0.04, 0.05, config, segments,
+                        types.SimpleNamespace(progress=progress), noise)
+    # the reference: the same draws, fitted one by one
+    jac = jacobian(params)
+    chol = np.linalg.cholesky(paper_noise_covariance(0.04, 0.05))
+    rng = np.random.default_rng(np.random.SeedSequence(3))
+    truth = float(np.max(np.abs(np.linalg.eigvals(jac))))
+    for total in block.trust_bounces:
+        per = max(40, data_side.MIN_RUN_LENGTH)
+        n_trials = max(1, int(round(total / per)))
+        y = np.zeros((30 * n_trials, 2))
+        series = np.empty((30 * n_trials, per, 2))
+        for k in range(data_side.TRUST_BURN_IN + per):
+            y = y @ jac.T + rng.standard_normal(y.shape) @ chol.T
+            if k >= data_side.TRUST_BURN_IN:
+                series[:, k - data_side.TRUST_BURN_IN] = y
+        series += rng.standard_normal(series.shape) * np.array([0.01, 0.005])
+        for method in ("ols", "lag2"):
+            found, inside = [], 0
+            for r in range(30):
+                try:
+                    fit = fit_var1(list(series[r * n_trials:(r + 1) * n_trials]), method)
+                except ModelError:
+                    continue
+                value, se = fit.eigen_summary()["spectral_radius"][:2]
+                half = 1.959963984540054 * se / value
+                found.append(value)
+                inside += value * np.exp(-half) <= truth <= value * np.exp(half)
+            row = frame[(frame.bounces == n_trials * per) & (frame.method == method)
+                        & ~frame.data_size].iloc[0]
+            assert row["repetitions"] == len(found)
+            assert row["median_estimate"] == pytest.approx(np.median(found), rel=1e-9)
+            assert row["coverage"] == pytest.approx(inside / len(found), abs=1e-12)
+    own = frame[frame.data_size]
+    assert list(own["bounces"]) == [120, 120] and list(own["trials"]) == [3, 3]

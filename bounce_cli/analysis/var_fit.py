@@ -30,11 +30,16 @@ four entries of J, times Cov(vec J). Intervals are estimate +- z SE (normal), ex
 spectral radius's: a modulus lives in [0, inf), so its interval is the delta method on the log
 scale, r exp(+- z SE / r) (SE(log r) = SE(r) / r), which never leaves (0, inf) and is
 asymmetric where the estimate is uncertain. A data set of fewer pairs than
-``MIN_PAIRS_FOR_INTERVAL`` (per estimator) gets no interval at all (NaN): below that the
-first-order delta method does not hold its coverage (measured on linear VAR(1) data at the acf
-and impulse configs' J, 400 data sets per size: the nominal 95 % interval covers at least 90 %
-from 200 pairs for OLS, only from 1200 triples for lag2, whose ratio of covariances is
-heavy-tailed on short data).
+``MIN_PAIRS_FOR_INTERVAL`` (per estimator) gets no interval by default (NaN): whether the
+first-order delta method holds its coverage there depends on J, the noise and above all on
+measurement noise (which biases OLS), so it is measured, not assumed: ``acf --data``'s trust
+study simulates data of the data's own run lengths at the model's J, the data's noise and the
+set-up's measurement noise, and where the delta interval covers the truth there (at least the
+level less ``trust_coverage_slack``, median bias within a quarter of the spread) the fit gets
+its intervals (``Var1Fit.calibration_trusted``, ``experiments.data_side.calibrated``). The
+fixed minimum (200 pairs for OLS, 1200 triples for lag2, whose ratio of covariances is
+heavy-tailed on short data) is where the interval covered at least 90 % on linear VAR(1) data
+at the acf and impulse configs' J and the assumed measurement noise, 400 data sets per size.
 
 A spectral radius estimate that is not finite, above ``MAX_PLAUSIBLE_RADIUS`` (1.5: a ball
 that kept bouncing cannot have it) or from an ill-conditioned fit (lag 2's instrument nearly
@@ -102,6 +107,12 @@ class Var1Fit:
     #: their canonical correlations, in [0, 1]): 1 for OLS, near 0 where lag 2's C(1) is
     #: nearly singular; with the jackknife the least of the three fits'
     instrument_det: float = 1.0
+    #: below ``MIN_PAIRS_FOR_INTERVAL``: the delta method's coverage measured on simulated data
+    #: of this fit's own size (``experiments.data_side.calibrated``; NaN: not measured), and
+    #: whether it is trusted there (then the fit has its intervals)
+    calibrated_coverage: float = math.nan
+    calibration_trusted: bool = False
+    calibration_note: str = ""  # why it is not trusted there
 
     @property
     def jacobian_se(self) -> np.ndarray:
@@ -114,8 +125,9 @@ class Var1Fit:
 
     @property
     def has_interval(self) -> bool:
-        """Enough pairs for the intervals (``MIN_PAIRS_FOR_INTERVAL``)."""
-        return self.n_pairs >= self.min_pairs_for_interval
+        """Enough pairs for the intervals (``MIN_PAIRS_FOR_INTERVAL``), or fewer where the
+        delta method's coverage was measured and trusted at this size."""
+        return self.n_pairs >= self.min_pairs_for_interval or self.calibration_trusted
 
     def radius_problem(self) -> str:
         """Why this fit's spectral radius is no estimate, or '' when it is one: the radius is

@@ -10,6 +10,7 @@ The model at the data's parameters: racket period and amplitude from the data's 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -254,7 +255,9 @@ def measurement_noise(block, source: ImpactsSource | None, data_path) -> Measure
     """The data's own measurement noise when its ``setup.csv`` gives both quantities
     (``measurement_sd_v_m_s``, ``measurement_sd_theta_rad``), else the config's assumed
     ``measurement_sd_v_m_s`` and ``measurement_sd_theta_deg``. A source that is no file
-    (the simulated lab's impacts in memory) has no setup table.
+    (the simulated lab's impacts in memory) has no setup table; a study's unit (a (label,
+    table) pair) carries its recordings' pooled ``setup.csv`` values in the table's
+    ``attrs["setup"]``.
 
     Parameters
     ----------
@@ -270,10 +273,15 @@ def measurement_noise(block, source: ImpactsSource | None, data_path) -> Measure
     MeasurementNoise
     """
     path = data_path if source is None else source
-    setup = read_setup(path) if isinstance(path, (str, Path)) else {}
+    if isinstance(path, (str, Path)):
+        setup = {q: value.estimate for q, value in read_setup(path).items()}
+    elif isinstance(path, tuple) and len(path) == 2 and isinstance(path[1], pd.DataFrame):
+        setup = path[1].attrs.get("setup", {})  # a study's unit: its recordings' setup.csv
+    else:
+        setup = {}
     v, theta = setup.get("measurement_sd_v_m_s"), setup.get("measurement_sd_theta_rad")
-    if v is not None and theta is not None:
-        return MeasurementNoise(abs(v.estimate), abs(theta.estimate), SETUP_FILE)
+    if v is not None and theta is not None and math.isfinite(v) and math.isfinite(theta):
+        return MeasurementNoise(abs(v), abs(theta), SETUP_FILE)
     return MeasurementNoise(block.measurement_sd_v_m_s,
                             math.radians(block.measurement_sd_theta_deg), "assumed")
 
@@ -295,7 +303,7 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
         raise ConfigError(f"data: {impacts.path}: no run of {config.max_lag + 2} consecutive "
                           "unperturbed impacts (max_lag + 2) in any trial; lower max_lag or "
                           "data_analysis.settle_after_perturbation")
-    options.progress.start(4 + len(d.trust_bounces), "data: correlations, VAR(1) fits")
+    options.progress.start(5 + len(d.trust_bounces), "data: correlations, VAR(1) fits")
     corr = trial_correlations([s[1] for s in segments], [s[2] for s in segments], config.max_lag)
     options.progress.advance(1)
     jac = jacobian(params)
@@ -333,6 +341,10 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
                 if str(exc).startswith(WITHHELD):
                     options.warn(f"{label}: {exc}; written as NaN")
         options.progress.advance(1)
+    trust = trust_frame(params, q_v, q_theta, config, segments, options, noise)
+    fits = {label: fit if isinstance(fit, ModelError) else
+            calibrated(fit, trust, d.confidence, d.trust_coverage_slack)
+            for label, fit in fits.items()}
     st = stability(params)
     fp = params.fixed_point()
     conf = d.confidence
@@ -417,7 +429,6 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
         srows.extend(more)
     stab = pd.DataFrame(srows)
     diagnostics, diagnostic_lines = var_diagnostics(fits, trials, config.max_lag)
-    trust = trust_frame(params, q_v, q_theta, config, segments, options, noise)
     frames = {"acf_data.csv": acf, "stability_data.csv": stab, "trust.csv": trust,
               "var_diagnostics.csv": diagnostics}
     lines = [f"data {impacts.path}: {n_seg} runs, {len(dv_all)} bounces; {racket_text(params)}",
@@ -449,14 +460,19 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
     run_length = max(int(round(np.mean([len(s[1]) for s in segments]))), MIN_RUN_LENGTH)
     noise_words = (f"assumed: no {SETUP_FILE} beside the data gives it" if noise.source ==
                    "assumed" else f"the data's own, from {SETUP_FILE}")
+    sized = trust[~trust.data_size.astype(bool)]
     for method in ("ols", "lag2"):
-        ok = trust[(trust.method == method) & trust.trusted.astype(bool)]
+        ok = sized[(sized.method == method) & sized.trusted.astype(bool)]
         need = f"from {int(ok.bounces.min())} bounces" if len(ok) else "at none of the sizes tried"
+        own = trust[(trust.method == method) & trust.data_size.astype(bool)]
+        at_own = (f" (at their own run lengths: coverage {own.coverage.iloc[0]:.1%}, "
+                  f"{'trusted' if bool(own.trusted.iloc[0]) else 'not trusted'})"
+                  if len(own) else "")
         lines.append(f"trust study ({noise.sd_v_m_s:.3g} m/s, "
                      f"{math.degrees(noise.sd_theta_rad):.3g} deg measurement noise, "
                      f"{noise_words}; sizes in whole "
                      f"runs of the data's mean length, {run_length}): {method} trusted "
-                     f"{need}; these data have {n_data}")
+                     f"{need}; these data have {n_data}{at_own}")
     return frames, lines
 
 
@@ -669,10 +685,23 @@ def prediction_rows(prediction: VarxPrediction, fits: dict, params: ModelParams,
 
 def interval_note(fit: Var1Fit, quantity: str) -> str:
     """How a fitted quantity's interval was made, or why there is none."""
+    method = "delta method, log scale" if quantity == "spectral_radius" else "delta method"
     if not fit.has_interval:
-        return (f"no interval: {fit.n_pairs} {_rows_word(fit)}, fewer than the "
-                f"{fit.min_pairs_for_interval} the {fit.method.split('+')[0]} interval needs")
-    return "delta method, log scale" if quantity == "spectral_radius" else "delta method"
+        return f"no interval: {_too_few(fit)}"
+    if fit.n_pairs < fit.min_pairs_for_interval:
+        return (f"{method}; {fit.n_pairs} {_rows_word(fit)}, below the fixed minimum of "
+                f"{fit.min_pairs_for_interval}: its coverage at this size measured by the trust "
+                f"study, {fit.calibrated_coverage:.1%}")
+    return method
+
+
+def _too_few(fit: Var1Fit) -> str:
+    """Why a fit below ``MIN_PAIRS_FOR_INTERVAL`` has no interval."""
+    words = (f"{fit.n_pairs} {_rows_word(fit)}, fewer than the {fit.min_pairs_for_interval} "
+             f"the {fit.method.split('+')[0]} interval needs without a check")
+    if math.isnan(fit.calibrated_coverage):
+        return words
+    return f"{words}; the trust study at this size: {fit.calibration_note}"
 
 
 def var_diagnostics(fits: dict, trials: list[np.ndarray], max_lag: int
@@ -744,11 +773,11 @@ def radius_text(fit: Var1Fit, confidence: float) -> str:
     """The fitted spectral radius with its interval, or with the reason it has none."""
     value, se, low, high = fit.eigen_summary(confidence)["spectral_radius"]
     if not fit.has_interval:
-        return (f"spectral radius {value:.3f} (SE {se:.3f}): too few bounces for an interval "
-                f"({fit.n_pairs} {_rows_word(fit)}; the {fit.method.split('+')[0]} interval needs "
-                f"{fit.min_pairs_for_interval})")
+        return (f"spectral radius {value:.3f} (SE {se:.3f}): no interval ({_too_few(fit)})")
+    checked = (f"; coverage at this size {fit.calibrated_coverage:.0%} in the trust study"
+               if fit.n_pairs < fit.min_pairs_for_interval else "")
     return (f"spectral radius {value:.3f} [{low:.3f}, {high:.3f}] ({confidence:.0%} CI, delta "
-            "method on the log scale)")
+            f"method on the log scale{checked})")
 
 
 def _z(confidence: float) -> float:
@@ -761,23 +790,29 @@ def trust_frame(params, q_v, q_theta, config, segments, options,
                 noise: MeasurementNoise) -> pd.DataFrame:
     """How many bounces each estimator needs: linear VAR data at the model's J (data
     parameters) and the data's noise, plus white measurement noise ``noise`` (the data's own
-    from setup.csv, or the config's assumed),
-    split into trials of the data's mean run length; per total size and estimator the bias,
-    SD and interval coverage of the spectral radius over repetitions."""
-    from ..analysis.var_fit import fit_var1
+    from setup.csv, or the config's assumed), split into trials of the data's mean run length;
+    per total size and estimator the bias, SD and interval coverage (the delta method's, at
+    every size) of the spectral radius over repetitions. The last row per estimator
+    (``data_size`` true) is the data's own size: trials of the data's own run lengths, each
+    started in eq. 19's stationary distribution; it decides whether the data's fits below
+    ``MIN_PAIRS_FOR_INTERVAL`` get an interval (:func:`calibrated`). The repetitions of a
+    size are fitted at once (``analysis.var_stacked``)."""
+    from ..analysis.var_stacked import log_radius_se, simulate_panels, spectral_radii
 
     d = config.data_analysis
     jac = jacobian(params)
     truth = stability(params).spectral_radius
-    chol = np.linalg.cholesky(paper_noise_covariance(max(q_v, 1e-12), max(q_theta, 1e-12)))
+    noise_cov = paper_noise_covariance(max(q_v, 1e-12), max(q_theta, 1e-12))
+    chol = np.linalg.cholesky(noise_cov)
     meas = np.array([noise.sd_v_m_s, noise.sd_theta_rad])
     run_length = int(round(np.mean([len(s[1]) for s in segments])))
     rng = np.random.default_rng(np.random.SeedSequence(d.trust_seed))
-    rows = []
+    z = _z(d.confidence)
+    reps = d.trust_repetitions
+    sizes: list[tuple[list[int], np.ndarray, bool]] = []
     for total in d.trust_bounces:
         per = max(run_length, MIN_RUN_LENGTH)
         n_trials = max(1, int(round(total / per)))
-        reps = d.trust_repetitions
         y = np.zeros((reps * n_trials, 2))
         series = np.empty((reps * n_trials, per, 2))
         for k in range(TRUST_BURN_IN + per):
@@ -785,34 +820,82 @@ def trust_frame(params, q_v, q_theta, config, segments, options,
             if k >= TRUST_BURN_IN:
                 series[:, k - TRUST_BURN_IN] = y
         series += rng.standard_normal(series.shape) * meas
+        sizes.append(([per] * n_trials, series.reshape(reps, n_trials * per, 2), False))
+    own = [len(s[1]) for s in segments]
+    if truth < 1.0:
+        sizes.append((own, simulate_panels(jac, noise_cov, own, reps, rng,
+                                           measurement_sd=meas), True))
+    rows = []
+    for lengths, panels, data_size in sizes:
         for method in ("ols", "lag2"):
-            found: list[float] = []
-            inside, with_interval = 0, 0
-            for r in range(reps):
-                try:
-                    fit = fit_var1(list(series[r * n_trials:(r + 1) * n_trials]), method,
-                                   jackknife=d.jackknife)
-                except ModelError:
-                    continue
-                value, _, low, high = fit.eigen_summary(d.confidence)["spectral_radius"]
-                found.append(value)
-                with_interval += fit.has_interval
-                inside += low <= truth <= high
-            est = np.array(found)
+            est, inside = _trust_fits(panels, lengths, method, d.jackknife, truth, z,
+                                      spectral_radii, log_radius_se)
             q16, med, q84 = np.percentile(est, [16, 50, 84]) if len(est) else (math.nan,) * 3
-            rows.append({"bounces": n_trials * per, "trials": n_trials, "method": method,
+            rows.append({"bounces": sum(lengths), "trials": len(lengths), "method": method,
                          "repetitions": len(est), "true_spectral_radius": truth,
                          "median_estimate": med, "median_bias": med - truth,
                          "spread_16_84": q84 - q16, "q16": q16, "q84": q84,
-                         "coverage": inside / with_interval if with_interval else math.nan,
+                         "coverage": inside / len(est) if len(est) else math.nan,
                          "measurement_sd_v_m_s": meas[0],
                          "measurement_sd_theta_deg": math.degrees(meas[1]),
-                         "measurement_noise": noise.source})
+                         "measurement_noise": noise.source, "data_size": data_size})
         options.progress.advance(1)
     frame = pd.DataFrame(rows)
     frame["trusted"] = (frame["coverage"] >= d.confidence - d.trust_coverage_slack) & (
         frame["median_bias"].abs() <= 0.25 * frame["spread_16_84"])
     return frame
+
+
+def _trust_fits(panels, lengths, method, jackknife, truth, z, spectral_radii, log_radius_se):
+    """The trust study's estimates of one size and estimator (those ``fit_var1`` fits) and how
+    many of their delta-method intervals (log scale) hold the truth."""
+    from ..analysis.var_stacked import stacked_fit
+
+    try:
+        fit = stacked_fit(panels, lengths, method, jackknife)
+    except ModelError:
+        return np.zeros(0), 0
+    jac, cov = fit.jacobian[fit.identified], fit.cov_vec[fit.identified]
+    value = spectral_radii(jac)
+    half = np.minimum(z * log_radius_se(jac, cov), 700.0)
+    inside = int(np.sum((value * np.exp(-half) <= truth) & (truth <= value * np.exp(half))))
+    return value, inside
+
+
+def calibrated(fit: Var1Fit, trust: pd.DataFrame, confidence: float, slack: float
+               ) -> Var1Fit:
+    """``fit`` with its interval given below ``MIN_PAIRS_FOR_INTERVAL`` where the trust study
+    at the data's own size (its ``data_size`` row for the fit's estimator) trusts the delta
+    method there (coverage >= confidence - slack, |median bias| <= a quarter of the spread).
+
+    Parameters
+    ----------
+    fit : Var1Fit
+        A fit of the data (VAR or VARX: the VAR's trust study stands for both).
+    trust : pandas.DataFrame
+        :func:`trust_frame`'s table.
+    confidence, slack : float
+        The intervals' level and ``trust_coverage_slack`` (the rule of ``trusted``).
+
+    Returns
+    -------
+    Var1Fit
+        ``fit``, with ``calibrated_coverage`` set where its size was checked.
+    """
+    method = fit.method.split("+")[0]
+    rows = trust[(trust["method"] == method) & trust["data_size"].astype(bool)]
+    if fit.n_pairs >= fit.min_pairs_for_interval or not len(rows):
+        return fit
+    row = rows.iloc[0]
+    coverage = float(row["coverage"])
+    if not coverage >= confidence - slack:
+        note = (f"the {confidence:.0%} interval covers the truth in {coverage:.1%} of "
+                f"{int(row['repetitions'])} simulated data sets (below {confidence - slack:.0%})")
+    else:
+        note = (f"the estimate's median bias {row['median_bias']:+.3f} is more than a quarter "
+                f"of its 16-84 % spread {row['spread_16_84']:.3f}")
+    return dataclasses.replace(fit, calibrated_coverage=coverage,
+                               calibration_trusted=bool(row["trusted"]), calibration_note=note)
 
 
 def acf_data_draw(frames: dict[str, pd.DataFrame]) -> dict:
@@ -885,8 +968,10 @@ def _stability_figure(stab: pd.DataFrame, trust: pd.DataFrame | None):
     ax.legend(fontsize=7, title="spectral radius [95 % CI]", title_fontsize=7, loc="center")
     ax = axes[0, 1]
     if trust is not None and len(trust):
+        sized = trust[~trust.get("data_size", pd.Series(False, index=trust.index))
+                      .astype(bool)]
         for method, colour in (("ols", "tab:blue"), ("lag2", "tab:red")):
-            d = trust[trust["method"] == method]
+            d = sized[sized["method"] == method]
             ax.errorbar(d["bounces"], d["median_estimate"],
                         yerr=[d["median_estimate"] - d["q16"], d["q84"] - d["median_estimate"]],
                         fmt="-o", color=colour, capsize=2,

@@ -300,7 +300,7 @@ def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures:
         return None, {}
     pooled = pd.concat(tables, ignore_index=True)
     measured: dict[str, float] = {}
-    for quantity in ("g_m_s2",):
+    for quantity in MEASURED_SETUP:
         pairs = [(n, s[quantity]) for n, s in setups
                  if quantity in s and math.isfinite(s[quantity])]
         if pairs:
@@ -309,6 +309,12 @@ def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures:
     summary.append(f"{unit.label}: {len(tables)} of {len(unit.rows)} recording(s), "
                    f"{pooled['trial'].nunique()} trial(s), {len(pooled)} impacts")
     return pooled, measured
+
+
+#: what the unit's recordings measured of the set-up (their setup.csv), pooled weighted by
+#: impacts: g for the model, the measurement noise of v_k and theta_k for acf --data's trust
+#: study (which decides the intervals of short data)
+MEASURED_SETUP = ("g_m_s2", "measurement_sd_v_m_s", "measurement_sd_theta_rad")
 
 
 def unit_parameters(pooled: pd.DataFrame, measured: dict[str, float],
@@ -362,6 +368,8 @@ def analyse_unit(task: UnitTask) -> dict[str, Any]:
     pooled, measured = read_unit_impacts(task, frames, failures, summary)
     if pooled is not None:
         frames[f"{unit.folder}/impacts.csv"] = pooled
+        # the recordings' own measurement noise travels with the pooled table to acf --data
+        pooled.attrs["setup"] = {q: v for q, v in measured.items() if q != "g_m_s2"}
         parameters = None
         try:
             parameters = unit_parameters(pooled, measured, cfg["model"])
@@ -459,7 +467,7 @@ def unit_row(pooled: pd.DataFrame, frames: dict[str, pd.DataFrame], unit: Unit,
         except ModelError:
             pass
     stab = frames.get(f"{unit.folder}/acf/stability_data.csv")
-    for method in ("ols", "lag2"):
+    for method in RADIUS_ESTIMATORS:
         for field in ("estimate", "ci_low", "ci_high"):
             out[f"radius_{method}" + ("" if field == "estimate" else f"_{field}")] = math.nan
         out[f"radius_{method}_note"] = ""
@@ -490,6 +498,11 @@ def unit_row(pooled: pd.DataFrame, frames: dict[str, pd.DataFrame], unit: Unit,
     return out
 
 
+#: the spectral radius estimates of group.csv and group_stability.csv: the VAR(1) and, with
+#: each impact's racket period and amplitude as inputs, the VARX (acf --data's sources)
+RADIUS_ESTIMATORS = ("ols", "lag2", "varx_ols", "varx_lag2")
+
+
 def radius_entries(method: str, estimate: float, low: float, high: float,
                    note: str) -> dict[str, Any]:
     """group.csv's ``radius_<method>``, its interval and ``radius_<method>_note`` from a
@@ -500,7 +513,7 @@ def radius_entries(method: str, estimate: float, low: float, high: float,
     Parameters
     ----------
     method : str
-        ``ols`` or ``lag2``.
+        ``ols``, ``lag2``, ``varx_ols`` or ``varx_lag2`` (``RADIUS_ESTIMATORS``).
     estimate, low, high : float
         The row's estimate and interval.
     note : str
@@ -676,7 +689,9 @@ def group_tables(frames: dict[str, pd.DataFrame], units: list[Unit],
         cond = condition_of(group)
         for condition in sorted(cond.unique()):
             part = group[cond == condition]
-            for method in ("ols", "lag2"):
+            for method in RADIUS_ESTIMATORS:
+                if f"radius_{method}" not in part.columns:
+                    continue  # a group.csv of an older run, resumed
                 # a unit's estimate counts only where its data were enough for an interval
                 # (acf --data gives none below its stated minimum of bounces: such an estimate
                 # can be anything, e.g. a lag-2 radius of 30 on 170 bounces), and never where

@@ -584,3 +584,38 @@ def test_recordings_named_dot_dot_or_alike_keep_their_own_outputs(tmp_path, cli_
     assert pooled["trial"].nunique() == 3
     per_file = sum(len(pd.read_csv(p)) for p in (unit / "extract").glob("*/impacts.csv"))
     assert per_file == len(pooled)
+
+
+@pytest.mark.slow
+def test_a_labs_small_study_gets_an_interval_for_every_radius(tmp_path, cli_module):
+    """Issue 36's case: 3 subjects x 2 conditions x 3 trials x 20 s (about 90 impacts per
+    unit, below the fixed minimum of 200 pairs). The trust study at each unit's own size
+    trusts the OLS interval (the extraction's measurement noise is small), so every unit's
+    OLS and VARX-OLS radius has an interval, and group_stability.csv has the data-vs-model
+    paired difference with its interval per condition."""
+    sim = tmp_path / "sim"
+    assert cli_module("simulate-study", "--quiet", "--out", sim, "--set", "subjects.count=3",
+                      "--set", "trials=3", "--set", "duration_s=20",
+                      "--set", "racket.period_sd_s=0.005").exit_code == 0
+    out = tmp_path / "study"
+    result = cli_module("study", "--manifest", sim / "study.csv", "--out", out, "--jobs", "2",
+                        "--set", "analyses=[acf]",
+                        "--set", "settings.acf.data_analysis.trust_repetitions=100",
+                        "--set", "settings.acf.data_analysis.trust_bounces=[100]")
+    assert result.exit_code == 0, result.output
+    group = pd.read_csv(out / "group.csv")
+    assert len(group) == 6 and (group["impacts"] < 200).all()
+    for method in ("ols", "varx_ols"):
+        low, high = group[f"radius_{method}_ci_low"], group[f"radius_{method}_ci_high"]
+        assert np.isfinite(low).all() and np.isfinite(high).all(), group[
+            [f"radius_{method}", f"radius_{method}_note"]]
+        assert ((low < group[f"radius_{method}"]) & (group[f"radius_{method}"] < high)).all()
+    stab = pd.read_csv(out / "s1" / "vision" / "acf" / "stability_data.csv")
+    note = stab[(stab.quantity == "spectral_radius") & (stab.source == "ols+jackknife")]
+    assert "measured by the trust study" in note["note"].iloc[0]
+    paired = pd.read_csv(out / "group_stability.csv")
+    ols = paired[paired["estimate"] == "ols"]
+    assert len(ols) == 2 and (ols["units"] == 3).all()
+    assert np.isfinite(ols["ci_low"]).all() and (ols["ci_low"] < ols["ci_high"]).all()
+    for value in group.filter(regex=r"^radius_[a-z_0-9]+$").to_numpy().ravel():
+        assert math.isnan(value) or value <= 1.5
