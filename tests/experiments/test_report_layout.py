@@ -31,9 +31,8 @@ const tables = [...document.querySelectorAll('table')].map(t => {
           scrolls: getComputedStyle(box).overflowX};
 });
 const images = [...document.querySelectorAll('figure img')].map(i => ({
-  right: i.getBoundingClientRect().right, width: i.getBoundingClientRect().width,
-  natural: i.naturalWidth, height: i.getBoundingClientRect().height,
-  naturalHeight: i.naturalHeight}));
+  right: i.getBoundingClientRect().right, width: i.clientWidth, natural: i.naturalWidth,
+  height: i.clientHeight, naturalHeight: i.naturalHeight}));  // client*: without the border
 const out = document.createElement('pre');
 out.id = 'measured';
 out.textContent = JSON.stringify({viewport: page.clientWidth, pageWidth: page.scrollWidth,
@@ -77,31 +76,49 @@ def test_every_table_is_in_a_box_that_scrolls_sideways():
     assert "height: auto" in re.search(r"figure img\s*\{([^}]*)\}", STYLE).group(1)
 
 
-@pytest.mark.slow
-@pytest.mark.skipif(CHROMIUM is None,
-                    reason="headless Chromium is not installed (apt-get install chromium)")
-@pytest.mark.parametrize("width", [800, 1280])
-def test_no_table_runs_off_the_page_in_chromium(tmp_path, width):
-    document = wide_report().replace("</body>", MEASURE + "</body>")
-    path = tmp_path / "report.html"
-    path.write_text(document, encoding="utf-8")
+def measure(path, width: int, scratch) -> dict:
+    """What Chromium lays out for the HTML file ``path`` at ``width`` px: the page's width,
+    every table against its box, every figure's image (``MEASURE``, via ``--dump-dom``)."""
+    measured_page = scratch / "measured.html"
+    measured_page.write_text(path.read_text(encoding="utf-8").replace("</body>",
+                                                                      MEASURE + "</body>"),
+                             encoding="utf-8")
     run = subprocess.run([CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu",
-                          f"--user-data-dir={tmp_path / 'profile'}", f"--window-size={width},2000",
-                          "--virtual-time-budget=2000", "--dump-dom", path.as_uri()],
+                          f"--user-data-dir={scratch / 'profile'}", f"--window-size={width},2000",
+                          "--virtual-time-budget=2000", "--dump-dom", measured_page.as_uri()],
                          capture_output=True, text=True, timeout=120)
     found = re.search(r"<pre id=\"measured\">(.*?)</pre>", run.stdout, re.S)
     assert found, run.stderr[-2000:]
-    measured = json.loads(found.group(1).replace("&quot;", '"').replace("&amp;", "&"))
+    return json.loads(found.group(1).replace("&quot;", '"').replace("&amp;", "&"))
+
+
+def assert_nothing_runs_off(measured: dict, width: int) -> None:
+    """No sideways scroll of the page; each table in a box that scrolls and ends inside the
+    page; each figure inside the page with its aspect ratio (its title whole)."""
     viewport = measured["viewport"]
     assert 0 < viewport <= width
-    assert measured["pageWidth"] <= viewport, measured  # the page has no sideways scroll
+    assert measured["pageWidth"] <= viewport, measured
+    for table in measured["tables"]:
+        assert table["box"] == "table" and table["scrolls"] == "auto", table
+        assert table["boxRight"] <= viewport + 0.5, table
+    for image in measured["images"]:
+        assert image["right"] <= viewport + 0.5 and image["width"] <= image["natural"], image
+        assert image["height"] == pytest.approx(image["naturalHeight"] * image["width"]
+                                                / image["natural"], abs=1.5), image
+
+
+needs_chromium = pytest.mark.skipif(
+    CHROMIUM is None, reason="headless Chromium is not installed (apt-get install chromium)")
+
+
+@pytest.mark.slow
+@needs_chromium
+@pytest.mark.parametrize("width", [800, 1280])
+def test_no_table_runs_off_the_page_in_chromium(tmp_path, width):
+    path = tmp_path / "report.html"
+    path.write_text(wide_report(), encoding="utf-8")
+    measured = measure(path, width, tmp_path)
+    assert_nothing_runs_off(measured, width)
     wide, narrow = measured["tables"]
-    for table in (wide, narrow):
-        assert table["box"] == "table" and table["scrolls"] == "auto"
-        assert table["boxRight"] <= viewport + 0.5, table  # the box ends inside the page
     assert wide["tableWidth"] > wide["boxWidth"]  # the wide one is wider: it scrolls in its box
-    (image,) = measured["images"]
-    assert image["right"] <= viewport + 0.5 and image["width"] <= image["natural"]
-    # shrunk with its aspect ratio kept: the title along the top is whole, not cut off
-    assert image["height"] == pytest.approx(image["naturalHeight"] * image["width"]
-                                            / image["natural"], abs=1.5)
+    assert len(measured["images"]) == 1
