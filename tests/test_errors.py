@@ -305,3 +305,37 @@ def test_a_size_that_would_not_fit_in_memory_is_refused_before_allocating(
     one_error_line(result, "would need" if "max_points" not in needles[0] else "memory",
                    *needles)
     assert not out.exists()
+
+
+@pytest.mark.parametrize("value", ["1e9", "inf", "0.2"])
+def test_a_racket_period_sd_beyond_a_trial_period_is_one_line_in_simulate_study(tmp_path,
+                                                                                value):
+    """simulate-study's racket.period_sd_s (cycle-to-cycle SD) above 10 % of the shortest
+    trial period a subject draws: refused before any trial is simulated, one line, no folder
+    (it was a pydantic traceback-like block from one trial's config)."""
+    out = tmp_path / "sim"
+    result = run("simulate-study", "--out", out, "--set", "subjects.count=1", "--set",
+                 "trials=1", "--set", "duration_s=5", "--set", f"racket.period_sd_s={value}")
+    one_error_line(result, "racket.period_sd_s")
+    assert not out.exists()
+
+
+def test_a_trial_config_rule_broken_by_one_subject_is_one_line(tmp_path, monkeypatch):
+    """A rule of one trial's recording config that the study's own checks do not cover (here
+    a subject drawn with a short racket period, below the study's mean) is one line naming the
+    trial and the key, never pydantic's block of lines."""
+    from bounce_cli.experiments import simulate_study
+
+    plan = simulate_study.trial_plan
+
+    def short_periods(config):
+        table = plan(config)
+        table["racket_period_s"] = table["racket_period_s"] * 0.5
+        return table
+
+    monkeypatch.setattr(simulate_study, "trial_plan", short_periods)
+    out = tmp_path / "sim"
+    result = run("simulate-study", "--out", out, "--set", "subjects.count=1", "--set",
+                 "trials=1", "--set", "duration_s=5", "--set", "racket.period_sd_s=0.05")
+    one_error_line(result, "s1 ", "trial 1", "racket.period_sd_s")
+    assert not out.exists()

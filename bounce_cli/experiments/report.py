@@ -15,13 +15,13 @@ body { font-family: -apple-system, 'Segoe UI', Helvetica, Arial, sans-serif; mar
        max-width: 1100px; color: #222; line-height: 1.4; padding: 0 1em; }
 h1 { border-bottom: 2px solid #444; padding-bottom: .2em; }
 h2 { border-bottom: 1px solid #bbb; padding-bottom: .1em; margin-top: 2em; }
-table { border-collapse: collapse; font-size: 12px; margin: .5em 0 1em; display: block;
-        overflow-x: auto; max-width: 100%; }
+div.table { overflow-x: auto; max-width: 100%; margin: .5em 0 1em; }
+table { border-collapse: collapse; font-size: 12px; }
 th, td { border: 1px solid #ccc; padding: 2px 6px; text-align: right; white-space: nowrap; }
 th { background: #f0f0f0; }
 td.text { text-align: left; }
 figure { margin: 1em 0; }
-figure img { max-width: 100%; border: 1px solid #ddd; }
+figure img { max-width: 100%; height: auto; border: 1px solid #ddd; }
 figcaption { font-size: 12px; color: #555; }
 .warn { color: #a40; font-weight: bold; }
 nav a { margin-right: 1em; }
@@ -60,7 +60,8 @@ def _cell(value, digits: int) -> tuple[str, bool]:
 
 
 def html_table(frame: pd.DataFrame, digits: int = 6, max_rows: int = 200) -> str:
-    """A DataFrame as an HTML table (floats to ``digits`` significant digits, NaN empty)."""
+    """A DataFrame as an HTML table (floats to ``digits`` significant digits, NaN empty), in a
+    box that scrolls sideways where the table is wider than the page."""
     head = "".join(f"<th>{html.escape(str(c))}</th>" for c in frame.columns)
     rows = []
     for record in frame.head(max_rows).itertuples(index=False):
@@ -71,7 +72,8 @@ def html_table(frame: pd.DataFrame, digits: int = 6, max_rows: int = 200) -> str
         rows.append("<tr>" + "".join(cells) + "</tr>")
     more = (f"<p>({len(frame) - max_rows} more rows in the CSV)</p>"
             if len(frame) > max_rows else "")
-    return f"<table><tr>{head}</tr>{''.join(rows)}</table>{more}"
+    # the table scrolls inside its box on a narrow screen, the page itself does not
+    return f"<div class='table'><table><tr>{head}</tr>{''.join(rows)}</table></div>{more}"
 
 
 def page(title: str, sections: list[Section]) -> str:

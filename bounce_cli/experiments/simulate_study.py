@@ -25,7 +25,7 @@ import math
 
 import numpy as np
 import pandas as pd
-from pydantic import Field, model_validator
+from pydantic import Field, ValidationError, model_validator
 
 from ..runtime.config import ConfigError, ExperimentConfig, ModelBlock, StrictModel
 from ..model.linear import stable_ac_range_g
@@ -80,6 +80,13 @@ class SimulateStudyConfig(ExperimentConfig):
         total = self.subjects.count * len(self.conditions) * self.trials
         if self.damaged_files > total:
             raise ValueError(f"damaged_files: at most the {total} recordings")
+        shortest = self.subjects.period_mean_s * min(self.period_factors)
+        if self.racket.period_sd_s > 0.1 * shortest:
+            # each trial's recording allows 10 % of its racket period: refused here, before
+            # any trial is drawn, against the shortest mean period a trial asks for
+            raise ValueError(f"racket.period_sd_s must be at most 10% of the shortest trial "
+                             f"period (subjects.period_mean_s x min(period_factors) = "
+                             f"{shortest:g} s)")
         if total * self.duration_s * self.sample_rate_hz > 5e7:
             raise ValueError("subjects x conditions x trials x duration_s x sample_rate_hz "
                              "exceeds 5e7 samples")
@@ -140,6 +147,13 @@ def simulate_trial(data: dict, row) -> tuple[pd.DataFrame, pd.DataFrame, pd.Data
         seed = data["seed"] if restart == 0 else int(streams[restart - 1].generate_state(1)[0])
         try:
             config = RecordingConfig.model_validate({**data, "seed": seed})
+        except ValidationError as exc:  # one line: the first rule of the trial's config broken
+            error = exc.errors()[0]
+            where = ".".join(str(part) for part in error["loc"])
+            reason = error["msg"].removeprefix("Value error, ")
+            raise ConfigError(f"{row.subject} {row.condition} trial {row.trial} "
+                              f"(racket period {row.racket_period_s:.4g} s): "
+                              + (f"{where}: {reason}" if where else reason)) from None
         except ValueError as exc:
             raise ConfigError(f"{row.subject} {row.condition} trial {row.trial}: {exc}") from None
         try:

@@ -402,6 +402,20 @@ def test_the_report_renders_in_a_browser(tiny_study, tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.parametrize("width", [800, 1280])
+def test_no_table_of_the_report_runs_off_the_page(tiny_study, tmp_path, width):
+    """Issue 36: the study's report at 800 and 1280 px: every table scrolls in its own box,
+    the page has no sideways scroll, the figures fit with their titles."""
+    from test_report_layout import CHROMIUM, assert_nothing_runs_off, measure
+
+    if CHROMIUM is None:
+        pytest.skip("Chromium is not installed (Debian package chromium)")
+    measured = measure(tiny_study / "report.html", width, tmp_path)
+    assert len(measured["tables"]) >= 3 and measured["images"]
+    assert_nothing_runs_off(measured, width)
+
+
+@pytest.mark.slow
 def test_perturbations_come_with_events_and_give_impulse_responses(tmp_path, cli_module):
     """A perturbed study: events written and named by the manifest, impulse runs per unit,
     group_impulse.csv averages the responses over subjects."""
