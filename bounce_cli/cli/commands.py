@@ -833,6 +833,10 @@ def add_experiment_command(entry: Entry) -> None:
         port: Annotated[Optional[int], typer.Option(
             "--port", help="The page's port on 127.0.0.1, 0 for any free one (display.port); "
             "the URL is printed.", min=0, max=65535)] = None,
+        figures: Annotated[Optional[str], typer.Option(
+            "--figures", help="Which figures to draw: none, group (the group's) or all (the "
+            "group's and every unit's); default: what the reports show (config key "
+            "report.figures).", metavar="none|group|all")] = None,
         resume: ResumeOption = False,
         scheduler: SchedulerOption = None,
         figure_format: FigureFormatOption = None,
@@ -864,6 +868,8 @@ def add_experiment_command(entry: Entry) -> None:
             overrides.append("display.realtime=true")
         if port is not None:
             overrides.append(f"display.port={port}")
+        if figures is not None:
+            overrides.append(f"report.figures={figures}")
         run_experiment(entry, config=config, overrides=overrides, out=out_dir, quiet=quiet,
                        force=force, print_config=print_config, jobs=jobs, resume=resume,
                        scheduler=scheduler, figure_formats=tuple(figure_format or ["png"]),
@@ -883,6 +889,7 @@ def add_experiment_command(entry: Entry) -> None:
     declared = {**{k: v is not None for k, v in file_options.items()},
                 "racket": entry.racket_help is not None, "headless": entry.live,
                 "realtime": entry.live, "port": entry.live,
+                "figures": entry.manifest_help is not None,
                 "resume": entry.resumable, "scheduler": entry.cluster, "jobs": entry.parallel}
     params = [p.replace(annotation=hints[p.name])
               for p in inspect.signature(command).parameters.values()

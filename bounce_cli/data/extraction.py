@@ -33,6 +33,7 @@ Times in s, positions in m, velocities in m/s, phases in rad.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field, replace
 
@@ -998,9 +999,13 @@ def _racket_at_impacts(t, racket: _Racket, imp: _Impacts, s: ExtractionSettings)
 
 
 def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
-                  s: ExtractionSettings = ExtractionSettings()) -> TrialExtraction:
+                  s: ExtractionSettings = ExtractionSettings(),
+                  cache: dict | None = None) -> TrialExtraction:
     """Impacts of one trial (see the module docstring). ``ball`` may be None when events give
     the impact times; ``event_alpha`` (optional) the coefficient of restitution per event.
+    ``cache`` (a dict kept for the trial's samples, empty at first): the racket's cycles and
+    the bridged samples, found once and reused by later passes over the same samples at
+    another g or marker offset (neither enters them).
 
     In steps: the racket's cycles, the contacts (events or detected), the flights around each
     contact (or, without ball data, eq. 1 between impacts), hops and gaps, the racket at each
@@ -1009,8 +1014,14 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
     dt = float(np.median(np.diff(t)))
     s = replace(widened_windows(s, dt), guard_samples=guard_samples(s, dt))
     g = s.g
-    racket_ = _racket_of(t, racket, s)
-    ball_ = None if ball is None else _ball_of(t, ball, s)
+    key = replace(s, g=0.0, ball_offset_m=0.0)  # what the racket's cycles depend on
+    if cache is not None and cache.get("key") == key:
+        racket_, ball_ = cache["racket"], cache["ball"]
+    else:
+        racket_ = _racket_of(t, racket, s)
+        ball_ = None if ball is None else _ball_of(t, ball, s)
+        if cache is not None:
+            cache.update(key=key, racket=racket_, ball=ball_)
     excluded: list[tuple[float, str]] = []
     contacts = _contacts_of(t, racket_, ball_, event_t, event_alpha, s, excluded)
     imp = (_impacts_from_flights(t, racket_, ball_, contacts, s) if ball_ is not None
@@ -1100,6 +1111,14 @@ def contact_duration(areas, weights) -> tuple[float, float, int]:
     return duration, se_t2 / (2.0 * duration), int(a.size)
 
 
+@functools.lru_cache(maxsize=1)
+def _gauss_legendre_64() -> tuple[np.ndarray, np.ndarray]:
+    """The 64-point Gauss-Legendre nodes and weights, computed once (read-only)."""
+    nodes, weights = np.polynomial.legendre.leggauss(64)
+    nodes.flags.writeable = weights.flags.writeable = False
+    return nodes, weights
+
+
 def contact_shape_factor(alpha: float) -> float:
     """K(alpha) of a linear spring-damper contact (restitution alpha): the area between the
     ball's path in the contact and its two free flights extrapolated (the V they make, meeting
@@ -1121,7 +1140,7 @@ def contact_shape_factor(alpha: float) -> float:
     log = math.log(alpha)
     zeta = -log / math.sqrt(math.pi**2 + log * log)
     decay = zeta * math.pi / math.sqrt(1.0 - zeta * zeta)
-    nodes, weights = np.polynomial.legendre.leggauss(64)
+    nodes, weights = _gauss_legendre_64()
     s_eq = alpha / (1.0 + alpha)  # the flights meet: -s = alpha (s - 1)
 
     def part(a: float, b: float, v_line) -> float:

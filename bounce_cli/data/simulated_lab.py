@@ -57,7 +57,10 @@ three streams gave).
 
 from __future__ import annotations
 
+import functools
+import importlib.util
 import math
+import os
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -417,6 +420,34 @@ def equivalent_impact(t_in: float, x_in: float, v_in: float, t_out: float, x_out
     return t_eq, v_in - g * (t_eq - t_in), v_out - g * (t_eq - t_out)
 
 
+def common_path(s: SessionSettings) -> bool:
+    """True when a session has none of the physical set-up's imperfections, no perturbations
+    and no controller: the path ``compiled_lab`` runs compiled."""
+    return (s.contact_s == 0.0 and s.alpha_sd == 0.0 and s.harmonic2_m == 0.0
+            and s.disturbance_m == 0.0 and s.drift_amplitude_m == 0.0 and s.controller is None
+            and not s.perturb_alphas)
+
+
+def compiled_lab_available() -> bool:
+    """True when the compiled contact loop (``compiled_lab``, numba) can be used: the
+    environment variable ``BOUNCE_LAB`` is not ``python`` and the module imports (numba
+    installed and willing); otherwise the Python loop runs, with the same results."""
+    if os.environ.get("BOUNCE_LAB", "auto").strip().lower() == "python":
+        return False
+    return _compiled_lab_imports()
+
+
+@functools.lru_cache(maxsize=None)
+def _compiled_lab_imports() -> bool:
+    if importlib.util.find_spec("numba") is None:
+        return False
+    try:
+        from . import compiled_lab  # noqa: F401
+    except Exception:
+        return False
+    return True
+
+
 def simulate_trial(params: ModelParams, s: SessionSettings, streams) -> TrialTruth:
     """One trial's continuous motion and impacts (see the module docstring)."""
     rng_racket, rng_velocity = streams[:2]
@@ -439,6 +470,20 @@ def simulate_trial(params: ModelParams, s: SessionSettings, streams) -> TrialTru
     if t >= 0.0:  # a resting start: the launch is the trial's first impact
         times, v_after, alphas, perturbed = [t], [v], [params.alpha], [False]
         v_ins, contact_s = [math.nan], [0.0]  # no incoming flight: alpha_measured unknown
+    if common_path(s) and compiled_lab_available():
+        from .compiled_lab import contact_loop
+
+        loop = contact_loop(racket, params, s, t, x, v, rng_velocity)
+        if loop is not None:
+            flights, impacts = loop
+            n = impacts.shape[1]
+            return TrialTruth(
+                racket, flights[0], flights[1], flights[2],
+                np.concatenate([times, impacts[0]]), np.concatenate([v_after, impacts[1]]),
+                np.array(alphas + [params.alpha] * n),
+                np.array(perturbed + [False] * n, dtype=bool), t_end, g,
+                impact_v_in=np.concatenate([v_ins, impacts[2]]),
+                impact_contact_s=np.array(contact_s + [0.0] * n), contacts=[])
     while True:
         t_hit = next_contact(t, x, v, g, racket, t_end)
         if not math.isfinite(t_hit):

@@ -254,11 +254,14 @@ class SessionExtraction(NamedTuple):
     warnings: list[str]
 
 
-def _extract_trials(trials: list[Trial], events, settings: ExtractionSettings, source: str):
+def _extract_trials(trials: list[Trial], events, settings: ExtractionSettings, source: str,
+                    caches: list[dict] | None = None):
     """[(trial, its events, TrialExtraction)] at ``settings``; a trial without a bounce is a
-    one-line error naming the file and the trial."""
+    one-line error naming the file and the trial. ``caches``: one dict per trial, kept across
+    the passes of ``extract_all`` (the racket's cycles are found once per trial)."""
     out = []
-    for trial in trials:
+    caches = caches if caches is not None else [{} for _ in trials]
+    for trial, cache in zip(trials, caches):
         ev = events.get(str(trial.label)) if events is not None else None
         if events is not None and (ev is None or ev.t.size == 0):
             raise ConfigError(f"{source}: trial {trial.label}: no events for this trial")
@@ -268,7 +271,7 @@ def _extract_trials(trials: list[Trial], events, settings: ExtractionSettings, s
         try:
             result = extract_trial(trial.t, trial.racket, trial.ball,
                                    None if ev is None else ev.t,
-                                   None if ev is None else ev.alpha, settings)
+                                   None if ev is None else ev.alpha, settings, cache)
         except ModelError as exc:
             hint = NO_BOUNCE_HINT if str(exc).startswith("no bounce found") else ""
             raise ConfigError(f"{source}: trial {trial.label}: {exc}{hint}") from None
@@ -301,7 +304,8 @@ def extract_all(trials: list[Trial], events, settings: ExtractionSettings, sourc
     second extracts at them. A measured g outside any set-up's (PLAUSIBLE_G_M_S2) is a unit
     slip: an error when it would be used, else a warning; a set g that the flights
     contradict by more than 3 SE is a warning."""
-    first = _extract_trials(trials, events, settings, source)
+    caches: list[dict] = [{} for _ in trials]  # one pass finds each trial's racket cycles
+    first = _extract_trials(trials, events, settings, source, caches)
     gravity = pooled_gravity([f for _, _, r in first for f in r.flights])
     warnings: list[str] = []
     g = settings.g
@@ -322,13 +326,13 @@ def extract_all(trials: list[Trial], events, settings: ExtractionSettings, sourc
                             "flights are fitted at the set g (unset it to use the measured)")
     # the marker offset is measured at the impacts of flights fitted at the right g
     results = first if g == settings.g else _extract_trials(
-        trials, events, replace(settings, g=g), source)
+        trials, events, replace(settings, g=g), source, caches)
     offsets = np.concatenate([r.offsets_m for _, _, r in results])
     offsets = offsets[np.isfinite(offsets)]
     used = replace(settings, g=g)
     if measure_offset and offsets.size and float(np.median(offsets)) != settings.ball_offset_m:
         used = replace(used, ball_offset_m=float(np.median(offsets)))
-        results = _extract_trials(trials, events, used, source)
+        results = _extract_trials(trials, events, used, source, caches)
     impacts, excluded, cycles = [], [], []
     for trial, ev, result in results:
         frame = pd.DataFrame({"trial": trial.label, **result.impacts})
@@ -508,7 +512,9 @@ def set_gravity(config: ExtractConfig) -> float | None:
     return config.model.g if "g" in config.model.model_fields_set else None
 
 
-def run(config: ExtractConfig, options: RunOptions) -> ExperimentResult:
+def run(config: ExtractConfig, options: RunOptions, figures: bool = True) -> ExperimentResult:
+    """``bounce extract``; ``figures=False`` draws no figure (the study draws its own from
+    the frames, and only those it writes)."""
     g_set = set_gravity(config)
     # without a set g a first pass runs at model.g's default (and stays there without ball
     # data, whose flights alone show g)
@@ -561,10 +567,12 @@ def run(config: ExtractConfig, options: RunOptions) -> ExperimentResult:
         summary.append("RMS error against the truth: " + ", ".join(
             f"{q} {acc.loc[q, 'rms_error']:.3g} {acc.loc[q, 'unit']}"
             for q in ("theta_deg", "v_m_s", "racket_acc_g")))
-    figures = draw(frames)
-    caption_figures(figures, None, f"data: {config.data}" if config.data is not None
+    if not figures:
+        return ExperimentResult(frames=frames, figures={}, summary=summary)
+    drawn = draw(frames)
+    caption_figures(drawn, None, f"data: {config.data}" if config.data is not None
                     else "the bundled simulated session (no --data)")
-    return ExperimentResult(frames=frames, figures=figures, summary=summary)
+    return ExperimentResult(frames=frames, figures=drawn, summary=summary)
 
 
 def setup_summary(setup: list[SetupQuantity]) -> str:

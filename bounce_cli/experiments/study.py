@@ -86,6 +86,15 @@ class ReportBlock(StrictModel):
 
     unit_figures: bool = Field(True, description="each unit's figures (Fig. 2 of its first "
                                "recording and its analyses'), written and in the reports")
+    figures: Optional[Literal["none", "group", "all"]] = Field(
+        None, description="the figures drawn (--figures): none, the group's, or the group's "
+        "and every unit's; null: what the reports show (all, or group without unit_figures)")
+
+    def drawn(self) -> str:
+        """none, group or all: ``figures``, else what the reports show."""
+        if self.figures is not None:
+            return self.figures
+        return "all" if self.unit_figures else "group"
 
 
 class StudyConfig(ExperimentConfig):
@@ -279,7 +288,7 @@ def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures:
                 setup = {q.quantity: q.estimate for q in read_setup(row.file).values()}
             else:
                 ex_cfg = extraction_config(cfg, row.overrides, row.file, row.events, user_g)
-                result = extract.run(ex_cfg, RunOptions())
+                result = extract.run(ex_cfg, RunOptions(), figures=False)
                 stem = f"{unit.folder}/extract/{name}"
                 for file_name, frame in result.frames.items():
                     frames[f"{stem}/{file_name}"] = frame
@@ -398,7 +407,7 @@ def analyse_unit(task: UnitTask) -> dict[str, Any]:
         row.update(unit_row(pooled, frames, unit, row.get("alpha"), row.get("g_m_s2")))
     row["failures"] = len(failures)
     pngs = {}
-    if cfg["report"]["unit_figures"]:
+    if ReportBlock(**cfg["report"]).drawn() == "all":
         for name, fig in draw_units(frames, [unit]).items():
             pngs[name] = base64.b64encode(png_bytes(fig)).decode("ascii")
     return {"index": task.index, "key": task.key,
@@ -573,7 +582,9 @@ def run(config: StudyConfig, options: RunOptions) -> ExperimentResult:
     frames.update(group_tables(frames, units, config))
     # each figure rendered once, to PNG: written as it is and embedded in the reports (the
     # units' own in their workers)
-    pngs = {name: png_bytes(fig) for name, fig in draw(frames).items()}
+    drawn = config.report.drawn()
+    pngs = ({name: png_bytes(fig) for name, fig in draw(frames).items()}
+            if drawn != "none" else {})
     for result in results:
         pngs.update({name: base64.b64decode(data) for name, data in result["pngs"].items()})
     files = report_files(frames, pngs, units, manifest.path, config, warnings)

@@ -296,6 +296,24 @@ def test_marker_offset_is_measured_and_only_shifts_the_apex():
     np.testing.assert_allclose(plain.impacts["v_m_s"], told.impacts["v_m_s"], atol=1e-3)
 
 
+def test_passes_sharing_the_racket_cycles_give_the_same_impacts():
+    """extract_all's passes at another g and marker offset reuse the first pass's racket
+    cycles (``cache``): each pass's impacts equal, bit for bit, a fresh extraction's."""
+    offset = SessionSettings(sample_rate_hz=200.0, position_noise_m=0.0005,
+                             ball_marker_offset_m=0.03, seed=4, **BASE)
+    truth, (t, racket, ball) = session(offset)[0]
+    cache: dict = {}
+    for settings in (ExtractionSettings(), ExtractionSettings(g=9.79),
+                     ExtractionSettings(g=9.79, ball_offset_m=0.03)):
+        shared = extract_trial(t, racket, ball, s=settings, cache=cache)
+        fresh = extract_trial(t, racket, ball, s=settings)
+        assert shared.impacts.keys() == fresh.impacts.keys()
+        for name, column in fresh.impacts.items():
+            np.testing.assert_array_equal(shared.impacts[name], column, err_msg=name)
+        np.testing.assert_array_equal(shared.se_theta_rad, fresh.se_theta_rad)
+    assert cache["racket"] is not None
+
+
 def test_chatter_is_flagged_not_reported():
     """A double contact 2 ms apart: the 2 ms hop is not a bounce."""
     truth, (t, racket, ball) = session(CASE_A)[0]

@@ -633,3 +633,21 @@ def test_a_labs_small_study_gets_an_interval_for_every_radius(tmp_path, cli_modu
     assert np.isfinite(ols["ci_low"]).all() and (ols["ci_low"] < ols["ci_high"]).all()
     for value in group.filter(regex=r"^radius_[a-z_0-9]+$").to_numpy().ravel():
         assert math.isnan(value) or value <= 1.5
+
+
+@pytest.mark.parametrize("figures, group_png, unit_png", [("none", False, False),
+                                                          ("group", True, False)])
+def test_figures_option_draws_only_what_is_asked(tiny, tiny_study, tmp_path, cli_module,
+                                                 figures, group_png, unit_png):
+    """``--figures none|group``: no unit figure (and no group figure with none), the same
+    tables as the run that drew them all."""
+    out = tmp_path / figures
+    result = cli_module("study", "--manifest", tiny / "study.csv", "--out", out, "--quiet",
+                        "--set", "analyses=[regression, learning]", "--figures", figures,
+                        *FAST)
+    assert result.exit_code == 0, result.output
+    assert (out / "group_regression.png").is_file() == group_png
+    assert (out / "s1" / "a" / "regression" / "regression.png").is_file() == unit_png
+    assert (tiny_study / "s1" / "a" / "regression" / "regression.png").is_file()
+    for name in ("group.csv", "group_regression.csv", "s1/a/regression/fit.csv"):
+        pd.testing.assert_frame_equal(pd.read_csv(out / name), pd.read_csv(tiny_study / name))
