@@ -111,7 +111,3 @@ def lazy_exports(package: str, exports: dict[str, str]):
 
 
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)
-
-from . import old_paths  # noqa: E402  (the old module paths, with a DeprecationWarning)
-
-old_paths.install()

@@ -6,12 +6,11 @@ import pandas as pd
 import pytest
 
 from bounce_cli.runtime.config import ConfigError
-from bounce_cli.model.params import ModelParams
+from bounce_cli.model.params import ModelParams, circular_mean
 from bounce_cli.analysis.data_stats import perturbation_schedule, simulate_impacts
 from bounce_cli.data.impacts import (
     EVENT_COLUMNS,
     REQUIRED_COLUMNS,
-    circular_mean,
     impacts_frame,
     read_impacts,
 )

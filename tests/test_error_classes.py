@@ -63,8 +63,6 @@ def test_every_exception_class_of_the_package_is_a_bounce_error_or_says_why_not(
     ("bounce_cli.runtime.config", "ConfigError"),
     ("bounce_cli.model.params", "ModelError"),
     ("bounce_cli.model.params", "NoFixedPointError"),
-    ("bounce_cli.engine", "ModelError"),
-    ("bounce_cli.engine", "NoFixedPointError"),
     ("bounce_cli.runtime.artifacts", "OutputDirError"),
     ("bounce_cli.runtime.parallel", "ClusterError"),
     ("bounce_cli.paper.claims", "MissingResults"),

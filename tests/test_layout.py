@@ -10,26 +10,22 @@ from __future__ import annotations
 
 import ast
 import importlib
-import sys
-import warnings
 from pathlib import Path
 
 import pytest
 
 import bounce_cli
-from bounce_cli import old_paths
 
 PACKAGE = Path(bounce_cli.__file__).parent
 ROOT = PACKAGE.parent
 
 #: the rooms from the ground up (docs/design.md, "Rooms"): a module imports only modules of
-#: its own room or of a room before it. The table of old paths and the errors (standard
+#: its own room or of a room before it. The errors (standard
 #: library only) and the package's face (``bounce_cli/__init__.py``: lazy exports) come
 #: first; the paper's printed values sit low, so that anything above the analyses may compare
 #: with them, while its claims and the gallery of ``bounce reproduce`` read the experiments
 #: and sit above them; the Python API and the command line are the top.
 ROOMS = (
-    "bounce_cli.old_paths",
     "bounce_cli.errors",
     "bounce_cli.memory",
     "bounce_cli",
@@ -193,100 +189,30 @@ def test_every_module_is_in_a_room():
     top_level = {m for m in MODULES
                  if m.count(".") == 1 and not (PACKAGE / m.split(".")[1]).is_dir()}
     assert top_level == {"bounce_cli.api", "bounce_cli.errors", "bounce_cli.memory",
-                         "bounce_cli.old_paths", "bounce_cli.__main__"}
+                         "bounce_cli.__main__"}
 
 
-def old_path_of(target: str, names: list[str]) -> str | None:
-    """The old module path that an import of ``names`` from ``target`` goes through, if any."""
-    for old in (*old_paths.MOVED_MODULES, *old_paths.OLD_PACKAGES):
-        if target == old or target.startswith(old + "."):
-            return old
-    if target in old_paths.MOVED_INTO_PACKAGE and names:
-        return f"{target}.{names[0]}"  # a name of the old module, not a submodule
-    return None
+#: module paths retired in 0.2.0 (CHANGELOG.md), a sample of each kind: a flat module, an
+#: ``engine`` module, the ``engine`` package, the forwarding table itself
+RETIRED_PATHS = ("bounce_cli.engine", "bounce_cli.engine.params", "bounce_cli.engine.control",
+                 "bounce_cli.config", "bounce_cli.recordings", "bounce_cli.claims",
+                 "bounce_cli.old_paths")
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("folder", ["bounce_cli", "tests", "benchmarks"])
-def test_nothing_imports_an_old_path(folder):
-    here = Path(__file__).resolve()
-    used = []
-    for path in sorted((ROOT / folder).rglob("*.py")):
-        if path.resolve() == here or path.name == "old_paths.py":
-            continue
-        module = module_name(path) if folder == "bounce_cli" else path.stem
-        for target, names, line in imported_modules(module, path):
-            old = old_path_of(target, names)
-            if old:
-                used.append(f"{path.relative_to(ROOT)}:{line}: {old}")
-    assert used == []
+@pytest.mark.parametrize("old", RETIRED_PATHS)
+def test_a_retired_module_path_imports_no_more(old):
+    """One import path per public name: the forwarders of the old paths are gone."""
+    with pytest.raises(ModuleNotFoundError):
+        importlib.import_module(old)
 
 
-def fresh_import(name: str):
-    """Import ``name`` as if for the first time (its old-path entries dropped), recording the
-    warnings."""
-    for key in [k for k in sys.modules if k == name or k.startswith(name + ".")]:
-        if key in old_paths.MOVED_MODULES or key in old_paths.OLD_PACKAGES:
-            del sys.modules[key]
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        module = importlib.import_module(name)
-    return module, [str(w.message) for w in caught if w.category is DeprecationWarning]
-
-
-@pytest.mark.parametrize("old", sorted(old_paths.MOVED_MODULES))
-def test_an_old_module_path_gives_the_new_module_with_a_warning(old):
-    new = old_paths.MOVED_MODULES[old]
-    module, messages = fresh_import(old)
-    assert module is importlib.import_module(new)  # one module object, not a second copy
-    assert module.__spec__.name == new
-    assert any(m.startswith(f"{old} has moved to {new};") for m in messages), messages
-
-
-def test_the_old_engine_package_serves_its_names_with_a_warning():
-    engine, messages = fresh_import("bounce_cli.engine")
-    assert any(m.startswith("bounce_cli.engine has moved") for m in messages)
-    with pytest.warns(DeprecationWarning, match=r"bounce_cli\.model\.params\.ModelParams"):
-        from bounce_cli.engine import ModelParams
-    from bounce_cli.model import ModelParams as new
-    assert ModelParams is new
-    with pytest.warns(DeprecationWarning, match=r"bounce_cli\.analysis\.classify\.classify_grid"):
-        assert engine.classify_grid is importlib.import_module(
-            "bounce_cli.analysis.classify").classify_grid
+@pytest.mark.parametrize("package, old_name", [("bounce_cli.paper", "FIG3_MODEL"),
+                                               ("bounce_cli.cli", "app")])
+def test_a_package_serves_no_names_of_the_module_it_replaced(package, old_name):
     with pytest.raises(AttributeError):
-        engine.no_such_name  # noqa: B018
-    # each name it exported still exists at its new home
-    for name, home in old_paths.ENGINE_EXPORTS.items():
-        assert hasattr(importlib.import_module(home), name), (name, home)
-
-
-@pytest.mark.parametrize("old", sorted(old_paths.MOVED_INTO_PACKAGE))
-def test_an_old_module_that_is_now_a_package_serves_its_names_with_a_warning(old):
-    new = importlib.import_module(old_paths.MOVED_INTO_PACKAGE[old])
-    package = importlib.import_module(old)
-    name = next(n for n in sorted(vars(new)) if not n.startswith("_")
-                and getattr(getattr(new, n), "__module__", None) == new.__name__)
-    with pytest.warns(DeprecationWarning, match=rf"{old}\.{name} has moved to {new.__name__}"):
-        assert getattr(package, name) is getattr(new, name)
+        getattr(importlib.import_module(package), old_name)
 
 
 def test_the_top_level_exports_still_work():
     for name in bounce_cli.__all__:
         assert getattr(bounce_cli, name) is not None
-
-
-def test_the_old_control_module_serves_the_map_and_its_design():
-    """``engine.control`` was split into the controlled map (``model.control``) and its
-    design (``analysis.control_design``): every name it had is served from its new home."""
-    control, messages = fresh_import("bounce_cli.engine.control")
-    assert any(m.startswith("bounce_cli.engine.control has moved") for m in messages)
-    from bounce_cli.analysis import control_design
-    from bounce_cli.model import control as model_control
-
-    with pytest.warns(DeprecationWarning, match=r"bounce_cli\.model\.control\.ControlledMap"):
-        assert control.ControlledMap is model_control.ControlledMap
-    with pytest.warns(DeprecationWarning,
-                      match=r"bounce_cli\.analysis\.control_design\.fit_period_control"):
-        assert control.fit_period_control is control_design.fit_period_control
-    with pytest.raises(AttributeError):
-        control.no_such_name  # noqa: B018

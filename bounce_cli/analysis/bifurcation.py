@@ -43,7 +43,7 @@ from ..model.impact import can_fly
 from ..model.linear import ac_explicit_g, flip_boundary_g, spectral_radius, with_parameters
 from .lyapunov import advance_tangent, initial_tangent, map_jacobian
 from ..model.maps import map_step
-from ..model.params import MIN_HOP_S, ModelError, ModelParams, phase_difference
+from ..model.params import MIN_HOP_S, ModelError, ModelParams, gamma, phase_difference
 
 TWO_PI = 2.0 * math.pi
 
@@ -73,7 +73,7 @@ class ParameterArrays:
     @property
     def gamma(self) -> np.ndarray:
         """Gamma = a_r w^2 / g: the racket's peak acceleration in units of g."""
-        return self.racket_amplitude * self.omega**2 / self.g
+        return gamma(self.racket_amplitude, self.omega, self.g)
 
     def racket_velocity(self, phase):
         return self.racket_amplitude * self.omega * np.cos(phase)
@@ -92,7 +92,7 @@ class ParameterArrays:
 
 def gamma_of(params: ModelParams) -> float:
     """Gamma = a_r w^2 / g of one parameter point."""
-    return params.racket_amplitude * params.omega**2 / params.g
+    return params.gamma
 
 
 def parameter_point(base: ModelParams, parameter: str, value: float) -> ModelParams:

@@ -70,6 +70,7 @@ from typing import Callable, Sequence
 import numpy as np
 from scipy import stats
 
+from ..model.linear import eigenvalues_2x2
 from ..model.params import ModelError
 
 #: the entries of J in the order of vec(J) (row-major): (v, theta) as in eq. 9
@@ -218,16 +219,6 @@ def log_scale_interval(value: float, se: float, z: float) -> tuple[float, float]
 
 EIGEN_QUANTITIES = ("spectral_radius", "lambda_plus_re", "lambda_plus_im", "lambda_minus_re",
                     "lambda_minus_im")
-
-
-def eigenvalues_2x2(jac: np.ndarray) -> tuple[complex, complex]:
-    """(lambda_+, lambda_-) = c +- sqrt(c^2 - det J), c = tr J / 2 (eq. 10 for eq. 9's J,
-    where det J = alpha^2)."""
-    c = 0.5 * (jac[0, 0] + jac[1, 1])
-    det = jac[0, 0] * jac[1, 1] - jac[0, 1] * jac[1, 0]
-    disc = c * c - det
-    root = math.sqrt(disc) if disc >= 0 else 1j * math.sqrt(-disc)
-    return complex(c + root), complex(c - root)
 
 
 def _eigen_quantities(jac: np.ndarray) -> np.ndarray:

@@ -678,7 +678,7 @@ def orbit_notes_exact(orbit, params: ModelParams, cycles: int) -> list[str]:
         notes.append(
             f"note: resting: the ball stuck at t = {orbit.theta[-1] / params.omega:.6g} s and "
             f"is never released (Gamma = a_r w^2 / g = "
-            f"{params.racket_amplitude * params.omega**2 / params.g:.4g} <= 1)")
+            f"{params.gamma:.4g} <= 1)")
     elif cycles > 0:
         release = orbit.theta[orbit.rows("release")[-1]]
         notes.append(

@@ -45,7 +45,6 @@ from typing import Any, Union
 import numpy as np
 import pandas as pd
 
-from ..model.params import circular_mean  # noqa: F401 (its former home)
 from ..runtime.config import ConfigError, show_value
 
 #: the columns every impacts table has, in this order
@@ -317,7 +316,7 @@ def impacts_frame(sim, params, trial_names=None) -> pd.DataFrame:
         rows.append(pd.DataFrame({
             "trial": name, "k": np.arange(n), "t_s": sim.t[i],
             "theta_rad": theta, "theta_deg": np.degrees(theta), "v_m_s": sim.v[i],
-            "racket_acc_g": -params.racket_amplitude * params.omega**2 * np.sin(theta) / params.g,
+            "racket_acc_g": params.racket_acceleration_g(np.asarray(theta)),
             "racket_period_s": params.racket_period,
             "racket_amplitude_m": params.racket_amplitude,
             "hop_s": sim.hop[i], "ball_apex_m": apex_height(params, theta, sim.v[i]),

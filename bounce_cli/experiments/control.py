@@ -36,7 +36,7 @@ from ..analysis.classify import OUTCOMES
 from ..analysis.impulse import find_threshold
 from ..model.perturbation import perturbed_velocity, relaxation_impacts
 from ..model.linear import jacobian, radius_below
-from ..model.params import ModelError, ModelParams, phase_difference
+from ..model.params import ModelError, ModelParams, eq8_amplitude, phase_difference
 from ..analysis.stochastic import (
     PAIR_NAMES,
     map_noise_covariance,
@@ -682,7 +682,7 @@ def passive_model(frames: dict[str, pd.DataFrame]) -> ModelParams:
     alpha = math.sqrt(abs(complex(eig.lambda1_re, eig.lambda1_im)
                           * complex(eig.lambda2_re, eig.lambda2_im)))
     theta = math.radians(float(row.theta_deg - row.dtheta_deg))
-    amplitude = ModelParams(alpha, g, 1.0, tau).cos_theta_fixed() / math.cos(theta)
+    amplitude = eq8_amplitude(alpha, g, 2.0 * math.pi / tau, theta)
     return ModelParams(alpha, g, amplitude, tau)
 
 

@@ -23,7 +23,7 @@ from pydantic import Field
 from ..runtime.config import ConfigError, StrictModel
 from ..analysis.impulse import impulse_response_full
 from ..model.linear import jacobian, stability
-from ..model.params import ModelError, ModelParams, phase_difference
+from ..model.params import ModelError, ModelParams, circular_mean, eq8_alpha, phase_difference
 from ..analysis.stochastic import PAIR_NAMES, paper_noise_covariance, var1_theory
 from ..analysis.data_stats import (
     align,
@@ -35,7 +35,7 @@ from ..analysis.data_stats import (
 from ..analysis.racket_inputs import INPUT_COEFFICIENTS, racket_input_jacobian
 from ..analysis.var_fit import EIGEN_QUANTITIES, J_ENTRIES, Var1Fit, fit_var1
 from ..data.data_parameters import DataModel, model_for_data
-from ..data.impacts import Impacts, ImpactsSource, circular_mean, read_impacts
+from ..data.impacts import Impacts, ImpactsSource, read_impacts
 from .base import ExperimentResult
 from .plotting import (
     IMPACT_AFTER_LABEL,
@@ -235,8 +235,7 @@ def stationary_means(runs) -> tuple[float, float]:
 def implied_alpha(params: ModelParams, theta_rad: float) -> float:
     """Eq. 8 solved for alpha: (1 - alpha)/(1 + alpha) = r with r = cos(theta) w^2 a_r / (pi g),
     so alpha = (1 - r)/(1 + r); NaN where the phase is outside (-90, 90) deg."""
-    r = math.cos(theta_rad) * params.omega**2 * params.racket_amplitude / (math.pi * params.g)
-    return (1.0 - r) / (1.0 + r) if r > 0 else math.nan
+    return eq8_alpha(params.g, params.racket_amplitude, params.omega, theta_rad)
 
 
 # -- acf --data (Fig. 8 and the stability measured from data) --------------------------------

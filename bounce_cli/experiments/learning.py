@@ -34,7 +34,7 @@ from ..runtime.config import (
 )
 from ..analysis.data_stats import apex_sd_eq19, settled_mask
 from ..model.linear import jacobian, racket_amplitude_for_ac, stability, stable_ac_range_g
-from ..model.params import ModelError, ModelParams, phase_difference
+from ..model.params import ModelError, ModelParams, circular_mean, phase_difference
 from ..analysis.regression import ols_line
 from ..analysis.stochastic import (
     map_noise_covariance,
@@ -42,7 +42,7 @@ from ..analysis.stochastic import (
     stationary_covariance,
 )
 from ..data.data_parameters import DataModel, model_for_data
-from ..data.impacts import circular_mean, read_impacts
+from ..data.impacts import read_impacts
 from .plotting import caption_figures, data_caption, integer_axis, new_figure, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 

@@ -54,8 +54,7 @@ from ..analysis.group_stats import (
     paired_difference,
 )
 from ..model.linear import stability
-from ..model.params import ModelError, ModelParams, phase_difference
-from ..data.impacts import circular_mean
+from ..model.params import ModelError, ModelParams, circular_mean, phase_difference
 from .plotting import publication_style
 from .report import Section, embed_png, html_table, page
 from ..data.study_manifest import ManifestRow, Unit, read_manifest

@@ -221,7 +221,7 @@ def tables(axes: list[SweepAxis], points: list[ModelParams], index: np.ndarray,
         columns[name] = index[:, k]
     for field in MODEL_FIELDS:
         columns[SWEEP_PARAMETERS[field][0]] = [getattr(p, field) for p in points]
-    columns["gamma"] = [p.racket_amplitude * p.omega**2 / p.g for p in points]
+    columns["gamma"] = [p.gamma for p in points]
     sweep = pd.concat([pd.DataFrame(columns), pd.DataFrame([r["row"] for r in results])],
                       axis=1)
     axes_frame = pd.DataFrame({

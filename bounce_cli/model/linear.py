@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .maps import map_step
-from .params import ModelError, ModelParams
+from .params import ModelError, ModelParams, gamma
 
 
 def racket_acceleration_at_impact_g(params: ModelParams) -> float:
@@ -21,8 +21,7 @@ def racket_acceleration_at_impact_g(params: ModelParams) -> float:
 
     Equals -sqrt((a_r w^2/g)^2 - pi^2 ((1-alpha)/(1+alpha))^2).
     """
-    fp = params.fixed_point()
-    return -params.racket_amplitude * params.omega**2 * math.sin(fp.theta_rad) / params.g
+    return params.racket_acceleration_g(params.fixed_point().theta_rad)
 
 
 def jacobian(params: ModelParams) -> np.ndarray:
@@ -47,12 +46,58 @@ def characteristic_c(alpha, ac):
     return ((1.0 + np.square(alpha)) + np.square(1.0 + np.asarray(alpha)) * ac) / 2.0
 
 
+def eigenvalues_from_trace(c, det):
+    """The eigenvalues of a 2 x 2 matrix from half its trace and its determinant:
+    ``lambda_+- = c +- sqrt(c^2 - det)`` (eq. 10, where eq. 9's J has det J = alpha^2).
+
+    The one definition of the 2 x 2 eigenvalues: :func:`eigenvalues` (the model's, from
+    alpha and AC) and :func:`eigenvalues_2x2` (any matrix: a VAR(1) fitted to data) call it.
+
+    Parameters
+    ----------
+    c : float or array_like
+        Half the trace, tr J / 2.
+    det : float or array_like
+        The determinant, det J.
+
+    Returns
+    -------
+    tuple of numpy.ndarray
+        (lambda_+, lambda_-), complex; a complex pair where c^2 < det.
+    """
+    disc = c * c - det
+    root = np.where(disc >= 0.0, np.sqrt(np.abs(disc)) + 0j, 1j * np.sqrt(np.abs(disc)))
+    return c + root, c - root
+
+
 def eigenvalues(alpha, ac):
     """lambda_+- = c +- sqrt(c^2 - alpha^2) (eq. 10) as complex arrays (lambda_+, lambda_-)."""
     c = np.asarray(characteristic_c(alpha, ac), dtype=float)
-    disc = c * c - np.square(alpha)
-    root = np.where(disc >= 0.0, np.sqrt(np.abs(disc)) + 0j, 1j * np.sqrt(np.abs(disc)))
-    return c + root, c - root
+    return eigenvalues_from_trace(c, np.square(alpha))
+
+
+def eigenvalues_2x2(jac) -> tuple[complex, complex]:
+    """(lambda_+, lambda_-) of a 2 x 2 matrix: :func:`eigenvalues_from_trace` with
+    c = tr J / 2 and det J (eq. 10 for eq. 9's J, where det J = alpha^2).
+
+    Parameters
+    ----------
+    jac : array_like, shape (2, 2)
+        The matrix (eq. 9's Jacobian, or a VAR(1) coefficient matrix fitted to data).
+
+    Returns
+    -------
+    tuple of complex
+
+    Examples
+    --------
+    >>> eigenvalues_2x2(np.array([[0.0, -0.25], [1.0, 0.0]]))
+    (0.5j, -0.5j)
+    """
+    c = 0.5 * (jac[0, 0] + jac[1, 1])
+    det = jac[0, 0] * jac[1, 1] - jac[0, 1] * jac[1, 0]
+    plus, minus = eigenvalues_from_trace(c, det)
+    return complex(plus), complex(minus)
 
 
 def spectral_radius(alpha, ac):
@@ -194,7 +239,7 @@ def ac_explicit_g(alpha, g, racket_amplitude, racket_period):
     NaN where the radicand is negative (no fixed point).
     """
     w = 2.0 * np.pi / np.asarray(racket_period, dtype=float)
-    radicand = np.square(racket_amplitude * w**2 / g) - np.pi**2 * np.square(
+    radicand = np.square(gamma(racket_amplitude, w, g)) - np.pi**2 * np.square(
         (1.0 - np.asarray(alpha)) / (1.0 + np.asarray(alpha))
     )
     with np.errstate(invalid="ignore"):
@@ -248,11 +293,11 @@ def with_parameters(base: ModelParams, values: Mapping[str, float]) -> ModelPara
     fields = {f: getattr(base, f) for f in MODEL_FIELDS}
     fields.update({k: float(v) for k, v in values.items() if k in MODEL_FIELDS})
     if "gamma" in values:
-        gamma = float(values["gamma"])
-        if not gamma > 0.0:
+        gamma_value = float(values["gamma"])
+        if not gamma_value > 0.0:
             raise ModelError(f"gamma must be > 0 (got {values['gamma']!r})")
         point = ModelParams(**fields)
-        fields["racket_amplitude"] = gamma * point.g / point.omega**2
+        fields["racket_amplitude"] = gamma_value * point.g / point.omega**2
     if "ac_g" in values:
         ac = float(values["ac_g"])
         if not ac <= 0.0:

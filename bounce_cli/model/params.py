@@ -23,6 +23,120 @@ MAX_TERM_EXPONENT = 100
 MIN_HOP_S = 1e-3
 
 
+# -- eq. 8 and the quantities built on it: each defined here once -----------------------------
+def eq8_cos_theta(alpha, g, racket_amplitude, omega):
+    """The right-hand side of eq. 8: cos(theta~) of the period-1 fixed point.
+
+    ``cos theta~ = pi (1 - alpha)/(1 + alpha) g / (omega_r^2 a_r)`` (eq. 8); the orbit exists
+    where it is <= 1. With ``racket_amplitude = 1`` it is :func:`eq8_amplitude` at theta = 0.
+
+    Parameters
+    ----------
+    alpha : float or array_like
+        Coefficient of restitution.
+    g : float or array_like
+        Gravitational acceleration, m/s^2.
+    racket_amplitude : float or array_like
+        a_r, m.
+    omega : float or array_like
+        omega_r = 2 pi / tau, rad/s.
+
+    Returns
+    -------
+    float or numpy.ndarray
+        cos(theta~), the inputs' broadcast shape.
+
+    Examples
+    --------
+    At the parameters of Figs. 3 and 9 (alpha 0.5, a_r 0.30 m, tau 0.92 s), theta~ = 42.76 deg:
+
+    >>> round(eq8_cos_theta(0.5, 9.81, 0.30, 2 * math.pi / 0.92), 4)
+    0.7342
+    """
+    return math.pi * (1.0 - alpha) / (1.0 + alpha) * g / (omega**2 * racket_amplitude)
+
+
+def eq8_amplitude(alpha, g, omega, theta_rad):
+    """Eq. 8 solved for the racket amplitude: the a_r (m) whose period-1 orbit hits at phase
+    ``theta_rad``, ``a_r = pi (1 - alpha)/(1 + alpha) g / (omega_r^2 cos theta)``.
+
+    Eq. 15 is this with omega_r = 2 pi / tau, a line in tau^2 (``analysis.regression``);
+    at theta = 0 it is the smallest amplitude with a fixed point.
+
+    Parameters
+    ----------
+    alpha, g, omega : float or array_like
+        As in :func:`eq8_cos_theta`.
+    theta_rad : float or array_like
+        The impact phase, rad.
+
+    Returns
+    -------
+    float or numpy.ndarray
+        a_r, m (negative or infinite where cos theta <= 0).
+    """
+    cos = math.cos(theta_rad) if isinstance(theta_rad, (float, int)) else np.cos(theta_rad)
+    return eq8_cos_theta(alpha, g, 1.0, omega) / cos
+
+
+def eq8_alpha(g, racket_amplitude, omega, theta_rad: float) -> float:
+    """Eq. 8 solved for the coefficient of restitution: ``(1 - alpha)/(1 + alpha) = r`` with
+    ``r = cos(theta) omega_r^2 a_r / (pi g)``, so ``alpha = (1 - r)/(1 + r)``.
+
+    Parameters
+    ----------
+    g, racket_amplitude, omega : float
+        As in :func:`eq8_cos_theta`.
+    theta_rad : float
+        The observed impact phase, rad.
+
+    Returns
+    -------
+    float
+        alpha; NaN where the phase is outside (-90, 90) deg (r <= 0).
+    """
+    r = math.cos(theta_rad) * omega**2 * racket_amplitude / (math.pi * g)
+    return (1.0 - r) / (1.0 + r) if r > 0 else math.nan
+
+
+def gamma(racket_amplitude, omega, g):
+    """Gamma = a_r omega_r^2 / g: the racket's peak acceleration in units of g.
+
+    The parameter the bifurcation diagram and the continuation sweep; the ball resting on
+    the racket is released where sin(theta) = 1 / Gamma (``model.chatter``).
+
+    Parameters
+    ----------
+    racket_amplitude, omega, g : float or array_like
+        a_r (m), omega_r (rad/s), g (m/s^2).
+
+    Returns
+    -------
+    float or numpy.ndarray
+    """
+    return racket_amplitude * omega**2 / g
+
+
+def racket_acceleration_g(racket_amplitude, omega, g, phase):
+    """The racket's acceleration at ``phase`` in units of g: ``-a_r omega_r^2 sin(theta) / g``
+    (eq. 4 differentiated twice); at the fixed point's phase it is section 4's AC, negative on
+    the stable branch (``model.linear.racket_acceleration_at_impact_g``).
+
+    Parameters
+    ----------
+    racket_amplitude, omega, g : float or array_like
+        a_r (m), omega_r (rad/s), g (m/s^2).
+    phase : float or array_like
+        theta = omega_r t, rad (a Python float takes ``math.sin``, an array ``numpy.sin``).
+
+    Returns
+    -------
+    float or numpy.ndarray
+    """
+    sin = math.sin(phase) if isinstance(phase, float) else np.sin(phase)
+    return -racket_amplitude * omega**2 * sin / g
+
+
 @dataclass(frozen=True)
 class FixedPoint:
     """The period-1 fixed point (v~, theta~) of eqs. 7 and 8.
@@ -109,18 +223,22 @@ class ModelParams:
 
     # -- fixed point (eqs. 7, 8) -----------------------------------------------------------
     def cos_theta_fixed(self) -> float:
-        """Right-hand side of eq. 8: pi (1-alpha)/(1+alpha) g / (omega_r^2 a_r)."""
-        return (
-            math.pi
-            * (1.0 - self.alpha)
-            / (1.0 + self.alpha)
-            * self.g
-            / (self.omega**2 * self.racket_amplitude)
-        )
+        """Right-hand side of eq. 8 at these parameters (:func:`eq8_cos_theta`)."""
+        return eq8_cos_theta(self.alpha, self.g, self.racket_amplitude, self.omega)
 
     def min_racket_amplitude(self) -> float:
-        """Smallest a_r for which eq. 8 has a solution (cos theta~ = 1), in m."""
-        return math.pi * (1.0 - self.alpha) / (1.0 + self.alpha) * self.g / self.omega**2
+        """Smallest a_r for which eq. 8 has a solution (cos theta~ = 1), in m
+        (:func:`eq8_amplitude` at theta = 0)."""
+        return eq8_amplitude(self.alpha, self.g, self.omega, 0.0)
+
+    @property
+    def gamma(self) -> float:
+        """Gamma = a_r w^2 / g (:func:`gamma`)."""
+        return gamma(self.racket_amplitude, self.omega, self.g)
+
+    def racket_acceleration_g(self, phase):
+        """The racket's acceleration at ``phase`` in units of g (:func:`racket_acceleration_g`)."""
+        return racket_acceleration_g(self.racket_amplitude, self.omega, self.g, phase)
 
     def fixed_point(self) -> FixedPoint:
         """Period-1 fixed point: v~ = pi g / omega_r (eq. 7), theta~ = arccos(eq. 8).

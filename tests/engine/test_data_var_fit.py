@@ -7,12 +7,11 @@ import math
 import numpy as np
 import pytest
 
-from bounce_cli.model.linear import jacobian, stability
+from bounce_cli.model.linear import eigenvalues_2x2, jacobian, stability
 from bounce_cli.model.params import ModelParams
 from bounce_cli.analysis.data_stats import simulate_impacts
 from bounce_cli.model.params import ModelError, phase_difference
 from bounce_cli.analysis.var_fit import (
-    eigenvalues_2x2,
     fit_var1,
     fit_var1_lag2,
     fit_var1_ols,
