@@ -11,7 +11,8 @@ from bounce_cli.analysis.var_stacked import (
     spectral_radii,
     stacked_fit,
 )
-from bounce_cli.analysis.var_fit import eigenvalues_2x2, fit_var1
+from bounce_cli.analysis.var_fit import fit_var1
+from bounce_cli.model.linear import eigenvalues_2x2
 
 J_TRUE = np.array([[0.2, -0.9], [0.5, 0.45]])  # a complex pair, radius about 0.72
 NOISE = np.array([[0.04, 0.01], [0.01, 0.02]])
