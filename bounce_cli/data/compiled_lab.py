@@ -29,7 +29,7 @@ import math
 import numba
 import numpy as np
 
-from .simulated_lab import CONTACT_TOLERANCE_M, MAX_CONTACT_STEPS
+from .lab_contact import CONTACT_TOLERANCE_M, MAX_CONTACT_STEPS
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 

@@ -71,16 +71,13 @@ from ..model.flight import impact_velocity, restitution_of
 from ..model.params import ModelError, ModelParams
 from .impacts import ball_apex
 from ..model.perturbation import perturbed_impact
+from .lab_contact import CONTACT_TOLERANCE_M, MAX_CONTACT_STEPS
 
 #: a simulated session's sticking threshold, s: a hop shorter than this is an error (a lab's
 #: ball does not chatter); ten times section 3's ``MIN_HOP_S``
 LAB_MIN_HOP_S = 0.01
 
 TWO_PI = 2.0 * math.pi
-#: the contact iteration stops when the gap is below this (m) and polishes with one Newton step
-CONTACT_TOLERANCE_M = 1e-12
-#: safe steps allowed per flight before giving up (typical flights take 10-40)
-MAX_CONTACT_STEPS = 20_000
 
 
 @dataclass(frozen=True)
