@@ -339,3 +339,12 @@ def test_a_trial_config_rule_broken_by_one_subject_is_one_line(tmp_path, monkeyp
                  "trials=1", "--set", "duration_s=5", "--set", "racket.period_sd_s=0.05")
     one_error_line(result, "s1 ", "trial 1", "racket.period_sd_s")
     assert not out.exists()
+
+
+@pytest.mark.parametrize("g", [-3.0, 0.0, float("nan"), float("inf")])
+def test_a_fitted_g_that_is_no_fall_gets_a_hint_not_a_math_error(g):
+    """The fuzzer's find (a ball sample of 1e40): a fitted g <= 0 or not finite has no power
+    of ten to blame; the hint says to check the ball's column instead of raising."""
+    from bounce_cli.experiments.extract import unit_slip_hint
+
+    assert "columns.ball" in unit_slip_hint(g)

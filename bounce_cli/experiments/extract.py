@@ -282,6 +282,9 @@ def _extract_trials(trials: list[Trial], events, settings: ExtractionSettings, s
 def unit_slip_hint(g: float) -> str:
     """What a fitted g far from any set-up's suggests (lengths scaled by a power of ten)."""
     ratio = g / STANDARD_GRAVITY
+    if not (math.isfinite(ratio) and ratio > 0.0):  # a ball that does not fall: no scale slip
+        return ("check the ball's column and the vertical axis (columns.ball, "
+                "c3d.vertical_axis): its flights do not fall")
     for factor, slip in ((10.0, "millimetres read as centimetres, or centimetres as "
                                 "decimetres"), (100.0, "centimetres read as metres"),
                          (1000.0, "millimetres read as metres"),
