@@ -225,15 +225,15 @@ def check_reader(tmp_path: Path, seeds, name: str, budget: settings) -> None:
 READERS = ["csv", "vicon", "qtm", "motive", "c3d", "vicon-real"]
 
 
-@pytest.mark.parametrize("name", READERS)
-def test_a_mutated_recording_is_read_or_refused_in_one_line(tmp_path, seeds, name):
-    check_reader(tmp_path, seeds, name, QUICK)
+#: the two budgets as a test parameter: the quick one in the default run, the long one marked
+BUDGETS = [pytest.param(QUICK, id="quick"),
+           pytest.param(LONG, id="long", marks=pytest.mark.slow)]
 
 
-@pytest.mark.slow
+@pytest.mark.parametrize("budget", BUDGETS)
 @pytest.mark.parametrize("name", READERS)
-def test_many_mutated_recordings_are_read_or_refused_in_one_line(tmp_path, seeds, name):
-    check_reader(tmp_path, seeds, name, LONG)
+def test_mutated_recordings_are_read_or_refused_in_one_line(tmp_path, seeds, name, budget):
+    check_reader(tmp_path, seeds, name, budget)
 
 
 CONFIGS = [("extract.yaml", ExtractConfig), ("recording.yaml", RecordingConfig)]
@@ -255,15 +255,10 @@ def check_config(tmp_path: Path, file_name: str, schema, budget: settings) -> No
     check()
 
 
+@pytest.mark.parametrize("budget", BUDGETS)
 @pytest.mark.parametrize("file_name, schema", CONFIGS)
-def test_a_mutated_config_is_loaded_or_refused_in_one_line(tmp_path, file_name, schema):
-    check_config(tmp_path, file_name, schema, QUICK)
-
-
-@pytest.mark.slow
-@pytest.mark.parametrize("file_name, schema", CONFIGS)
-def test_many_mutated_configs_are_loaded_or_refused_in_one_line(tmp_path, file_name, schema):
-    check_config(tmp_path, file_name, schema, LONG)
+def test_mutated_configs_are_loaded_or_refused_in_one_line(tmp_path, file_name, schema, budget):
+    check_config(tmp_path, file_name, schema, budget)
 
 
 @pytest.fixture(scope="module")

@@ -796,7 +796,7 @@ def trust_frame(params, q_v, q_theta, config, segments, options,
     started in eq. 19's stationary distribution; it decides whether the data's fits below
     ``MIN_PAIRS_FOR_INTERVAL`` get an interval (:func:`calibrated`). The repetitions of a
     size are fitted at once (``analysis.var_stacked``)."""
-    from ..analysis.var_stacked import log_radius_se, simulate_panels, spectral_radii
+    from ..analysis.var_stacked import simulate_panels
 
     d = config.data_analysis
     jac = jacobian(params)
@@ -827,8 +827,7 @@ def trust_frame(params, q_v, q_theta, config, segments, options,
     rows = []
     for lengths, panels, data_size in sizes:
         for method in ("ols", "lag2"):
-            est, inside = _trust_fits(panels, lengths, method, d.jackknife, truth, z,
-                                      spectral_radii, log_radius_se)
+            est, inside = _trust_fits(panels, lengths, method, d.jackknife, truth, z)
             q16, med, q84 = np.percentile(est, [16, 50, 84]) if len(est) else (math.nan,) * 3
             rows.append({"bounces": sum(lengths), "trials": len(lengths), "method": method,
                          "repetitions": len(est), "true_spectral_radius": truth,
@@ -845,10 +844,10 @@ def trust_frame(params, q_v, q_theta, config, segments, options,
     return frame
 
 
-def _trust_fits(panels, lengths, method, jackknife, truth, z, spectral_radii, log_radius_se):
+def _trust_fits(panels, lengths, method, jackknife, truth, z):
     """The trust study's estimates of one size and estimator (those ``fit_var1`` fits) and how
     many of their delta-method intervals (log scale) hold the truth."""
-    from ..analysis.var_stacked import stacked_fit
+    from ..analysis.var_stacked import log_radius_se, spectral_radii, stacked_fit
 
     try:
         fit = stacked_fit(panels, lengths, method, jackknife)
