@@ -1,9 +1,9 @@
 """bounce from Python: run an experiment in a notebook, read a recording, extract its impacts.
 
-The same code path as the command line: :func:`run` loads and validates a config exactly as
-``bounce <name>`` does (:func:`load_run_config`), runs the experiment, and, given ``out``,
-writes exactly what the command writes through the same run directory (:func:`open_run_directory`,
-:func:`write_result`). A user error raises a :class:`~bounce_cli.errors.BounceError` (a
+The same code path as the command line: :func:`run` goes through the one front door of
+every run, :func:`bounce_cli.experiments.runner.execute`, which loads and validates a config
+exactly as ``bounce <name>`` does, runs the experiment, and, given ``out``, writes exactly
+what the command writes. A user error raises a :class:`~bounce_cli.errors.BounceError` (a
 :class:`~bounce_cli.errors.ConfigError`, :class:`~bounce_cli.errors.ModelError`, ...) with the
 one line the command would print; nothing exits the interpreter.
 
@@ -21,26 +21,17 @@ stability of eqs. 9-14) are re-exported here and from :mod:`bounce_cli`::
 from __future__ import annotations
 
 import json
-import warnings
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .runtime.artifacts import FIGURE_DPI, RunDirectory
-from .runtime.config import (
-    DATA_MODEL_KEYS,
-    ConfigError,
-    ExperimentConfig,
-    bundled_config_path,
-    keys_set_by_user,
-    load_config,
-    validate,
-)
+from .runtime.config import ConfigError, validate
 from .model.params import FixedPoint, ModelError, ModelParams
 from .model.maps import Orbit, iterate_orbit, map_step
 from .model.linear import Stability, stability
-from .experiments.base import Experiment, ExperimentResult, RunOptions
-from .experiments.registry import EXPERIMENTS, Entry
+from .experiments.base import ExperimentResult
+from .experiments.registry import EXPERIMENTS
+from .experiments.runner import execute, find_entry, python_warning
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -50,246 +41,6 @@ __all__ = [
     "ModelParams", "FixedPoint", "map_step", "iterate_orbit", "Orbit", "stability", "Stability",
     "ConfigError", "ModelError",
 ]
-
-
-# -- the one path shared with the CLI (``cli.run_experiment``) -------------------------------
-def find_entry(name: str) -> Entry:
-    """The registry entry of experiment ``name`` (a command of ``bounce``).
-
-    Parameters
-    ----------
-    name : str
-        The command's name, e.g. ``"basin"``.
-
-    Returns
-    -------
-    Entry
-        Its :class:`bounce_cli.experiments.registry.Entry`.
-
-    Raises
-    ------
-    ConfigError
-        When no experiment has that name (the message lists them).
-
-    Examples
-    --------
-    >>> find_entry("basin").figures[0][0]
-    'basin.png'
-    """
-    for entry in EXPERIMENTS:
-        if entry.name == name:
-            return entry
-    raise ConfigError(f"no experiment named {name!r} (one of: "
-                      + ", ".join(e.name for e in EXPERIMENTS) + ")")
-
-
-def load_run_config(entry: Entry, config: Path | None,
-                    overrides: list[str]) -> tuple[Experiment, Path, ExperimentConfig]:
-    """Load an experiment's config and validate it, as ``bounce <name> --config --set`` does.
-
-    Parameters
-    ----------
-    entry : Entry
-        The experiment (:func:`find_entry`).
-    config : Path or None
-        A YAML config; None: the bundled ``configs/<name>.yaml``.
-    overrides : list of str
-        ``dotted.key=value`` overrides (YAML scalars), applied in order.
-
-    Returns
-    -------
-    tuple
-        (the experiment, the config file read, the validated config).
-
-    Raises
-    ------
-    ConfigError
-        A missing or malformed file, an unknown key, a value out of range.
-
-    Examples
-    --------
-    >>> _, path, cfg = load_run_config(find_entry("basin"), None, ["grid.v0_m_s.num=4"])
-    >>> path.name, cfg.grid.v0_m_s.num
-    ('basin.yaml', 4)
-    """
-    experiment = entry.load()
-    path = Path(config) if config is not None else bundled_config_path(entry.config)
-    return experiment, path, load_config(experiment.schema, path, overrides, EXPERIMENTS)
-
-
-def warn_if_unstable(params: ModelParams, controller=None,
-                     warn: Callable[[str], None] | None = None) -> None:
-    """Warn when the period-1 fixed point exists but is linearly unstable (eq. 10; with racket
-    period control the 3 x 3 Jacobian of ``engine.control``): the figures then describe an
-    orbit nothing converges to.
-
-    Parameters
-    ----------
-    params : ModelParams
-        The model's parameters.
-    controller : optional
-        The racket period controller of ``model.control``, or None.
-    warn : callable, optional
-        Receives the one-line message (the CLI prints ``bounce: warning: <message>``); None:
-        a Python ``UserWarning``.
-
-    Raises
-    ------
-    NoFixedPointError
-        When there is no fixed point at all (eq. 8).
-
-    Examples
-    --------
-    >>> unstable = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.30, racket_period=0.5)
-    >>> warn_if_unstable(unstable, warn=print)  # doctest: +ELLIPSIS
-    the period-1 fixed point is linearly unstable at these parameters (spectral radius ...
-    """
-    from .model.linear import flip_boundary_g, is_stable
-
-    say = warn if warn is not None else python_warning
-    if controller is not None:
-        from .model.control import controlled_jacobian, spectral_radius_3x3
-
-        radius = float(spectral_radius_3x3(controlled_jacobian(params, controller)))
-        if not is_stable(radius):
-            say(f"the period-1 fixed point is linearly unstable with this racket period "
-                f"control (model.control: spectral radius {radius:.3g} of the 3 x 3 Jacobian)")
-        return
-    st = stability(params)
-    if not st.stable:
-        say(f"the period-1 fixed point is linearly unstable at these parameters (spectral "
-            f"radius {st.spectral_radius:.3g}, AC = {st.ac_g:.3g} g; stable for "
-            f"{float(flip_boundary_g(params.alpha)):.3g} g < AC < 0, eq. 14)")
-
-
-def warn_if_implausible_racket(model, warn: Callable[[str], None] | None = None) -> None:
-    """A warning per racket parameter of a ``model`` block outside what a person can do
-    (``bounce_cli.data.plausibility``), naming the likely unit slip (a block without a racket, such
-    as a study's, has nothing to check).
-
-    Parameters
-    ----------
-    model
-        A config's validated ``model`` block.
-    warn : callable, optional
-        Receives each one-line message; None: a Python ``UserWarning``.
-    """
-    from .data.plausibility import racket_warnings
-
-    if getattr(model, "racket_amplitude", None) is None or getattr(
-            model, "racket_period", None) is None:
-        return
-    say = warn if warn is not None else python_warning
-    for message in racket_warnings(model.racket_amplitude, model.racket_period,
-                                   "model.racket_amplitude", "model.racket_period"):
-        say(message)
-
-
-def check_model(entry: Entry, cfg: ExperimentConfig,
-                warn: Callable[[str], None] | None = None) -> None:
-    """Before a run: warn of an implausible racket, and, for a run about the period-1 fixed
-    point, of an unstable one (with a ``data`` file the model is taken at the data's racket,
-    not the config's, so neither is checked). Raises ``NoFixedPointError`` when there is
-    none."""
-    if getattr(cfg, "data", None) is not None:
-        return
-    warn_if_implausible_racket(cfg.model, warn)
-    if entry.needs_fixed_point:
-        controller = getattr(cfg.model, "controller", lambda: None)()
-        warn_if_unstable(cfg.params, controller, warn)
-
-
-def run_options(entry: Entry, cfg: ExperimentConfig, config: Path | None, overrides: list[str],
-                **options: Any) -> RunOptions:
-    """The run's :class:`RunOptions` (``options``: jobs, warn, scheduler), with the model keys
-    the user set (``--set``'s, and their own config's where it differs from the bundled one:
-    ``config.keys_set_by_user``) where a ``data`` analysis takes the others from the data."""
-    run = RunOptions(**options)
-    if getattr(cfg, "data", None) is not None:
-        defaults = None if config is None else load_config(
-            type(cfg), bundled_config_path(entry.config)).model_dump(mode="json")
-        given = keys_set_by_user(config, overrides, defaults)
-        run.model_set_by_user = frozenset(
-            key for key in DATA_MODEL_KEYS if f"model.{key}" in given)
-    return run
-
-
-def open_run_directory(entry: Entry, cfg: ExperimentConfig, path: Path, *, config_given: bool,
-                       overrides: list[str], out: Path | None, force: bool,
-                       figure_formats: tuple[str, ...] = ("png",),
-                       dpi: int = FIGURE_DPI) -> RunDirectory:
-    """The run directory the results go to (default ``results/<name>``), with the manifest's
-    provenance; checks that ``out`` holds no other config's results unless ``force``.
-
-    Parameters
-    ----------
-    entry, cfg, path
-        The experiment, its validated config and the file it was read from
-        (:func:`load_run_config`).
-    config_given : bool
-        The user named the config (else the bundled one was read).
-    overrides : list of str
-        The ``--set`` overrides, recorded in the manifest.
-    out : Path or None
-        The output folder; None: ``results/<config's stem or name>``.
-    force : bool
-        Replace results of a different config in ``out``.
-    figure_formats : tuple of str, default ("png",)
-        Each figure is written once in each format.
-    dpi : int
-        The PNGs' resolution.
-
-    Returns
-    -------
-    RunDirectory
-        Nothing is written until :func:`write_result` commits it.
-    """
-    data_file = getattr(cfg, "data", None)
-    name = path.stem if config_given else entry.name
-    return RunDirectory(
-        Path(out) if out is not None else Path("results") / name,
-        command=entry.name,
-        resolved_config=cfg.model_dump(mode="json"),
-        overrides=overrides,
-        config_path=str(path) if config_given else f"bundled: configs/{path.name}",
-        # a fit to a data file draws no random numbers: its seed is not part of the run
-        seed=getattr(cfg, "seed", None) if data_file is None else None,
-        data_file=data_file,
-        force=force,
-        figure_formats=figure_formats,
-        dpi=dpi,
-    )
-
-
-def write_result(run_dir: RunDirectory, result: ExperimentResult, agrees=None) -> list[Path]:
-    """Write a result's tables, figures and files into ``run_dir`` atomically.
-
-    Parameters
-    ----------
-    run_dir : RunDirectory
-        From :func:`open_run_directory`.
-    result : ExperimentResult
-        What the experiment returned.
-    agrees : optional
-        See ``RunDirectory.commit``.
-
-    Returns
-    -------
-    list of Path
-        The files written (the manifest among them).
-    """
-    for name, frame in result.frames.items():
-        run_dir.add_csv(name, frame)
-    for name, figure in result.figures.items():
-        run_dir.add_figure(name, figure)
-    for name, content in result.files.items():
-        run_dir.add_file(name, content)
-    return run_dir.commit(agrees)
-
-
-def python_warning(message: str) -> None:
-    """The API's warning sink: a ``UserWarning`` carrying the CLI's warning text."""
-    warnings.warn(message, UserWarning, stacklevel=3)
 
 
 def override_texts(set: Mapping[str, Any] | Sequence[str] | None) -> list[str]:
@@ -367,26 +118,8 @@ def run(name: str, config: str | Path | None = None,
         overrides.append(f"data={json.dumps(str(data))}")
     if int(jobs) < 1:
         raise ConfigError(f"jobs: {jobs} (at least 1)")
-    experiment, path, cfg = load_run_config(entry, None if config is None else Path(config),
-                                            overrides)
-    check_model(entry, cfg)
-    run_dir = None
-    if out is not None:  # checked before the work: a folder of another config's results
-        run_dir = open_run_directory(entry, cfg, path, config_given=config is not None,
-                                     overrides=overrides, out=Path(out), force=force)
-    try:
-        options = run_options(entry, cfg, None if config is None else Path(config), overrides,
-                              jobs=int(jobs), warn=python_warning)
-        if run_dir is not None:
-            run_dir.record = options.record
-        result = experiment.run(cfg, options)
-        if run_dir is not None:
-            write_result(run_dir, result)
-    except BaseException:
-        if run_dir is not None:
-            run_dir.discard()
-        raise
-    return result
+    return execute(entry, config, overrides, write=out is not None, out=out, force=force,
+                   jobs=int(jobs), warn=python_warning).result
 
 
 #: the columns of a recording frame (as ``bounce simulate-recording`` writes recording.csv)

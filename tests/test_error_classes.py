@@ -160,7 +160,7 @@ def test_the_cli_prints_any_bounce_error_of_an_experiment_as_one_line(monkeypatc
     def check_model(*args, **kwargs):
         raise cls("what to change")
 
-    monkeypatch.setattr("bounce_cli.cli.commands.check_model", check_model)
+    monkeypatch.setattr("bounce_cli.experiments.runner.check_model", check_model)
     result = runner.invoke(app, ["basin", "--out", str(tmp_path / "o")])
     assert result.exit_code == 2, result.output
     assert result.stderr.splitlines() == ["bounce: error: what to change"]
@@ -169,10 +169,10 @@ def test_the_cli_prints_any_bounce_error_of_an_experiment_as_one_line(monkeypatc
 
 @pytest.mark.parametrize("cls", [errors.ConfigError, errors.ModelError, errors.DataError])
 def test_the_cli_prints_a_bounce_error_of_an_engine_command_as_one_line(monkeypatch, cls):
-    def load_model(*args, **kwargs):
+    def load_model_block(*args, **kwargs):
         raise cls("what to change")
 
-    monkeypatch.setattr("bounce_cli.cli.commands.load_model", load_model)
+    monkeypatch.setattr("bounce_cli.experiments.runner.load_model_block", load_model_block)
     result = runner.invoke(app, ["fixed-point"])
     assert result.exit_code == 2, result.output
     assert result.stderr.splitlines() == ["bounce: error: what to change"]
@@ -182,7 +182,7 @@ def test_an_error_that_is_not_a_bounce_error_is_not_dressed_as_a_user_error(monk
     def check_model(*args, **kwargs):
         raise ZeroDivisionError("a bug")
 
-    monkeypatch.setattr("bounce_cli.cli.commands.check_model", check_model)
+    monkeypatch.setattr("bounce_cli.experiments.runner.check_model", check_model)
     result = runner.invoke(app, ["basin", "--out", str(tmp_path / "o")])
     assert isinstance(result.exception, ZeroDivisionError)
     assert "bounce: error" not in result.stderr

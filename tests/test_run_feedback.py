@@ -13,7 +13,8 @@ import pytest
 from typer.testing import CliRunner
 
 from bounce_cli.runtime import parallel
-from bounce_cli.cli.commands import PlainProgress, app
+from bounce_cli.cli.commands import app
+from bounce_cli.cli.progress import PlainProgress
 from bounce_cli.experiments import basin
 from bounce_cli.experiments.base import RunOptions
 

@@ -79,7 +79,7 @@ def test_stability_of_a_fixed_point_agrees_with_is_stable():
 def test_the_cli_warns_at_gain_one_whatever_the_last_bits(rate):
     """Racket period control with K = 1 has an eigenvalue 1 (a neutral direction): its radius
     is 1 +- 1 ulp depending on the rate; the warning must not depend on which."""
-    from bounce_cli.api import warn_if_unstable
+    from bounce_cli.experiments.runner import warn_if_unstable
     from bounce_cli.model.control import PeriodController
 
     heard: list[str] = []
@@ -115,6 +115,9 @@ def test_every_default_sticking_threshold_is_section_3s_one_constant():
 
     assert MIN_HOP_S == 1e-3  # section 3: "the time between bounces was less than 1e-3 s"
     assert ClassifySettings().min_hop_s == SweepSettings().min_hop_s == MIN_HOP_S
+    from bounce_cli.cli import commands
+
+    assert commands.MIN_HOP_S == MIN_HOP_S  # bounce orbit --min-hop-s, written beside the CLI
     assert IterateBlock().min_hop_s == DiagramBlock().min_hop_s == MIN_HOP_S
     for fn in (orbit_by_iteration, simulate_impacts):
         assert inspect.signature(fn).parameters["min_hop_s"].default == MIN_HOP_S

@@ -98,8 +98,8 @@ class AcfConfig(ExperimentConfig):
 
 
 def run(config: AcfConfig, options: RunOptions) -> ExperimentResult:
-    if config.data is not None:
-        return run_data(config, options)
+    if config.data is not None or options.impacts is not None:
+        return run_data(config, options, options.impacts)
     params = config.params
     noise = config.noise
     controller = config.model.active_controller()  # None: the passive map

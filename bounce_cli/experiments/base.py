@@ -47,6 +47,8 @@ from ..runtime.config import ExperimentConfig
 if TYPE_CHECKING:  # annotations only: ``bounce --help`` does not import pandas
     import pandas as pd
 
+    from ..data.impacts import ImpactsSource
+
 
 class Progress(Protocol):
     """Progress of long work: ``start(total, description)``, ``advance(n)``."""
@@ -105,7 +107,10 @@ class RunOptions:
     ``record``: what the run adds to ``run.json`` beside the config (the CLI writes it), e.g.
     ``model_at_data``, the values a ``--data`` analysis used and where they came from.
     ``inform(message)``: what a live experiment tells its operator while it runs (the URL of
-    the virtual set-up's page; the CLI prints ``bounce: <message>``)."""
+    the virtual set-up's page; the CLI prints ``bounce: <message>``). ``impacts``: a
+    ``--data`` analysis's impacts table held in memory, ``(label, frame)``, read instead of
+    the config's ``data`` file (the study's units). ``figures``: draw the figures (False:
+    the tables alone, for a caller that draws its own or none)."""
 
     jobs: int = 1
     progress: Progress = field(default_factory=NullProgress)
@@ -115,6 +120,8 @@ class RunOptions:
     checkpoints: Checkpoints = field(default_factory=NoCheckpoints)
     model_set_by_user: frozenset[str] | None = None
     record: dict[str, Any] = field(default_factory=dict)
+    impacts: ImpactsSource | None = None
+    figures: bool = True
 
 
 @dataclass

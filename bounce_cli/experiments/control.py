@@ -448,6 +448,20 @@ def read_impacts(path_text: str | list[str]) -> Impacts:
     return impacts
 
 
+def data_source(config: ControlConfig, options: RunOptions | None):
+    """The impacts ``control --data`` fits: a table in memory (``options.impacts``, the
+    study's units), else the file(s) ``config.data``; None: none (simulated trials)."""
+    if options is not None and options.impacts is not None:
+        return options.impacts
+    return config.data
+
+
+def data_label(config: ControlConfig, options: RunOptions) -> str:
+    """Where the fitted impacts came from, as the summary and captions name it."""
+    source = data_source(config, options)
+    return source[0] if isinstance(source, tuple) else data_text(source)
+
+
 def fit_inputs(config: ControlConfig, options: RunOptions | None = None
                ) -> tuple[pd.DataFrame, ModelParams, dict]:
     """The impacts to fit (a lab's ``data`` or simulated trials of the configured controller),
@@ -456,7 +470,8 @@ def fit_inputs(config: ControlConfig, options: RunOptions | None = None
     (simulated) or NaN. Every result of ``control --data`` is computed at that model."""
     params = config.params
     control = config.model.control
-    if config.data is None:
+    source = data_source(config, options)
+    if source is None:
         sim = config.fit.simulate
         impacts = pd.DataFrame(simulate_perturbation_trials(
             params, control.controller(), n_trials=sim.trials,
@@ -468,11 +483,11 @@ def fit_inputs(config: ControlConfig, options: RunOptions | None = None
         lost = int((per_trial < sim.impacts_per_trial).sum() + (sim.trials - len(per_trial)))
         return impacts, params, {"gain_K": control.gain, "rate_c": control.rate,
                                  "source": "simulated", "trials_lost": lost}
-    table = read_impacts(config.data)
+    table = read_impacts(source)
     impacts = table.frame
     # the model at the data's racket (section 7: "identical to the ones of the experiment"),
     # alpha_0 and g the data's unless the user set them
-    model = model_for_data(table, config, options or RunOptions(), config.data)
+    model = model_for_data(table, config, options or RunOptions(), source)
     period = config.fit.racket_period_s
     data_params = ModelParams(model.alpha.value, model.g.value,
                               float(impacts["racket_amplitude_m"].mean()),
@@ -562,13 +577,14 @@ def fit_frames(config: ControlConfig, inputs=None) -> dict[str, pd.DataFrame]:
 
 # -- run ------------------------------------------------------------------------------------------
 def run(config: ControlConfig, options: RunOptions) -> ExperimentResult:
-    if config.data is None:
+    with_data = data_source(config, options) is not None
+    if not with_data:
         config.params.fixed_point()  # NoFixedPointError: one line naming model.racket_amplitude
     fit_data = fit_inputs(config, options)  # a bad --data file fails before any work
     params = fit_data[1]  # with --data: the model at the data's racket, alpha and g
-    if config.data is not None:
+    if with_data:
         data_model_text = fit_data[2]["model"].text()
-        where = (f"data: {data_text(config.data)}: the model at the data's racket a_r = "
+        where = (f"data: {data_label(config, options)}: the model at the data's racket a_r = "
                  f"{params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s, "
                  f"{data_model_text}")
         try:
@@ -589,16 +605,16 @@ def run(config: ControlConfig, options: RunOptions) -> ExperimentResult:
     options.progress.advance(1)
     from .plotting import caption_figures
 
-    figures = draw(frames)
+    figures = draw(frames) if options.figures else {}
     caption_figures(figures, params, f"controller K = {config.model.control.gain:g}, "
                     f"c = {config.model.control.rate:g}"
-                    + (f"; fit to data: {data_text(config.data)} (the model at the data's racket)"
-                       if config.data is not None else ""))
+                    + (f"; fit to data: {data_label(config, options)} (the model at the data's "
+                       "racket)" if with_data else ""))
     summary = summary_lines(frames)
-    if config.data is not None:
-        summary.insert(0, f"data {data_text(config.data)}: every result at the data's racket a_r = "
-                       f"{params.racket_amplitude:.4g} m, tau = {params.racket_period:.4g} s; "
-                       f"{data_model_text}")
+    if with_data:
+        summary.insert(0, f"data {data_label(config, options)}: every result at the data's "
+                       f"racket a_r = {params.racket_amplitude:.4g} m, tau = "
+                       f"{params.racket_period:.4g} s; {data_model_text}")
     return ExperimentResult(frames=frames, figures=figures, summary=summary)
 
 

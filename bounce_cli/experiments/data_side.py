@@ -97,7 +97,7 @@ def data_side_result(data_run, draw, config, options, source: ImpactsSource | No
     ``data_run(config, options, source)``, and ``draw``'s figures of them, captioned with where
     the impacts came from (``source``: the impacts; default: the file ``config.data``)."""
     frames, lines = data_run(config, options, source)
-    figures = draw(frames)
+    figures = draw(frames) if options.figures else {}
     caption_figures(figures, None, data_caption(config, source, options.record))
     return ExperimentResult(frames=frames, figures=figures, summary=lines)
 

@@ -515,9 +515,9 @@ def set_gravity(config: ExtractConfig) -> float | None:
     return config.model.g if "g" in config.model.model_fields_set else None
 
 
-def run(config: ExtractConfig, options: RunOptions, figures: bool = True) -> ExperimentResult:
-    """``bounce extract``; ``figures=False`` draws no figure (the study draws its own from
-    the frames, and only those it writes)."""
+def run(config: ExtractConfig, options: RunOptions) -> ExperimentResult:
+    """``bounce extract``; ``options.figures`` False draws no figure (the study draws its own
+    from the frames, and only those it writes)."""
     g_set = set_gravity(config)
     # without a set g a first pass runs at model.g's default (and stays there without ball
     # data, whose flights alone show g)
@@ -570,7 +570,7 @@ def run(config: ExtractConfig, options: RunOptions, figures: bool = True) -> Exp
         summary.append("RMS error against the truth: " + ", ".join(
             f"{q} {acc.loc[q, 'rms_error']:.3g} {acc.loc[q, 'unit']}"
             for q in ("theta_deg", "v_m_s", "racket_acc_g")))
-    if not figures:
+    if not options.figures:
         return ExperimentResult(frames=frames, figures={}, summary=summary)
     drawn = draw(frames)
     caption_figures(drawn, None, f"data: {config.data}" if config.data is not None

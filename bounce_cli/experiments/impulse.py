@@ -191,8 +191,8 @@ def relaxation_frame(params: ModelParams, config: ImpulseConfig, outcomes: dict)
 
 
 def run(config: ImpulseConfig, options: RunOptions) -> ExperimentResult:
-    if config.data is not None:
-        return run_data(config, options)
+    if config.data is not None or options.impacts is not None:
+        return run_data(config, options, options.impacts)
     params = config.params
     options.progress.start(len(config.alpha_p) + 2, "impulse responses")
     outcomes = {}

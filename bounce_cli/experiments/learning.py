@@ -156,7 +156,9 @@ def trend_table(trials: pd.DataFrame, confidence: float) -> pd.DataFrame:
 
 
 def run(config: LearningConfig, options: RunOptions, source=None) -> ExperimentResult:
-    """``source``: an impacts table in memory, ``(label, frame)`` (default: ``config.data``)."""
+    """``source``: an impacts table in memory, ``(label, frame)`` (default:
+    ``options.impacts``, else ``config.data``)."""
+    source = options.impacts if source is None else source
     alpha, g = config.model.alpha, config.model.g
     frames: dict[str, pd.DataFrame] = {}
     lines = []
@@ -196,7 +198,7 @@ def run(config: LearningConfig, options: RunOptions, source=None) -> ExperimentR
                  f"{q_v:.4g} m/s, q_theta = {q_theta:.4g} rad ({noise_words}): SD of ball "
                  f"amplitude smallest ({best.apex_sd_m * 100:.2f} cm) at AC = {best.ac_g:.3f} g; "
                  f"stable AC range ({float(stable_ac_range_g(alpha)[0]):.3f}, 0) g (eq. 14)")
-    figures = draw(frames)
+    figures = draw(frames) if options.figures else {}
     caption_figures(figures, None, data_caption(config, source, options.record))
     return ExperimentResult(frames=frames, figures=figures, summary=lines)
 

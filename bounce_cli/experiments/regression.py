@@ -247,7 +247,9 @@ def _constant(group: pd.DataFrame, column: str, default: float, condition) -> fl
 
 
 def run(config: RegressionConfig, options: RunOptions, source=None) -> ExperimentResult:
-    """``source``: an impacts table in memory, ``(label, frame)`` (default: ``config.data``)."""
+    """``source``: an impacts table in memory, ``(label, frame)`` (default:
+    ``options.impacts``, else ``config.data``)."""
+    source = options.impacts if source is None else source
     # None: simulated trials
     data_label = (data_text(config.data) or None) if source is None else source[0]
     at_model = ""  # with data: the model's alpha and g and where they came from
@@ -287,7 +289,7 @@ def run(config: RegressionConfig, options: RunOptions, source=None) -> Experimen
                 f"condition {condition!r}: the trials' squared racket periods span only "
                 f"{spread:.2%} of their mean, so eq. 15's slope is not determined (fit "
                 "trials at different racket periods, e.g. different target heights)")
-    figures = draw({"trials.csv": trials, "fit.csv": fit})
+    figures = draw({"trials.csv": trials, "fit.csv": fit}) if options.figures else {}
     if data_label is not None:
         caption_figures(figures, None, f"data: {data_label}{at_model}")
     else:

@@ -27,7 +27,6 @@ import hashlib
 import io
 import json
 import math
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Literal, Optional
@@ -272,8 +271,8 @@ def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures:
     extraction measured of the set-up (``setup.csv`` quantities, pooled over files)."""
     from ..data.impacts import read_impacts
     from ..data.setup_table import read_setup
-    from . import extract
     from .data_side import is_impacts_table
+    from .runner import execute
 
     cfg = task.config
     unit = task.unit
@@ -287,7 +286,7 @@ def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures:
                 setup = {q.quantity: q.estimate for q in read_setup(row.file).values()}
             else:
                 ex_cfg = extraction_config(cfg, row.overrides, row.file, row.events, user_g)
-                result = extract.run(ex_cfg, RunOptions(), figures=False)
+                result = execute("extract", ex_cfg, write=False, figures=False).result
                 stem = f"{unit.folder}/extract/{name}"
                 for file_name, frame in result.frames.items():
                     frames[f"{stem}/{file_name}"] = frame
@@ -416,31 +415,14 @@ def analyse_unit(task: UnitTask) -> dict[str, Any]:
 
 def run_analysis(name: str, cfg: dict[str, Any], alpha: float, g: float, seed: int, unit: Unit,
                  pooled: pd.DataFrame, warnings: list[str]) -> ExperimentResult:
-    """One analysis of a unit, as ``bounce <name> --data`` runs it on the pooled table."""
-    from . import acf, impulse, learning, regression
+    """One analysis of a unit, as ``bounce <name> --data`` runs it, on the pooled table held
+    in memory (the study draws its own figures: none here)."""
+    from .runner import execute
 
-    options = RunOptions(warn=lambda message: warnings.append(f"{unit.label}: {name}: "
-                                                              f"{message}"))
-    source = (f"{unit.label}", pooled)
-    settings = cfg["settings"].get(name, {})
-    if name == "control":
-        from . import control
-
-        with tempfile.TemporaryDirectory() as folder:
-            path = Path(folder) / "impacts.csv"
-            pooled.to_csv(path, index=False)
-            config = analysis_config(name, settings, alpha, g, seed, str(path))
-            result = control.run(config, options)
-        result.figures = {}
-        return result
-    config = analysis_config(name, settings, alpha, g, seed, None)
-    runners: dict[str, Callable[..., ExperimentResult]] = {
-        "learning": learning.run, "regression": regression.run, "acf": acf.run_data,
-        "impulse": impulse.run_data}
-    runner = runners[name]
-    result = runner(config, options, source)
-    result.figures = {}
-    return result
+    config = analysis_config(name, cfg["settings"].get(name, {}), alpha, g, seed, None)
+    return execute(name, config, write=False, impacts=(f"{unit.label}", pooled), figures=False,
+                   warn=lambda message: warnings.append(f"{unit.label}: {name}: {message}")
+                   ).result
 
 
 def unit_row(pooled: pd.DataFrame, frames: dict[str, pd.DataFrame], unit: Unit,
@@ -853,7 +835,7 @@ def _first_extract(frames: dict[str, pd.DataFrame], unit: Unit) -> str | None:
 
 # -- the report ----------------------------------------------------------------------------------
 def png_bytes(fig) -> bytes:
-    from ..runtime.artifacts import FIGURE_DPI
+    from ..runtime.figure_files import FIGURE_DPI
 
     buffer = io.BytesIO()
     fig.savefig(buffer, format="png", dpi=FIGURE_DPI)

@@ -43,7 +43,7 @@ import numpy as np
 from .. import __version__
 from ..errors import OutputDirError, RunDirectoryBusy
 from .interrupts import deferred
-from .figure_files import save_figure
+from .figure_files import FIGURE_DPI, save_figure
 
 if TYPE_CHECKING:  # pandas is imported where a table is written or read (fast start-up)
     import pandas as pd
@@ -131,8 +131,6 @@ def reserve(path: Path) -> Path:
     return tmp
 
 
-#: resolution of the PNG figures unless ``--dpi`` says otherwise
-FIGURE_DPI = 150
 #: zlib level of the PNGs: 1 encodes the basin's two figures in 0.5 s instead of 0.8 s, for
 #: files about a quarter larger (basin_iterations.png 480 kB instead of 370 kB)
 PNG_OPTIONS = {"compress_level": 1}

@@ -13,6 +13,8 @@ if TYPE_CHECKING:  # matplotlib is imported when a figure is written
 
 #: the file formats a figure can be written in (``--figure-format``)
 FIGURE_FORMATS = ("png", "pdf", "svg")
+#: resolution of the PNG figures unless ``--dpi`` says otherwise
+FIGURE_DPI = 150
 
 #: rcParams while a figure is written: fonts embedded as TrueType in PDF (editable, accepted
 #: by journals; matplotlib's default Type 3 is not), SVG element ids from a fixed salt (a
