@@ -12,11 +12,10 @@ worker process import none of numpy, pandas or the experiments until they need t
 
 from __future__ import annotations
 
-import importlib
-import sys
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
-__version__ = "0.1.0"
+from .lazy import lazy_exports
+from .version import __version__
 
 if TYPE_CHECKING:  # for type checkers: the names as if imported eagerly
     from .api import (
@@ -74,40 +73,6 @@ __all__ = [
     # the model (eqs. 5-10)
     "ModelParams", "FixedPoint", "map_step", "iterate_orbit", "Orbit", "stability", "Stability",
 ]
-
-
-def lazy_exports(package: str, exports: dict[str, str]):
-    """A package's PEP 562 ``__getattr__`` and ``__dir__`` for ``exports`` (name -> its
-    submodule, relative to ``package``): each name is imported on first use and then kept
-    in the package's namespace.
-
-    Parameters
-    ----------
-    package : str
-        The package's ``__name__``.
-    exports : dict
-        Exported name -> the submodule defining it (``"api"`` for ``package.api``).
-
-    Returns
-    -------
-    tuple
-        (``__getattr__``, ``__dir__``) to assign at the package's top level.
-    """
-    namespace = sys.modules[package].__dict__
-
-    def __getattr__(name: str) -> Any:
-        try:
-            module = exports[name]
-        except KeyError:
-            raise AttributeError(f"module {package!r} has no attribute {name!r}") from None
-        value = getattr(importlib.import_module(f".{module}", package), name)
-        namespace[name] = value
-        return value
-
-    def __dir__() -> list[str]:
-        return sorted([*namespace, *exports])
-
-    return __getattr__, __dir__
 
 
 __getattr__, __dir__ = lazy_exports(__name__, _EXPORTS)

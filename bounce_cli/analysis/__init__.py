@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from .. import lazy_exports
+from ..lazy import lazy_exports
 
 if TYPE_CHECKING:  # for type checkers: the names as if imported eagerly
     from .classify import OUTCOMES, Classification, ClassifySettings, classify_batch, classify_grid

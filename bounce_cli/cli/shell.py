@@ -30,7 +30,7 @@ except ImportError:  # pragma: no cover - older typer on click
         NoArgsIsHelpError,
     )
 
-from .. import __version__
+from ..version import __version__
 from ..runtime.figure_files import FIGURE_DPI
 from ..runtime.interrupts import Interrupted, report as report_interrupt
 

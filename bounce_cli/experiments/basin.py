@@ -267,7 +267,7 @@ def import_output_libraries() -> None:
     import matplotlib.backends.backend_agg  # noqa: F401
     import pandas  # noqa: F401
 
-    import bounce_cli.experiments.plotting  # noqa: F401
+    from . import plotting  # noqa: F401
 
 
 def format_bytes(n: float) -> str:

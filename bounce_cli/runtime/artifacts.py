@@ -40,7 +40,7 @@ from typing import TYPE_CHECKING, Any, Callable, Iterator
 
 import numpy as np
 
-from .. import __version__
+from ..version import __version__
 from ..errors import OutputDirError, RunDirectoryBusy
 from .interrupts import deferred
 from .figure_files import FIGURE_DPI, save_figure
