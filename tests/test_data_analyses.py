@@ -501,7 +501,7 @@ def test_the_model_bias_of_the_varx_brings_eq9_into_its_interval():
     fitted identically on 19 sessions the model simulates at the data's racket SDs and
     calibrated noise, the model's bias for it, removed, leaves every entry of J and the
     radius inside its 90 % interval, and the calibrated q_v is within 25 % of the truth."""
-    from bounce_cli.analysis.racket_inputs import RacketSession, simulate_runs
+    from bounce_cli.data.simulated_runs import RacketSession, simulate_runs
     from bounce_cli.experiments.data_side import (
         AcfDataBlock,
         prediction_rows,

@@ -168,12 +168,6 @@ def noise_from_sds(jac: np.ndarray, sd_v: float, sd_theta: float) -> tuple[float
 
 
 # -- ball amplitude (section 5, Fig. 6) -----------------------------------------------------
-def apex_height(params: ModelParams, theta, v):
-    """Ball apex above the racket's mid-position after an impact at phase theta with v:
-    x_r(theta) + v^2 / (2 g) (eqs. 1, 4)."""
-    return params.racket_amplitude * np.sin(theta) + np.square(v) / (2.0 * params.g)
-
-
 def apex_sd_eq19(params: ModelParams, q_v: float, q_theta: float,
                  noise_cov: np.ndarray | None = None) -> float:
     """SD of the ball apex height (m) that eq. 19 predicts: the gradient of apex_height at the

@@ -4,7 +4,7 @@ contact loop, bit for bit.
 The common path is the model's own session: a cycle-wise racket (each cycle its own period
 and amplitude) with no drift, harmonic or disturbance, instantaneous contacts, no restitution
 SD, no perturbations, no controller and no rest before the first cycle; it is what
-``analysis.racket_inputs.simulate_runs`` simulates for the data side's VARX calibration (about
+``data.simulated_runs.simulate_runs`` simulates for the data side's VARX calibration (about
 a hundred sessions a unit). There ``simulate_trial`` spends almost all of its time in
 ``next_contact``'s safe steps, each a handful of numpy calls on 0-d arrays (about 10 us a
 step); here the same steps take well under a microsecond.

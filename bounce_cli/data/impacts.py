@@ -304,7 +304,7 @@ def impacts_frame(sim, params, trial_names=None) -> pd.DataFrame:
     (``engine.data_stats.simulate_impacts``): racket period and amplitude are the model's,
     AC = -a_r w^2 sin(theta) / g, ball apex x_r(theta) + v^2 / 2g, the set-up's g (``g_m_s2``,
     what the data analyses run the model at). Lost trials are left out."""
-    from ..analysis.data_stats import apex_height
+    from ..model.flight import apex_height
 
     rows = []
     n_trials, n = sim.v.shape

@@ -508,7 +508,7 @@ def plausible_fit(fit: Var1Fit) -> Var1Fit:
 
 # -- the model's prediction for the VARX estimates ---------------------------------------------
 def simulated_trials(runs) -> tuple[list[np.ndarray], list[np.ndarray]]:
-    """(v, theta) and (period, amplitude) of simulated runs (``racket_inputs.SimulatedRun``)
+    """(v, theta) and (period, amplitude) of simulated runs (``data.simulated_runs.SimulatedRun``)
     as :func:`stationary_segments` gives the data's: the phase minus the run's circular mean,
     wrapped to [-pi, pi)."""
     trials = [np.column_stack([r.v_m_s, phase_difference(r.theta_rad,
@@ -567,7 +567,7 @@ def varx_prediction(params: ModelParams, fits: dict, trials: list[np.ndarray],
     VarxPrediction or None
         None when the OLS VARX did not fit or ``model_sessions`` is 0.
     """
-    from ..analysis.racket_inputs import RacketSession, simulate_runs
+    from ..data.simulated_runs import RacketSession, simulate_runs
 
     base = fits.get("varx_ols")
     if block.model_sessions == 0 or not isinstance(base, Var1Fit):

@@ -174,6 +174,24 @@ def impact_velocity(v_before: float, racket_v: float, alpha: float) -> float:
     return racket_v - alpha * (v_before - racket_v)
 
 
+def apex_height(params: ModelParams, theta, v):
+    """Ball apex above the racket's mid-position after an impact (eqs. 1, 4).
+
+    Parameters
+    ----------
+    params : ModelParams
+        a_r and g.
+    theta, v : float or array
+        Phase of the impact (rad) and the ball's velocity after it (m/s).
+
+    Returns
+    -------
+    float or array
+        x_r(theta) + v^2 / (2 g), m.
+    """
+    return params.racket_amplitude * np.sin(theta) + np.square(v) / (2.0 * params.g)
+
+
 def restitution_of(v_before, v_after, racket_v):
     """Eq. 3 solved for alpha: ``-(v_b+ - v_r) / (v_b- - v_r)`` (arrays broadcast; NaN or inf
     where the ball does not approach the racket, without a warning)."""

@@ -87,8 +87,8 @@ def test_sticking_raises_the_same_error(monkeypatch):
 
 
 def test_simulate_runs_bit_identical(monkeypatch):
-    """The data side's model sessions (``racket_inputs.simulate_runs``), redraws included."""
-    from bounce_cli.analysis.racket_inputs import RacketSession, simulate_runs
+    """The data side's model sessions (``data.simulated_runs.simulate_runs``), redraws included."""
+    from bounce_cli.data.simulated_runs import RacketSession, simulate_runs
 
     session = RacketSession(0.01, 0.003, 0.04)
     a, b = _both(monkeypatch, lambda: [simulate_runs(PARAMS, session, [80, 120],

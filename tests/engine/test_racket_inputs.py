@@ -9,7 +9,8 @@ import pytest
 
 from bounce_cli.model.linear import jacobian, stability
 from bounce_cli.model.params import ModelParams
-from bounce_cli.analysis.racket_inputs import cycle_map_step, racket_input_jacobian
+from bounce_cli.analysis.racket_inputs import racket_input_jacobian
+from bounce_cli.data.simulated_runs import cycle_map_step
 from bounce_cli.analysis.var_fit import fit_var1
 
 LAB = ModelParams(alpha=0.55, g=9.81, racket_amplitude=0.11, racket_period=0.60)

@@ -8,7 +8,8 @@ import pytest
 
 from bounce_cli.model.linear import flip_boundary_g, racket_amplitude_for_ac, stability
 from bounce_cli.model.params import ModelParams
-from bounce_cli.analysis.data_stats import apex_height, apex_sd_eq19, simulate_impacts
+from bounce_cli.analysis.data_stats import apex_sd_eq19, simulate_impacts
+from bounce_cli.model.flight import apex_height
 from bounce_cli.experiments import learning
 from bounce_cli.data.impacts import impacts_frame
 
