@@ -1,4 +1,4 @@
-"""The reproduction rules of the tables filled by chaotic orbits (``paper/chaotic_tables``):
+"""The reproduction rules of the tables filled by chaotic orbits (``reproduction/chaotic_tables``):
 another machine's last bits are stood in for by moving g by a few ulps (it reaches every
 orbit from the first impact, as another libm's sin and cos do), which must be accepted,
 while a real change must not be: of the model (alpha or g by 1e-6), and each systematic
@@ -15,7 +15,7 @@ import pandas as pd
 import pytest
 
 import bounce_cli
-from bounce_cli.paper.chaotic_tables import (
+from bounce_cli.reproduction.chaotic_tables import (
     LATE_STRETCH,
     aggregate_drift,
     allowed_flips,
@@ -24,7 +24,7 @@ from bounce_cli.paper.chaotic_tables import (
     late_outcome,
     point_statistics,
 )
-from bounce_cli.paper.reproduce import table_drift, value_drift
+from bounce_cli.reproduction.reproduce import table_drift, value_drift
 from bounce_cli.runtime.artifacts import RunTables
 
 EPS = np.finfo(float).eps
@@ -410,7 +410,7 @@ def test_reproduce_leaves_a_bifurcation_moved_by_ulps_as_committed(tmp_path):
     rule, the previous run's tables read from its folder): a run whose chaotic orbits went
     their own way after a last-bit difference leaves every file as it was; a run that
     changed rewrites all its tables, so that the folder never holds two runs' tables."""
-    from bounce_cli.paper.reproduce import tables_agree
+    from bounce_cli.reproduction.reproduce import tables_agree
     from bounce_cli.runtime.artifacts import RunDirectory
 
     out = tmp_path / "bifurcation"

@@ -9,7 +9,7 @@ import pandas as pd
 import pytest
 
 from bounce_cli.paper import values as paper
-from bounce_cli.paper.claims import CLAIMS, verify
+from bounce_cli.reproduction.claims import CLAIMS, verify
 
 RESULTS = Path(__file__).resolve().parents[1] / "results"
 

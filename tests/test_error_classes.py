@@ -65,7 +65,7 @@ def test_every_exception_class_of_the_package_is_a_bounce_error_or_says_why_not(
     ("bounce_cli.model.params", "NoFixedPointError"),
     ("bounce_cli.runtime.artifacts", "OutputDirError"),
     ("bounce_cli.runtime.parallel", "ClusterError"),
-    ("bounce_cli.paper.claims", "MissingResults"),
+    ("bounce_cli.reproduction.claims", "MissingResults"),
     ("bounce_cli.api", "ConfigError"),
     ("bounce_cli", "BounceError"),
     ("bounce_cli", "ConfigError"),

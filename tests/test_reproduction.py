@@ -2,10 +2,11 @@
 compared with the baseline committed in ``results/``; every figure is redrawn from the
 committed CSVs alone; ``bounce verify`` passes on the baseline and fails on drifted data.
 
-The tolerance is the one ``bounce reproduce`` uses (``bounce_cli.paper.reproduce.table_drift``;
-stated there): rtol 1e-6 / atol 1e-9 for floats, categorical columns exact but for the few
-stated exceptions, and the tables filled by chaotic orbits compared by what reproduces of
-them (``bounce_cli.paper.chaotic_tables``; ``tests/test_chaotic_tables.py``).
+The tolerance is the one ``bounce reproduce`` uses
+(``bounce_cli.reproduction.reproduce.table_drift``; stated there): rtol 1e-6 / atol 1e-9 for
+floats, categorical columns exact but for the few stated exceptions, and the tables filled by
+chaotic orbits compared by what reproduces of them (``bounce_cli.reproduction.chaotic_tables``;
+``tests/test_chaotic_tables.py``).
 """
 
 import io
@@ -21,7 +22,7 @@ from bounce_cli.cli.commands import app
 from bounce_cli.runtime.config import bundled_config_path, load_config
 from bounce_cli.experiments.base import RunOptions
 from bounce_cli.experiments.registry import entry, reproduced
-from bounce_cli.paper.reproduce import table_drift
+from bounce_cli.reproduction.reproduce import table_drift
 from bounce_cli.runtime.artifacts import RunTables
 
 EXPERIMENT_NAMES = [e.name for e in reproduced()]
@@ -100,8 +101,8 @@ def test_verify_fails_on_drifted_or_missing_results(tmp_path):
 
 
 def test_reproduce_gallery_lists_every_figure_and_flags_missing_ones(tmp_path):
-    from bounce_cli.paper.claims import markdown_table, verify
-    from bounce_cli.paper.reproduce import gallery_markdown
+    from bounce_cli.reproduction.claims import markdown_table, verify
+    from bounce_cli.reproduction.reproduce import gallery_markdown
 
     copy = tmp_path / "results"
     shutil.copytree(RESULTS, copy, ignore=shutil.ignore_patterns("*.csv", "basin.png"))
@@ -223,7 +224,7 @@ def test_a_run_keeps_the_files_that_agree_within_the_reproduction_tolerance(tmp_
     import matplotlib.pyplot as plt
 
     from bounce_cli.runtime.artifacts import RunDirectory
-    from bounce_cli.paper.reproduce import tables_agree
+    from bounce_cli.reproduction.reproduce import tables_agree
 
     out = tmp_path / "demo"
     reproduce_rule = tables_agree("demo")
@@ -258,7 +259,7 @@ def test_a_run_that_changed_rewrites_its_tables_within_tolerance_too(tmp_path):
     """One table beyond the tolerance, another within it: both are rewritten (the folder
     holds the tables of one run, as the rules that read one table beside another assume),
     and reproduce says which were rewritten along."""
-    from bounce_cli.paper.reproduce import experiment_status, tables_agree
+    from bounce_cli.reproduction.reproduce import experiment_status, tables_agree
     from bounce_cli.runtime.artifacts import RunDirectory
 
     out = tmp_path / "demo"
@@ -292,7 +293,7 @@ def test_an_adaptive_table_is_compared_by_the_branches_it_traces():
     in a corrector) is the same result; a branch more or of another period is not."""
     import pandas as pd
 
-    from bounce_cli.paper.reproduce import table_drift
+    from bounce_cli.reproduction.reproduce import table_drift
 
     committed = pd.read_csv(RESULTS / "continuation" / "branches.csv")
     extra = pd.concat([committed, committed.iloc[[3]]], ignore_index=True)
@@ -313,7 +314,7 @@ def test_the_crosscheck_fit_at_the_rounding_floor_is_compared_within_its_stated_
     from bounce_cli.experiments.base import NullProgress
     from bounce_cli.experiments.stability import (CrosscheckBlock, CrosscheckPoint,
                                                   crosscheck_frame)
-    from bounce_cli.paper.reproduce import RTOL
+    from bounce_cli.reproduction.reproduce import RTOL
 
     block = CrosscheckBlock(points=[CrosscheckPoint(alpha=0.8, ac_g=-1.006, racket_period=0.6)])
     committed = crosscheck_frame(block, 9.81, NullProgress())

@@ -218,7 +218,7 @@ def test_rerunning_a_bundled_config_changes_no_committed_byte_of_its_manifest(tm
 
     import pandas as pd
 
-    from bounce_cli.paper.reproduce import table_drift
+    from bounce_cli.reproduction.reproduce import table_drift
 
     root = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
     committed = os.path.join(root, "results", "trajectory")

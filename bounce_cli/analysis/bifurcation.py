@@ -324,7 +324,7 @@ def lyapunov_standard_error(batch_growth: np.ndarray, measured_impacts: int) -> 
     run (the statistics of a chaotic orbit, a tangent vector still turning), not what the run
     is too short to see (an intermittency longer than the run). Two machines whose last bits
     differ follow a chaotic orbit apart and agree on its exponent within a few such errors,
-    not digit for digit (``bounce_cli.paper.chaotic_tables``).
+    not digit for digit (``bounce_cli.reproduction.chaotic_tables``).
 
     Parameters
     ----------

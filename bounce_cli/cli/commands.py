@@ -276,10 +276,10 @@ def reproduce_command(
     it (or a figure is missing); each experiment is reported identical, within tolerance or
     changed (with the files).
     """
-    from ..paper.claims import markdown_table, verify
+    from ..reproduction.claims import markdown_table, verify
     from ..runtime.artifacts import write_text_atomic
     from ..experiments.registry import reproduced
-    from ..paper.reproduce import experiment_status, gallery_markdown, tables_agree
+    from ..reproduction.reproduce import experiment_status, gallery_markdown, tables_agree
 
     known = [entry.name for entry in reproduced()]
     unknown = [name for name in names or [] if name not in known]
@@ -338,7 +338,7 @@ def verify_command(
 
     Exit 0 when each claim is reproduced or differs for a documented reason, 1 otherwise.
     """
-    from ..paper.claims import verify
+    from ..reproduction.claims import verify
 
     if not results.is_dir():
         fail(f"--results {results}: no such directory (run `bounce reproduce` first)")

@@ -3,8 +3,8 @@
 "The dialogue between data and model: passive stability and relaxation behavior in a ball
 bouncing task" (sections, equations and figures numbered as there). Experiments compare
 their results with these values only when they run at the paper's parameters
-(:func:`at_parameters`), and ``bounce verify`` (:mod:`bounce_cli.paper.claims`) holds the reproduced
-results against them. Nothing here is computed from the model.
+(:func:`at_parameters`), and ``bounce verify`` (:mod:`bounce_cli.reproduction.claims`) holds
+the reproduced results against them. Nothing here is computed from the model.
 """
 
 from __future__ import annotations

@@ -20,10 +20,10 @@ from typing import Callable
 import numpy as np
 import pandas as pd
 
-from . import values as paper
+from ..paper import values as paper
 from ..errors import MissingResults
 from ..model.params import ModelParams
-from .values import Printed, number_text
+from ..paper.values import Printed, number_text
 
 #: |lambda| = |alpha| in the complex regime is exact algebra: rounding only
 EXACT_ALGEBRA_TOLERANCE = 1e-9
