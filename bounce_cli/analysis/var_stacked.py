@@ -18,6 +18,7 @@ from typing import Sequence
 
 import numpy as np
 
+from ..model.linear import spectral_radii_2x2
 from ..model.params import ModelError
 from .var_fit import (
     MAX_PLAUSIBLE_RADIUS,
@@ -197,20 +198,9 @@ def stacked_fit(panels: np.ndarray, lengths: Sequence[int], method: str,
         identified = identified & id1 & id2
         jac = 2.0 * jac - 0.5 * (j1 + j2)
         valid = valid & ok1 & ok2
-    radius = spectral_radii(jac)
+    radius = spectral_radii_2x2(jac)
     valid = valid & np.isfinite(radius) & (radius <= MAX_PLAUSIBLE_RADIUS)
     return StackedFit(jac, cov, identified, valid & identified)
-
-
-def spectral_radii(jac: np.ndarray) -> np.ndarray:
-    """max |lambda| of each 2x2 matrix in a (..., 2, 2) stack (eq. 10's eigenvalues:
-    c +- sqrt(c^2 - det J), c = tr J / 2; complex pairs have modulus sqrt(det J))."""
-    c = 0.5 * (jac[..., 0, 0] + jac[..., 1, 1])
-    det = jac[..., 0, 0] * jac[..., 1, 1] - jac[..., 0, 1] * jac[..., 1, 0]
-    disc = c * c - det
-    root = np.sqrt(np.abs(disc))
-    real = np.maximum(np.abs(c + root), np.abs(c - root))
-    return np.where(disc >= 0.0, real, np.sqrt(np.abs(det)))
 
 
 def log_radius_se(jac: np.ndarray, cov_vec: np.ndarray, step: float = 1e-6) -> np.ndarray:
@@ -220,10 +210,10 @@ def log_radius_se(jac: np.ndarray, cov_vec: np.ndarray, step: float = 1e-6) -> n
     for i in range(4):
         d = np.zeros(4)
         d[i] = step
-        grad[..., i] = (spectral_radii(jac + d.reshape(2, 2))
-                        - spectral_radii(jac - d.reshape(2, 2))) / (2 * step)
+        grad[..., i] = (spectral_radii_2x2(jac + d.reshape(2, 2))
+                        - spectral_radii_2x2(jac - d.reshape(2, 2))) / (2 * step)
     var = np.einsum("...i,...ij,...j->...", grad, cov_vec, grad)
-    return np.sqrt(np.clip(var, 0.0, None)) / spectral_radii(jac)
+    return np.sqrt(np.clip(var, 0.0, None)) / spectral_radii_2x2(jac)
 
 
 def simulate_panels(jac: np.ndarray, noise_cov: np.ndarray, lengths: Sequence[int],

@@ -847,14 +847,15 @@ def trust_frame(params, q_v, q_theta, config, segments, options,
 def _trust_fits(panels, lengths, method, jackknife, truth, z):
     """The trust study's estimates of one size and estimator (those ``fit_var1`` fits) and how
     many of their delta-method intervals (log scale) hold the truth."""
-    from ..analysis.var_stacked import log_radius_se, spectral_radii, stacked_fit
+    from ..analysis.var_stacked import log_radius_se, stacked_fit
+    from ..model.linear import spectral_radii_2x2
 
     try:
         fit = stacked_fit(panels, lengths, method, jackknife)
     except ModelError:
         return np.zeros(0), 0
     jac, cov = fit.jacobian[fit.identified], fit.cov_vec[fit.identified]
-    value = spectral_radii(jac)
+    value = spectral_radii_2x2(jac)
     half = np.minimum(z * log_radius_se(jac, cov), 700.0)
     inside = int(np.sum((value * np.exp(-half) <= truth) & (truth <= value * np.exp(half))))
     return value, inside

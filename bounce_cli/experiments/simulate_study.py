@@ -21,14 +21,13 @@ with files that cannot be read, to see how ``bounce study`` reports failures.
 
 from __future__ import annotations
 
-import math
 
 import numpy as np
 import pandas as pd
 from pydantic import Field, ValidationError, model_validator
 
 from ..runtime.config import ConfigError, ExperimentConfig, ModelBlock, StrictModel
-from ..model.linear import stable_ac_range_g
+from ..model.linear import racket_amplitude_for_ac, stable_ac_range_g
 from ..model.params import ModelError
 from .base import Experiment, ExperimentResult, RunOptions
 from .simulate_recording import PerturbationBlock, RacketBlock, RecordingConfig, session_frames
@@ -97,13 +96,6 @@ class SimulateStudyConfig(ExperimentConfig):
 AC_MARGIN = 0.08
 
 
-def amplitude_for_ac(ac_g: float, period_s: float, alpha: float, g: float) -> float:
-    """The racket amplitude (m) whose period-1 orbit hits at racket acceleration ``ac_g``
-    (eq. 9's AC with eq. 8): ``a_r = g / w^2 sqrt(AC^2 + pi^2 ((1 - alpha)/(1 + alpha))^2)``."""
-    omega = 2.0 * math.pi / period_s
-    return g / omega**2 * math.hypot(ac_g, math.pi * (1.0 - alpha) / (1.0 + alpha))
-
-
 def trial_plan(config: SimulateStudyConfig) -> pd.DataFrame:
     """Every trial's true parameters (truth_trials.csv) and its seed, subjects drawn from
     their own streams (``SeedSequence(seed).spawn``) so that adding conditions or trials
@@ -126,7 +118,7 @@ def trial_plan(config: SimulateStudyConfig) -> pd.DataFrame:
                 rows.append({
                     "subject": f"s{number}", "condition": condition.name, "trial": trial,
                     "racket_period_s": tau,
-                    "racket_amplitude_m": amplitude_for_ac(ac, tau, m.alpha, m.g),
+                    "racket_amplitude_m": float(racket_amplitude_for_ac(m.alpha, ac, m.g, tau)),
                     "ac_g": ac, "alpha": m.alpha, "g_m_s2": m.g,
                     "velocity_noise_m_s": condition.velocity_noise_m_s,
                     "seed": int(next(seeds).generate_state(1)[0]),

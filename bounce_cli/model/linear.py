@@ -94,10 +94,35 @@ def eigenvalues_2x2(jac) -> tuple[complex, complex]:
     >>> eigenvalues_2x2(np.array([[0.0, -0.25], [1.0, 0.0]]))
     (0.5j, -0.5j)
     """
-    c = 0.5 * (jac[0, 0] + jac[1, 1])
-    det = jac[0, 0] * jac[1, 1] - jac[0, 1] * jac[1, 0]
-    plus, minus = eigenvalues_from_trace(c, det)
+    plus, minus = eigenvalues_from_trace(*half_trace_and_det(np.asarray(jac)))
     return complex(plus), complex(minus)
+
+
+def half_trace_and_det(jac: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(tr J / 2, det J) of each 2 x 2 matrix of a (..., 2, 2) stack."""
+    c = 0.5 * (jac[..., 0, 0] + jac[..., 1, 1])
+    det = jac[..., 0, 0] * jac[..., 1, 1] - jac[..., 0, 1] * jac[..., 1, 0]
+    return c, det
+
+
+def spectral_radii_2x2(jac: np.ndarray) -> np.ndarray:
+    """max |lambda| of each 2 x 2 matrix of a stack, by :func:`eigenvalues_from_trace`
+    (eq. 10); a complex pair's modulus is sqrt(det J) (eq. 12: alpha for eq. 9's J).
+
+    Parameters
+    ----------
+    jac : numpy.ndarray, shape (..., 2, 2)
+        The matrices (VAR(1) coefficient matrices fitted to many data sets at once).
+
+    Returns
+    -------
+    numpy.ndarray, shape (...)
+        The spectral radii.
+    """
+    c, det = half_trace_and_det(jac)
+    plus, minus = eigenvalues_from_trace(c, det)
+    real_pair = c * c - det >= 0.0
+    return np.where(real_pair, np.maximum(np.abs(plus), np.abs(minus)), np.sqrt(np.abs(det)))
 
 
 def spectral_radius(alpha, ac):
