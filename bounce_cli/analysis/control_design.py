@@ -11,6 +11,7 @@ The controlled map itself (controllers, the step behind the step protocol, orbit
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 from typing import Callable, Literal, Sequence
 
@@ -297,8 +298,10 @@ def fit_period_control(params: ModelParams, responses: Sequence[MeanResponse], *
             if initial is None:
                 model = predicted_deviations(params, controller, mean[:, 0] - offsets, n)
             else:
-                model = np.nanmean(predicted_deviations(
-                    params, controller, initial - offsets[:, None], n), axis=-1)
+                with warnings.catch_warnings():  # every window lost at this (K, c): NaN, a
+                    warnings.simplefilter("ignore", RuntimeWarning)  # large residual below
+                    model = np.nanmean(predicted_deviations(
+                        params, controller, initial - offsets[:, None], n), axis=-1)
             r = (model[:, 1:] + offsets[:, None] - mean[:, 1:]) / np.maximum(se[:, 1:],
                                                                             floor[:, None])
             out.append(np.where(np.isfinite(r), r, 1e3).ravel())
