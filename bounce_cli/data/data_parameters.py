@@ -14,6 +14,10 @@ data's alpha and g:
 data's alpha and g are its ``alpha`` and ``g`` columns (one value per condition), under the
 same rules (``trials_model``).
 
+``model_at_data`` builds that model, once for every analysis of impacts (``acf``, ``impulse``,
+``control``, a study's units): alpha and g from here, the racket the means of the table's
+``racket_amplitude_m`` and ``racket_period_s`` columns.
+
 "Set by the user" means given on this command line: ``--set model.alpha=...`` (or
 ``model.g``), or written under ``model:`` in the user's own ``--config`` file with a value
 other than the bundled config's (``runtime.config.keys_set_by_user``: a config printed by
@@ -29,10 +33,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Literal
 
 import numpy as np
 
+from ..model.linear import stability
+from ..model.params import ModelError, ModelParams
 from ..runtime.config import DATA_MODEL_KEYS, ConfigError
 from .plausibility import racket_warnings
 from .setup_table import SETUP_FILE, read_setup
@@ -55,8 +61,11 @@ class ModelValue:
     def text(self, unit: str = "") -> str:
         """``alpha 0.49 (measured, 438 impacts)`` or ``g 5.80 m/s^2 (set)``."""
         shown = f"{self.value:.2f}" if self.name == "g" else f"{self.value:.3g}"
-        how = self.source if not self.detail else f"{self.source}, {self.detail}"
-        return f"{self.name} {shown}{' ' + unit if unit else ''} ({how})"
+        return f"{self.name} {shown}{' ' + unit if unit else ''} ({self.how()})"
+
+    def how(self) -> str:
+        """Where the value came from: ``measured, 438 impacts`` or ``set``."""
+        return self.source if not self.detail else f"{self.source}, {self.detail}"
 
     def record(self) -> dict[str, Any]:
         """The entry of ``run.json``'s ``model_at_data``."""
@@ -127,7 +136,8 @@ def g_from_data(frame, paths: list) -> ModelValue | None:
 
 
 def data_model(impacts, model, set_by_user: frozenset[str] | None,
-               paths: list | None = None) -> DataModel:
+               paths: list | None = None, measured_g: float | None = None,
+               set_source: str = "set") -> DataModel:
     """alpha and g for the model at the data's parameters (module docstring).
 
     Parameters
@@ -141,6 +151,12 @@ def data_model(impacts, model, set_by_user: frozenset[str] | None,
     paths : list of path, optional
         The files the table was read from (their ``setup.csv`` give g); none for a table in
         memory.
+    measured_g : float, optional
+        g already measured from the recordings' flights (a study pools its recordings'
+        ``setup.csv``); in place of ``paths``' ``setup.csv``, before a ``g_m_s2`` column.
+    set_source : str
+        The source a value the user set is recorded with (a study: ``set in the study's
+        config``).
 
     Returns
     -------
@@ -152,21 +168,23 @@ def data_model(impacts, model, set_by_user: frozenset[str] | None,
     ConfigError
         When a value is neither in the data nor set by the user (one line naming both ways).
     """
-    set_alpha, set_g = _set_values(model, set_by_user)
+    set_alpha, set_g = _set_values(model, set_by_user, set_source)
     alpha = set_alpha or alpha_from_data(impacts.frame)
-    g = set_g or g_from_data(impacts.frame, list(paths or []))
+    pooled_g = (None if measured_g is None else
+                ModelValue("g", measured_g, "measured", 0, "the recordings' flights"))
+    g = set_g or pooled_g or g_from_data(impacts.frame, list(paths or []))
     return _checked(impacts.path, alpha, g, {
         "alpha": "no alpha_measured or alpha column in the table",
         "g": f"no {SETUP_FILE} with g_m_s2 beside it, no g_m_s2 column"},
         f"bounce extract writes alpha_measured and {SETUP_FILE}")
 
 
-def _set_values(model, set_by_user: frozenset[str] | None
+def _set_values(model, set_by_user: frozenset[str] | None, set_source: str = "set"
                 ) -> tuple[ModelValue | None, ModelValue | None]:
-    """The config's alpha and g where they count as given (set by the user; library use:
-    every config value), None where the data's apply."""
+    """The config's alpha and g where they count as given (set by the user, recorded as
+    ``set_source``; library use: every config value), None where the data's apply."""
     given = frozenset(DATA_MODEL_KEYS) if set_by_user is None else set_by_user
-    how = "config" if set_by_user is None else "set"
+    how = "config" if set_by_user is None else set_source
     alpha = ModelValue("alpha", float(model.alpha), how) if "alpha" in given else None
     g = ModelValue("g", float(model.g), how) if "g" in given else None
     return alpha, g
@@ -268,3 +286,68 @@ def model_for_data(impacts, config, options, source) -> DataModel:
                 f"data: {impacts.path}: column racket_period_s (trial means)"):
             options.warn(message)
     return found
+
+
+#: the impacts table's racket columns whose means are the racket of the model at the data's
+#: parameters
+RACKET_COLUMNS = ("racket_amplitude_m", "racket_period_s")
+
+
+def model_at_data(impacts, found: DataModel,
+                  need: Literal["stable", "fixed point"] | None = "stable",
+                  racket_period: float | None = None) -> ModelParams:
+    """The model at the data's parameters: alpha and g of ``found``, the racket the data's.
+
+    Every analysis of an impacts table builds its model here: ``acf --data``,
+    ``impulse --data``, ``control --data`` and a study's units.
+
+    Parameters
+    ----------
+    impacts : bounce_cli.data.impacts.Impacts
+        The impacts table: the racket amplitude a_r and period tau are the means of its
+        ``racket_amplitude_m`` and ``racket_period_s`` columns over all its impacts; its
+        ``path`` names it in messages.
+    found : DataModel
+        alpha and g (``data_model`` or ``model_for_data``: the data's unless the user set them).
+    need : {"stable", "fixed point"} or None
+        What the analysis needs of the model: a linearly stable period-1 fixed point (eq. 10:
+        spectral radius below 1; stationary statistics), a fixed point (eq. 8:
+        |cos theta~| <= 1) or nothing checked (None).
+    racket_period : float, optional
+        A racket period (s) in place of the data's mean (``control``'s
+        ``fit.racket_period_s``).
+
+    Returns
+    -------
+    ModelParams
+        alpha, g, a_r, tau.
+
+    Raises
+    ------
+    ConfigError
+        One line when the model lacks what ``need`` asks: no period-1 fixed point (eq. 8
+        gives cos theta~ > 1), or an unstable one (eq. 10).
+    ModelError
+        Parameters outside the model's range (``ModelParams``).
+    """
+    frame = impacts.frame
+    alpha, g = found.alpha.value, found.g.value
+    a_r = float(frame["racket_amplitude_m"].mean())
+    tau = float(frame["racket_period_s"].mean()) if racket_period is None else racket_period
+    params = ModelParams(alpha, g, a_r, tau)
+    if need is None:
+        return params
+    period = f"period {tau:.4g} s" if racket_period is None else f"the given period {tau:.4g} s"
+    where = (f"data: {impacts.path}: the model at the data's racket amplitude {a_r:.4g} m and "
+             f"{period} with alpha = {alpha:g}, g = {g:g} m/s^2")
+    try:
+        st = stability(params)
+    except ModelError:
+        raise ConfigError(f"{where} has no period-1 fixed point (eq. 8: cos theta~ = "
+                          f"{params.cos_theta_fixed():.3g} > 1); check model.alpha and model.g"
+                          ) from None
+    if need == "stable" and not st.stable:
+        raise ConfigError(f"{where} has an unstable fixed point (spectral radius "
+                          f"{st.spectral_radius:.3g}, AC = {st.ac_g:.3g} g): no stationary "
+                          "statistics to compare with")
+    return params

@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 from pydantic import Field, model_validator
 
-from ..data.data_parameters import model_for_data
+from ..data.data_parameters import model_at_data, model_for_data
 from ..data.impacts import Impacts, read_impacts as shared_read_impacts
 from ..memory import check_array_memory
 from ..runtime.config import (
@@ -465,9 +465,10 @@ def data_label(config: ControlConfig, options: RunOptions) -> str:
 def fit_inputs(config: ControlConfig, options: RunOptions | None = None
                ) -> tuple[pd.DataFrame, ModelParams, dict]:
     """The impacts to fit (a lab's ``data`` or simulated trials of the configured controller),
-    the model at their parameters (with data: the data's racket, alpha and g, as
-    ``data_parameters.model_for_data`` and ``fit.racket_period_s`` say), and the truth
-    (simulated) or NaN. Every result of ``control --data`` is computed at that model."""
+    the model at their parameters (with data: ``data_parameters.model_at_data``, the data's
+    racket, alpha and g, as ``model_for_data`` and ``fit.racket_period_s`` say; a one-line
+    error without a fixed point), and the truth (simulated) or NaN. Every result of
+    ``control --data`` is computed at that model."""
     params = config.params
     control = config.model.control
     source = data_source(config, options)
@@ -488,11 +489,8 @@ def fit_inputs(config: ControlConfig, options: RunOptions | None = None
     # the model at the data's racket (section 7: "identical to the ones of the experiment"),
     # alpha_0 and g the data's unless the user set them
     model = model_for_data(table, config, options or RunOptions(), source)
-    period = config.fit.racket_period_s
-    data_params = ModelParams(model.alpha.value, model.g.value,
-                              float(impacts["racket_amplitude_m"].mean()),
-                              float(impacts["racket_period_s"].mean()) if period is None
-                              else period)
+    data_params = model_at_data(table, model, need="fixed point",
+                                racket_period=config.fit.racket_period_s)
     return impacts, data_params, {"model": model, "gain_K": math.nan, "rate_c": math.nan,
                                   "source": "data", "trials_lost": math.nan}
 
@@ -517,11 +515,6 @@ def fit_frames(config: ControlConfig, inputs=None) -> dict[str, pd.DataFrame]:
     if not responses:
         raise ConfigError(f"data: no perturbation window of {block.impacts_after + 1} "
                           "consecutive impacts inside one trial (fit.impacts_after)")
-    try:
-        params.fixed_point()
-    except Exception as exc:
-        raise ConfigError(f"data: the model at the data's racket has no fixed point: {exc}") \
-            from None
     switch = config.model.control.switch  # when the racket takes the new period (the data's)
 
     def controller_of(gain: float, rate: float) -> PeriodController:

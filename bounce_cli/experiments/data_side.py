@@ -3,9 +3,9 @@
 dispatch here when their config has ``data`` set to an impacts table, and draw the figures
 below from the frames these functions return.
 
-The model at the data's parameters: racket period and amplitude from the data's cycles
-(means over all impacts of the file), alpha and g the data's unless the user set them
-(``bounce_cli.data.data_parameters``).
+The model at the data's parameters (``bounce_cli.data.data_parameters.model_at_data``): racket
+period and amplitude from the data's cycles (means over all impacts of the file), alpha and g
+the data's unless the user set them.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ from ..analysis.data_stats import (
 )
 from ..analysis.racket_inputs import INPUT_COEFFICIENTS, racket_input_jacobian
 from ..analysis.var_fit import EIGEN_QUANTITIES, J_ENTRIES, Var1Fit, fit_var1
-from ..data.data_parameters import DataModel, model_for_data
+from ..data.data_parameters import DataModel, model_at_data, model_for_data
 from ..data.impacts import Impacts, ImpactsSource, read_impacts
 from .base import ExperimentResult
 from .plotting import (
@@ -103,30 +103,6 @@ def data_side_result(data_run, draw, config, options, source: ImpactsSource | No
 
 
 # -- the model at the data's parameters ------------------------------------------------------
-def model_at_data(
-    impacts: Impacts, alpha: float, g: float, need_stable: bool = True
-) -> ModelParams:
-    """alpha, g as given (``data_parameters.model_for_data``); a_r and tau the means of the
-    data's racket cycles. A one-line error when these give no (stable) period-1 fixed point."""
-    f = impacts.frame
-    tau = float(f["racket_period_s"].mean())
-    a_r = float(f["racket_amplitude_m"].mean())
-    where = (f"data: {impacts.path}: the model at the data's racket amplitude {a_r:.4g} m and "
-             f"period {tau:.4g} s with alpha = {alpha:g}, g = {g:g} m/s^2")
-    params = ModelParams(alpha, g, a_r, tau)
-    try:
-        st = stability(params)
-    except ModelError:
-        raise ConfigError(f"{where} has no period-1 fixed point (eq. 8: cos theta~ = "
-                          f"{params.cos_theta_fixed():.3g} > 1); check model.alpha and model.g"
-                          ) from None
-    if need_stable and not st.stable:
-        raise ConfigError(f"{where} has an unstable fixed point (spectral radius "
-                          f"{st.spectral_radius:.3g}, AC = {st.ac_g:.3g} g): no stationary "
-                          "statistics to compare with")
-    return params
-
-
 def racket_text(params: ModelParams) -> str:
     """``model at the data's racket a_r = 0.11 m, tau = 0.6 s``."""
     return (f"model at the data's racket a_r = {params.racket_amplitude:.4g} m, tau = "
@@ -292,7 +268,7 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
                            command="acf --data",
                            min_bounces=config.max_lag + 2)
     used = model_for_data(impacts, config, options, source)
-    params = model_at_data(impacts, used.alpha.value, used.g.value)
+    params = model_at_data(impacts, used)
     noise = measurement_noise(d, source, config.data)
     segments = stationary_segments(impacts, d.settle_after_perturbation, config.max_lag + 2)
     segments_means = [(s[1], s[3]) for s in segments]
@@ -1011,7 +987,7 @@ def impulse_data_run(config, options, source: ImpactsSource | None = None
         raise ConfigError(f"data: {impacts.path}: column perturbed: no perturbed impact, nothing "
                           "to align (bounce impulse --data needs perturbations)")
     used = model_for_data(impacts, config, options, source)
-    params = model_at_data(impacts, used.alpha.value, used.g.value)
+    params = model_at_data(impacts, used)
     n = config.iterations
     groups = list(impacts.by_trial())
     alpha_0 = params.alpha

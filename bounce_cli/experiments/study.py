@@ -37,6 +37,7 @@ from pydantic import Field, field_validator, model_validator
 
 from ..runtime import parallel
 from ..runtime.config import (
+    DATA_MODEL_KEYS,
     ConfigError,
     ExperimentConfig,
     StrictModel,
@@ -53,7 +54,14 @@ from ..analysis.group_stats import (
     paired_difference,
 )
 from ..model.linear import stability
-from ..model.params import ModelError, ModelParams, circular_mean, phase_difference
+from ..model.params import ModelError, circular_mean, phase_difference
+from ..data.data_parameters import (
+    RACKET_COLUMNS,
+    DataModel,
+    data_model,
+    model_at_data,
+)
+from ..data.impacts import Impacts
 from .plotting import publication_style
 from .report import Section, embed_png, html_table, page
 from ..data.study_manifest import ManifestRow, Unit, read_manifest
@@ -325,34 +333,16 @@ MEASURED_SETUP = ("g_m_s2", "measurement_sd_v_m_s", "measurement_sd_theta_rad")
 
 
 def unit_parameters(pooled: pd.DataFrame, measured: dict[str, float],
-                    model: dict[str, Any]) -> tuple[float, str, float, str]:
-    """(alpha, where from, g, where from): the study's model block where set, else what the
-    unit's data show (:mod:`bounce_cli.data.data_parameters`' rules, as every ``--data`` analysis
-    applies them: ``alpha_measured``, else the events' ``alpha``; g from the extraction's
-    flights, else a ``g_m_s2`` column); a unit that shows neither is a one-line error naming
-    both ways."""
-    from ..data.data_parameters import ModelValue, alpha_from_data, g_from_data
-
-    alpha = (ModelValue("alpha", float(model["alpha"]), "set in the study's config")
-             if model.get("alpha") is not None else alpha_from_data(pooled))
-    if model.get("g") is not None:
-        g: ModelValue | None = ModelValue("g", float(model["g"]), "set in the study's config")
-    elif "g_m_s2" in measured:
-        g = ModelValue("g", measured["g_m_s2"], "measured", 0, "the recordings' flights")
-    else:
-        g = g_from_data(pooled, [])
-    missing = [name for name, value in (("alpha", alpha), ("g", g)) if value is None]
-    if missing:
-        raise ConfigError(f"the data show no {' and no '.join(missing)} (no alpha_measured or "
-                          f"alpha column, no setup.csv or g_m_s2 column): set "
-                          f"{' and '.join('model.' + m for m in missing)} in the study's config "
-                          f"(--set), or give tables that carry them")
-    assert alpha is not None and g is not None
-
-    def source(value: ModelValue) -> str:
-        return value.source if not value.detail else f"{value.source}, {value.detail}"
-
-    return alpha.value, source(alpha), g.value, source(g)
+                    model: dict[str, Any], label: str = "") -> DataModel:
+    """alpha and g of a unit's model: the study's model block where set, else what the
+    unit's data show (``data_parameters.data_model``, as every ``--data`` analysis applies it:
+    ``alpha_measured``, else the events' ``alpha``; g from the recordings' flights, pooled in
+    ``measured``, else a ``g_m_s2`` column); a unit that shows neither is a one-line error
+    naming both ways."""
+    block = StudyModelBlock(**model)
+    set_in_config = frozenset(k for k in DATA_MODEL_KEYS if getattr(block, k) is not None)
+    return data_model(Impacts(pooled, Path(label)), block, set_in_config,
+                      measured_g=measured.get("g_m_s2"), set_source="set in the study's config")
 
 
 def one_line(exc: BaseException) -> str:
@@ -377,14 +367,15 @@ def analyse_unit(task: UnitTask) -> dict[str, Any]:
         frames[f"{unit.folder}/impacts.csv"] = pooled
         # the recordings' own measurement noise travels with the pooled table to acf --data
         pooled.attrs["setup"] = {q: v for q, v in measured.items() if q != "g_m_s2"}
-        parameters = None
+        found = None
         try:
-            parameters = unit_parameters(pooled, measured, cfg["model"])
+            found = unit_parameters(pooled, measured, cfg["model"], unit.label)
         except ConfigError as exc:
             failures.append({"unit": unit.folder, "file": "", "stage": "model",
                              "error": one_line(exc)})
-        if parameters is not None:
-            alpha, alpha_source, g, g_source = parameters
+        if found is not None:
+            alpha, alpha_source, g, g_source = (found.alpha.value, found.alpha.how(),
+                                                found.g.value, found.g.how())
             row.update(alpha=alpha, alpha_source=alpha_source, g_m_s2=g, g_source=g_source)
             summary[0] += (f"; model at alpha {alpha:.3f} ({alpha_source}), g {g:.2f} m/s^2 "
                            f"({g_source})")
@@ -402,7 +393,7 @@ def analyse_unit(task: UnitTask) -> dict[str, Any]:
                 for file_name, frame in result.frames.items():
                     frames[f"{unit.folder}/{name}/{file_name}"] = frame
                 summary += [f"{unit.label}: {name}: {line}" for line in result.summary]
-        row.update(unit_row(pooled, frames, unit, row.get("alpha"), row.get("g_m_s2")))
+        row.update(unit_row(pooled, frames, unit, found))
     row["failures"] = len(failures)
     pngs = {}
     if ReportBlock(**cfg["report"]).drawn() == "all":
@@ -426,7 +417,7 @@ def run_analysis(name: str, cfg: dict[str, Any], alpha: float, g: float, seed: i
 
 
 def unit_row(pooled: pd.DataFrame, frames: dict[str, pd.DataFrame], unit: Unit,
-             alpha: float | None, g: float | None) -> dict[str, Any]:
+             found: DataModel | None) -> dict[str, Any]:
     """group.csv's numbers of one unit: its bounces, the state's means and SDs, the racket,
     the measured set-up, the data's VAR(1) radius beside the model's eq. 10 radius, the
     impacts to relax, the control fit."""
@@ -449,12 +440,11 @@ def unit_row(pooled: pd.DataFrame, frames: dict[str, pd.DataFrame], unit: Unit,
         per_trial = pooled.groupby("trial")["ball_apex_m"].std()
         out["apex_sd_m"] = float(per_trial.mean())
     out["model_spectral_radius"] = math.nan
-    if alpha is not None and g is not None and "racket_period_mean_s" in out:
+    if found is not None and set(RACKET_COLUMNS) <= set(pooled.columns):
         try:
-            params = ModelParams(alpha, g, out["racket_amplitude_mean_m"],
-                                 out["racket_period_mean_s"])
+            params = model_at_data(Impacts(pooled, Path(unit.label)), found, need=None)
             out["model_spectral_radius"] = float(stability(params).spectral_radius)
-        except ModelError:
+        except ModelError:  # no fixed point (eq. 8) or parameters out of range: NaN
             pass
     stab = frames.get(f"{unit.folder}/acf/stability_data.csv")
     for method in RADIUS_ESTIMATORS:
