@@ -5,8 +5,8 @@ the same trial structure; fitted one by one, the Python overhead of each small f
 the time. :func:`stacked_fit` fits R panels (R data sets of the same trial lengths, each the
 trials one after the other) in one stacked solve: the same estimator as ``var_fit.fit_var1``
 (each trial's mean removed, no pair across a trial boundary, OLS or lag 2, the split-panel
-jackknife, inputs), the normal equations of all R panels formed by ``einsum`` and solved by
-one batched ``np.linalg.solve``; it agrees with ``fit_var1`` to rounding
+jackknife, inputs), the normal equations of all R panels formed by batched matrix products
+and solved by one batched ``np.linalg.solve``; it agrees with ``fit_var1`` to rounding
 (``tests/engine/test_data_var_stacked.py``). :func:`simulate_panels` draws such panels from
 eq. 19, each trial started in the stationary distribution.
 """
@@ -74,6 +74,12 @@ class StackedFit:
     valid: np.ndarray
 
 
+def _cross(left: np.ndarray, right: np.ndarray) -> np.ndarray:
+    """The cross-products left_r' right_r of each of R stacked (R, n, i) and (R, n, j)
+    arrays, (R, i, j): a batched matrix product (BLAS), about ten times einsum's loop."""
+    return left.transpose(0, 2, 1) @ right
+
+
 def _demeaned(panels: np.ndarray, segments: Segments) -> np.ndarray:
     """(R, T, w) panels with each segment's mean removed (rows outside a segment: 0)."""
     out = np.zeros_like(panels)
@@ -123,31 +129,31 @@ def _solve_segments(method: str, panels: np.ndarray, inputs: np.ndarray | None,
         what = "pairs" if method == "ols" else "triples"
         raise ModelError(f"too few bounces for the {'VAR(1)' if method == 'ols' else 'lag-2'}"
                          f" fit ({n} {what} in {len(segments.lengths)} trials)")
-    a = np.einsum("rni,rnj->rij", z, regressors)
+    a = _cross(z, regressors)
     identified = np.linalg.cond(a) <= CONDITION_LIMIT[method]
     valid = identified.copy()
     if method == "lag2":
         sign, log_a = np.linalg.slogdet(a)
-        sign_z, log_z = np.linalg.slogdet(np.einsum("rni,rnj->rij", z, z))
-        sign_x, log_x = np.linalg.slogdet(np.einsum("rni,rnj->rij", regressors, regressors))
+        sign_z, log_z = np.linalg.slogdet(_cross(z, z))
+        sign_x, log_x = np.linalg.slogdet(_cross(regressors, regressors))
         ok = (sign != 0) & (sign_z > 0) & (sign_x > 0)
         with np.errstate(over="ignore", invalid="ignore"):
             strength = np.where(ok, np.minimum(1.0, np.exp(log_a - 0.5 * (log_z + log_x))),
                                 0.0)
         valid &= strength >= MIN_INSTRUMENT_DET
     a = np.where(identified[:, None, None], a, np.eye(p))  # a failed fit solves something harmless
-    b = np.linalg.solve(a, np.einsum("rni,rnj->rij", z, x_next))  # (R, p, 2) = [J, B]^T
+    b = np.linalg.solve(a, _cross(z, x_next))  # (R, p, 2) = [J, B]^T
     resid = x_next - regressors @ b
     a_inv = np.linalg.inv(a)
     if method == "ols":
-        sigma = np.einsum("rni,rnj->rij", resid, resid) / dof
+        sigma = _cross(resid, resid) / dof
         cov = sigma[:, :, None, :, None] * a_inv[:, None, :2, None, :2]
         cov = cov.reshape(r, 4, 4)
     else:
         g = (resid[:, :, :, None] * z[:, :, None, :]).reshape(r, n, 2 * p)
-        s = np.einsum("rni,rnj->rij", g, g)
+        s = _cross(g, g)
         same = segment_of[1:] == segment_of[:-1]
-        g1 = np.einsum("rni,rnj->rij", g[:, 1:][:, same], g[:, :-1][:, same])
+        g1 = _cross(g[:, 1:][:, same], g[:, :-1][:, same])
         s = s + g1 + g1.transpose(0, 2, 1)
         bread = np.zeros((r, 2 * p, 2 * p))
         bread[:, :p, :p] = a_inv
