@@ -62,6 +62,7 @@ from ..data.data_parameters import (
     model_at_data,
 )
 from ..data.impacts import Impacts
+from ..data.setup_table import SETUP_FILE, SetupQuantity, setup_frame
 from .plotting import publication_style
 from .report import Section, embed_png, html_table, page
 from ..data.study_manifest import ManifestRow, Unit, read_manifest
@@ -332,6 +333,16 @@ def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures:
 MEASURED_SETUP = ("g_m_s2", "measurement_sd_v_m_s", "measurement_sd_theta_rad")
 
 
+def pooled_setup(measured: dict[str, float], impacts: int) -> pd.DataFrame:
+    """The unit's ``setup.csv``: what its recordings measured of the set-up
+    (:data:`MEASURED_SETUP`, pooled weighted by impacts), written beside its pooled
+    ``impacts.csv`` so that a single command run on that table (``bounce acf --data
+    <unit>/impacts.csv``) takes the same g and measurement noise as the study did."""
+    return setup_frame([SetupQuantity(quantity, value, n=impacts,
+                                      note="the unit's recordings, pooled weighted by impacts")
+                        for quantity, value in measured.items()])
+
+
 def unit_parameters(pooled: pd.DataFrame, measured: dict[str, float],
                     model: dict[str, Any], label: str = "") -> DataModel:
     """alpha and g of a unit's model: the study's model block where set, else what the
@@ -365,6 +376,8 @@ def analyse_unit(task: UnitTask) -> dict[str, Any]:
     pooled, measured = read_unit_impacts(task, frames, failures, summary)
     if pooled is not None:
         frames[f"{unit.folder}/impacts.csv"] = pooled
+        if measured:  # beside it, so that `bounce <analysis> --data` on it runs the same model
+            frames[f"{unit.folder}/{SETUP_FILE}"] = pooled_setup(measured, len(pooled))
         # the recordings' own measurement noise travels with the pooled table to acf --data
         pooled.attrs["setup"] = {q: v for q, v in measured.items() if q != "g_m_s2"}
         found = None
