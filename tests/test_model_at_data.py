@@ -133,6 +133,11 @@ def test_run_json_records_the_units_alpha_and_g(unit, name):
     assert close(recorded["alpha"]["value"], float(row["alpha"]))
     assert recorded["g"]["source"] == "measured"  # the unit's setup.csv
     assert close(recorded["g"]["value"], float(row["g_m_s2"]))
+    # and the racket: the data's, not the config's 0.30 m / 0.92 s
+    for key, column in (("racket_amplitude", "racket_amplitude_mean_m"),
+                        ("racket_period", "racket_period_mean_s")):
+        assert recorded[key]["source"] == "data"
+        assert close(recorded[key]["value"], float(row[column])), key
 
 
 @pytest.mark.slow

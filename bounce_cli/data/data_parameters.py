@@ -295,7 +295,8 @@ RACKET_COLUMNS = ("racket_amplitude_m", "racket_period_s")
 
 def model_at_data(impacts, found: DataModel,
                   need: Literal["stable", "fixed point"] | None = "stable",
-                  racket_period: float | None = None) -> ModelParams:
+                  racket_period: float | None = None,
+                  record: dict[str, Any] | None = None) -> ModelParams:
     """The model at the data's parameters: alpha and g of ``found``, the racket the data's.
 
     Every analysis of an impacts table builds its model here: ``acf --data``,
@@ -316,6 +317,10 @@ def model_at_data(impacts, found: DataModel,
     racket_period : float, optional
         A racket period (s) in place of the data's mean (``control``'s
         ``fit.racket_period_s``).
+    record : dict, optional
+        A run's record (``RunOptions.record``): its ``model_at_data`` entry, alpha and g
+        from ``model_for_data``, gains the racket amplitude and period used, so that
+        ``run.json`` names the whole model and where each value came from.
 
     Returns
     -------
@@ -335,6 +340,16 @@ def model_at_data(impacts, found: DataModel,
     a_r = float(frame["racket_amplitude_m"].mean())
     tau = float(frame["racket_period_s"].mean()) if racket_period is None else racket_period
     params = ModelParams(alpha, g, a_r, tau)
+    if record is not None:
+        n = int(frame["racket_amplitude_m"].notna().sum())
+        racket = {"racket_amplitude": ModelValue("racket_amplitude", a_r, "data", n,
+                                                 f"mean of {n} impacts' cycles"),
+                  "racket_period": ModelValue("racket_period", tau, "data", n,
+                                              f"mean of {n} impacts' cycles")
+                  if racket_period is None else
+                  ModelValue("racket_period", tau, "set", 0, "fit.racket_period_s")}
+        record.setdefault("model_at_data", {}).update(
+            {name: value.record() for name, value in racket.items()})
     if need is None:
         return params
     period = f"period {tau:.4g} s" if racket_period is None else f"the given period {tau:.4g} s"

@@ -488,9 +488,10 @@ def fit_inputs(config: ControlConfig, options: RunOptions | None = None
     impacts = table.frame
     # the model at the data's racket (section 7: "identical to the ones of the experiment"),
     # alpha_0 and g the data's unless the user set them
-    model = model_for_data(table, config, options or RunOptions(), source)
+    run = options or RunOptions()
+    model = model_for_data(table, config, run, source)
     data_params = model_at_data(table, model, need="fixed point",
-                                racket_period=config.fit.racket_period_s)
+                                racket_period=config.fit.racket_period_s, record=run.record)
     return impacts, data_params, {"model": model, "gain_K": math.nan, "rate_c": math.nan,
                                   "source": "data", "trials_lost": math.nan}
 

@@ -268,7 +268,7 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
                            command="acf --data",
                            min_bounces=config.max_lag + 2)
     used = model_for_data(impacts, config, options, source)
-    params = model_at_data(impacts, used)
+    params = model_at_data(impacts, used, record=options.record)
     noise = measurement_noise(d, source, config.data)
     segments = stationary_segments(impacts, d.settle_after_perturbation, config.max_lag + 2)
     segments_means = [(s[1], s[3]) for s in segments]
@@ -987,7 +987,7 @@ def impulse_data_run(config, options, source: ImpactsSource | None = None
         raise ConfigError(f"data: {impacts.path}: column perturbed: no perturbed impact, nothing "
                           "to align (bounce impulse --data needs perturbations)")
     used = model_for_data(impacts, config, options, source)
-    params = model_at_data(impacts, used)
+    params = model_at_data(impacts, used, record=options.record)
     n = config.iterations
     groups = list(impacts.by_trial())
     alpha_0 = params.alpha
