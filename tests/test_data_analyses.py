@@ -682,3 +682,20 @@ def test_the_trust_study_fitted_at_once_is_the_one_by_one_route():
             assert row["coverage"] == pytest.approx(inside / len(found), abs=1e-12)
     own = frame[frame.data_size]
     assert list(own["bounces"]) == [120, 120] and list(own["trials"]) == [3, 3]
+
+
+def test_impulse_data_with_perturbations_one_way_draws_without_a_warning(tmp_path, cli):
+    """A lab that only lowers alpha (a normal design): the figure's increase panel is empty,
+    and nothing but bounce's own lines reaches the terminal (no matplotlib legend warning)."""
+    import warnings
+
+    alpha = perturbation_schedule(10, 70, 12, 0.5, [(0.38, 0.40)], seed=31)
+    sim = simulate_impacts(PAPER, 0.003, 0.003, 10, 70, seed=32, alpha=alpha)
+    path = tmp_path / "impacts.csv"
+    impacts_frame(sim, PAPER).to_csv(path, index=False)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        result = cli("impulse", "--data", path, "--out", tmp_path / "out", "--quiet",
+                     "--set", "data_analysis.settle_after_perturbation=8")
+    assert result.exit_code == 0, result.output
+    assert any((tmp_path / "out").glob("*.png"))

@@ -1120,7 +1120,8 @@ def impulse_data_draw(frames: dict[str, pd.DataFrame]) -> dict:
                 ax.set_xlabel(IMPACT_AFTER_LABEL)
             if row == 0:
                 ax.set_title(perturbation_title(side == "decrease"))
-                ax.legend(fontsize=8)
+                if ax.get_legend_handles_labels()[0]:  # a direction without perturbations: none
+                    ax.legend(fontsize=8)
     fig.suptitle("Fig. 9 with data: relaxation after a perturbation (data black, model grey)")
     fig2, axes2 = new_figure(2, 1, width=7, height=7, sharex=True)
     modulations = (("racket_period_s", "racket period change (ms)", 1e3),
