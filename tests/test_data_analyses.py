@@ -699,3 +699,19 @@ def test_impulse_data_with_perturbations_one_way_draws_without_a_warning(tmp_pat
                      "--set", "data_analysis.settle_after_perturbation=8")
     assert result.exit_code == 0, result.output
     assert any((tmp_path / "out").glob("*.png"))
+
+
+def test_control_data_with_one_perturbation_each_way_is_an_error_not_its_start(
+        tmp_path, cli, user_error):
+    """One window per direction has no SE to weigh the fit: the least squares stayed at its
+    starting point (K = c = 0.5, NaN intervals) and reported it as a fit. Now one line."""
+    alpha = np.full((1, 70), 0.5)
+    alpha[0, 20], alpha[0, 45] = 0.39, 0.61  # one perturbation each way
+    sim = simulate_impacts(PAPER, 0.003, 0.003, 1, 70, seed=32, alpha=alpha)
+    frame = impacts_frame(sim, PAPER)
+    assert sorted(frame.loc[frame["perturbed"], "alpha"] > 0.5) == [False, True]
+    path = tmp_path / "impacts.csv"
+    frame.to_csv(path, index=False)
+    result = cli("control", "--data", path, "--out", tmp_path / "out", "--quiet")
+    user_error(result, "too few perturbations to fit K and c")
+    assert not (tmp_path / "out").exists()

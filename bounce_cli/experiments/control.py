@@ -507,6 +507,10 @@ def align_frame(impacts: pd.DataFrame, params: ModelParams, n_after: int) -> dic
                                alpha_0=params.alpha, n_after=n_after)
 
 
+#: perturbation windows a direction needs to enter the fit of K and c (its mean's SE)
+MIN_WINDOWS = 2
+
+
 def fit_frames(config: ControlConfig, inputs=None) -> dict[str, pd.DataFrame]:
     """fit.csv (K, c with confidence intervals, the fitted model's eigenvalues, offsets) and
     fit_responses.csv (mean responses and the fitted model's) from ``fit_inputs``."""
@@ -516,6 +520,14 @@ def fit_frames(config: ControlConfig, inputs=None) -> dict[str, pd.DataFrame]:
     if not responses:
         raise ConfigError(f"data: no perturbation window of {block.impacts_after + 1} "
                           "consecutive impacts inside one trial (fit.impacts_after)")
+    # a mean of one window has no standard error to weigh the fit by: the least squares
+    # would stay at its starting point and report it as the fit
+    if all(r.n_events < MIN_WINDOWS for r in responses.values()):
+        counts = ", ".join(f"{r.n_events} {d}" for d, r in responses.items())
+        raise ConfigError(f"data: too few perturbations to fit K and c: {counts} window(s) "
+                          f"of {block.impacts_after + 1} impacts, fewer than {MIN_WINDOWS} in "
+                          "every direction (fit.impacts_after)")
+    responses = {d: r for d, r in responses.items() if r.n_events >= MIN_WINDOWS}
     switch = config.model.control.switch  # when the racket takes the new period (the data's)
 
     def controller_of(gain: float, rate: float) -> PeriodController:
