@@ -84,7 +84,7 @@ class BounceGroup(TyperGroup):
 app = typer.Typer(
     cls=BounceGroup,
     name="bounce",
-    help="Reproduce the experiments of the ball bouncing map paper from YAML configs.",
+    help="The ball bouncing map paper's experiments: the model, a lab's data against it, the virtual set-up.",
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
@@ -112,7 +112,7 @@ def main_callback(
         typer.Option("--version", callback=_version, is_eager=True, help="Show the version."),
     ] = False,
 ) -> None:
-    """Reproduce the experiments of the ball bouncing map paper from YAML configs."""
+    """The ball bouncing map paper's experiments: the model, a lab's data against it, the virtual set-up."""
 
 
 # -- options shared by every command ---------------------------------------------------------
