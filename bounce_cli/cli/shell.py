@@ -81,10 +81,14 @@ class BounceGroup(TyperGroup):
         return code
 
 
+#: what ``bounce --help`` says the app is (pyproject.toml's description says the same)
+SUMMARY = ("The ball bouncing map paper's experiments: the model, a lab's data against it, "
+           "the virtual set-up.")
+
 app = typer.Typer(
     cls=BounceGroup,
     name="bounce",
-    help="The ball bouncing map paper's experiments: the model, a lab's data against it, the virtual set-up.",
+    help=SUMMARY,
     no_args_is_help=True,
     add_completion=False,
     pretty_exceptions_enable=False,
@@ -105,14 +109,14 @@ def _version(value: bool) -> None:
         raise typer.Exit()
 
 
-@app.callback()
+@app.callback(help=SUMMARY)
 def main_callback(
     version: Annotated[
         bool,
         typer.Option("--version", callback=_version, is_eager=True, help="Show the version."),
     ] = False,
 ) -> None:
-    """The ball bouncing map paper's experiments: the model, a lab's data against it, the virtual set-up."""
+    """The app's summary (:data:`SUMMARY`) and its version option."""
 
 
 # -- options shared by every command ---------------------------------------------------------
