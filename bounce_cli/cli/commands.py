@@ -188,8 +188,9 @@ def orbit_command(
     overrides: SetOption = None,
     as_csv: Annotated[bool, typer.Option("--csv", help="Write CSV to stdout.")] = False,
 ) -> None:
-    """Iterate the map (eqs. 5, 6) from one initial condition, at any parameters (with
-    model.control: the racket period as a third state, engine.control)."""
+    """Iterate the map (eqs. 5, 6) from one initial condition, at any parameters.
+
+    With model.control the racket period is a third state (bounce_cli.model.control)."""
     from ..experiments.orbit import controlled_orbit, exact_orbit, passive_orbit
 
     block, params = _model_or_fail(config, overrides, need_fixed_point=False)

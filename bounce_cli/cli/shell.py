@@ -31,7 +31,6 @@ except ImportError:  # pragma: no cover - older typer on click
     )
 
 from ..version import __version__
-from ..runtime.figure_files import FIGURE_DPI
 from ..runtime.interrupts import Interrupted, report as report_interrupt
 
 
@@ -199,7 +198,7 @@ FigureFormatOption = Annotated[
 ]
 DpiOption = Annotated[
     int, typer.Option("--dpi", min=30, max=2400, metavar="N",
-                      help=f"Resolution of PNG figures, dots per inch (default {FIGURE_DPI}).")
+                      help="Resolution of PNG figures, dots per inch.")
 ]
 ResumeOption = Annotated[
     bool,

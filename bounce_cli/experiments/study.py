@@ -764,7 +764,8 @@ def _learning_line(r: dict) -> str | None:
 
 def _stability_line(r: dict) -> str:
     """The stability of one condition and estimate, data against the model."""
-    return (f"stability ({r['condition']}, {r['estimate']}, {r['units']} units"
+    units = f"{r['units']} unit{'' if r['units'] == 1 else 's'}"
+    return (f"stability ({r['condition']}, {r['estimate']}, {units}"
             + (f"; {r['units_without_interval']} without an interval, left out"
                if r["units_without_interval"] else "")
             + (f"; {r['units_withheld']} withheld (no estimate), left out"
