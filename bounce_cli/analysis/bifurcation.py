@@ -22,7 +22,7 @@ a transient, in the wrapped phase (phases compared modulo 2 pi):
 * ``unresolved``: no such p and a non-positive exponent (a longer period, or an orbit that has
   not settled within the transient, as happens right at a bifurcation).
 
-With ``min_hop_s`` 0 (exact sticking, ``engine.chatter``) an orbit is not stopped where it
+With ``min_hop_s`` 0 (exact sticking, ``model.chatter``) an orbit is not stopped where it
 sticks: it rides to the release and flies on from there (the release state is the same every
 time). ``locked``: it was released at least twice during the measured impacts (periodic from
 its first release; ``SweepOrbits.locked_cycles`` racket cycles per period; the recorded
@@ -258,7 +258,7 @@ def iterate_sweep(
     idx = np.flatnonzero(flies)
     th, vv, pars = np.mod(theta0[idx], TWO_PI), v0[idx], params.take(idx)
     tangent = initial_tangent(idx.size)
-    exact = settings.min_hop_s == 0.0  # exact sticking (engine.chatter)
+    exact = settings.min_hop_s == 0.0  # exact sticking (model.chatter)
     chatter = _ExactSticking(n, idx.size) if exact else None
     for k in range(1, total + 1):
         if idx.size:
@@ -350,7 +350,7 @@ def lyapunov_standard_error(batch_growth: np.ndarray, measured_impacts: int) -> 
 
 
 class _ExactSticking:
-    """``iterate_sweep``'s bookkeeping of exact sticking (``engine.chatter``), per state: the
+    """``iterate_sweep``'s bookkeeping of exact sticking (``model.chatter``), per state: the
     unwrapped phase since the start (to count racket cycles between releases), the phase of
     the last release, whether the next flight starts at a release, and whether the state
     stuck during the measured impacts (locked)."""

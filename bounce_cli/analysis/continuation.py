@@ -8,12 +8,12 @@ A periodic orbit of period p impacts over m racket cycles is a zero of
 where F is the map of eqs. 5, 6 and lambda one parameter (Gamma = a_r w^2 / g, a_r, tau or
 alpha). Its x-derivative is M - I with M = J_{p-1} ... J_0, the product of the map's
 Jacobians along the orbit (the implicit-function derivatives of section 4 at every impact,
-``engine.lyapunov.map_jacobian``; eq. 9 at the period-1 orbit). Its lambda-derivative follows
+``analysis.lyapunov.map_jacobian``; eq. 9 at the period-1 orbit). Its lambda-derivative follows
 the orbit too: dx_{k+1}/dlambda = J_k dx_k/dlambda + dF/dlambda(x_k), with dF/dlambda from
 the same implicit differentiation of eq. 6 in the racket's amplitude, angular frequency, g
 and alpha (:func:`parameter_derivative`).
 
-Each flight's hop is the root of the gap (``engine.impact.gap``) continued from the previous
+Each flight's hop is the root of the gap (``model.impact.gap``) continued from the previous
 point of the branch (Newton on G(s) = 0), not the first root: a branch can then be followed
 up to and past the point where a flight touches the racket tangentially (grazing), and the
 physical orbit is the part of the branch where every flight stays above the racket.

@@ -59,7 +59,8 @@ class ControlledResponse:
     dtau: np.ndarray
 
     def relaxation_impacts(self, tol_v: float, tol_theta: float) -> int:
-        """``engine.relaxation_impacts`` of this response (v and theta, as for Fig. 9)."""
+        """``model.perturbation.relaxation_impacts`` of this response (v and theta, as for
+        Fig. 9)."""
         return relaxation_impacts(self.dv, self.dtheta, tol_v, tol_theta)
 
 
@@ -402,11 +403,11 @@ def fastest_controller(params: ModelParams, guess: tuple[float, float]) -> Faste
 def controlled_impulse_response_linear(params: ModelParams, controller: Controller,
                                        alpha_p: float, n_impacts: int) -> ControlledResponse:
     """The linearised controlled map y_{k+1} = M y_k (M: the 3 x 3 Jacobian) from
-    y_0 = (v_0 - v~, 0, 0), as ``engine.impulse_response_linear`` is for eq. 9's J."""
+    y_0 = (v_0 - v~, 0, 0), as ``analysis.impulse.impulse_response_linear`` is for eq. 9's J."""
     v_fp, theta_fp, tau_bar = controlled_fixed_point(params, controller)
     y = iterate_linear(controlled_jacobian(params, controller),
                        [perturbed_velocity(params, alpha_p) - v_fp, 0.0, 0.0], n_impacts)
-    v = v_fp + y[:, 0]  # dv = v - v~ as ``engine.impulse`` computes it (same bits at K = 0)
+    v = v_fp + y[:, 0]  # dv = v - v~ as ``analysis.impulse`` computes it (same bits at K = 0)
     return ControlledResponse(v=v, theta=np.mod(theta_fp + y[:, 1], TWO_PI),
                               tau=tau_bar + y[:, 2], dv=v - v_fp, dtheta=y[:, 1], dtau=y[:, 2])
 

@@ -249,7 +249,7 @@ def align(values_trials: Sequence[np.ndarray], perturbed_trials: Sequence[np.nda
           labels: Sequence | None = None) -> AlignedWindows:
     """Align one quantity on the perturbed impacts of every trial: the one alignment of the
     data side (``bounce impulse --data``, and ``bounce control --data`` through
-    ``engine.control.align_perturbations``).
+    ``analysis.control_design.align_perturbations``).
 
     Baseline per trial: the mean over :func:`baseline_mask` impacts (for a phase, the
     circular mean, and deviations wrapped to [-pi, pi)). Windows from

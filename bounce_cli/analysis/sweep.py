@@ -1,7 +1,7 @@
 """A basin atlas over parameters: at each parameter point the period-1 fixed point (eqs. 7, 8)
 and its spectral radius (eq. 10), and a basin on a (theta0, v0) grid classified as in
 section 3 (Fig. 4), summarised by its outcome fractions, its basin entropy and boundary basin
-entropy and, on request, its uncertainty exponent (``engine.basin_measures``).
+entropy and, on request, its uncertainty exponent (``analysis.basin_measures``).
 
 A parameter point is the model with some of alpha, g, racket_amplitude and racket_period
 replaced, or with ``ac_g`` set: the racket acceleration at impact AC (units of g, <= 0) put

@@ -301,7 +301,7 @@ def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: st
 
 def impacts_frame(sim, params, trial_names=None) -> pd.DataFrame:
     """An impacts table (the columns above) from the engine's synthetic lab
-    (``engine.data_stats.simulate_impacts``): racket period and amplitude are the model's,
+    (``analysis.data_stats.simulate_impacts``): racket period and amplitude are the model's,
     AC = -a_r w^2 sin(theta) / g, ball apex x_r(theta) + v^2 / 2g, the set-up's g (``g_m_s2``,
     what the data analyses run the model at). Lost trials are left out."""
     from ..model.flight import apex_height

@@ -16,7 +16,7 @@ The ball flies ballistically (eqs. 1, 2) and bounces by the impact law eq. 3
 (``flight.impact_velocity``), with velocity noise q_v xi_k added to every velocity after
 impact as in eq. 16. Perturbation events replace alpha by alpha_p at chosen impacts (section 7).
 The next impact is the FIRST contact after the current one, found by the safe-step iteration of
-``engine.impact`` (the gap's lower bound G + G' h - M h^2 / 2 with M >= |G''| proves each step
+``model.impact`` (the gap's lower bound G + G' h - M h^2 / 2 with M >= |G''| proves each step
 root-free), here in time and for the drifting, cycle-wise racket: steps never cross a cycle
 boundary, where M changes. With zero SDs and no drift the impacts are those of
 ``flight.simulate`` (tested).
@@ -107,7 +107,7 @@ class SessionSettings:
     harmonic2_m: float = 0.0
     disturbance_m: float = 0.0
     disturbance_s: float = 0.1
-    #: racket period control (``engine.control``): at each impact the controller sets the
+    #: racket period control (``model.control``): at each impact the controller sets the
     #: period of the racket's NEXT cycle (``switch = "cycle"``); None: the periods are drawn
     controller: Any = None
 

@@ -4,7 +4,7 @@ Theory: the linearised VAR(1) model (eq. 19) with the paper's diagonal noise cov
 with the covariance the map of eqs. 16-18 actually induces. Samples: long runs of eqs. 16-18
 (the paper's crosses) and simulated trials as the experiment recorded them (three of 40 s).
 The inverse problems behind the candidate explanations are solved by the engine
-(``engine.stochastic``); the paper's values come from :mod:`bounce_cli.paper.values`.
+(``analysis.stochastic``); the paper's values come from :mod:`bounce_cli.paper.values`.
 """
 
 from __future__ import annotations
@@ -214,7 +214,7 @@ class ControlledRuns:
 def controlled_runs(params: ModelParams, controller, q_v: float, q_theta: float,
                     n_bounces: int, n_runs: int, seeds: np.random.SeedSequence, burn_in: int,
                     advance) -> ControlledRuns:
-    """The stochastic map of eqs. 16-18 with racket period control (``engine.control``: the
+    """The stochastic map of eqs. 16-18 with racket period control (``model.control``: the
     same noise, eq. 16 as printed), ``n_runs`` runs of ``n_bounces`` after ``burn_in``,
     started at the fixed point, one stream per run (spawned from ``seeds``). A run whose ball
     stops is lost (rows NaN)."""

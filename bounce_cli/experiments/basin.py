@@ -4,7 +4,7 @@ Every initial condition (theta0, v0) of a grid -- the ball leaves the racket at 
 with velocity v0 -- is classified by iterating the map (eqs. 5, 6) until it reaches the
 period-1 fixed point, sticks, or (never, on the paper's grid) runs out of impacts; initial
 velocities not above the racket's are "below the racket". The numerics live in
-``engine.classify``; this module builds the grid, tiles it over worker processes and draws.
+``analysis.classify``; this module builds the grid, tiles it over worker processes and draws.
 """
 
 from __future__ import annotations

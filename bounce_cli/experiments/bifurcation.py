@@ -5,9 +5,9 @@ over a range; at every value the map (eqs. 5, 6) is iterated from several initia
 a transient is discarded, and the impacts after it are recorded. Each orbit's attractor
 (``period<p>`` in the wrapped phase, ``chaotic``, ``sticking``, ...) and its largest Lyapunov
 exponent (the map's Jacobian at every impact, by implicit differentiation of eqs. 5, 6) come
-from ``engine.bifurcation`` and ``engine.lyapunov``. The figure draws the period-1 orbit's
+from ``analysis.bifurcation`` and ``analysis.lyapunov``. The figure draws the period-1 orbit's
 existence threshold (the fold, eq. 8) and flip threshold (eq. 14) where continuation locates
-them (``engine.continuation``, exact to rounding), with the closed forms beside them in
+them (``analysis.continuation``, exact to rounding), with the closed forms beside them in
 ``thresholds.csv``; the flip is also located by brute force on the map's iterated orbits, by
 multisection on the detected period, and compared.
 """
@@ -269,7 +269,7 @@ def threshold_frame(config: BifurcationConfig, per_value: pd.DataFrame, periods:
                 rows.append(dict(threshold=kind, cycles=cycles, equation=equation,
                                  closed_form=value))
     table = pd.DataFrame(rows)
-    # the thresholds located by continuation (engine.continuation): the fold where the orbit
+    # the thresholds located by continuation (analysis.continuation): the fold where the orbit
     # is born and its flip, exact to rounding; the figure draws its lines there
     continued = {cycles: continued_period1_thresholds(base, sweep.parameter, cycles)
                  for cycles in sorted(set(table.cycles))}

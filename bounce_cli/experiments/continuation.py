@@ -2,14 +2,14 @@
 
 Each start (eq. 8's period-1 orbit hopping m racket cycles, or the periodic orbit an initial
 condition settles on) is converged by Newton on F^p(x) = x + (0, 2 pi m) (eqs. 5, 6) and
-followed both ways by pseudo-arclength continuation (``engine.continuation``) with the map's
+followed both ways by pseudo-arclength continuation (``analysis.continuation``) with the map's
 analytic Jacobian (section 4's implicit-function derivatives along the orbit) and analytic
 parameter derivatives. Flips (an eigenvalue -1), folds (+1), Neimark-Sacker points (a
 complex pair on the unit circle) and grazings (a flight touching the racket) are located by
 test functions and Newton on the augmented system; at a flip the doubled orbit is switched
 onto and followed in turn, so the period-doubling cascade is followed to ``max_period`` and
 Feigenbaum's delta estimated from its flips. The figure draws the branches over the
-brute-force bifurcation diagram (``engine.bifurcation``: the map iterated from several
+brute-force bifurcation diagram (``analysis.bifurcation``: the map iterated from several
 initial conditions at every value, as ``bounce bifurcation``).
 """
 

@@ -1,5 +1,5 @@
 """Active period control: the racket period as a third state (the paper's future work,
-sections 7-8; model in ``engine.control``).
+sections 7-8; model in ``model.control``).
 
 Asks of the controlled map what the paper asked of the passive one: where is it linearly
 stable and how fast does it relax (spectral radius over the controller's gain K and rate c;
@@ -379,11 +379,12 @@ def basin_frames(params: ModelParams, config: ControlConfig,
 
 # -- correlation functions with control (Fig. 8) -------------------------------------------------
 def correlations_frame(params: ModelParams, config: ControlConfig) -> pd.DataFrame:
-    """acf.csv: per lag and pair (``engine.PAIR_NAMES``), the VAR(1) correlation functions
-    (eq. 19) of the passive map (2 x 2 J, eq. 9) and of the controlled one (3 x 3 Jacobian,
-    the period's noise q_tau), both with the noise covariance the map of eqs. 16-18 induces
-    (``engine.map_noise_covariance``, phase noise inside cos(theta_{k+1})), and the sample
-    correlations (mean and standard error over runs) of the controlled stochastic map."""
+    """acf.csv: per lag and pair (``analysis.stochastic.PAIR_NAMES``), the VAR(1) correlation
+    functions (eq. 19) of the passive map (2 x 2 J, eq. 9) and of the controlled one (3 x 3
+    Jacobian, the period's noise q_tau), both with the noise covariance the map of eqs. 16-18
+    induces (``analysis.stochastic.map_noise_covariance``, phase noise inside
+    cos(theta_{k+1})), and the sample correlations (mean and standard error over runs) of
+    the controlled stochastic map."""
     block = config.correlations
     controller = config.model.control.controller()
     noise2 = map_noise_covariance(params, block.q_v_m_s, block.q_theta_rad, "theta")
@@ -497,8 +498,8 @@ def fit_inputs(config: ControlConfig, options: RunOptions | None = None
 
 
 def align_frame(impacts: pd.DataFrame, params: ModelParams, n_after: int) -> dict:
-    """Mean responses by direction (``engine.control.align_perturbations``: one function the
-    shared data-side alignment can replace)."""
+    """Mean responses by direction (``analysis.control_design.align_perturbations``: one
+    function the shared data-side alignment can replace)."""
     alpha = impacts["alpha"].to_numpy() if "alpha" in impacts else None
     return align_perturbations(impacts["trial"].to_numpy(), impacts["k"].to_numpy(),
                                impacts["v_m_s"].to_numpy(), impacts["theta_rad"].to_numpy(),

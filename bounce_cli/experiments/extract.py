@@ -2,7 +2,7 @@
 
 Reads a lab's recording (CSV or C3D, ``bounce_cli.data.recordings``), optionally its event log
 (``--events``: the impact times and alpha of a virtual set-up), and extracts per bounce the
-map's variables (``engine.extraction``): phase of impact theta_k, ball velocity after impact v_k
+map's variables (``data.extraction``): phase of impact theta_k, ball velocity after impact v_k
 (eq. 5's state), racket acceleration at impact AC (section 4) and the rest of
 ``bounce_cli.data.impacts``. Writes ``impacts.csv``, ``excluded.csv`` (contacts not reported, with
 the reason), ``cycles.csv`` (the racket cycles), ``fig2.png`` with the samples it shows
@@ -141,7 +141,7 @@ STANDARD_GRAVITY = 9.80665
 
 
 class ExtractionBlock(StrictModel):
-    """The extraction's settings (``engine.extraction``; g comes from the model block)."""
+    """The extraction's settings (``data.extraction``; g comes from the model block)."""
 
     max_gap_s: float = Field(DEFAULTS.max_gap_s, ge=0.0)
     acc_half_window_s: float = Field(DEFAULTS.acc_half_window_s, gt=0.0)

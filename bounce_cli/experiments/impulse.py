@@ -114,7 +114,7 @@ def at_paper_parameters(params: ModelParams) -> bool:
 
 def linear_outcome(params: ModelParams, controller=None) -> str:
     """The linear map y_{k+1} = J y_k returns to the fixed point iff J is stable (with a
-    controller: the 3 x 3 Jacobian of ``engine.control``)."""
+    controller: the 3 x 3 Jacobian of ``model.control``)."""
     if controller is not None:
         from ..model.control import controlled_jacobian, spectral_radius_3x3
 

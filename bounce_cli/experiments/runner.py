@@ -112,7 +112,7 @@ def load_run_config(entry: Entry, config: Path | None,
 def warn_if_unstable(params: ModelParams, controller=None,
                      warn: Callable[[str], None] | None = None) -> None:
     """Warn when the period-1 fixed point exists but is linearly unstable (eq. 10; with racket
-    period control the 3 x 3 Jacobian of ``engine.control``): the figures then describe an
+    period control the 3 x 3 Jacobian of ``model.control``): the figures then describe an
     orbit nothing converges to.
 
     Parameters

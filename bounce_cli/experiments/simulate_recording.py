@@ -1,6 +1,6 @@
 """``bounce simulate-recording``: a simulated lab session with known truth (Fig. 2's raw data).
 
-The engine (``engine.recording``) moves ball and racket in continuous time (eqs. 1-4, the impact
+The engine (``data.simulated_lab``) moves ball and racket in continuous time (eqs. 1-4, the impact
 law eq. 3 with eq. 16's velocity noise q_v after each impact, per-cycle racket period and
 amplitude, perturbations of alpha as in section 7) and samples both positions like a motion
 capture system. Writes ``recording.csv`` (what a lab measures), ``events.csv`` (every impact's
@@ -9,7 +9,7 @@ of ``bounce_cli.data.impacts``, with ``v_in_m_s, alpha_measured, contact_s``) an
 (Fig. 2's layout drawn from the truth).
 
 A physical set-up (``contact:``, ``racket.harmonic2_m``, ``racket.disturbance_*``, the marker
-offset, the model's g): see ``engine.recording``; the truth then holds the equivalent
+offset, the model's g): see ``data.simulated_lab``; the truth then holds the equivalent
 instantaneous impacts (where the flights before and after a contact meet).
 """
 

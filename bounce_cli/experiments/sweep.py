@@ -6,7 +6,7 @@ amplitude, so that alpha x ac_g is Fig. 5's plane), each point gets the period-1
 (eqs. 7, 8) and its spectral radius (eq. 10), and a basin on a (theta0, v0) grid classified
 as in section 3: the fractions of ``period1``, ``sticking``, ``below_racket`` and
 ``undecided``, the basin entropy and boundary basin entropy (Daza et al. 2016) and, on
-request, the uncertainty exponent (``engine.sweep``, ``engine.basin_measures``).
+request, the uncertainty exponent (``analysis.sweep``, ``analysis.basin_measures``).
 
 Each parameter point is one task with its own seed (``SeedSequence(seed).spawn``), run on
 ``--jobs`` local processes or a Dask cluster (``--scheduler``) through ``parallel.executor``;

@@ -1,7 +1,7 @@
 """``bounce trajectory``: continuous-time motion of ball and racket (eqs. 1-4; Figs. 2, 3).
 
 For each case the ball leaves the racket at phase theta0 with velocity v0; the engine
-(``engine.flight.simulate``) integrates the motion with the configured integrator, including
+(``model.flight.simulate``) integrates the motion with the configured integrator, including
 the sticking phases where the ball rides on the racket.
 """
 

@@ -115,7 +115,7 @@ class PeriodController:
     #: when the new period starts: "impact" (the flight after impact k runs at tau_{k+1}; the
     #: model of this module) or "cycle" (at the racket's next upward mid-position crossing:
     #: the rest of the current cycle keeps tau_k, a racket moved cycle by cycle as
-    #: ``engine.recording`` moves it; see ``controlled_step``)
+    #: ``data.simulated_lab`` moves it; see ``controlled_step``)
     switch: str = "impact"
 
     def target(self, v, reference: Reference):
@@ -199,8 +199,8 @@ def contact_after_crossing(height, v, amplitude, omega, g, *,
 
     The racket moves as a sin(s) at angular frequency omega from the crossing s = 0; the
     ball is ``height`` (>= 0) above it there with velocity v. This is the map's gap with
-    theta = 0 and a height (``engine.impact.SinusoidGap``; |G''| <= g / w^2 + a), solved by
-    ``engine.impact.first_contact`` from s = 0 with its stopping rule.
+    theta = 0 and a height (``model.impact.SinusoidGap``; |G''| <= g / w^2 + a), solved by
+    ``model.impact.first_contact`` from s = 0 with its stopping rule.
 
     Parameters
     ----------

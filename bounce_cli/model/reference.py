@@ -5,7 +5,7 @@ For each impact the FIRST root of eq. 6 is bracketed by scanning the gap for its
 change on a fine grid of elapsed phase, then refined with ``scipy.optimize.brentq``. Scalar
 Python throughout (``math``), sharing no code with ``next_impact_phase`` or ``classify_batch``: it
 exists to check the fast classifier point by point and as the baseline of
-``benchmarks/basin.py``. It follows the same conventions as ``engine.classify`` (see there).
+``benchmarks/basin.py``. It follows the same conventions as ``analysis.classify`` (see there).
 """
 
 from __future__ import annotations

@@ -79,10 +79,10 @@ class ModelBlock(StrictModel):
 
 
 class ControlBlock(StrictModel):
-    """Racket period control (``engine.control``, the paper's future work, sections 7-8):
+    """Racket period control (``model.control``, the paper's future work, sections 7-8):
     tau_{k+1} = tau_k + c (tau_bar + K 2 (v_k - v~) / g - tau_k), tau_bar = racket_period."""
 
-    kind: Literal["period"] = Field("period", description="controller (engine.control)")
+    kind: Literal["period"] = Field("period", description="controller (model.control)")
     gain: float = Field(description="K: 1 = the period follows the ball's flight time in full")
     rate: float = Field(1.0, ge=0.0, le=2.0,
                         description="c per impact: 1 = immediate, 0 = never; > 1 overshoots")

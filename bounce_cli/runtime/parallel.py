@@ -82,7 +82,7 @@ class InProcess:
 
 class Threads:
     """``jobs`` threads of this process, for tasks whose work releases the GIL (the compiled
-    basin kernel, ``engine.compiled``): no process start, nothing pickled. Tasks are
+    basin kernel, ``model.compiled``): no process start, nothing pickled. Tasks are
     submitted lazily, at most ``AHEAD`` per thread past the next result to yield. Left by an
     exception (an interrupt, a failing task), the tasks not yet started are cancelled and
     the ones under way (a thread cannot be stopped) are waited for: at most one task each."""
