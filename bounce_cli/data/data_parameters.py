@@ -337,19 +337,21 @@ def model_at_data(impacts, found: DataModel,
     """
     frame = impacts.frame
     alpha, g = found.alpha.value, found.g.value
-    a_r = float(frame["racket_amplitude_m"].mean())
-    tau = float(frame["racket_period_s"].mean()) if racket_period is None else racket_period
+
+    def data_mean(name: str, column: str) -> ModelValue:
+        n = int(frame[column].notna().sum())
+        return ModelValue(name, float(frame[column].mean()), "data", n,
+                          f"mean of {n} impacts' cycles")
+
+    amplitude_column, period_column = RACKET_COLUMNS
+    amplitude = data_mean("racket_amplitude", amplitude_column)
+    period_used = (data_mean("racket_period", period_column) if racket_period is None else
+                   ModelValue("racket_period", racket_period, "set", 0, "fit.racket_period_s"))
+    a_r, tau = amplitude.value, period_used.value
     params = ModelParams(alpha, g, a_r, tau)
     if record is not None:
-        n = int(frame["racket_amplitude_m"].notna().sum())
-        racket = {"racket_amplitude": ModelValue("racket_amplitude", a_r, "data", n,
-                                                 f"mean of {n} impacts' cycles"),
-                  "racket_period": ModelValue("racket_period", tau, "data", n,
-                                              f"mean of {n} impacts' cycles")
-                  if racket_period is None else
-                  ModelValue("racket_period", tau, "set", 0, "fit.racket_period_s")}
         record.setdefault("model_at_data", {}).update(
-            {name: value.record() for name, value in racket.items()})
+            {value.name: value.record() for value in (amplitude, period_used)})
     if need is None:
         return params
     period = f"period {tau:.4g} s" if racket_period is None else f"the given period {tau:.4g} s"

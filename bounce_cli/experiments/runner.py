@@ -406,6 +406,8 @@ def execute(entry: Entry | str, config: Path | str | ExperimentConfig | None = N
             stop = getattr(progress, "stop", None)
             if stop is not None:
                 stop()
+        if not figures:  # the tables alone, whether or not the experiment reads the flag
+            result.figures = {}
         if run_dir is None:
             return Execution(result, cfg)
         written = write_result(run_dir, result, agrees)
