@@ -1120,8 +1120,11 @@ def impulse_data_draw(frames: dict[str, pd.DataFrame]) -> dict:
                 ax.set_xlabel(IMPACT_AFTER_LABEL)
             if row == 0:
                 ax.set_title(perturbation_title(side == "decrease"))
-                if ax.get_legend_handles_labels()[0]:  # a direction without perturbations: none
+                if ax.get_legend_handles_labels()[0]:
                     ax.legend(fontsize=8)
+            if not len(a) and not len(m):  # a lab that perturbs one way only
+                ax.text(0.5, 0.5, "no perturbations this way", transform=ax.transAxes,
+                        ha="center", va="center", color="0.4")
     fig.suptitle("Fig. 9 with data: relaxation after a perturbation (data black, model grey)")
     fig2, axes2 = new_figure(2, 1, width=7, height=7, sharex=True)
     modulations = (("racket_period_s", "racket period change (ms)", 1e3),
