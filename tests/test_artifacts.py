@@ -514,6 +514,38 @@ def test_a_rerun_with_other_package_versions_keeps_the_record_when_nothing_chang
     assert json.loads((out / "timing.json").read_text())["versions"]["numpy"] != "0.0.1-older"
 
 
+def test_records_agree_up_to_rounding_only():
+    assert artifacts.records_agree({"a": [0.30000898483538800, "x", 3, True]},
+                                   {"a": [0.30000898483538810, "x", 3, True]})
+    assert artifacts.records_agree({"v": float("nan")}, {"v": float("nan")})
+    assert not artifacts.records_agree({"a": 0.3}, {"a": 0.3 * (1 + 1e-7)})
+    assert not artifacts.records_agree({"a": 1}, {"a": 1.0})  # an int is not a float
+    assert not artifacts.records_agree({"a": 1}, {"a": 1, "b": 2})
+    assert not artifacts.records_agree([1.0, 2.0], [1.0])
+
+
+@pytest.mark.parametrize("relative_change, kept", [(3e-16, True), (1e-6, False)])
+def test_a_rerun_whose_record_moved_by_rounding_keeps_the_committed_record(
+        tmp_path, relative_change, kept):
+    """A set-up measured from the data (run.json's record) that differs in the last bits on
+    another CPU leaves the committed run.json as it is when the results are unchanged; a
+    number that really moved is written."""
+    out = tmp_path / "r"
+
+    def run_once(amplitude):
+        run = make_run(out, {"a": 1})
+        run.record = {"setup": {"racket_amplitude": {"value": amplitude, "n": 512}}}
+        run.add_csv("data.csv", pd.DataFrame({"x_m": [1.0, 2.0]}))
+        run.commit()
+        return (out / "run.json").read_bytes()
+
+    moved = 0.300008984835388 * (1 + relative_change)
+    assert moved != 0.300008984835388  # the record did change
+    before = run_once(0.300008984835388)
+    after = run_once(moved)
+    assert (after == before) == kept
+
+
 def test_a_cell_needing_quotes_in_a_later_chunk_hands_the_table_to_pandas(tmp_path,
                                                                          monkeypatch):
     monkeypatch.setattr(artifacts, "CSV_CHUNK_ROWS", 100)

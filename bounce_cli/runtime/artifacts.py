@@ -296,6 +296,25 @@ def read_manifest(out_dir: Path) -> dict[str, Any]:
     return data if isinstance(data, dict) else {}
 
 
+#: relative difference below which two numbers of a run's record (run.json) are the same
+#: number: floating point's rounding on another CPU or BLAS, never a changed input
+RECORD_RTOL = 1e-9
+
+
+def records_agree(a: Any, b: Any, rtol: float = RECORD_RTOL) -> bool:
+    """Whether two JSON records are the same but for floats within ``rtol`` of each other
+    (relative to the larger magnitude): same keys, same lengths, same strings, booleans and
+    integers."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(records_agree(a[k], b[k], rtol) for k in a)
+    if isinstance(a, list) and isinstance(b, list):
+        return len(a) == len(b) and all(records_agree(x, y, rtol) for x, y in zip(a, b))
+    if isinstance(a, float) and isinstance(b, float):
+        return (a == b or abs(a - b) <= rtol * max(abs(a), abs(b))
+                or (a != a and b != b))  # both NaN
+    return type(a) is type(b) and a == b
+
+
 def same_bytes(a: Path, b: Path) -> bool:
     """Whether two files hold the same bytes (False when ``b`` does not exist)."""
     try:
@@ -546,18 +565,20 @@ class RunDirectory:
         return sorted({self.out_dir, *(self.out_dir / n.parent for n in inside)})
 
     def manifest_text(self, results_unchanged: bool) -> str:
-        """``run.json``'s text. A rerun whose every result file is byte for byte the previous
-        run's, and whose record differs from the previous one only in package versions, keeps
-        the previous record: the results were made with those versions (and the newer ones
-        reproduce them, as ``timing.json`` records), and reproducing an unchanged result on an
-        upgraded machine changes no tracked file."""
+        """``run.json``'s text. A rerun whose every result file is the previous run's (byte
+        for byte, or within the reproduction tolerance where ``commit`` was given one), and
+        whose record differs from the previous one only in package versions and in numbers
+        within ``RECORD_RTOL`` (a set-up measured from the data, rounded differently on
+        another CPU), keeps the previous record: the results were made with those versions
+        (and the newer ones reproduce them, as ``timing.json`` records), and reproducing an
+        unchanged result on an upgraded or different machine changes no tracked file."""
         manifest = self.manifest("completed")
         previous = self.previous
         if (results_unchanged and previous
-                and {k: v for k, v in previous.items() if k != "versions"}
-                == {k: v for k, v in manifest.items() if k != "versions"}
+                and records_agree({k: v for k, v in previous.items() if k != "versions"},
+                                  {k: v for k, v in manifest.items() if k != "versions"})
                 and isinstance(previous.get("versions"), dict)):
-            manifest = {**manifest, "versions": previous["versions"]}
+            manifest = previous
         return json.dumps(manifest, indent=2) + "\n"
 
     def commit(self,
