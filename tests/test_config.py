@@ -162,3 +162,20 @@ def test_a_device_or_a_folder_as_config_is_one_line(tmp_path):
         assert done.returncode == 2 and len(lines) == 1, done.stderr[-2000:]
         assert lines[0].startswith(f"bounce: error: {given}: ") and "not a regular file" \
             in lines[0], lines[0]
+
+
+def test_a_parsed_config_is_cached_by_its_text_and_never_shared(tmp_path):
+    """read_yaml keeps parsed configs by their text: a caller that edits its copy does not
+    change the next reader's, and an edited file is parsed again."""
+    from bounce_cli.runtime.config import read_yaml
+
+    path = write(tmp_path, """\
+        model: {alpha: 0.5}
+        list: [1, 2]
+        """)
+    first = read_yaml(path)
+    first["model"]["alpha"] = 0.9
+    first["list"].append(3)
+    assert read_yaml(path) == {"model": {"alpha": 0.5}, "list": [1, 2]}
+    path.write_text("model: {alpha: 0.7}\n")
+    assert read_yaml(path) == {"model": {"alpha": 0.7}}
