@@ -152,3 +152,49 @@ def test_theta_rad_and_theta_deg_must_agree(table, tmp_path):
     off = table.assign(theta_deg=table["theta_deg"] + 5.0)
     with pytest.raises(ConfigError, match="theta_rad and theta_deg disagree"):
         read_impacts(write(tmp_path, off, "off.csv"))
+
+
+# -- the local fits' least squares: normal equations, SVD where they would lose digits -------
+def _svd_least_squares(design, y):
+    coef, *_ = np.linalg.lstsq(design, y, rcond=None)
+    return coef, np.linalg.pinv(design.T @ design)
+
+
+def test_least_squares_agrees_with_svd_on_the_local_fits_designs():
+    """The normal equations of the extraction's fits (scaled-time polynomials of degree
+    0-4, a line in seconds) agree with lstsq/pinv within 1e-11 relative."""
+    from bounce_cli.data.extraction import least_squares
+
+    rng = np.random.default_rng(7)
+    for trial in range(300):
+        n = int(rng.integers(3, 80))
+        if trial % 3 == 0:
+            dt = np.sort(rng.uniform(-0.05, 0.6, n))
+            design = np.column_stack([np.ones(n), dt])
+        else:
+            degree = int(rng.integers(0, min(5, n)))
+            s = np.sort(rng.uniform(-1, 1, n))
+            design = np.vander(s, degree + 1, increasing=True)
+        y = rng.normal(size=n) + 3.0 * design[:, -1]
+        coef, inverse = least_squares(design, y)
+        ref_coef, ref_inverse = _svd_least_squares(design, y)
+        scale = np.abs(ref_coef).max()
+        assert np.allclose(coef, ref_coef, rtol=1e-11, atol=1e-11 * scale), trial
+        assert np.allclose(inverse, ref_inverse, rtol=1e-11,
+                           atol=1e-11 * np.abs(ref_inverse).max()), trial
+
+
+@pytest.mark.parametrize("case", ["singular", "ill-conditioned"])
+def test_least_squares_falls_back_to_svd_where_the_normal_equations_lose_digits(case):
+    from bounce_cli.data.extraction import GRAM_CONDITION_LIMIT, least_squares
+
+    s = np.linspace(0.9995, 1.0, 12)
+    design = (np.column_stack([np.ones(12), s, s]) if case == "singular"
+              else np.vander(s, 3, increasing=True))
+    gram = design.T @ design
+    assert np.linalg.cond(gram) > GRAM_CONDITION_LIMIT
+    y = np.sin(7 * s)
+    coef, inverse = least_squares(design, y)
+    ref_coef, ref_inverse = _svd_least_squares(design, y)
+    assert np.allclose(coef, ref_coef, rtol=1e-12, atol=0)
+    assert np.allclose(inverse, ref_inverse, rtol=1e-12, atol=0)
