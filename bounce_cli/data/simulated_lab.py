@@ -307,9 +307,22 @@ class TrialTruth:
         return x
 
 
+def racket_cycles_drawn(params: ModelParams, s: SessionSettings) -> int:
+    """How many racket cycles a trial draws: enough to cover it twice over, plus margin.
+
+    The count decides where the amplitudes' draws start in the generator's stream (after the
+    periods'), so it must not hinge on a float's last bits: the data side's model sessions
+    last a whole number of quarter periods, where the ratio below is an integer up to
+    rounding, and a plain ``ceil`` gave one more cycle or not as the racket's mean period
+    (measured from the data) moved by an ulp, and with it every amplitude of the session.
+    A ratio within 1e-9 of an integer counts as that integer."""
+    ratio = (s.duration_s + s.rest_s + 3 * params.racket_period) / (0.5 * params.racket_period)
+    return int(math.ceil(ratio - 1e-9 * max(1.0, abs(ratio)))) + 4
+
+
 def _draw_racket(params: ModelParams, s: SessionSettings, rng: np.random.Generator) -> CycleRacket:
     tau, a = params.racket_period, params.racket_amplitude
-    n = int(math.ceil((s.duration_s + s.rest_s + 3 * tau) / (0.5 * tau))) + 4
+    n = racket_cycles_drawn(params, s)
     periods = tau + s.period_sd_s * rng.standard_normal(n)
     amplitudes = a + s.amplitude_sd_m * rng.standard_normal(n)
     if np.any(periods <= 0.2 * tau) or np.any(amplitudes <= 0.0):

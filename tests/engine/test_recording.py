@@ -300,3 +300,40 @@ def test_the_racket_disturbance_starts_at_each_release_and_is_gone_after_its_dur
     for touch, release, _ in truth.contacts:
         free &= ~((t >= touch) & (t <= release))
     assert (truth.ball_position(t) - r.position(t))[free].min() > -1e-9
+
+
+def test_the_racket_draws_do_not_hinge_on_the_last_bit_of_the_period():
+    """The data side simulates sessions lasting a whole number of quarter racket periods at the
+    period measured from the data: the number of cycles drawn (and so where the amplitudes'
+    draws start) must not change when that period moves by an ulp."""
+    import math
+
+    from bounce_cli.data.simulated_lab import racket_cycles_drawn
+
+    flips_before = 0
+    for i in range(400):
+        tau = 0.5 + i * 0.00037
+        quarters = 2 * (40 + i % 60)  # even: (duration + 3 tau) / (tau / 2) is an integer
+        counts, old_counts = set(), set()
+        for t in (np.nextafter(tau, 0.0), tau, np.nextafter(tau, 1.0)):
+            params = ModelParams(alpha=0.5, g=9.81, racket_period=t, racket_amplitude=0.1)
+            settings = SessionSettings(n_trials=1, duration_s=quarters * t * 1.25)
+            counts.add(racket_cycles_drawn(params, settings))
+            ratio = (settings.duration_s + 3 * t) / (0.5 * t)
+            old_counts.add(int(math.ceil(ratio)) + 4)
+        assert len(counts) == 1, tau
+        flips_before += len(old_counts) > 1
+    assert flips_before > 0  # the plain ceil did hinge on them: this test can fail
+
+
+def test_an_ulp_in_the_racket_period_moves_a_simulated_session_by_rounding_only():
+    from bounce_cli.data.simulated_runs import RacketSession, simulate_runs
+
+    session = RacketSession(3e-4, 1.2e-4, 0.05)
+    impacts = []
+    for tau in (0.5754, np.nextafter(0.5754, 1.0)):
+        params = ModelParams(alpha=0.5, g=9.81, racket_period=tau, racket_amplitude=0.1)
+        runs, _ = simulate_runs(params, session, [60, 60], np.random.SeedSequence(5))
+        impacts.append(np.concatenate([np.column_stack([r.v_m_s, r.theta_rad, r.racket_amplitude_m])
+                                      for r in runs]))
+    np.testing.assert_allclose(impacts[0], impacts[1], rtol=1e-9, atol=1e-12)
