@@ -651,3 +651,28 @@ def test_figures_option_draws_only_what_is_asked(tiny, tiny_study, tmp_path, cli
     assert (tiny_study / "s1" / "a" / "regression" / "regression.png").is_file()
     for name in ("group.csv", "group_regression.csv", "s1/a/regression/fit.csv"):
         pd.testing.assert_frame_equal(pd.read_csv(out / name), pd.read_csv(tiny_study / name))
+
+
+def test_a_unit_table_passes_through_json_unchanged():
+    """A worker's tables reach the parent (and the checkpoints) as JSON: every float exactly
+    (NaN, inf, -0.0, the last bit), every dtype as it was."""
+    import json
+
+    import numpy as np
+    import pandas as pd
+
+    from bounce_cli.experiments.study import frame_from_json, frame_to_json
+
+    frame = pd.DataFrame({
+        "x": [0.1 + 0.2, float("nan"), float("inf"), -0.0, 5e-324],
+        "n": np.array([1, 2, 3, -4, 2**60], dtype=np.int64),
+        "ok": [True, False, True, True, False],
+        "label": ["a", None, "c", "d", "e"],
+        "kind": pd.Categorical(["p", "q", "p", "p", "q"]),
+    })
+    back = frame_from_json(json.loads(json.dumps(frame_to_json(frame))))
+    pd.testing.assert_frame_equal(back, frame)
+    assert np.signbit(back["x"].iloc[3])
+    empty = frame.drop(columns="kind").iloc[:0]  # (an empty category keeps no categories)
+    pd.testing.assert_frame_equal(frame_from_json(frame_to_json(empty)), empty,
+                                  check_index_type=False)
