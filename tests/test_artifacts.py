@@ -114,6 +114,29 @@ def test_large_tables_written_by_a_child_are_the_same_bytes(tmp_path,
     assert not list((tmp_path / "r").glob(".*tmp"))
 
 
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="written in children on Linux")
+def test_many_small_tables_are_written_half_by_a_child(tmp_path, monkeypatch):
+    """A study's hundreds of unit tables: the later half is staged by a forked child while
+    this process writes the rest; every file the same bytes as pandas writes."""
+    monkeypatch.setattr(artifacts, "BACKGROUND_TABLE_COUNT", 4)
+    run = make_run(tmp_path / "r", {"a": 1})
+    frames = {f"u{i}/t.csv": big_table(50 + i) for i in range(6)}
+    for name, frame in frames.items():
+        run.add_csv(name, frame)
+    forks = []
+    real = artifacts._ChildWriter.start
+    with pytest.MonkeyPatch.context() as m:
+        m.setattr(artifacts._ChildWriter, "start",
+                  lambda self: forks.append([f.parent.name for *_, f in self.jobs])
+                  or real(self))
+        run.commit()
+    assert forks == [["u3", "u4", "u5"]]
+    for name, frame in frames.items():
+        frame.to_csv(tmp_path / "pandas.csv", index=False)
+        assert (tmp_path / "r" / name).read_bytes() == (tmp_path / "pandas.csv").read_bytes()
+    assert not list((tmp_path / "r").rglob(".*tmp"))
+
+
 class FailingInTheChild(pd.DataFrame):
     def to_csv(self, *args, **kwargs):
         raise OSError(28, "No space left on device")

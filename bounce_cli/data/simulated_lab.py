@@ -576,13 +576,23 @@ def set_next_period(racket: CycleRacket, t: float, v: float, controller, referen
     racket.starts[c + 2:] = racket.starts[c + 1] + np.cumsum(periods[:-1])
 
 
+def impact_state(truth: TrialTruth) -> dict[str, np.ndarray]:
+    """The exact impacts' state and racket cycle: velocity after impact (m/s), phase in the
+    impact's racket cycle (rad) and that cycle's period (s) and amplitude (m) -- the columns
+    of :func:`truth_rows` that a model session (``data.simulated_runs``) keeps."""
+    r, t = truth.racket, truth.impact_t
+    c = r.cycle_index(t)
+    return {"v_m_s": truth.impact_v, "theta_rad": r.phase(t),
+            "racket_period_s": r.periods[c],
+            "racket_amplitude_m": r.harmonic_amplitude(r.amplitudes[c])}
+
+
 def truth_rows(truth: TrialTruth) -> dict[str, np.ndarray]:
     """The exact impacts in the impacts table's variables (``bounce_cli.data.impacts``)."""
     r, g = truth.racket, truth.g
     t = truth.impact_t
-    c = r.cycle_index(t)
-    theta = r.phase(t)
-    v = truth.impact_v
+    state = impact_state(truth)
+    theta, v = state["theta_rad"], state["v_m_s"]
     hop = np.append(np.diff(t), np.nan)
     v_in = truth.impact_v_in
     racket_v = r.velocity(t)
@@ -595,8 +605,8 @@ def truth_rows(truth: TrialTruth) -> dict[str, np.ndarray]:
         "theta_deg": np.degrees(theta),
         "v_m_s": v,
         "racket_acc_g": r.acceleration(t) / g,
-        "racket_period_s": r.periods[c],
-        "racket_amplitude_m": r.harmonic_amplitude(r.amplitudes[c]),
+        "racket_period_s": state["racket_period_s"],
+        "racket_amplitude_m": state["racket_amplitude_m"],
         "hop_s": hop,
         "ball_apex_m": apex,
         "alpha": truth.impact_alpha,

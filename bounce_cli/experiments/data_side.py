@@ -967,7 +967,8 @@ def _stability_figure(stab: pd.DataFrame, trust: pd.DataFrame | None):
         meas = trust.iloc[0]
         how = meas.get("measurement_noise", "assumed")
         how = "assumed" if how == "assumed" else "the data's, " + str(how)
-        ax.set_title(f"bias from measurement noise ({meas['measurement_sd_v_m_s']:.3g} m/s, "
+        # two lines: with the measured noise's source the title is wider than the panel
+        ax.set_title(f"bias from measurement noise\n({meas['measurement_sd_v_m_s']:.3g} m/s, "
                      f"{meas['measurement_sd_theta_deg']:.3g} deg, {how})", fontsize=10)
         ax.legend(fontsize=8)
     fig.suptitle("Stability measured from data (VAR(1) of eq. 19) beside eqs. 9-10")

@@ -6,7 +6,7 @@ through :func:`save_figure`."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, BinaryIO
 
 if TYPE_CHECKING:  # matplotlib is imported when a figure is written
     from matplotlib.figure import Figure
@@ -74,7 +74,7 @@ def encodable(value: Any) -> Any:
     return value.encode("utf-8", "surrogateescape").decode("utf-8", "replace")
 
 
-def save_figure(fig: Figure, path: Path, kind: str, *, dpi: float, source: str,
+def save_figure(fig: Figure, path: Path | BinaryIO, kind: str, *, dpi: float, source: str,
                 png_options: dict[str, Any] | None = None) -> None:
     """Write ``fig`` to ``path`` as ``kind`` (one of :data:`FIGURE_FORMATS`) at ``dpi``, with
     :func:`figure_metadata`, in :data:`SAVE_STYLE`.
@@ -83,7 +83,7 @@ def save_figure(fig: Figure, path: Path, kind: str, *, dpi: float, source: str,
     ----------
     fig : Figure
         The figure (from an experiment's ``draw``).
-    path : Path
+    path : Path or binary file object
         The file to write (its name's suffix is not consulted).
     kind : str
         "png", "pdf" or "svg".
