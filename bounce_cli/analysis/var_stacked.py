@@ -115,10 +115,10 @@ def _solve_segments(method: str, panels: np.ndarray, inputs: np.ndarray | None,
     x, x_next = y[:, index[-2]], y[:, index[-1]]
     instruments = x if method == "ols" else y[:, index[0]]
     r, n = x.shape[0], x.shape[1]
-    if inputs is not None:
-        u = _demeaned(inputs[None], segments)[0]
-        u_rows = np.hstack([u[index[-1]], u[index[-2]]])
-        stacked = np.broadcast_to(u_rows, (r,) + u_rows.shape)
+    if inputs is not None:  # (T, m): the same for every panel, or (R, T, m): each its own
+        u = _demeaned(inputs if inputs.ndim == 3 else inputs[None], segments)
+        u_rows = np.concatenate([u[:, index[-1]], u[:, index[-2]]], axis=2)
+        stacked = np.broadcast_to(u_rows, (r,) + u_rows.shape[1:])
         regressors = np.concatenate([x, stacked], axis=2)
         z = np.concatenate([instruments, stacked], axis=2)
     else:
@@ -180,8 +180,8 @@ def stacked_fit(panels: np.ndarray, lengths: Sequence[int], method: str,
         The estimator (``var_fit`` module docstring).
     jackknife : bool
         The split-panel jackknife (``var_fit.split_jackknife``).
-    inputs : (T, m) array, optional
-        The same exogenous inputs for every panel (a VARX).
+    inputs : (T, m) or (R, T, m) array, optional
+        Exogenous inputs (a VARX): the same for every panel, or each panel's own.
 
     Returns
     -------
@@ -192,6 +192,8 @@ def stacked_fit(panels: np.ndarray, lengths: Sequence[int], method: str,
     if method not in CONDITION_LIMIT:
         raise ModelError(f"unknown VAR(1) estimator {method!r}")
     panels = np.asarray(panels, float)
+    if inputs is not None:
+        inputs = np.asarray(inputs, float)
     whole = whole_trials(lengths)
     jac, cov, identified, valid = _solve_segments(method, panels, inputs, whole)
     if jackknife:

@@ -543,7 +543,9 @@ def varx_prediction(params: ModelParams, fits: dict, trials: list[np.ndarray],
     VarxPrediction or None
         None when the OLS VARX did not fit or ``model_sessions`` is 0.
     """
+    from ..analysis.var_stacked import stacked_fit
     from ..data.simulated_runs import RacketSession, simulate_runs
+    from ..model.linear import spectral_radii_2x2
 
     base = fits.get("varx_ols")
     if block.model_sessions == 0 or not isinstance(base, Var1Fit):
@@ -564,21 +566,27 @@ def varx_prediction(params: ModelParams, fits: dict, trials: list[np.ndarray],
             fit_var1(sim_trials, "ols", jackknife=False, exog=sim_racket).noise_cov)[0])
     q_v = q_residual * q_residual / float(np.mean(residual))
     session = RacketSession(first.period_sd_s, first.amplitude_sd_m, q_v)
-    estimates: dict[str, list[np.ndarray]] = {label: [] for label in labels}
+    panels, inputs = [], []
     for seed in seeds[1].spawn(block.model_sessions):
         runs, again = simulate_runs(params, session, lengths, seed)
         redrawn += again
         sim_trials, sim_racket = simulated_trials(runs)
-        for label in labels:
-            try:
-                fit = plausible_fit(fit_var1(sim_trials, label.removeprefix("varx_"),
-                                             jackknife=block.jackknife, exog=sim_racket))
-            except ModelError:
-                continue
-            radius = fit.eigen_summary()["spectral_radius"][0]
-            estimates[label].append(np.append(fit.jacobian.ravel(), radius))
-    return VarxPrediction(block.model_sessions, q_v, q_residual, redrawn,
-                          {label: np.array(e) for label, e in estimates.items() if len(e) > 1})
+        panels.append(np.concatenate(sim_trials))
+        inputs.append(np.concatenate(sim_racket))
+    # every session fitted as the data were (fit_var1, plausible_fit), all at once: the
+    # sessions share the data's run lengths (analysis.var_stacked, each its own inputs)
+    estimates: dict[str, np.ndarray] = {}
+    for label in labels:
+        try:
+            fit = stacked_fit(np.stack(panels), lengths, label.removeprefix("varx_"),
+                              block.jackknife, np.stack(inputs))
+        except ModelError:
+            continue
+        kept = fit.valid  # fit_var1 fitted it and plausible_fit kept it
+        if np.count_nonzero(kept) > 1:
+            estimates[label] = np.column_stack([fit.jacobian[kept].reshape(-1, 4),
+                                                spectral_radii_2x2(fit.jacobian[kept])])
+    return VarxPrediction(block.model_sessions, q_v, q_residual, redrawn, estimates)
 
 
 def rank_interval(sims: np.ndarray, confidence: float) -> tuple[np.ndarray, np.ndarray, float]:

@@ -44,6 +44,26 @@ def test_the_stacked_fit_is_fit_var1_on_each_panel(method, jackknife, with_input
     assert stacked.valid.all()
 
 
+@pytest.mark.parametrize("method", ["ols", "lag2"])
+@pytest.mark.parametrize("jackknife", [False, True])
+def test_the_stacked_fit_with_each_panels_own_inputs_is_fit_var1_on_each(method, jackknife):
+    """The model sessions of a VARX prediction: every panel its own racket inputs."""
+    lengths = [33, 26, 41]
+    rng = np.random.default_rng(8)
+    coef = np.array([[0.3, -0.1, 0.2, 0.05], [0.1, 0.2, -0.3, 0.1]])
+    inputs = rng.standard_normal((4, sum(lengths), 2)) * [0.01, 0.002] + [0.6, 0.3]
+    panels = np.stack([panel(lengths, 10 + s, inputs[s], coef) for s in range(4)])
+    stacked = stacked_fit(panels, lengths, method, jackknife, inputs)
+    for r in range(4):
+        one = fit_var1(split(panels[r], lengths), method, jackknife=jackknife,
+                       exog=split(inputs[r], lengths))
+        np.testing.assert_allclose(stacked.jacobian[r], one.jacobian, rtol=1e-10, atol=1e-12)
+        np.testing.assert_allclose(stacked.cov_vec[r], one.cov_vec, rtol=1e-8, atol=1e-14)
+        assert stacked.valid[r] == (one.radius_problem() == "")
+    shared = stacked_fit(panels, lengths, method, jackknife, inputs[0])
+    assert not np.allclose(shared.jacobian[1:], stacked.jacobian[1:], rtol=1e-6)
+
+
 def test_spectral_radii_are_the_eigenvalues_moduli():
     rng = np.random.default_rng(1)
     mats = rng.normal(size=(200, 2, 2))
