@@ -168,6 +168,8 @@ class LocalFit:
     var_v: float
     rss: float
     dof: int
+    #: the second derivative at t0 (0 for a polynomial of degree below 2)
+    acc: float = 0.0
 
 
 def local_fit(t, x, t0: float, half_window: float, degree: int) -> LocalFit | None:
@@ -188,16 +190,24 @@ def local_fit(t, x, t0: float, half_window: float, degree: int) -> LocalFit | No
     LocalFit or None
         None with too few samples.
     """
+    return _local_fit_and_coefficients(t, x, t0, half_window, degree)[1]
+
+
+def _local_fit_and_coefficients(t, x, t0: float, half_window: float, degree: int):
+    """(coefficients of ``local_polynomial``, ``local_fit``), or (None, None) with too few
+    samples: one least-squares fit serves both."""
     fit = _local_design(t, x, t0, half_window, degree)
     if fit is None:
-        return None
+        return None, None
     design, xx = fit
     coef, inv = least_squares(design, xx)
     resid = xx - design @ coef
     dof = len(xx) - degree - 1
     s2 = float(resid @ resid) / dof if dof > 0 else math.nan
-    return LocalFit(float(coef[0]), float(coef[1] / half_window), s2 * float(inv[0, 0]),
-                    s2 * float(inv[1, 1]) / half_window**2, float(resid @ resid), dof)
+    acc = float(2.0 * coef[2] / half_window**2) if len(coef) > 2 else 0.0
+    return coef, LocalFit(float(coef[0]), float(coef[1] / half_window), s2 * float(inv[0, 0]),
+                          s2 * float(inv[1, 1]) / half_window**2, float(resid @ resid), dof,
+                          acc)
 
 
 def local_derivatives(t, x, t0: float, half_window: float, degree: int):
@@ -721,6 +731,22 @@ class _Racket:
     bridged: np.ndarray
     long_gap: np.ndarray
     cycles: RacketCycles
+    #: local fits of ``fit`` done so far, by (t0, half window, degree): the passes over a
+    #: trial at another g or marker offset meet the same times (events, cycle crossings)
+    _fits: dict = field(default_factory=dict, repr=False)
+
+    def local(self, t, t0: float, half_window: float, degree: int):
+        """(coefficients, :class:`LocalFit`) of the racket's local polynomial at t0
+        (``local_fit``; (None, None) with too few samples), each fitted once."""
+        key = (float(t0), half_window, degree)
+        if key not in self._fits:
+            self._fits[key] = _local_fit_and_coefficients(t, self.fit, t0, half_window, degree)
+        return self._fits[key]
+
+    def position(self, t, t0: float, s: ExtractionSettings) -> float:
+        """The racket's position at t0 from its local position fit (NaN: too few samples)."""
+        fit = self.local(t, t0, s.position_half_window_s, s.position_degree)[1]
+        return math.nan if fit is None else fit.x
 
 
 @dataclass
@@ -893,13 +919,11 @@ def _impacts_from_flights(t, racket: _Racket, ball: _Ball, contacts: _Contacts,
                     imp.t_k[j] = tj
                     imp.met[j] = True
                     imp.offsets.append(float(after.position(tj, g))
-                                       - local_derivatives(t, racket.fit, tj,
-                                                           s.position_half_window_s,
-                                                           s.position_degree)[0])
+                                       - racket.position(t, tj, s))
                 else:
-                    imp.t_k[j] = _meet_racket(t, racket.fit, after, ct[j], s)
+                    imp.t_k[j] = _meet_racket(t, racket, after, ct[j], s)
             else:
-                imp.t_k[j] = _meet_racket(t, racket.fit, after, ct[j], s)
+                imp.t_k[j] = _meet_racket(t, racket, after, ct[j], s)
         if not math.isfinite(imp.t_k[j]):
             # keep the detected sample's time: the impact is listed (excluded.csv) at it,
             # the hops and the count of impacts lost in gaps stay defined, and k skips it
@@ -925,7 +949,7 @@ def _velocities_at(t, racket: _Racket, ball: _Ball, imp: _Impacts, j: int, after
         if not exact and closing > 0.0:
             imp.var_t[j] = (before.position_var(t_k) + after.position_var(t_k)) / closing**2
     imp.se_v[j] = math.sqrt(after.cov[1][1] + g * g * imp.var_t[j])
-    racket_here = local_fit(t, racket.fit, t_k, s.position_half_window_s, s.position_degree)
+    racket_here = racket.local(t, t_k, s.position_half_window_s, s.position_degree)[1]
     if racket_here is not None and imp.met[j]:
         imp.offset_k[j] = float(after.position(t_k, g)) - racket_here.x
     x_k = float(after.position(t_k, g)) - s.ball_offset_m
@@ -942,10 +966,8 @@ def _impacts_from_racket(t, racket: _Racket, contacts: _Contacts,
     n, g = len(imp.t_k), s.g
     for j in range(n - 1):
         h = imp.t_k[j + 1] - imp.t_k[j]
-        x0 = local_derivatives(t, racket.fit, imp.t_k[j], s.position_half_window_s,
-                               s.position_degree)[0]
-        x1 = local_derivatives(t, racket.fit, imp.t_k[j + 1], s.position_half_window_s,
-                               s.position_degree)[0]
+        x0 = racket.position(t, imp.t_k[j], s)
+        x1 = racket.position(t, imp.t_k[j + 1], s)
         imp.v_k[j] = (x1 - x0) / h + 0.5 * g * h  # eq. 1 at both impacts
         rise = max(imp.v_k[j], 0.0) / g
         imp.apex_x[j] = x0 + 0.5 * max(imp.v_k[j], 0.0) * rise
@@ -1010,8 +1032,8 @@ def _racket_at_impacts(t, racket: _Racket, imp: _Impacts, s: ExtractionSettings)
             reason[j] = ("gap: racket data missing in the impact's racket cycle"
                          if np.any(racket.long_gap[lo:hi]) else "outside a complete racket cycle")
             continue
-        acc[j] = local_derivatives(t, racket.fit, t_k[j], s.acc_half_window_s,
-                                   s.acc_degree)[2] / g
+        here = racket.local(t, t_k[j], s.acc_half_window_s, s.acc_degree)[1]
+        acc[j] = math.nan if here is None else here.acc / g
         if not math.isfinite(acc[j]) or not math.isfinite(imp.v_k[j]):
             reason[j] = "gap: too few racket samples around the impact"
     # eq. 3 at t_k with the racket's velocity there (local fit), and the racket's residuals
@@ -1020,7 +1042,7 @@ def _racket_at_impacts(t, racket: _Racket, imp: _Impacts, s: ExtractionSettings)
     for j in range(n):
         if reason[j]:
             continue
-        here = local_fit(t, racket.fit, t_k[j], s.acc_half_window_s, s.acc_degree)
+        here = racket.local(t, t_k[j], s.acc_half_window_s, s.acc_degree)[1]
         if here is None:
             continue
         if math.isfinite(here.rss) and here.dof > 0:
@@ -1098,7 +1120,7 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
         impacts["alpha_measured"] = alpha_measured[keep]
         impacts["contact_s"] = imp.contact[keep]
     offset = float(np.median(imp.offsets)) if imp.offsets else math.nan
-    se_theta = _phase_se(t, racket_.fit, cycles, t_k, imp.var_t, s)
+    se_theta = _phase_se(t, racket_, t_k, imp.var_t, s)
     return TrialExtraction(impacts, excluded, cycles, offset, imp.flights, imp.offset_k[keep],
                            imp.se_v[keep], se_theta[keep], racket_rss, racket_dof,
                            imp.area[keep], imp.weight[keep])
@@ -1189,20 +1211,17 @@ def contact_shape_factor(alpha: float) -> float:
     return part(0.0, s_eq, lambda s_: -s_) + part(s_eq, 1.0, lambda s_: alpha * (s_ - 1.0))
 
 
-def _phase_se(t, racket, cycles: RacketCycles, t_k, var_t, s: ExtractionSettings):
+def _phase_se(t, racket: _Racket, t_k, var_t, s: ExtractionSettings):
     """Standard error of each theta_k = 2 pi (t_k - c0) / (c1 - c0): t_k's variance
     ``var_t`` and each crossing's (the racket fit's position variance there over its slope
     squared), independent."""
     out = np.full(len(t_k), np.nan)
+    cycles = racket.cycles
     c, _ = cycles.locate(t_k)
-    crossing_var: dict[float, float] = {}
 
     def var_at(tc: float) -> float:
-        if tc not in crossing_var:
-            fit = local_fit(t, racket, tc, s.position_half_window_s, s.position_degree)
-            crossing_var[tc] = (fit.var_x / fit.v**2 if fit is not None and fit.v != 0.0
-                                else math.nan)
-        return crossing_var[tc]
+        fit = racket.local(t, tc, s.position_half_window_s, s.position_degree)[1]
+        return fit.var_x / fit.v**2 if fit is not None and fit.v != 0.0 else math.nan
 
     for j in np.flatnonzero(c >= 0).tolist():
         c0 = float(cycles.crossings[c[j]])
@@ -1231,10 +1250,11 @@ def _spacing(t, i: int) -> float:
     return float(t[i] - t[i - 1])
 
 
-def _meet_racket(t, racket, after: FlightFit, t_crude: float, s: ExtractionSettings) -> float:
+def _meet_racket(t, racket: _Racket, after: FlightFit, t_crude: float,
+                 s: ExtractionSettings) -> float:
     """Where the fitted flight after a contact meets the racket (local cubic) near t_crude."""
     h = s.position_half_window_s
-    coef = local_polynomial(t, racket, t_crude, h, s.position_degree)
+    coef = racket.local(t, t_crude, h, s.position_degree)[0]
     if coef is None:
         return math.nan
     # the flight in s = (t - t_crude) / h, minus the racket polynomial

@@ -23,6 +23,7 @@ from bounce_cli.data.extraction import (
     contact_shape_factor,
     extract_trial,
     local_derivatives,
+    local_fit,
     match_impacts,
     pooled_gravity,
 )
@@ -83,6 +84,18 @@ def test_local_polynomial_is_savitzky_golay_at_the_samples():
         for i in (50, 123, 300):
             assert local_derivatives(t, x, t[i], half, degree)[2] == pytest.approx(
                 expected[i], rel=1e-9, abs=1e-9)
+
+
+def test_one_local_fit_serves_value_slope_and_curvature():
+    """The racket's fits at an impact are done once (``local_fit``) for its position, velocity
+    and AC: the same numbers, bit for bit, as ``local_derivatives``; a line has no curvature."""
+    rng = np.random.default_rng(3)
+    t = np.arange(300) * 0.004
+    x = 0.2 * np.sin(2 * np.pi * t / 0.8) + 0.0005 * rng.standard_normal(t.size)
+    for t0, half, degree in ((0.5013, 0.02, 3), (0.7, 0.04, 4), (0.31, 0.02, 1)):
+        fit = local_fit(t, x, t0, half, degree)
+        assert (fit.x, fit.v, fit.acc) == local_derivatives(t, x, t0, half, degree)
+    assert local_fit(t, x, 0.5, 0.02, 1).acc == 0.0
 
 
 def test_second_derivative_of_a_sine_between_samples():
