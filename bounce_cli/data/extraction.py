@@ -211,12 +211,11 @@ def _local_fit_and_coefficients(t, x, t0: float, half_window: float, degree: int
 
 
 def local_derivatives(t, x, t0: float, half_window: float, degree: int):
-    """(x, x', x'') at t0 from ``local_polynomial``; NaNs when it has too few samples."""
-    coef = local_polynomial(t, x, t0, half_window, degree)
-    if coef is None:
+    """(x, x', x'') at t0 from ``local_fit``; NaNs when it has too few samples."""
+    fit = local_fit(t, x, t0, half_window, degree)
+    if fit is None:
         return math.nan, math.nan, math.nan
-    c = np.concatenate([coef, [0.0, 0.0, 0.0]])
-    return float(c[0]), float(c[1] / half_window), float(2.0 * c[2] / half_window**2)
+    return fit.x, fit.v, fit.acc
 
 
 def _poly_root_near(coef, half_window: float, t0: float, target: float = 0.0,
