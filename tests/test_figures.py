@@ -317,3 +317,56 @@ def test_a_non_ascii_path_in_the_c_locale_goes_into_the_png_metadata(tmp_path, c
     caption = Image.open(out + b"/fig2.png").text["Description"]
     shown = "d\u00e4t\u00e4" if folder == "d\u00e4t\u00e4".encode() else "d\ufffdt"
     assert f"{shown}/rec.csv" in caption, caption
+
+
+def test_tick_labels_are_plain_text_and_the_power_of_ten_stays_mathtext():
+    """Tick labels are written as plain text (mathtext's parser was a quarter of a study's
+    figure time) with the same true minus sign; the offset (x10^k) stays a superscript. The
+    unwrapping must match how this matplotlib wraps a label, or it would do nothing."""
+    from matplotlib.ticker import ScalarFormatter
+
+    from bounce_cli.experiments.plotting import new_figure, publication_style
+
+    @publication_style
+    def draw(frames):
+        fig, axes = new_figure()
+        axes[0, 0].plot([0.0, 1.0], [-3e-7, 2e-7])
+        return {"f.png": fig}
+
+    fig = draw({})["f.png"]
+    fig.draw_without_rendering()
+    ax = fig.axes[0]
+    y_labels = [t.get_text() for t in ax.get_yticklabels() if t.get_text()]
+    x_labels = [t.get_text() for t in ax.get_xticklabels() if t.get_text()]
+    assert y_labels and x_labels
+    assert not any("$" in label for label in y_labels + x_labels), y_labels + x_labels
+    assert any(label.startswith("\N{MINUS SIGN}") for label in y_labels), y_labels
+    offset = ax.yaxis.get_offset_text().get_text()
+    assert offset.startswith("$") and r"\times" in offset, offset
+    assert "10^{\N{MINUS SIGN}7}" in offset, offset
+    # the label a plain ScalarFormatter writes under use_mathtext is what gets unwrapped
+    from matplotlib import rc_context
+    with rc_context({"axes.formatter.use_mathtext": True}):
+        formatter = ScalarFormatter()
+    formatter.create_dummy_axis()
+    formatter.axis.set_view_interval(-0.6, 0.6)
+    formatter.set_locs([-0.5, 0.0, 0.5])
+    from bounce_cli.experiments.plotting import _MATHTEXT_TICK
+    assert _MATHTEXT_TICK.fullmatch(formatter(-0.5)), formatter(-0.5)
+
+
+@pytest.mark.slow
+def test_no_figure_parses_its_tick_labels_as_mathtext(figures):
+    found = []
+    checked = 0
+    for name, fig in figures.items():
+        fig.draw_without_rendering()
+        for ax in fig.axes:
+            for axis in (ax.xaxis, ax.yaxis):
+                if axis.get_scale() != "linear":
+                    continue
+                labels = [t.get_text() for t in axis.get_ticklabels() if t.get_text()]
+                found += [f"{name}: {label!r}" for label in labels if "mathdefault" in label]
+                checked += len(labels)
+    assert not found, "\n".join(found[:10])
+    assert checked > 500
