@@ -106,9 +106,11 @@ def _rows(segments: Segments, lags: int) -> tuple[list[np.ndarray], np.ndarray]:
 
 
 def _solve_segments(method: str, panels: np.ndarray, inputs: np.ndarray | None,
-                    segments: Segments) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """``var_fit._fit`` on R panels at once: J (R, 2, 2), Cov(vec J) (R, 4, 4), identified
-    (R,) and valid (R,: identified with a strong enough lag-2 instrument)."""
+                    segments: Segments, with_cov: bool = True
+                    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray]:
+    """``var_fit._fit`` on R panels at once: J (R, 2, 2), Cov(vec J) (R, 4, 4; None unless
+    ``with_cov``: a jackknife's half fits need J alone), identified (R,) and valid (R,:
+    identified with a strong enough lag-2 instrument)."""
     lags = 1 if method == "ols" else 2
     y = _demeaned(panels, segments)
     index, segment_of = _rows(segments, lags)
@@ -143,6 +145,8 @@ def _solve_segments(method: str, panels: np.ndarray, inputs: np.ndarray | None,
         valid &= strength >= MIN_INSTRUMENT_DET
     a = np.where(identified[:, None, None], a, np.eye(p))  # a failed fit solves something harmless
     b = np.linalg.solve(a, _cross(z, x_next))  # (R, p, 2) = [J, B]^T
+    if not with_cov:
+        return b[:, :2, :].transpose(0, 2, 1), None, identified, valid
     resid = x_next - regressors @ b
     a_inv = np.linalg.inv(a)
     if method == "ols":
@@ -196,13 +200,14 @@ def stacked_fit(panels: np.ndarray, lengths: Sequence[int], method: str,
         inputs = np.asarray(inputs, float)
     whole = whole_trials(lengths)
     jac, cov, identified, valid = _solve_segments(method, panels, inputs, whole)
+    assert cov is not None
     if jackknife:
         if min(lengths) < 8:
             raise ModelError(f"a trial has only {min(lengths)} bounces: the split-panel "
                              "jackknife needs at least 8 per trial (4 per half)")
         first, second = whole.halves()
-        j1, _, id1, ok1 = _solve_segments(method, panels, inputs, first)
-        j2, _, id2, ok2 = _solve_segments(method, panels, inputs, second)
+        j1, _, id1, ok1 = _solve_segments(method, panels, inputs, first, with_cov=False)
+        j2, _, id2, ok2 = _solve_segments(method, panels, inputs, second, with_cov=False)
         identified = identified & id1 & id2
         jac = 2.0 * jac - 0.5 * (j1 + j2)
         valid = valid & ok1 & ok2
