@@ -271,21 +271,51 @@ class RacketCycles:
     mid_window_s: float
 
     def mid_position(self, t):
-        """The racket's (drifting) mid-position at times t: local quadratic fit of the
-        extrema midpoints within ``mid_window_s``."""
+        """The racket's (drifting) mid-position at times t: a local quadratic (a mean with
+        fewer than 3 midpoints) fitted to the extrema midpoints within ``mid_window_s``,
+        all times at once (the normal equations of every window stacked; ``least_squares``
+        for a window whose Gram matrix it would not invert)."""
         t = np.atleast_1d(np.asarray(t, dtype=float))
-        out = np.full(t.shape, np.nan)
-        for i, ti in enumerate(t):
-            sel = np.abs(self.mid_times - ti) <= self.mid_window_s
-            n = int(np.count_nonzero(sel))
-            if n == 0:
-                continue
-            degree = min(2, n - 1, 0 if n < 3 else 2)
-            s = (self.mid_times[sel] - ti) / self.mid_window_s
-            coef, _ = least_squares(np.vander(s, degree + 1, increasing=True),
-                                    self.mid_values[sel])
-            out[i] = coef[0]
-        return out
+        mt, w = self.mid_times, self.mid_window_s
+        if t.size == 0 or mt.size == 0:
+            return np.full(t.shape, np.nan)
+        flat = t.ravel()
+        # the midpoints within the window of each time, as a padded (m, width) table
+        # (mid_times are sorted; the searchsorted range is widened and |dt| <= w decides)
+        lo = np.searchsorted(mt, flat - w * (1.0 + 1e-9), side="left")
+        hi = np.searchsorted(mt, flat + w * (1.0 + 1e-9), side="right")
+        width = int(np.max(hi - lo, initial=0))
+        if width == 0:
+            return np.full(t.shape, np.nan)
+        index = np.minimum(lo[:, None] + np.arange(width), mt.size - 1)
+        inside = (np.arange(width) < (hi - lo)[:, None]) & (
+            np.abs(mt[index] - flat[:, None]) <= w)
+        count = inside.sum(axis=1)
+        s = np.where(inside, (mt[index] - flat[:, None]) / w, 0.0)
+        y = np.where(inside, self.mid_values[index], 0.0)
+        value = np.full(flat.shape, np.nan)
+        few = (count > 0) & (count < 3)
+        value[few] = y[few].sum(axis=1) / count[few]
+        many = np.flatnonzero(count >= 3)
+        if many.size:
+            powers = inside[many, :, None] * s[many, :, None] ** np.arange(5)  # (m, width, 5)
+            sums = powers.sum(axis=1)
+            gram = sums[:, np.arange(3)[:, None] + np.arange(3)]  # (m, 3, 3): sum s^(i+j)
+            rhs = np.einsum("mwk,mw->mk", powers[:, :, :3], y[many])
+            try:
+                inverse = np.linalg.inv(gram)
+            except np.linalg.LinAlgError:  # an exactly singular window among them
+                inverse = np.stack([_inverse_or_nan(g) for g in gram])
+            with np.errstate(all="ignore"):
+                condition = (np.abs(gram).sum(axis=2).max(axis=1)
+                             * np.abs(inverse).sum(axis=2).max(axis=1))
+            good = np.isfinite(inverse).all(axis=(1, 2)) & (condition <= GRAM_CONDITION_LIMIT)
+            value[many[good]] = np.einsum("mk,mk->m", inverse[good, 0, :], rhs[good])
+            for i in many[~good]:  # a degenerate window: least_squares' own fallback
+                sel = inside[i]
+                coef, _ = least_squares(np.vander(s[i, sel], 3, increasing=True), y[i, sel])
+                value[i] = coef[0]
+        return value.reshape(t.shape)
 
     def locate(self, t):
         """(cycle index or -1, phase in [0, 2 pi)) of times t."""
@@ -298,6 +328,14 @@ class RacketCycles:
         cc = np.maximum(c, 0)
         theta = np.where(inside, TWO_PI * (t - self.crossings[cc]) / self.periods[cc], np.nan)
         return c, np.minimum(theta, np.nextafter(TWO_PI, 0.0))
+
+
+def _inverse_or_nan(matrix: np.ndarray) -> np.ndarray:
+    """The inverse of a square matrix, NaNs where it is singular."""
+    try:
+        return np.linalg.inv(matrix)
+    except np.linalg.LinAlgError:
+        return np.full_like(matrix, np.nan)
 
 
 def _refined_extrema(t, x, measured, index, kind: int, s: ExtractionSettings):
@@ -390,23 +428,23 @@ def racket_cycles(t, racket, measured, s: ExtractionSettings) -> RacketCycles:
     # the start of the recording)
     crossings = []
     half_cycle = float(np.median(np.diff(et))) if len(et) > 1 else 0.0
+    rises = []  # (j, t_before, t_peak) of each rise from a trough to the next peak
     for j in range(-1, len(et)):
         if j == -1:
             if not (len(et) > 1 and ek[0] == 1):
                 continue
             # no trough before the first peak: search at most a typical half cycle before it
-            t_before, t_peak = max(t[0], et[0] - half_cycle), et[0]
+            rises.append((j, max(t[0], et[0] - half_cycle), et[0]))
         elif j == len(et) - 1:
             if not (len(et) > 1 and ek[j] == -1):
                 continue
             # no peak after the last trough (the recording ends first): the crossing may
             # still be recorded, and it closes the cycle before it
-            t_before, t_peak = et[j], min(t[-1], et[j] + half_cycle)
+            rises.append((j, et[j], min(t[-1], et[j] + half_cycle)))
         elif ek[j] == -1 and ek[j + 1] == 1:
-            t_before, t_peak = et[j], et[j + 1]
-        else:
-            continue
-        mid = float(cycles.mid_position(0.5 * (t_before + t_peak))[0])
+            rises.append((j, et[j], et[j + 1]))
+    rise_mids = cycles.mid_position([0.5 * (t_before + t_peak) for _, t_before, t_peak in rises])
+    for (j, t_before, t_peak), mid in zip(rises, rise_mids.tolist()):
         a, b = np.searchsorted(t, [t_before, t_peak])
         y = work[a:b] - mid
         # from at or below the mid-position to at or above it, "at" within at_mid: a racket
@@ -433,7 +471,7 @@ def racket_cycles(t, racket, measured, s: ExtractionSettings) -> RacketCycles:
                   else _poly_root_near(coef, h, onset + h, mid, reach=1.0 + step / h))
         if math.isfinite(tc):
             crossings.append((tc, j))
-    starts, periods, amplitudes, mids = [], [], [], []
+    starts, periods, extremes = [], [], []
     for (t0, _j0), (t1, _j1) in zip(crossings[:-1], crossings[1:]):
         between = (et > t0) & (et < t1)
         if np.count_nonzero(between & (ek == 1)) != 1 or np.count_nonzero(
@@ -444,10 +482,14 @@ def racket_cycles(t, racket, measured, s: ExtractionSettings) -> RacketCycles:
             continue  # a long gap inside the cycle
         starts.append(t0)
         periods.append(t1 - t0)
-        peak, trough = between & (ek == 1), between & (ek == -1)
-        drift = cycles.mid_position([et[peak][0], et[trough][0]])  # each about its own mid
-        amplitudes.append(0.5 * ((ex[peak][0] - drift[0]) - (ex[trough][0] - drift[1])))
-        mids.append(float(cycles.mid_position(t0)[0]))
+        extremes.append(np.flatnonzero(between & (ek == 1))[0])
+        extremes.append(np.flatnonzero(between & (ek == -1))[0])
+    # each extremum about its own mid-position; the cycle's mid-position at its start
+    drift = cycles.mid_position(et[np.array(extremes, dtype=int)]).reshape(-1, 2)
+    peaks_x = ex[np.array(extremes[0::2], dtype=int)]
+    troughs_x = ex[np.array(extremes[1::2], dtype=int)]
+    amplitudes = (0.5 * ((peaks_x - drift[:, 0]) - (troughs_x - drift[:, 1]))).tolist()
+    mids = cycles.mid_position(np.array(starts)).tolist()
     if periods:  # a cycle far longer or shorter than the trial's typical one is not a cycle
         typical = float(np.median(periods))
         ok = [abs(p / typical - 1.0) <= MAX_PERIOD_DEVIATION for p in periods]

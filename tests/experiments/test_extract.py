@@ -808,3 +808,46 @@ def test_extract_writes_the_measured_set_up_and_names_a_unit_slip(simulated, tmp
                                  "--set", "units.length=cm")
     user_error(slip, "98", "millimetres read as centimetres", "units.length")
     assert not slip_out.exists()
+
+
+def _mid_position_one_by_one(cycles, times):
+    """The definition of ``RacketCycles.mid_position``: one least-squares fit per time."""
+    from bounce_cli.data.extraction import least_squares
+
+    out = []
+    for ti in times:
+        sel = np.abs(cycles.mid_times - ti) <= cycles.mid_window_s
+        n = int(np.count_nonzero(sel))
+        if n == 0:
+            out.append(math.nan)
+            continue
+        s = (cycles.mid_times[sel] - ti) / cycles.mid_window_s
+        coef, _ = least_squares(np.vander(s, 3 if n >= 3 else 1, increasing=True),
+                                cycles.mid_values[sel])
+        out.append(coef[0])
+    return np.array(out)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_the_stacked_mid_position_is_the_fit_at_each_time(seed):
+    """All times' windows in one stacked solve give each window's own quadratic (a mean below
+    3 midpoints, NaN with none), a degenerate window (repeated midpoint times) included."""
+    from bounce_cli.data.extraction import RacketCycles
+
+    rng = np.random.default_rng(seed)
+    mid_times = np.sort(np.concatenate([rng.uniform(0.0, 10.0, 40), [12.0, 12.0, 12.0],
+                                        [15.0, 15.2]]))
+    mid_values = 0.01 * np.sin(mid_times) + 1e-3 * rng.standard_normal(mid_times.size)
+    empty = np.array([])
+    cycles = RacketCycles(empty, empty, empty, empty, mid_times, mid_values, 0.6)
+    times = np.concatenate([rng.uniform(-1.0, 17.0, 200), mid_times[:5] + 0.6, [12.0, 20.0]])
+    stacked = cycles.mid_position(times)
+    reference = _mid_position_one_by_one(cycles, times)
+    assert np.array_equal(np.isnan(stacked), np.isnan(reference))
+    assert np.isnan(stacked[-1]) and np.isfinite(stacked[-2])
+    np.testing.assert_allclose(stacked, reference, rtol=1e-11, atol=1e-14)
+    one = int(np.flatnonzero(np.isfinite(reference))[0])
+    assert float(cycles.mid_position(times[one])[0]) == pytest.approx(reference[one], rel=1e-12)
+    grid = times[:204].reshape(6, -1)
+    np.testing.assert_allclose(cycles.mid_position(grid), stacked[:204].reshape(6, -1),
+                               rtol=1e-13)
