@@ -184,6 +184,30 @@ def test_least_squares_agrees_with_svd_on_the_local_fits_designs():
                            atol=1e-11 * np.abs(ref_inverse).max()), trial
 
 
+@pytest.mark.parametrize("case", ["flight", "one time", "far from zero", "two samples"])
+def test_the_closed_form_line_is_least_squares_on_the_columns_one_and_x(case):
+    """least_squares_line (the flights' fits) is least_squares on (1, x): the same
+    coefficients and (X'X)^-1 within 1e-11, the fallback where X'X is singular (one sample
+    time) or ill-conditioned (times far from their reference) included."""
+    from bounce_cli.data.extraction import least_squares, least_squares_line
+
+    rng = np.random.default_rng(3)
+    for _ in range(100):
+        n = 2 if case == "two samples" else int(rng.integers(3, 80))
+        if case == "one time":
+            x = np.full(n, 0.3)
+        elif case == "far from zero":
+            x = 1e4 + np.sort(rng.uniform(0.0, 0.5, n))
+        else:
+            x = np.sort(rng.uniform(-0.05, 0.6, n))
+        y = 2.0 - 4.0 * x + rng.normal(size=n)
+        coef, inverse = least_squares_line(x, y)
+        ref_coef, ref_inverse = least_squares(np.column_stack([np.ones(n), x]), y)
+        assert np.allclose(coef, ref_coef, rtol=1e-11, atol=1e-11 * np.abs(ref_coef).max())
+        assert np.allclose(inverse, ref_inverse, rtol=1e-11,
+                           atol=1e-11 * np.abs(ref_inverse).max())
+
+
 @pytest.mark.parametrize("case", ["singular", "ill-conditioned"])
 def test_least_squares_falls_back_to_svd_where_the_normal_equations_lose_digits(case):
     from bounce_cli.data.extraction import GRAM_CONDITION_LIMIT, least_squares
