@@ -113,7 +113,10 @@ def simulate_runs(params: ModelParams, session: RacketSession, lengths: list[int
                                    period_sd_s=session.period_sd_s,
                                    amplitude_sd_m=session.amplitude_sd_m,
                                    velocity_noise_m_s=session.velocity_noise_m_s)
-        for attempt in run_seed.spawn(MAX_SIMULATION_RETRIES):
+        for _ in range(MAX_SIMULATION_RETRIES):
+            # spawned one retry at a time: the same streams as spawn(MAX_SIMULATION_RETRIES)
+            # (a child's key is its parent's and its index), without the unused ones
+            attempt = run_seed.spawn(1)[0]
             racket_seq, velocity_seq, alpha_seq = attempt.spawn(3)
             try:
                 truth = simulate_trial(params, settings, (np.random.default_rng(racket_seq),
