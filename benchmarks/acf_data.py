@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
-import os
 import shutil
 import statistics
 import subprocess
@@ -56,15 +55,17 @@ def main(argv: list[str] | None = None) -> int:
         impacts = make_impacts(work, args.trials, args.duration)
         subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(tree),
                         args.reference], check=True, capture_output=True)
-        base_env = {**os.environ}
-        routes = {"reference": {**base_env, "PYTHONPATH": str(tree)}, "this tree": base_env}
+        routes = {"reference": (study_bench.route_env(tree), tree),
+                  "this tree": (study_bench.route_env(ROOT), ROOT)}
+        for env, route_tree in routes.values():
+            study_bench.check_route(route_tree, env)
         results: dict[str, list[tuple[float, float]]] = {name: [] for name in routes}
         for _ in range(args.repeat):
-            for name, env in routes.items():
+            for name, (env, route_tree) in routes.items():
                 out = work / f"out-{name.replace(' ', '-')}"
                 command = [sys.executable, "-m", "bounce_cli", "acf", "--data", str(impacts),
                            "--out", str(out), "-q", "--force"]
-                wall, cpu, code = study_bench.timed(command, env)
+                wall, cpu, code = study_bench.timed(command, env, route_tree)
                 print(f"  {name:9s}: {wall:6.2f} s wall, {cpu:6.2f} s CPU (exit {code})",
                       flush=True)
                 results[name].append((wall, cpu))

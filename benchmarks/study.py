@@ -30,10 +30,30 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 
 
-def timed(command: list[str], env: dict[str, str]) -> tuple[float, float, int]:
-    """(wall s, CPU s of the process and its children, exit code) of one run."""
+def route_env(tree: Path) -> dict[str, str]:
+    """The environment of a route that runs the bounce_cli of ``tree``: ``python -m`` puts
+    its working directory first on ``sys.path``, so a route runs in its own tree as well
+    (``timed``'s ``cwd``) with the tree on ``PYTHONPATH`` (for its workers)."""
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    env.pop("BOUNCE_LAB", None)
+    return env
+
+
+def check_route(tree: Path, env: dict[str, str]) -> None:
+    """Fail unless ``python -m bounce_cli`` with ``env`` in ``tree`` imports ``tree``'s
+    package (not an installed one, not the directory the benchmark was started in)."""
+    found = subprocess.run([sys.executable, "-c", "import bounce_cli; print(bounce_cli.__file__)"],
+                           env=env, cwd=tree, check=True, capture_output=True, text=True)
+    path = Path(found.stdout.strip()).resolve()
+    if Path(tree).resolve() not in path.parents:
+        raise SystemExit(f"the route of {tree} imports bounce_cli from {path}")
+
+
+def timed(command: list[str], env: dict[str, str], cwd: Path | None = None
+          ) -> tuple[float, float, int]:
+    """(wall s, CPU s of the process and its children, exit code) of one run in ``cwd``."""
     start = time.perf_counter()
-    process = subprocess.Popen(command, env=env, stdout=subprocess.DEVNULL,
+    process = subprocess.Popen(command, env=env, cwd=cwd, stdout=subprocess.DEVNULL,
                                stderr=subprocess.PIPE)
     _, status, usage = os.wait4(process.pid, 0)
     wall = time.perf_counter() - start
@@ -66,30 +86,32 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     work = Path(tempfile.mkdtemp(prefix="bounce-study-bench-"))
     try:
-        manifest = args.manifest or make_study(work / "sim", args.subjects, args.trials)
-        base_env = {**os.environ}
-        base_env.pop("BOUNCE_LAB", None)
+        manifest = (args.manifest.resolve() if args.manifest  # (each route runs in its tree)
+                    else make_study(work / "sim", args.subjects, args.trials))
+        base_env = route_env(ROOT)
         if args.reference == "env":
-            ref_env = {**base_env, "BOUNCE_LAB": "python"}
+            ref_tree, ref_env = ROOT, {**base_env, "BOUNCE_LAB": "python"}
             ref_label = "this tree, BOUNCE_LAB=python"
         else:
-            tree = work / "reference"
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(tree),
-                            args.reference], check=True, capture_output=True)
-            ref_env = {**base_env, "PYTHONPATH": str(tree)}
+            ref_tree = work / "reference"
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach",
+                            str(ref_tree), args.reference], check=True, capture_output=True)
+            ref_env = route_env(ref_tree)
             ref_label = f"revision {args.reference}"
-        routes = {"reference": (ref_env, []),
+        check_route(ROOT, base_env)
+        check_route(ref_tree, ref_env)
+        routes = {"reference": (ref_env, [], ref_tree),
                   "this tree": (base_env, [] if args.figures is None
-                                else ["--figures", args.figures])}
+                                else ["--figures", args.figures], ROOT)}
         results: dict[tuple[str, int], list[tuple[float, float]]] = {}
         for jobs in [int(j) for j in args.jobs.split(",")]:
             for _ in range(args.repeat):
-                for name, (env, extra) in routes.items():
+                for name, (env, extra, tree) in routes.items():
                     out = work / f"out-{name.replace(' ', '-')}-{jobs}"
                     command = [sys.executable, "-m", "bounce_cli", "study", "--manifest",
                                str(manifest), "--out", str(out), "--jobs", str(jobs), "-q",
                                "--force", *extra]
-                    wall, cpu, code = timed(command, env)
+                    wall, cpu, code = timed(command, env, tree)
                     print(f"  {name:9s} --jobs {jobs}: {wall:7.1f} s wall, {cpu:7.1f} s CPU "
                           f"(exit {code})", flush=True)
                     results.setdefault((name, jobs), []).append((wall, cpu))
