@@ -80,6 +80,15 @@ def _cross(left: np.ndarray, right: np.ndarray) -> np.ndarray:
     return left.transpose(0, 2, 1) @ right
 
 
+def _range_sums(values: np.ndarray, starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
+    """Sums of ``values`` (..., T + 1; its last entry zero, so that a range may end at T)
+    over the entries [start, stop) of each range (start < stop): (..., ranges), by one
+    ``np.add.reduceat`` over the interleaved bounds."""
+    bounds = np.empty(2 * len(starts), dtype=np.intp)
+    bounds[0::2], bounds[1::2] = starts, stops
+    return np.add.reduceat(values, bounds, axis=-1)[..., 0::2]
+
+
 def _demeaned(panels: np.ndarray, segments: Segments) -> np.ndarray:
     """(R, T, w) panels with each segment's mean removed (rows outside a segment: 0)."""
     out = np.zeros_like(panels)
@@ -89,85 +98,156 @@ def _demeaned(panels: np.ndarray, segments: Segments) -> np.ndarray:
     return out
 
 
-def _rows(segments: Segments, lags: int) -> tuple[list[np.ndarray], np.ndarray]:
-    """Row indices of (y_k, ..., y_{k+lags}) within each segment and each row's segment."""
-    parts: list[list[np.ndarray]] = [[] for _ in range(lags + 1)]
-    segment_of = []
-    for i, (start, n) in enumerate(zip(segments.starts, segments.lengths)):
-        m = n - lags
-        if m <= 0:
-            continue
+def _lag_layout(method: str, width: int) -> tuple[int, list[int], list[int], list[int]]:
+    """The lags of ``method`` and where its instruments, regressors and target lie in the
+    stacked row s_k = (w_k, ..., w_{k+lags}) of w = (v, theta, inputs...) of ``width``:
+    OLS regresses y_{k+1} on (y_k, u_{k+1}, u_k); lag 2 regresses y_{k+2} on (y_{k+1},
+    u_{k+2}, u_{k+1}) with instruments (y_k, u_{k+2}, u_{k+1}) (``var_fit._prepared``)."""
+    y, u = [0, 1], list(range(2, width))
+
+    def at(lag: int, columns: list[int]) -> list[int]:
+        return [lag * width + c for c in columns]
+
+    if method == "ols":
+        regressors = at(0, y) + at(1, u) + at(0, u)
+        return 1, regressors, regressors, at(1, y)
+    return 2, at(0, y) + at(2, u) + at(1, u), at(1, y) + at(2, u) + at(1, u), at(2, y)
+
+
+@dataclass(frozen=True)
+class _Moments:
+    """A stack of R panels as the fits read it: w = (v, theta, inputs...) with each whole
+    trial's mean removed, its series along the last axis (R, w, T), and its lagged products
+    w_k w_{k+l}' (R, w, w, T - l); each padded with a zero entry for :func:`_range_sums`."""
+
+    centred: np.ndarray  # (R, w, T + 1)
+    products: list[np.ndarray]  # lag l: (R, w, w, T - l + 1)
+
+    @classmethod
+    def of(cls, panels: np.ndarray, inputs: np.ndarray | None, whole: Segments,
+           lags: int) -> _Moments:
+        r, t = panels.shape[:2]
+        if inputs is not None:  # (T, m): the same for every panel, or (R, T, m): each its own
+            u = inputs if inputs.ndim == 3 else inputs[None]
+            panels = np.concatenate([panels, np.broadcast_to(u, (r,) + u.shape[1:])], axis=2)
+        width = panels.shape[2]
+        centred = np.zeros((r, width, t + 1))
+        centred[:, :, :t] = panels.transpose(0, 2, 1)
+        starts = np.asarray(whole.starts, dtype=np.intp)
+        lengths = np.asarray(whole.lengths, dtype=np.intp)
+        means = _range_sums(centred, starts, starts + lengths) / lengths  # (R, w, trials)
+        centred[:, :, :t] -= np.repeat(means, lengths, axis=-1)
+        products = []
         for lag in range(lags + 1):
-            parts[lag].append(start + lag + np.arange(m))
-        segment_of.append(np.full(m, i))
-    if not segment_of:
-        raise ModelError(f"no trial has more than {lags} bounces")
-    return [np.concatenate(p) for p in parts], np.concatenate(segment_of)
+            out = np.zeros((r, width, width, t - lag + 1))
+            np.multiply(centred[:, :, None, :t - lag], centred[:, None, :, lag:t],
+                        out=out[..., :-1])
+            products.append(out)
+        return cls(centred, products)
+
+    def gram(self, segments: Segments, lags: int) -> tuple[np.ndarray, int]:
+        """The Gram matrix sum_k (s_k - m)(s_k - m)' of the stacked rows s_k = (w_k, ...,
+        w_{k+lags}) over k in [start, start + n - lags) of each segment, m the segment's own
+        mean (over its n rows), summed over segments: (R, (lags + 1) w, (lags + 1) w), and
+        the number of rows. Each block is a sum of lagged products over a range (one
+        reduceat) less the segment mean's share: the halves of a split-panel jackknife
+        downdate the whole data's products instead of refitting."""
+        kept = [(s, n) for s, n in zip(segments.starts, segments.lengths) if n - lags > 0]
+        if not kept:
+            raise ModelError(f"no trial has more than {lags} bounces")
+        starts = np.array([s for s, _ in kept], dtype=np.intp)
+        lengths = np.array([n for _, n in kept], dtype=np.intp)
+        count = lengths - lags  # rows k of each segment
+        r, width = self.centred.shape[:2]
+        mean = _range_sums(self.centred, starts, starts + lengths) / lengths  # (R, w, segs)
+        first = [_range_sums(self.centred, starts + i, starts + i + count)
+                 for i in range(lags + 1)]
+        size = (lags + 1) * width
+        gram = np.empty((r, size, size))
+        for lag in range(lags + 1):
+            for i in range(lags + 1 - lag):
+                j = i + lag
+                raw = _range_sums(self.products[lag], starts + i, starts + i + count)
+                block = (raw - first[i][:, :, None] * mean[:, None, :, :]
+                         - mean[:, :, None] * first[j][:, None, :, :]
+                         + count * mean[:, :, None] * mean[:, None, :, :]).sum(axis=-1)
+                gram[:, i * width:(i + 1) * width, j * width:(j + 1) * width] = block
+                if lag:
+                    gram[:, j * width:(j + 1) * width, i * width:(i + 1) * width] = \
+                        block.transpose(0, 2, 1)
+        return gram, int(count.sum())
 
 
-def _solve_segments(method: str, panels: np.ndarray, inputs: np.ndarray | None,
-                    segments: Segments, with_cov: bool = True
+def _solve_segments(method: str, moments: _Moments, segments: Segments, with_cov: bool = True
                     ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray]:
     """``var_fit._fit`` on R panels at once: J (R, 2, 2), Cov(vec J) (R, 4, 4; None unless
     ``with_cov``: a jackknife's half fits need J alone), identified (R,) and valid (R,:
-    identified with a strong enough lag-2 instrument)."""
-    lags = 1 if method == "ols" else 2
-    y = _demeaned(panels, segments)
-    index, segment_of = _rows(segments, lags)
-    x, x_next = y[:, index[-2]], y[:, index[-1]]
-    instruments = x if method == "ols" else y[:, index[0]]
-    r, n = x.shape[0], x.shape[1]
-    if inputs is not None:  # (T, m): the same for every panel, or (R, T, m): each its own
-        u = _demeaned(inputs if inputs.ndim == 3 else inputs[None], segments)
-        u_rows = np.concatenate([u[:, index[-1]], u[:, index[-2]]], axis=2)
-        stacked = np.broadcast_to(u_rows, (r,) + u_rows.shape[1:])
-        regressors = np.concatenate([x, stacked], axis=2)
-        z = np.concatenate([instruments, stacked], axis=2)
-    else:
-        regressors, z = x, instruments
-    p = regressors.shape[2]
+    identified with a strong enough lag-2 instrument). ``segments``: the whole trials (by
+    which ``moments`` were centred) or parts of them."""
+    width = moments.centred.shape[1]
+    lags, inst, reg, target = _lag_layout(method, width)
+    gram, n = moments.gram(segments, lags)
+    r, p = gram.shape[0], len(reg)
     dof = n - p - len(segments.lengths)
     if dof < 2:
         what = "pairs" if method == "ols" else "triples"
         raise ModelError(f"too few bounces for the {'VAR(1)' if method == 'ols' else 'lag-2'}"
                          f" fit ({n} {what} in {len(segments.lengths)} trials)")
-    a = _cross(z, regressors)
+    a = gram[:, inst][:, :, reg]
     identified = np.linalg.cond(a) <= CONDITION_LIMIT[method]
     valid = identified.copy()
     if method == "lag2":
         sign, log_a = np.linalg.slogdet(a)
-        sign_z, log_z = np.linalg.slogdet(_cross(z, z))
-        sign_x, log_x = np.linalg.slogdet(_cross(regressors, regressors))
+        sign_z, log_z = np.linalg.slogdet(gram[:, inst][:, :, inst])
+        sign_x, log_x = np.linalg.slogdet(gram[:, reg][:, :, reg])
         ok = (sign != 0) & (sign_z > 0) & (sign_x > 0)
         with np.errstate(over="ignore", invalid="ignore"):
             strength = np.where(ok, np.minimum(1.0, np.exp(log_a - 0.5 * (log_z + log_x))),
                                 0.0)
         valid &= strength >= MIN_INSTRUMENT_DET
     a = np.where(identified[:, None, None], a, np.eye(p))  # a failed fit solves something harmless
-    b = np.linalg.solve(a, _cross(z, x_next))  # (R, p, 2) = [J, B]^T
+    b = np.linalg.solve(a, gram[:, inst][:, :, target])  # (R, p, 2) = [J, B]^T
+    jac = b[:, :2, :].transpose(0, 2, 1)
     if not with_cov:
-        return b[:, :2, :].transpose(0, 2, 1), None, identified, valid
-    resid = x_next - regressors @ b
+        return jac, None, identified, valid
     a_inv = np.linalg.inv(a)
     if method == "ols":
-        sigma = _cross(resid, resid) / dof
-        cov = sigma[:, :, None, :, None] * a_inv[:, None, :2, None, :2]
-        cov = cov.reshape(r, 4, 4)
-    else:
-        g = (resid[:, :, :, None] * z[:, :, None, :]).reshape(r, n, 2 * p)
-        s = _cross(g, g)
-        same = segment_of[1:] == segment_of[:-1]
-        g1 = _cross(g[:, 1:][:, same], g[:, :-1][:, same])
-        s = s + g1 + g1.transpose(0, 2, 1)
-        bread = np.zeros((r, 2 * p, 2 * p))
-        bread[:, :p, :p] = a_inv
-        bread[:, p:, p:] = a_inv
-        full = bread @ s @ bread.transpose(0, 2, 1)
-        w, v = np.linalg.eigh((full + full.transpose(0, 2, 1)) / 2)
-        full = (v * np.clip(w, 0.0, None)[:, None, :]) @ v.transpose(0, 2, 1)
-        j_index = [0, 1, p, p + 1]
-        cov = full[:, j_index][:, :, j_index]
-    return b[:, :2, :].transpose(0, 2, 1), cov, identified, valid
+        # the residuals' cross-products from the Gram: e_k = y_{k+1} - b' x_k
+        cross = gram[:, target][:, :, reg] @ b
+        sse = (gram[:, target][:, :, target] - cross - cross.transpose(0, 2, 1)
+               + b.transpose(0, 2, 1) @ gram[:, reg][:, :, reg] @ b)
+        cov = (sse / dof)[:, :, None, :, None] * a_inv[:, None, :2, None, :2]
+        return jac, cov.reshape(r, 4, 4), identified, valid
+    # the lag-2 sandwich needs each row's residual times its instruments: the rows k of
+    # (w_k, w_{k+1}, w_{k+2}), weighted 0 where they run past their segment's end
+    t = moments.centred.shape[2] - 1
+    row = [moments.centred[:, :, lag:t - lags + lag] for lag in range(lags + 1)]
+
+    def series(index: int) -> np.ndarray:
+        return row[index // width][:, index % width]
+
+    inside = np.zeros(t - lags)
+    for start, length in zip(segments.starts, segments.lengths):
+        inside[start:start + max(length - lags, 0)] = 1.0
+    regressors = [series(i) for i in reg]
+    g = np.empty((r, 2, p, t - lags))
+    for e, column in enumerate(target):
+        resid = series(column) - sum(b[:, c, e, None] * x for c, x in enumerate(regressors))
+        resid *= inside
+        for c, i in enumerate(inst):
+            g[:, e, c] = resid * series(i)
+    g = g.reshape(r, 2 * p, t - lags)
+    s = g @ g.transpose(0, 2, 1)
+    g1 = g[:, :, 1:] @ g[:, :, :-1].transpose(0, 2, 1)  # consecutive rows: one segment's
+    s = s + g1 + g1.transpose(0, 2, 1)
+    bread = np.zeros((r, 2 * p, 2 * p))
+    bread[:, :p, :p] = a_inv
+    bread[:, p:, p:] = a_inv
+    full = bread @ s @ bread.transpose(0, 2, 1)
+    w, v = np.linalg.eigh((full + full.transpose(0, 2, 1)) / 2)
+    full = (v * np.clip(w, 0.0, None)[:, None, :]) @ v.transpose(0, 2, 1)
+    j_index = [0, 1, p, p + 1]
+    return jac, full[:, j_index][:, :, j_index], identified, valid
 
 
 def stacked_fit(panels: np.ndarray, lengths: Sequence[int], method: str,
@@ -199,15 +279,16 @@ def stacked_fit(panels: np.ndarray, lengths: Sequence[int], method: str,
     if inputs is not None:
         inputs = np.asarray(inputs, float)
     whole = whole_trials(lengths)
-    jac, cov, identified, valid = _solve_segments(method, panels, inputs, whole)
+    moments = _Moments.of(panels, inputs, whole, 1 if method == "ols" else 2)
+    jac, cov, identified, valid = _solve_segments(method, moments, whole)
     assert cov is not None
     if jackknife:
         if min(lengths) < 8:
             raise ModelError(f"a trial has only {min(lengths)} bounces: the split-panel "
                              "jackknife needs at least 8 per trial (4 per half)")
         first, second = whole.halves()
-        j1, _, id1, ok1 = _solve_segments(method, panels, inputs, first, with_cov=False)
-        j2, _, id2, ok2 = _solve_segments(method, panels, inputs, second, with_cov=False)
+        j1, _, id1, ok1 = _solve_segments(method, moments, first, with_cov=False)
+        j2, _, id2, ok2 = _solve_segments(method, moments, second, with_cov=False)
         identified = identified & id1 & id2
         jac = 2.0 * jac - 0.5 * (j1 + j2)
         valid = valid & ok1 & ok2

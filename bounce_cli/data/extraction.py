@@ -153,7 +153,9 @@ def least_squares_line(x, y):
     det = n * sxx - sx * sx
     if det > 0.0:
         inverse = np.array([[sxx, -sx], [-sx, n]]) / det
-        condition = (max(n, sxx) + abs(sx)) * (max(sxx, n) + abs(sx)) / det
+        # ||G||_inf * ||G^-1||_inf: the two row-sum norms are equal for this G
+        row_norm = max(n, sxx) + abs(sx)
+        condition = row_norm * row_norm / det
         if math.isfinite(condition) and condition <= GRAM_CONDITION_LIMIT:
             return inverse @ np.array([sy, sxy]), inverse
     return least_squares(np.column_stack([np.ones_like(x), x]), y)

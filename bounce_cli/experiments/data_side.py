@@ -796,10 +796,13 @@ def trust_frame(params, q_v, q_theta, config, segments, options,
     for total in d.trust_bounces:
         per = max(run_length, MIN_RUN_LENGTH)
         n_trials = max(1, int(round(total / per)))
+        # every step's shocks drawn at once: the stream's values in the order the steps
+        # drew them one by one
+        shocks = rng.standard_normal((TRUST_BURN_IN + per, reps * n_trials, 2)) @ chol.T
         y = np.zeros((reps * n_trials, 2))
         series = np.empty((reps * n_trials, per, 2))
-        for k in range(TRUST_BURN_IN + per):
-            y = y @ jac.T + rng.standard_normal(y.shape) @ chol.T
+        for k, shock in enumerate(shocks):
+            y = y @ jac.T + shock
             if k >= TRUST_BURN_IN:
                 series[:, k - TRUST_BURN_IN] = y
         series += rng.standard_normal(series.shape) * meas
