@@ -103,10 +103,10 @@ def test_large_tables_written_by_a_child_are_the_same_bytes(tmp_path,
     ax.plot([0, 1])
     run.add_figure("fig.png", fig)
     forks = []
-    real = artifacts._ChildWriter.start
+    real = artifacts.ForkedCall.start
     with pytest.MonkeyPatch.context() as m:
-        m.setattr(artifacts._ChildWriter, "start",
-                  lambda self: forks.append([t.name for t, *_ in self.jobs]) or real(self))
+        m.setattr(artifacts.ForkedCall, "start",
+                  lambda self: forks.append([t.name for t, *_ in self.fn.args[0]]) or real(self))
         run.commit()
     assert len(forks) == 1 and forks[0][0].startswith(".big.csv.")  # only the big one
     frame.to_csv(tmp_path / "pandas.csv", index=False)
@@ -124,10 +124,10 @@ def test_many_small_tables_are_written_half_by_a_child(tmp_path, monkeypatch):
     for name, frame in frames.items():
         run.add_csv(name, frame)
     forks = []
-    real = artifacts._ChildWriter.start
+    real = artifacts.ForkedCall.start
     with pytest.MonkeyPatch.context() as m:
-        m.setattr(artifacts._ChildWriter, "start",
-                  lambda self: forks.append([f.parent.name for *_, f in self.jobs])
+        m.setattr(artifacts.ForkedCall, "start",
+                  lambda self: forks.append([f.parent.name for *_, f in self.fn.args[0]])
                   or real(self))
         run.commit()
     assert forks == [["u3", "u4", "u5"]]
@@ -168,11 +168,12 @@ def test_a_failure_in_this_process_kills_the_child(tmp_path, small_background_th
     import time
 
     pids = []
-    real = artifacts._ChildWriter.start
+    real = artifacts.ForkedCall.start
 
     def start(self):
         real(self)
         pids.append(self.pid)
+        return self
 
     def slow(tmp):
         time.sleep(30)
@@ -182,7 +183,7 @@ def test_a_failure_in_this_process_kills_the_child(tmp_path, small_background_th
     fig, ax = plt.subplots()
     run.add_figure("fig.png", fig)
     with pytest.MonkeyPatch.context() as m:
-        m.setattr(artifacts._ChildWriter, "start", start)
+        m.setattr(artifacts.ForkedCall, "start", start)
         m.setattr(artifacts, "write_frame", lambda frame, path, kind=None: slow(path))
         m.setattr(fig, "savefig", lambda *a, **k: (_ for _ in ()).throw(KeyboardInterrupt))
         started = time.monotonic()

@@ -29,7 +29,6 @@ import os
 import platform
 import re
 import subprocess
-import sys
 import tempfile
 import time
 from importlib import metadata
@@ -44,6 +43,7 @@ from ..version import __version__
 from ..errors import OutputDirError, RunDirectoryBusy
 from .interrupts import deferred
 from .figure_files import FIGURE_DPI, save_figure
+from .forked import ForkedCall, can_fork
 
 if TYPE_CHECKING:  # pandas is imported where a table is written or read (fast start-up)
     import pandas as pd
@@ -144,95 +144,12 @@ BACKGROUND_TABLE_ROWS = 200_000
 BACKGROUND_TABLE_COUNT = 64
 
 
-class _ChildWriter:
-    """Writers run in a forked child process, each into its staged temporary file, which the
-    child then compares with the file it replaces (the parent needs to know for run.json).
-
-    The child ignores SIGINT (the parent decides: a terminal's Ctrl-C reaches both), dies
-    with the parent (Linux), never runs the parent's clean-up (``os._exit``) and reports a
-    failure by sending the exception back (raised again here by :meth:`wait`)."""
-
-    def __init__(self, jobs: list[tuple[Path, Callable[[Path], object], Path]]) -> None:
-        self.jobs = jobs
-        self.pid = 0
-        self._pipe = -1
-
-    def start(self) -> None:
-        """Fork the child. Signals are held during the fork (a signal raised in an at-fork
-        handler would be lost) and raised after it, when ``pid`` is set for :meth:`kill`."""
-        read_end, write_end = os.pipe()
-        self._pipe = read_end
-        parent = os.getpid()
-        with deferred():
-            self.pid = os.fork()
-            if self.pid == 0:
-                os.close(read_end)
-                self._child(write_end, parent)  # never returns
-            os.close(write_end)
-
-    def _child(self, write_end: int, parent: int) -> None:
-        import pickle
-        import signal
-
-        code = 1
-        try:
-            signal.signal(signal.SIGINT, signal.SIG_IGN)
-            for name in ("SIGTERM", "SIGHUP"):
-                if hasattr(signal, name):
-                    signal.signal(getattr(signal, name), signal.SIG_DFL)
-            from .parallel import _die_with_parent
-
-            _die_with_parent(parent)
-            for tmp, write, _ in self.jobs:
-                write(tmp)
-            unchanged = all(same_bytes(tmp, final) for tmp, _, final in self.jobs)
-            data = pickle.dumps(unchanged)
-            code = 0
-        except BaseException as exc:  # sent to the parent, which raises it
-            try:
-                data = pickle.dumps(exc)
-            except Exception:
-                data = pickle.dumps(RuntimeError(f"{type(exc).__name__}: {exc}"))
-        try:
-            with open(write_end, "wb", closefd=False) as pipe:
-                pipe.write(data)
-        finally:
-            os._exit(code)
-
-    def wait(self) -> bool:
-        """Wait for the child; raise what failed in it. True if every file it wrote is the
-        same, byte for byte, as the file it replaces (``same_bytes``)."""
-        import pickle
-
-        with open(self._pipe, "rb") as pipe:  # read before waiting: a full pipe would block
-            data = pipe.read()
-        self._pipe = -1
-        _, status = os.waitpid(self.pid, 0)
-        self.pid = 0
-        result = pickle.loads(data) if data else None
-        if isinstance(result, BaseException):
-            raise result
-        if status != 0 or not isinstance(result, bool):
-            raise OSError(f"the process writing {', '.join(t.name for t, _, _ in self.jobs)} "
-                          f"died (wait status {status})")
-        return result
-
-    def kill(self) -> None:
-        """Stop the child at once (its staged files are the caller's to remove)."""
-        import signal
-
-        if self.pid:
-            try:
-                os.kill(self.pid, signal.SIGKILL)
-                os.waitpid(self.pid, 0)
-            except OSError:
-                pass
-            self.pid = 0
-        try:
-            if self._pipe >= 0:
-                os.close(self._pipe)
-        except OSError:
-            pass
+def _write_and_compare(jobs: list[tuple[Path, Callable[[Path], object], Path]]) -> bool:
+    """Run each writer into its staged temporary file; True if every file is the same, byte
+    for byte, as the file it replaces (the parent needs to know for run.json)."""
+    for tmp, write, _ in jobs:
+        write(tmp)
+    return all(same_bytes(tmp, final) for tmp, _, final in jobs)
 
 
 def current_umask() -> int:
@@ -557,7 +474,7 @@ class RunDirectory:
                   if len(frame) >= BACKGROUND_TABLE_ROWS]
         if not tables and len(self._frames) >= BACKGROUND_TABLE_COUNT:
             tables = list(self._frames)[len(self._frames) // 2:]
-        if not tables or not sys.platform.startswith("linux"):  # fork is safe there
+        if not tables or not can_fork():
             return []
         figures = list(self._figures)
         return [tables] + ([figures[len(figures) // 2:]] if len(figures) >= 2 else [])
@@ -620,7 +537,7 @@ class RunDirectory:
         # what a run killed while staging left (this run holds the lock: no live run's)
         remove_stale_staging(self._folders(written), self.started.timestamp())
         staged: list[tuple[Path, Path]] = []
-        children: list[_ChildWriter] = []
+        children: list[ForkedCall] = []
 
         def reserved(name: str) -> Path:
             # the temporary file is created and recorded for the clean-up in one step: a
@@ -634,8 +551,9 @@ class RunDirectory:
             for group in self._background_groups() if agrees is None else []:
                 jobs = [(reserved(name), writers.pop(name), self.out_dir / name)
                         for name in group]
-                children.append(_ChildWriter(jobs))
-                children[-1].start()
+                children.append(ForkedCall(
+                    functools.partial(_write_and_compare, jobs),
+                    f"the process writing {', '.join(t.name for t, _, _ in jobs)}").start())
             unchanged = True
             tables_agree = True
             within: list[tuple[str, Path]] = []  # tables within tolerance of the previous
