@@ -29,7 +29,7 @@ import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Literal, Optional
+from typing import Any, Callable, Iterable, Literal, Optional
 
 import numpy as np
 import pandas as pd
@@ -46,12 +46,6 @@ from ..runtime.config import (
     did_you_mean,
     read_yaml,
     validate,
-)
-from ..analysis.group_stats import (
-    across_units,
-    eq15_prediction,
-    mixed_trend,
-    paired_difference,
 )
 from ..model.linear import stability
 from ..model.params import ModelError, circular_mean, phase_difference
@@ -91,8 +85,10 @@ class StudyModelBlock(StrictModel):
 class ReportBlock(StrictModel):
     """What the reports hold besides the group figures and tables."""
 
-    unit_figures: bool = Field(True, description="each unit's figures (Fig. 2 of its first "
-                               "recording and its analyses'), written and in the reports")
+    unit_figures: bool = Field(False, description="each unit's figures (Fig. 2 of its first "
+                               "recording and its analyses'), written and in the reports; "
+                               "off by default: drawing them costs more than the unit's "
+                               "analyses (every unit's tables are written either way)")
     figures: Optional[Literal["none", "group", "all"]] = Field(
         None, description="the figures drawn (--figures): none, the group's, or the group's "
         "and every unit's; null: what the reports show (all, or group without unit_figures)")
@@ -372,9 +368,6 @@ def one_line(exc: BaseException) -> str:
 def analyse_unit(task: UnitTask) -> dict[str, Any]:
     """Everything of one unit (a worker's task): its extracted recordings, its analyses' tables,
     its row of group.csv, its warnings and failures; JSON-able (checkpoints, other processes)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
     cfg, unit = task.config, task.unit
     frames: dict[str, pd.DataFrame] = {}
     failures: list[dict] = []
@@ -418,6 +411,9 @@ def analyse_unit(task: UnitTask) -> dict[str, Any]:
     row["failures"] = len(failures)
     pngs = {}
     if ReportBlock(**cfg["report"]).drawn() == "all":
+        import matplotlib
+
+        matplotlib.use("Agg")
         for name, fig in draw_units(frames, [unit]).items():
             pngs[name] = base64.b64encode(png_bytes(fig)).decode("ascii")
     return {"index": task.index, "key": task.key,
@@ -575,8 +571,7 @@ def run(config: StudyConfig, options: RunOptions) -> ExperimentResult:
     # each figure rendered once, to PNG: written as it is and embedded in the reports (the
     # units' own in their workers)
     drawn = config.report.drawn()
-    pngs = ({name: png_bytes(fig) for name, fig in draw(frames).items()}
-            if drawn != "none" else {})
+    pngs = group_pngs(frames) if drawn != "none" else {}
     for result in results:
         pngs.update({name: base64.b64decode(data) for name, data in result["pngs"].items()})
     files = report_files(frames, pngs, units, manifest.path, config, warnings)
@@ -620,6 +615,14 @@ def condition_of(frame: pd.DataFrame) -> pd.Series:
 def group_tables(frames: dict[str, pd.DataFrame], units: list[Unit],
                  config: StudyConfig) -> dict[str, pd.DataFrame]:
     """The group statistics' tables (see the module docstring)."""
+    # here, not at the top: the units' workers never need scipy.stats and statsmodels
+    from ..analysis.group_stats import (
+        across_units,
+        eq15_prediction,
+        mixed_trend,
+        paired_difference,
+    )
+
     out: dict[str, pd.DataFrame] = {}
     conf = config.confidence
     group = frames["group.csv"]
@@ -802,11 +805,29 @@ def group_summary(frames: dict[str, pd.DataFrame]) -> list[str]:
 
 # -- figures -------------------------------------------------------------------------------------
 @publication_style
-def draw(frames: dict[str, pd.DataFrame]) -> dict:
-    """The group figures, from the group tables."""
+def draw(frames: dict[str, pd.DataFrame], names: Iterable[str] | None = None) -> dict:
+    """The group figures, from the group tables (those of ``names``, or all)."""
     from .study_figures import draw_group
 
-    return draw_group(frames)
+    return draw_group(frames, names)
+
+
+def group_pngs(frames: dict[str, pd.DataFrame]) -> dict[str, bytes]:
+    """Every group figure rendered as PNG bytes: the later half of them drawn and rendered
+    by a forked child while this process does the first half (``runtime.forked``)."""
+    from ..runtime.forked import split_work
+    from .study_figures import group_figure_builders
+
+    def render(names: list[str]) -> dict[str, bytes]:
+        import matplotlib.pyplot as plt
+
+        out = {}
+        for name, fig in draw(frames, names).items():
+            out[name] = png_bytes(fig)
+            plt.close(fig)
+        return out
+
+    return split_work(list(group_figure_builders(frames)), render)
 
 
 def draw_units(frames: dict[str, pd.DataFrame], units: list[Unit]) -> dict:

@@ -4,6 +4,8 @@ against the model's."""
 
 from __future__ import annotations
 
+from typing import Any, Callable, Iterable
+
 import numpy as np
 import pandas as pd
 from matplotlib.ticker import MaxNLocator
@@ -18,31 +20,42 @@ RESPONSES = (("v_m_s", "$\\Delta v_k$ (m/s)"), ("theta_deg", "$\\Delta \\theta_k
              ("racket_amplitude_m", "$\\Delta$ racket amplitude (m)"))
 
 
-def draw_group(frames: dict[str, pd.DataFrame]) -> dict:
-    """Every group figure whose table is present."""
-    figures = {}
+def group_figure_builders(frames: dict[str, pd.DataFrame]) -> dict[str, Callable[[], Any]]:
+    """name -> a function drawing that group figure, for every group figure whose table is
+    present (in the report's order)."""
+    builders: dict[str, Callable[[], Any]] = {}
     if "group_regression.csv" in frames and "slope" in frames["group_regression.csv"]:
-        from .regression import draw as draw_regression
-
         fit = frames["group_regression.csv"].dropna(subset=["slope"])
         if len(fit):
-            fig = draw_regression({"trials.csv": frames["group_regression_trials.csv"],
-                                   "fit.csv": fit})["regression.png"]
-            fig.axes[0].set_title("Fig. 7 over the study: trial means of every subject, "
-                                  "pooled by condition")
-            figures["group_regression.png"] = fig
+            def regression():
+                from .regression import draw as draw_regression
+
+                fig = draw_regression({"trials.csv": frames["group_regression_trials.csv"],
+                                       "fit.csv": fit})["regression.png"]
+                fig.axes[0].set_title("Fig. 7 over the study: trial means of every subject, "
+                                      "pooled by condition")
+                return fig
+
+            builders["group_regression.png"] = regression
     if "group_learning_trials.csv" in frames:
-        figures["group_learning.png"] = learning_figure(frames["group_learning_trials.csv"],
-                                                        frames.get("group_learning.csv"))
+        builders["group_learning.png"] = lambda: learning_figure(
+            frames["group_learning_trials.csv"], frames.get("group_learning.csv"))
     group = frames.get("group.csv")
     if group is not None and "radius_ols" in group and group["radius_ols"].notna().any():
-        figures["group_stability.png"] = stability_figure(group,
-                                                          frames.get("group_stability.csv"))
+        builders["group_stability.png"] = lambda: stability_figure(
+            group, frames.get("group_stability.csv"))
     if "group_acf.csv" in frames:
-        figures["group_acf.png"] = acf_figure(frames["group_acf.csv"])
+        builders["group_acf.png"] = lambda: acf_figure(frames["group_acf.csv"])
     if "group_impulse.csv" in frames:
-        figures["group_impulse.png"] = impulse_figure(frames["group_impulse.csv"])
-    return figures
+        builders["group_impulse.png"] = lambda: impulse_figure(frames["group_impulse.csv"])
+    return builders
+
+
+def draw_group(frames: dict[str, pd.DataFrame], names: Iterable[str] | None = None) -> dict:
+    """Every group figure whose table is present, or those of ``names``."""
+    builders = group_figure_builders(frames)
+    chosen = builders if names is None else [n for n in names if n in builders]
+    return {name: builders[name]() for name in chosen}
 
 
 def learning_figure(trials: pd.DataFrame, trends: pd.DataFrame | None):
