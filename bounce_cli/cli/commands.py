@@ -380,8 +380,9 @@ def add_experiment_command(entry: Entry) -> None:
             "the URL is printed.", min=0, max=65535)] = None,
         figures: Annotated[Optional[str], typer.Option(
             "--figures", help="Which figures to draw: none, group (the group's) or all (the "
-            "group's and every unit's); default: what the reports show (config key "
-            "report.figures).", metavar="none|group|all")] = None,
+            "group's and every unit's); default: what the reports show, the group's unless "
+            "report.unit_figures is set (config key report.figures).",
+            metavar="none|group|all")] = None,
         resume: ResumeOption = False,
         scheduler: SchedulerOption = None,
         figure_format: FigureFormatOption = None,

@@ -61,7 +61,7 @@ def tiny(tmp_path_factory, cli_module):
 def tiny_study(tiny, tmp_path_factory, cli_module):
     out = tmp_path_factory.mktemp("tiny-study") / "study"
     result = cli_module("study", "--manifest", tiny / "study.csv", "--out", out, "--jobs", "2",
-                        "--set", "analyses=[regression, learning]", *FAST)
+                        "--set", "analyses=[regression, learning]", "--figures", "all", *FAST)
     assert result.exit_code == 0, result.output
     return out
 
@@ -636,18 +636,24 @@ def test_a_labs_small_study_gets_an_interval_for_every_radius(tmp_path, cli_modu
 
 
 @pytest.mark.parametrize("figures, group_png, unit_png", [("none", False, False),
-                                                          ("group", True, False)])
+                                                          ("group", True, False),
+                                                          (None, True, False),
+                                                          ("unit_figures", True, True)])
 def test_figures_option_draws_only_what_is_asked(tiny, tiny_study, tmp_path, cli_module,
                                                  figures, group_png, unit_png):
     """``--figures none|group``: no unit figure (and no group figure with none), the same
-    tables as the run that drew them all."""
-    out = tmp_path / figures
+    tables as the run that drew them all; by default the group's only, every unit's with
+    ``report.unit_figures``."""
+    out = tmp_path / str(figures)
+    option = {None: [], "unit_figures": ["--set", "report.unit_figures=true"]}.get(
+        figures, ["--figures", str(figures)])
     result = cli_module("study", "--manifest", tiny / "study.csv", "--out", out, "--quiet",
-                        "--set", "analyses=[regression, learning]", "--figures", figures,
-                        *FAST)
+                        "--set", "analyses=[regression, learning]", *option, *FAST)
     assert result.exit_code == 0, result.output
     assert (out / "group_regression.png").is_file() == group_png
     assert (out / "s1" / "a" / "regression" / "regression.png").is_file() == unit_png
+    report = (out / "report.html").read_text()
+    assert ("s1/a/regression/regression.png" in report) == unit_png
     assert (tiny_study / "s1" / "a" / "regression" / "regression.png").is_file()
     for name in ("group.csv", "group_regression.csv", "s1/a/regression/fit.csv"):
         pd.testing.assert_frame_equal(pd.read_csv(out / name), pd.read_csv(tiny_study / name))
