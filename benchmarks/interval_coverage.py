@@ -27,10 +27,9 @@ from bounce_cli.analysis.stochastic import paper_noise_covariance
 from bounce_cli.analysis.var_stacked import (
     log_radius_se,
     simulate_panels,
-    spectral_radii,
     stacked_fit,
 )
-from bounce_cli.model.linear import jacobian
+from bounce_cli.model.linear import jacobian, spectral_radii_2x2 as spectral_radii
 from bounce_cli.model.params import ModelParams
 
 SIZES = ["3x30", "3x60", "5x30", "5x60", "10x30", "10x60"]

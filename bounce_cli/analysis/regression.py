@@ -9,7 +9,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
+from scipy.special import stdtrit
 
 from ..model.params import ModelError, ModelParams, wrap_phase
 from .stochastic import simulate_stochastic_map
@@ -78,7 +78,7 @@ def ols_line(x, y, confidence: float = 0.95) -> LineFit:
     s2 = sse / (n - 2)
     se_slope = np.sqrt(s2 / sxx)
     se_int = np.sqrt(s2 * (1.0 / n + xm[..., 0] ** 2 / sxx))
-    t = stats.t.ppf(0.5 + confidence / 2.0, n - 2)
+    t = stdtrit(n - 2, 0.5 + confidence / 2.0)  # Student's t quantile (stats.t.ppf)
     r2 = np.where(syy > 0, 1.0 - sse / np.where(syy > 0, syy, 1.0), 1.0)
     return LineFit(
         n=np.full(np.shape(slope), n), slope=slope,

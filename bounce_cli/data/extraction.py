@@ -38,7 +38,6 @@ import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 from scipy.signal import find_peaks
 
 from ..model.params import ModelError
@@ -274,6 +273,8 @@ def bridge_short_gaps(t, x, max_gap_s: float):
     good = ~bad
     if np.count_nonzero(good) < 4:
         return x.copy(), bad
+    from scipy.interpolate import CubicSpline  # (its import is a quarter second: gaps only)
+
     filled = x.copy()
     spline = CubicSpline(t[good], x[good])
     long_gap = np.zeros(x.shape, dtype=bool)

@@ -764,9 +764,9 @@ def radius_text(fit: Var1Fit, confidence: float) -> str:
 
 
 def _z(confidence: float) -> float:
-    from scipy import stats
+    from scipy.special import ndtri  # scipy.stats.norm.ppf, without scipy.stats' import
 
-    return float(stats.norm.ppf(0.5 + confidence / 2.0))
+    return float(ndtri(0.5 + confidence / 2.0))
 
 
 def trust_frame(params, q_v, q_theta, config, segments, options,

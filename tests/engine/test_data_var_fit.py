@@ -334,6 +334,37 @@ def test_ljung_box_is_each_trials_q_summed_and_tells_var1_from_var2():
     assert passed >= 25 and failed == 30, (passed, failed)
 
 
+@pytest.mark.parametrize("n, lags", [(12, 1), (40, 5), (300, 10)])
+def test_ljung_box_q_is_statsmodels_acorr_ljungbox(n, lags):
+    """The Q that ljung_box sums is statsmodels' own (the reference implementation, kept
+    out of the analyses' imports for speed), on white, autocorrelated and offset series."""
+    from statsmodels.stats.diagnostic import acorr_ljungbox
+
+    from bounce_cli.analysis.var_fit import ljung_box_q
+
+    rng = np.random.default_rng(n)
+    white = rng.standard_normal(n)
+    ar = np.zeros(n)
+    for k in range(1, n):
+        ar[k] = 0.7 * ar[k - 1] + rng.standard_normal()
+    for x in (white, ar, 3.0 + 0.01 * ar):
+        expected = float(acorr_ljungbox(x, lags=[lags])["lb_stat"].iloc[0])
+        assert ljung_box_q(x, lags) == pytest.approx(expected, rel=1e-12)
+
+
+def test_the_distribution_functions_are_scipy_stats_own():
+    """The quantiles and tail the analyses take from scipy.special (scipy.stats' import is
+    half a second) are scipy.stats' values bit for bit."""
+    from scipy import special, stats
+
+    q = np.linspace(0.005, 0.999, 400)
+    np.testing.assert_array_equal(special.ndtri(q), stats.norm.ppf(q))
+    x = np.linspace(0.01, 400.0, 400)
+    for df in (1, 2, 3, 7, 38, 400):
+        np.testing.assert_array_equal(special.stdtrit(df, q), stats.t.ppf(q, df))
+        np.testing.assert_array_equal(special.chdtrc(df, x), stats.chi2.sf(x, df))
+
+
 def test_information_criteria_pick_the_true_lag_order():
     """BIC picks order 1 on VAR(1) data and both criteria order 2 on VAR(2) data (4 trials x
     500, per-trial designs on the same rows for every order)."""
