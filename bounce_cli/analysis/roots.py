@@ -7,7 +7,6 @@ import math
 from typing import Callable
 
 import numpy as np
-from scipy.optimize import brentq
 
 
 def nearest_root(f: Callable[[float], float], low: float, high: float, near: float,
@@ -19,6 +18,8 @@ def nearest_root(f: Callable[[float], float], low: float, high: float, near: flo
     its domain) no root is looked for. A root between two samples of equal sign (an even
     number of roots inside one interval) is not found: ``points`` sets that resolution.
     """
+    from scipy.optimize import brentq  # (imported here: a fifth of a second, rarely needed)
+
     grid = np.linspace(low, high, points)
     values = np.array([f(x) for x in grid])
     roots = [brentq(f, grid[i], grid[i + 1]) for i in range(points - 1)

@@ -38,10 +38,10 @@ import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy.signal import find_peaks
 
 from ..model.params import ModelError
 from ..model.flight import restitution_of
+from .peaks import peaks_by_prominence
 
 TWO_PI = 2.0 * math.pi
 #: a racket cycle whose period differs from the trial's median by more than this fraction is
@@ -436,8 +436,8 @@ def racket_cycles(t, racket, measured, s: ExtractionSettings) -> RacketCycles:
     at_mid = ROUNDING_TOLERANCE * (hi - lo)
     if prominence <= 0.0:
         raise ModelError("the racket does not move")
-    peaks, _ = find_peaks(work, prominence=prominence)
-    troughs, _ = find_peaks(-work, prominence=prominence)
+    peaks = peaks_by_prominence(work, prominence)  # scipy.signal.find_peaks' own
+    troughs = peaks_by_prominence(-work, prominence)
     raw = np.where(measured, racket, np.nan)
     extrema = sorted(_refined_extrema(t, raw, measured, peaks, 1, s)
                      + _refined_extrema(t, raw, measured, troughs, -1, s))

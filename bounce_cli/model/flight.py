@@ -32,7 +32,6 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
-from scipy.optimize import brentq
 
 from .chatter import IMPACT, RELEASE, STICK, iterate_exact_orbit, release_phase
 from .maps import ClassifySettings
@@ -480,5 +479,7 @@ def _first_crossing(t, h, state, new, p: ModelParams, skip_start: bool):
     start = 1 if skip_start else 0
     for i in range(start, RK4_SUBSAMPLES):
         if gaps[i] > 0.0 and gaps[i + 1] <= 0.0:
+            from scipy.optimize import brentq  # (a fifth of a second's import: here only)
+
             return t + brentq(gap, taus[i], taus[i + 1], xtol=1e-14, rtol=1e-14)
     return None
