@@ -65,7 +65,6 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
-from scipy.integrate import solve_ivp
 
 from ..model.flight import impact_velocity, restitution_of
 from ..model.params import ModelError, ModelParams
@@ -379,6 +378,8 @@ def compliant_contact(t_touch: float, closing_v: float, g: float, racket: CycleR
     """The spring-damper contact from the touch (the ball's lowest point at the racket,
     closing at ``closing_v`` = ball minus racket velocity < 0) to the release (y = 0 again):
     (release time, y' there, dense solution of (y, y')). y'' = -g - x_r'' - k y - c y'."""
+    from scipy.integrate import solve_ivp  # (its import: a physical set-up's contacts only)
+
     k, c = spring_damper(alpha, contact_s)
 
     def rhs(t, state):

@@ -14,8 +14,9 @@ import numpy as np
 
 from ..model.flight import impact_velocity
 from ..model.params import ModelError, ModelParams
-from .simulated_lab import (CycleRacket, SessionSettings, impact_state, next_contact,
-                            simulate_trial)
+from .lab_contact import CONTACT_TOLERANCE_M, MAX_CONTACT_STEPS
+from .simulated_lab import (CycleRacket, SessionSettings, TrialTruth, _draw_racket,
+                            impact_state, next_contact, simulate_trial)
 
 
 def cycle_map_step(params: ModelParams, v_k: float, theta_k: float, this: tuple[float, float],
@@ -106,37 +107,271 @@ def simulate_runs(params: ModelParams, session: RacketSession, lengths: list[int
     tuple
         (runs, sessions that fell into sticking and were drawn again).
     """
-    runs, redrawn = [], 0
-    for n, run_seed in zip(lengths, seed.spawn(len(lengths))):
-        duration = (n + SIMULATION_BURN_IN + 4) * params.racket_period * 1.25
-        settings = SessionSettings(n_trials=1, duration_s=duration,
-                                   period_sd_s=session.period_sd_s,
-                                   amplitude_sd_m=session.amplitude_sd_m,
-                                   velocity_noise_m_s=session.velocity_noise_m_s)
-        for _ in range(MAX_SIMULATION_RETRIES):
+    return simulate_sessions(params, session, lengths, [seed])[0]
+
+
+def simulate_sessions(params: ModelParams, session: RacketSession, lengths: list[int],
+                      seeds: list[np.random.SeedSequence]
+                      ) -> list[tuple[list[SimulatedRun], int]]:
+    """:func:`simulate_runs` for each of ``seeds``, every run of every session simulated at
+    once (:func:`_contacts_at_once`): the same draws and the same arithmetic as
+    ``simulated_lab.simulate_trial``'s loop, one run after another, so the same impacts bit
+    for bit (``tests/engine/test_simulated_sessions.py``), without a Python loop per contact
+    or numba's start-up (half a second per process).
+
+    Parameters
+    ----------
+    params, session, lengths
+        As :func:`simulate_runs`.
+    seeds : list of numpy.random.SeedSequence
+        One per session.
+
+    Returns
+    -------
+    list of tuple
+        Per session, what :func:`simulate_runs` returns.
+    """
+    settings = [SessionSettings(n_trials=1, duration_s=run_duration(params, n),
+                                period_sd_s=session.period_sd_s,
+                                amplitude_sd_m=session.amplitude_sd_m,
+                                velocity_noise_m_s=session.velocity_noise_m_s)
+                for n in lengths]
+    runs: list[list[SimulatedRun | None]] = [[None] * len(lengths) for _ in seeds]
+    redrawn = [0] * len(seeds)
+    run_seeds = [seed.spawn(len(lengths)) for seed in seeds]
+    todo = [(i, j) for i in range(len(seeds)) for j in range(len(lengths))]
+    for _ in range(MAX_SIMULATION_RETRIES):
+        drawn, failed = [], []
+        for i, j in todo:
             # spawned one retry at a time: the same streams as spawn(MAX_SIMULATION_RETRIES)
             # (a child's key is its parent's and its index), without the unused ones
-            attempt = run_seed.spawn(1)[0]
-            racket_seq, velocity_seq, alpha_seq = attempt.spawn(3)
+            attempt = run_seeds[i][j].spawn(1)[0]
             try:
-                truth = simulate_trial(params, settings, (np.random.default_rng(racket_seq),
-                                                          np.random.default_rng(velocity_seq),
-                                                          np.random.default_rng(alpha_seq)))
-            except ModelError:
-                redrawn += 1
+                drawn.append((i, j, _drawn_run(params, settings[j], attempt)))
+            except ModelError:  # a period or amplitude drawn <= 0
+                failed.append((i, j))
+        outcomes = _contacts_at_once(params, [d for _, _, d in drawn],
+                                     [settings[j] for _, j, _ in drawn])
+        for (i, j, run), outcome in zip(drawn, outcomes):
+            if isinstance(outcome, ModelError):
+                failed.append((i, j))
                 continue
-            rows = impact_state(truth)  # (the full truth_rows: a third of the time)
-            keep = slice(SIMULATION_BURN_IN, SIMULATION_BURN_IN + n)
-            if len(rows["v_m_s"][keep]) < n:
-                raise ModelError(f"a simulated run of {duration:.3g} s has fewer than "
-                                 f"{n + SIMULATION_BURN_IN} impacts")
-            runs.append(SimulatedRun(rows["v_m_s"][keep], rows["theta_rad"][keep],
-                                     rows["racket_period_s"][keep],
-                                     rows["racket_amplitude_m"][keep]))
+            if outcome is None:  # more impacts than drawn noise: simulate_trial's own loop
+                try:
+                    truth = simulate_trial(params, settings[j], run.streams())
+                except ModelError:
+                    failed.append((i, j))
+                    continue
+                rows = impact_state(truth)
+                outcome = (rows["v_m_s"], rows["theta_rad"], rows["racket_period_s"],
+                           rows["racket_amplitude_m"])
+            runs[i][j] = _kept(outcome, lengths[j], settings[j].duration_s)
+        for i, _ in failed:
+            redrawn[i] += 1
+        todo = sorted(failed)
+        if not todo:
             break
-        else:
-            raise ModelError(f"the model's simulated sessions fall into sticking at this "
-                             f"racket variability ({1e3 * session.period_sd_s:.3g} ms, "
-                             f"{1e3 * session.amplitude_sd_m:.3g} mm per cycle) and noise "
-                             f"({session.velocity_noise_m_s:.3g} m/s)")
-    return runs, redrawn
+    if todo:
+        raise ModelError(f"the model's simulated sessions fall into sticking at this "
+                         f"racket variability ({1e3 * session.period_sd_s:.3g} ms, "
+                         f"{1e3 * session.amplitude_sd_m:.3g} mm per cycle) and noise "
+                         f"({session.velocity_noise_m_s:.3g} m/s)")
+    return [([r for r in session_runs if r is not None], again)
+            for session_runs, again in zip(runs, redrawn)]
+
+
+def run_duration(params: ModelParams, n: int) -> float:
+    """The duration of a simulated run of ``n`` impacts: its burn-in and a margin included."""
+    return (n + SIMULATION_BURN_IN + 4) * params.racket_period * 1.25
+
+
+def _kept(state, n: int, duration: float) -> SimulatedRun:
+    """The run's impacts after the burn-in, ``n`` of them."""
+    keep = slice(SIMULATION_BURN_IN, SIMULATION_BURN_IN + n)
+    v, theta, period, amplitude = state
+    if len(v[keep]) < n:
+        raise ModelError(f"a simulated run of {duration:.3g} s has fewer than "
+                         f"{n + SIMULATION_BURN_IN} impacts")
+    return SimulatedRun(v[keep], theta[keep], period[keep], amplitude[keep])
+
+
+@dataclass
+class _DrawnRun:
+    """A run's racket and velocity noise drawn from its attempt's streams, as
+    ``simulate_trial`` draws them (the racket's periods then amplitudes; the noise of each
+    impact in turn, drawn ahead)."""
+
+    attempt: np.random.SeedSequence
+    racket: CycleRacket
+    bounds: np.ndarray  # g + max |x_r''| before the first cycle, then per cycle
+    draws: np.ndarray
+
+    def streams(self):
+        racket_seq, velocity_seq, alpha_seq = self.attempt.spawn(3)
+        return (np.random.default_rng(racket_seq), np.random.default_rng(velocity_seq),
+                np.random.default_rng(alpha_seq))
+
+
+def _drawn_run(params: ModelParams, settings: SessionSettings,
+               attempt: np.random.SeedSequence) -> _DrawnRun:
+    racket_seq, velocity_seq, _ = attempt.spawn(3)
+    racket = _draw_racket(params, settings, np.random.default_rng(racket_seq))
+    omega = 2.0 * np.pi / racket.periods
+    # CycleRacket.acceleration_bound's square, by the C library's pow as Python's ** takes
+    # it (an array's **2 multiplies, which differs in the last bit about once in a thousand)
+    squares = np.array([w**2 for w in omega.tolist()])
+    bounds = params.g + np.concatenate([[0.0], 0.0 + racket.amplitudes * squares])
+    capacity = 2 * len(racket.starts) + 16
+    draws = np.random.default_rng(velocity_seq).standard_normal(capacity)
+    return _DrawnRun(attempt, racket, bounds, draws)
+
+
+def _contacts_at_once(params: ModelParams, runs: list[_DrawnRun],
+                      settings: list[SessionSettings]) -> list:
+    """``simulate_trial``'s contact loop on the common path (``simulated_lab.next_contact``'s
+    safe steps, eq. 3 and eq. 16's noise at each contact, the sticking checks), every run at
+    once: each pass takes one safe step of every run still flying, in the same expressions
+    and order as the scalar loop (numpy's elementwise arithmetic, sin and cos are the scalar
+    ones, so the impacts are the same bits). Per run: (v, theta, period, amplitude) of its
+    impacts at t >= 0, a ModelError (sticking, a grazing flight) or None (more impacts than
+    its drawn noise)."""
+    count = len(runs)
+    if count == 0:
+        return []
+    g, alpha = params.g, params.alpha
+    cycles = np.array([len(r.racket.starts) for r in runs])
+    width = int(cycles.max())
+    starts = np.full((count, width + 1), np.inf)
+    omegas = np.ones((count, width))
+    amplitudes = np.zeros((count, width))
+    bounds = np.ones((count, width + 1))
+    capacity = np.array([len(r.draws) for r in runs])
+    draws = np.zeros((count, int(capacity.max())))
+    for i, run in enumerate(runs):
+        n = cycles[i]
+        starts[i, :n] = run.racket.starts
+        omegas[i, :n] = 2.0 * np.pi / run.racket.periods
+        amplitudes[i, :n] = run.racket.amplitudes
+        bounds[i, :n + 1] = run.bounds
+        draws[i, :capacity[i]] = run.draws
+    end_last = np.array([r.racket.ends[-1] for r in runs])
+    t_max = np.array([s.duration_s for s in settings])
+    min_hop = np.array([s.min_hop_s for s in settings])
+    q = np.array([s.velocity_noise_m_s for s in settings])
+    fp = params.fixed_point()
+    rows = np.arange(count)
+
+    def position(i, c, t):
+        return amplitudes[i, c] * np.sin(omegas[i, c] * (t - starts[i, c]))
+
+    def velocity(i, c, t):
+        return amplitudes[i, c] * omegas[i, c] * np.cos(omegas[i, c] * (t - starts[i, c]))
+
+    # the launch at the fixed point, in the first cycle (simulate_trial's)
+    t = starts[:, 0] + fp.theta_rad / params.omega
+    cycle = np.count_nonzero(starts <= t[:, None], axis=1) - 1
+    x = position(rows, cycle, t)
+    t0, x0, v0 = t.copy(), x, np.full(count, fp.v_m_s)
+    steps = np.zeros(count, dtype=np.int64)
+    used = np.zeros(count, dtype=np.intp)
+    hits_t = [[] for _ in range(count)]
+    hits_v = [[] for _ in range(count)]
+    outcome: list = [False] * count
+    bound = np.empty(count)
+    seg_end = np.empty(count)
+    entering = np.ones(count, dtype=bool)  # next_contact's outer loop: a new segment
+    live = rows.copy()
+    while live.size:
+        # next_contact's outer loop: the cycle holding t, its bound and the segment's end
+        enter = live[entering[live]]
+        if enter.size:
+            over = t[enter] >= t_max[enter]
+            for i in enter[over]:  # no contact before t_max: the trial is over
+                outcome[i] = True
+            enter = enter[~over]
+            c = cycle[enter]
+            bound[enter] = bounds[enter, c + 1]
+            after = c + 1 < cycles[enter]
+            seg = np.where(after, starts[enter, np.minimum(c + 1, width)],
+                           np.where(t[enter] < end_last[enter], end_last[enter], np.inf))
+            seg_end[enter] = np.where(t_max[enter] < seg, t_max[enter], seg)
+            entering[enter] = False
+            live = np.array([i for i in live if outcome[i] is False], dtype=np.intp)
+            if not live.size:
+                break
+        i = live
+        c = cycle[i]
+        dt = t[i] - t0[i]
+        gap = x0[i] + v0[i] * dt - 0.5 * g * dt * dt - position(i, c, t[i])
+        slope = v0[i] - g * dt - velocity(i, c, t[i])
+        hit = (t[i] > t0[i]) & (gap <= CONTACT_TOLERANCE_M)
+        # the flights that meet the racket: Newton's polish, eq. 3, the noise, the checks
+        k = i[hit]
+        if k.size:
+            t_hit = t[k].copy()
+            down = slope[hit] < 0.0
+            t_hit[down] -= gap[hit][down] / slope[hit][down]
+            c_hit = cycle[k] - (t_hit < starts[k, cycle[k]])  # the polish may step back
+            v_before = v0[k] - g * (t_hit - t0[k])
+            racket_v = velocity(k, c_hit, t_hit)
+            hop = t_hit - t0[k]
+            v_new = racket_v - alpha * (v_before - racket_v)
+            short = used[k] >= capacity[k]
+            v_new = v_new + q[k] * draws[k, np.minimum(used[k], draws.shape[1] - 1)]
+            x_release = position(k, c_hit, t_hit)
+            leaves = v_new > racket_v
+            for n, run in enumerate(k):
+                if short[n]:
+                    outcome[run] = None
+                elif t_hit[n] >= 0.0 and hop[n] < min_hop[run]:
+                    outcome[run] = ModelError(
+                        f"the ball fell into sticking at t = {t_hit[n]:.3f} s (a hop of "
+                        f"{hop[n]:.3g} s)")
+                elif t_hit[n] >= 0.0 and not leaves[n]:
+                    outcome[run] = ModelError(f"the ball fell into sticking at t = "
+                                              f"{t_hit[n]:.3f} s")
+                elif t_hit[n] >= 0.0:
+                    hits_t[run].append(t_hit[n])
+                    hits_v[run].append(v_new[n])
+            used[k] += 1
+            t[k], t0[k], x0[k], v0[k] = t_hit, t_hit, x_release, v_new
+            cycle[k] = c_hit
+            steps[k] = 0
+            entering[k] = True
+        # the others take their safe step
+        m = ~hit
+        j = i[m]
+        if j.size:
+            gap_m, slope_m, bound_m = gap[m], slope[m], bound[j]
+            step = (slope_m + np.sqrt(slope_m * slope_m + 2.0 * bound_m
+                                      * np.maximum(gap_m, 0.0))) / bound_m
+            steps[j] += 1
+            for run in j[steps[j] > MAX_CONTACT_STEPS]:
+                outcome[run] = ModelError(f"no contact found after t = {t0[run]:.6g} s "
+                                          "(grazing flight)")
+            for run in j[step <= 0.0]:
+                outcome[run] = ModelError(f"the ball cannot leave the racket at t = "
+                                          f"{t0[run]:.6g} s")
+            cross = t[j] + step >= seg_end[j]
+            onto = j[cross]
+            t[onto] = seg_end[onto]
+            cycle[onto] = np.where(seg_end[onto] >= starts[onto, np.minimum(cycle[onto] + 1,
+                                                                             width)],
+                                   cycle[onto] + 1, cycle[onto])
+            entering[onto] = True
+            ahead = j[~cross]
+            t[ahead] = t[ahead] + step[~cross]
+        live = np.array([r for r in live if outcome[r] is False], dtype=np.intp)
+    results: list = []
+    for i, run in enumerate(runs):
+        if outcome[i] is not True:
+            results.append(outcome[i])
+            continue
+        times = np.array(hits_t[i])
+        racket = run.racket
+        state = impact_state(TrialTruth(racket, np.zeros(0), np.zeros(0), np.zeros(0), times,
+                                        np.array(hits_v[i]), np.zeros(0), np.zeros(0),
+                                        settings[i].duration_s, g))
+        results.append((state["v_m_s"], state["theta_rad"], state["racket_period_s"],
+                        state["racket_amplitude_m"]))
+    return results

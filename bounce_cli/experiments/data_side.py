@@ -544,7 +544,7 @@ def varx_prediction(params: ModelParams, fits: dict, trials: list[np.ndarray],
         None when the OLS VARX did not fit or ``model_sessions`` is 0.
     """
     from ..analysis.var_stacked import stacked_fit
-    from ..data.simulated_runs import RacketSession, simulate_runs
+    from ..data.simulated_runs import RacketSession, simulate_sessions
     from ..model.linear import spectral_radii_2x2
 
     base = fits.get("varx_ols")
@@ -558,8 +558,8 @@ def varx_prediction(params: ModelParams, fits: dict, trials: list[np.ndarray],
     calibration = max(2, block.model_sessions // 4)  # sessions of the first step
     first = RacketSession(float(racket_sd[0]), float(racket_sd[1]), q_residual)
     residual, redrawn = [], 0
-    for seed in seeds[0].spawn(calibration):
-        runs, again = simulate_runs(params, first, lengths, seed)
+    # every session's runs simulated at once (data.simulated_runs.simulate_sessions)
+    for runs, again in simulate_sessions(params, first, lengths, seeds[0].spawn(calibration)):
         redrawn += again
         sim_trials, sim_racket = simulated_trials(runs)
         residual.append(noise_from_residual_covariance(
@@ -567,8 +567,8 @@ def varx_prediction(params: ModelParams, fits: dict, trials: list[np.ndarray],
     q_v = q_residual * q_residual / float(np.mean(residual))
     session = RacketSession(first.period_sd_s, first.amplitude_sd_m, q_v)
     panels, inputs = [], []
-    for seed in seeds[1].spawn(block.model_sessions):
-        runs, again = simulate_runs(params, session, lengths, seed)
+    for runs, again in simulate_sessions(params, session, lengths,
+                                         seeds[1].spawn(block.model_sessions)):
         redrawn += again
         sim_trials, sim_racket = simulated_trials(runs)
         panels.append(np.concatenate(sim_trials))
