@@ -274,8 +274,8 @@ def _contacts_at_once(params: ModelParams, runs: list[_DrawnRun],
     t0, x0, v0 = t.copy(), x, np.full(count, fp.v_m_s)
     steps = np.zeros(count, dtype=np.int64)
     used = np.zeros(count, dtype=np.intp)
-    hits_t = [[] for _ in range(count)]
-    hits_v = [[] for _ in range(count)]
+    hits_t: list[list[float]] = [[] for _ in range(count)]
+    hits_v: list[list[float]] = [[] for _ in range(count)]
     outcome: list = [False] * count
     bound = np.empty(count)
     seg_end = np.empty(count)
