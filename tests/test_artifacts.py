@@ -13,6 +13,13 @@ from bounce_cli.runtime import artifacts
 from bounce_cli.runtime.artifacts import OutputDirError, RunDirectory, atomic_write
 
 
+@pytest.fixture(autouse=True)
+def fast_csv_for_every_length(monkeypatch):
+    """The fast CSV writer on every table here, however short (a run hands tables below
+    CSV_FAST_MIN_ROWS to pandas): its bytes are held against pandas' on small tables."""
+    monkeypatch.setattr(artifacts, "CSV_FAST_MIN_ROWS", 0)
+
+
 def make_run(out, config, force=False):
     return RunDirectory(out, command="demo", resolved_config=config, overrides=["a.b=1"],
                         config_path="x.yaml", seed=3, force=force)
