@@ -274,9 +274,18 @@ def _contacts_at_once(params: ModelParams, runs: list[_DrawnRun],
     t0, x0, v0 = t.copy(), x, np.full(count, fp.v_m_s)
     steps = np.zeros(count, dtype=np.int64)
     used = np.zeros(count, dtype=np.intp)
-    hits_t: list[list[float]] = [[] for _ in range(count)]
-    hits_v: list[list[float]] = [[] for _ in range(count)]
-    outcome: list = [False] * count
+    hits_t = np.empty(draws.shape)  # an impact uses a draw: at most as many as drawn
+    hits_v = np.empty(draws.shape)
+    n_hits = np.zeros(count, dtype=np.intp)
+    outcome: list = [True] * count  # the run's end (True: it ran to t_max)
+    flying = np.ones(count, dtype=bool)
+
+    def ends(which, why) -> None:
+        for run in which:
+            if flying[run]:
+                outcome[run] = why(run)
+                flying[run] = False
+
     bound = np.empty(count)
     seg_end = np.empty(count)
     entering = np.ones(count, dtype=bool)  # next_contact's outer loop: a new segment
@@ -286,8 +295,7 @@ def _contacts_at_once(params: ModelParams, runs: list[_DrawnRun],
         enter = live[entering[live]]
         if enter.size:
             over = t[enter] >= t_max[enter]
-            for i in enter[over]:  # no contact before t_max: the trial is over
-                outcome[i] = True
+            flying[enter[over]] = False  # no contact before t_max: the trial is over
             enter = enter[~over]
             c = cycle[enter]
             bound[enter] = bounds[enter, c + 1]
@@ -296,7 +304,7 @@ def _contacts_at_once(params: ModelParams, runs: list[_DrawnRun],
                            np.where(t[enter] < end_last[enter], end_last[enter], np.inf))
             seg_end[enter] = np.where(t_max[enter] < seg, t_max[enter], seg)
             entering[enter] = False
-            live = np.array([i for i in live if outcome[i] is False], dtype=np.intp)
+            live = live[flying[live]]
             if not live.size:
                 break
         i = live
@@ -320,19 +328,16 @@ def _contacts_at_once(params: ModelParams, runs: list[_DrawnRun],
             v_new = v_new + q[k] * draws[k, np.minimum(used[k], draws.shape[1] - 1)]
             x_release = position(k, c_hit, t_hit)
             leaves = v_new > racket_v
-            for n, run in enumerate(k):
-                if short[n]:
-                    outcome[run] = None
-                elif t_hit[n] >= 0.0 and hop[n] < min_hop[run]:
-                    outcome[run] = ModelError(
-                        f"the ball fell into sticking at t = {t_hit[n]:.3f} s (a hop of "
-                        f"{hop[n]:.3g} s)")
-                elif t_hit[n] >= 0.0 and not leaves[n]:
-                    outcome[run] = ModelError(f"the ball fell into sticking at t = "
-                                              f"{t_hit[n]:.3f} s")
-                elif t_hit[n] >= 0.0:
-                    hits_t[run].append(t_hit[n])
-                    hits_v[run].append(v_new[n])
+            ends(k[short], lambda run: None)
+            counted = t_hit >= 0.0
+            sticks = counted & ~short & ((hop < min_hop[k]) | ~leaves)
+            ends(k[sticks], lambda run: ModelError(
+                f"the ball fell into sticking at t = {t[run]:.3f} s"))
+            record = counted & ~short & ~sticks
+            rec = k[record]
+            hits_t[rec, n_hits[rec]] = t_hit[record]
+            hits_v[rec, n_hits[rec]] = v_new[record]
+            n_hits[rec] += 1
             used[k] += 1
             t[k], t0[k], x0[k], v0[k] = t_hit, t_hit, x_release, v_new
             cycle[k] = c_hit
@@ -346,12 +351,10 @@ def _contacts_at_once(params: ModelParams, runs: list[_DrawnRun],
             step = (slope_m + np.sqrt(slope_m * slope_m + 2.0 * bound_m
                                       * np.maximum(gap_m, 0.0))) / bound_m
             steps[j] += 1
-            for run in j[steps[j] > MAX_CONTACT_STEPS]:
-                outcome[run] = ModelError(f"no contact found after t = {t0[run]:.6g} s "
-                                          "(grazing flight)")
-            for run in j[step <= 0.0]:
-                outcome[run] = ModelError(f"the ball cannot leave the racket at t = "
-                                          f"{t0[run]:.6g} s")
+            ends(j[steps[j] > MAX_CONTACT_STEPS], lambda run: ModelError(
+                f"no contact found after t = {t0[run]:.6g} s (grazing flight)"))
+            ends(j[step <= 0.0], lambda run: ModelError(
+                f"the ball cannot leave the racket at t = {t0[run]:.6g} s"))
             cross = t[j] + step >= seg_end[j]
             onto = j[cross]
             t[onto] = seg_end[onto]
@@ -361,17 +364,16 @@ def _contacts_at_once(params: ModelParams, runs: list[_DrawnRun],
             entering[onto] = True
             ahead = j[~cross]
             t[ahead] = t[ahead] + step[~cross]
-        live = np.array([r for r in live if outcome[r] is False], dtype=np.intp)
+        live = live[flying[live]]
     results: list = []
     for i, run in enumerate(runs):
         if outcome[i] is not True:
             results.append(outcome[i])
             continue
-        times = np.array(hits_t[i])
-        racket = run.racket
-        state = impact_state(TrialTruth(racket, np.zeros(0), np.zeros(0), np.zeros(0), times,
-                                        np.array(hits_v[i]), np.zeros(0), np.zeros(0),
-                                        settings[i].duration_s, g))
+        hits = slice(0, n_hits[i])
+        state = impact_state(TrialTruth(run.racket, np.zeros(0), np.zeros(0), np.zeros(0),
+                                        hits_t[i, hits], hits_v[i, hits], np.zeros(0),
+                                        np.zeros(0), settings[i].duration_s, g))
         results.append((state["v_m_s"], state["theta_rad"], state["racket_period_s"],
                         state["racket_amplitude_m"]))
     return results

@@ -549,6 +549,8 @@ def run(config: StudyConfig, options: RunOptions) -> ExperimentResult:
     options.progress.advance(len(done))
     if todo:
         jobs = min(options.jobs, len(todo))
+        if jobs > 1 or options.scheduler:  # this process waits for the units meanwhile
+            preload_in_background(GROUP_MODULES)
         with parallel.executor(jobs, options.scheduler) as executor:
             for result in executor.map(analyse_unit, todo):
                 options.checkpoints.save(result["index"], result)
@@ -587,6 +589,29 @@ def run(config: StudyConfig, options: RunOptions) -> ExperimentResult:
         exit_code = 1
     return ExperimentResult(frames=frames, figures={}, summary=summary,
                             files={**pngs, **files}, exit_code=exit_code)
+
+
+#: what the group statistics, figures and report import (statsmodels' MixedLM and its
+#: scipy.stats, matplotlib): half a second, loaded while the units' workers run
+GROUP_MODULES = ("statsmodels.formula.api", "matplotlib.figure",
+                 "matplotlib.backends.backend_agg")
+
+
+def preload_in_background(modules: tuple[str, ...]) -> None:
+    """Import ``modules`` in a daemon thread of this process (which would otherwise wait for
+    its workers): the study's tail, which needs them, then starts at once. A failing import
+    is left for the code that needs the module to report."""
+    import importlib
+    import threading
+
+    def load() -> None:
+        for name in modules:
+            try:
+                importlib.import_module(name)
+            except Exception:  # reported where the module is used
+                pass
+
+    threading.Thread(target=load, name="bounce-preload", daemon=True).start()
 
 
 # -- group statistics ----------------------------------------------------------------------------
@@ -819,13 +844,7 @@ def group_pngs(frames: dict[str, pd.DataFrame]) -> dict[str, bytes]:
     from .study_figures import group_figure_builders
 
     def render(names: list[str]) -> dict[str, bytes]:
-        import matplotlib.pyplot as plt
-
-        out = {}
-        for name, fig in draw(frames, names).items():
-            out[name] = png_bytes(fig)
-            plt.close(fig)
-        return out
+        return {name: png_bytes(fig) for name, fig in draw(frames, names).items()}
 
     return split_work(list(group_figure_builders(frames)), render)
 
