@@ -81,6 +81,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--trials", type=int, default=10)
     parser.add_argument("--manifest", type=Path, help="an existing study's manifest instead")
     parser.add_argument("--figures", default=None, help="--figures for this tree's runs")
+    parser.add_argument("--no-warmup", dest="warmup", action="store_false",
+                        help="no untimed run of each route on a 1 x 2 x 2 study first (it "
+                             "compiles the routes' bytecode where PYTHONDONTWRITEBYTECODE "
+                             "is unset)")
     parser.add_argument("--compare", action="store_true",
                         help="compare the two routes' CSVs (compare_csvs.py)")
     args = parser.parse_args(argv)
@@ -103,6 +107,12 @@ def main(argv: list[str] | None = None) -> int:
         routes = {"reference": (ref_env, [], ref_tree),
                   "this tree": (base_env, [] if args.figures is None
                                 else ["--figures", args.figures], ROOT)}
+        if args.warmup:  # each route's bytecode compiled and its files cached, untimed
+            small = make_study(work / "warmup", 1, 2)
+            for name, (env, _extra, tree) in routes.items():
+                timed([sys.executable, "-m", "bounce_cli", "study", "--manifest", str(small),
+                       "--out", str(work / f"warmup-{name.replace(' ', '-')}"), "-q",
+                       "--force"], env, tree)
         results: dict[tuple[str, int], list[tuple[float, float]]] = {}
         for jobs in [int(j) for j in args.jobs.split(",")]:
             for _ in range(args.repeat):
