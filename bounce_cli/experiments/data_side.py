@@ -11,6 +11,7 @@ the data's unless the user set them.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,6 +22,7 @@ import pandas as pd
 from pydantic import Field
 
 from ..runtime.config import ConfigError, StrictModel
+from ..runtime.forked import ForkedCall, can_fork
 from ..analysis.impulse import impulse_response_full
 from ..model.linear import jacobian, stability
 from ..model.params import ModelError, ModelParams, circular_mean, eq8_alpha, phase_difference
@@ -36,7 +38,7 @@ from ..analysis.racket_inputs import INPUT_COEFFICIENTS, racket_input_jacobian
 from ..analysis.var_fit import EIGEN_QUANTITIES, J_ENTRIES, Var1Fit, fit_var1
 from ..data.data_parameters import DataModel, model_at_data, model_for_data
 from ..data.impacts import Impacts, ImpactsSource, read_impacts
-from .base import ExperimentResult
+from .base import ExperimentResult, RunOptions
 from .plotting import (
     IMPACT_AFTER_LABEL,
     PANELS,
@@ -316,7 +318,24 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
                 if str(exc).startswith(WITHHELD):
                     options.warn(f"{label}: {exc}; written as NaN")
         options.progress.advance(1)
-    trust = trust_frame(params, q_v, q_theta, config, segments, options, noise)
+    trust_call = functools.partial(trust_frame, params, q_v, q_theta, config, segments,
+                                   noise=noise)
+    # with a core to spare, the trust study runs in a forked child while this process
+    # simulates the VARX prediction's sessions (independent draws: the same numbers)
+    trust_child = (ForkedCall(lambda: trust_call(quiet_options()),
+                              "the process of the trust study").start()
+                   if options.jobs > 1 and can_fork() else None)
+    try:
+        prediction = varx_prediction(params, fits, trials, pooled_racket_sd(racket), d)
+        if trust_child is None:
+            trust = trust_call(options)
+        else:
+            trust = trust_child.wait()
+            options.progress.advance(len(trust) // 2)  # (trust_frame's, one per size)
+    finally:
+        if trust_child is not None:
+            trust_child.kill()
+    options.progress.advance(1)
     fits = {label: fit if isinstance(fit, ModelError) else
             calibrated(fit, trust, d.confidence, d.trust_coverage_slack)
             for label, fit in fits.items()}
@@ -384,11 +403,10 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
     add("ac", "g", "model", st.ac_g)
     add("racket_period", "s", "data", params.racket_period, note="mean over impacts")
     add("racket_amplitude", "m", "data", params.racket_amplitude, note="mean over impacts")
-    racket_sd = np.sqrt(np.mean(np.concatenate([r - r.mean(axis=0) for r in racket]) ** 2,
-                                axis=0))
-    add("racket_period_sd", "s", "data", float(racket_sd[0]),
+    racket_spread = pooled_racket_sd(racket)
+    add("racket_period_sd", "s", "data", float(racket_spread[0]),
         note="pooled within-run SD of the cycles' periods")
-    add("racket_amplitude_sd", "m", "data", float(racket_sd[1]),
+    add("racket_amplitude_sd", "m", "data", float(racket_spread[1]),
         note="pooled within-run SD of the cycles' amplitudes")
     add("bounces", "1", "data", float(sum(len(s[1]) for s in segments)),
         note=f"in {n_seg} runs of consecutive unperturbed impacts")
@@ -396,8 +414,6 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
         note="measurement noise of v_k used by the trust study")
     add("measurement_sd_theta", "deg", noise.source, math.degrees(noise.sd_theta_rad),
         note="measurement noise of theta_k used by the trust study")
-    prediction = varx_prediction(params, fits, trials, racket_sd, d)
-    options.progress.advance(1)
     prediction_lines: list[str] = []
     if prediction is not None:
         more, prediction_lines = prediction_rows(prediction, fits, params, conf)
@@ -417,7 +433,7 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
         lines.append(f"{prefix}{fit.method}: {radius_text(fit, conf)}")
     lines.extend(prediction_lines)
     lines.extend(diagnostic_lines)
-    warning = racket_warning(fits, racket_sd)
+    warning = racket_warning(fits, racket_spread)
     if warning:
         options.warn(warning)
     if noise_source == "data_sd_match":
@@ -767,6 +783,17 @@ def _z(confidence: float) -> float:
     from scipy.special import ndtri  # scipy.stats.norm.ppf, without scipy.stats' import
 
     return float(ndtri(0.5 + confidence / 2.0))
+
+
+def pooled_racket_sd(racket: list[np.ndarray]) -> np.ndarray:
+    """The pooled within-run SDs of the racket's cycles (period s, amplitude m) of runs of
+    (period, amplitude) rows."""
+    return np.sqrt(np.mean(np.concatenate([r - r.mean(axis=0) for r in racket]) ** 2, axis=0))
+
+
+def quiet_options() -> RunOptions:
+    """RunOptions that report nothing (a forked child's: the parent holds the terminal)."""
+    return RunOptions()
 
 
 def trust_frame(params, q_v, q_theta, config, segments, options,

@@ -463,21 +463,21 @@ class RunDirectory:
         }
 
     def _background_groups(self) -> list[list[str]]:
-        """The files written by child processes while this one writes the rest: none, unless
-        a table has ``BACKGROUND_TABLE_ROWS`` rows or more, or there are
-        ``BACKGROUND_TABLE_COUNT`` tables or more (Linux only: fork is unsafe on macOS with
-        some system libraries, absent on Windows); then the large tables (or, of many small
-        ones, the later half) in one child and, with two figures or more, the later half of
-        the figures in another (the 1000 x 1000 basin: basin.csv 0.1 s, each PNG about
-        0.3 s; a 4 x 2 x 10 study: 496 tables, 2 s)."""
+        """The files written by child processes while this one writes the rest (Linux only:
+        ``runtime.forked``): the tables of ``BACKGROUND_TABLE_ROWS`` rows or more (or, of
+        ``BACKGROUND_TABLE_COUNT`` tables or more, the later half) in one child, and with two
+        figures or more, the later half of the figures in another: a figure takes 0.2-0.4 s
+        to render (the 1000 x 1000 basin: basin.csv 0.1 s, each PNG about 0.3 s; acf
+        --data's two figures 0.8 s one after the other)."""
+        if not can_fork():
+            return []
         tables = [name for name, frame in self._frames.items()
                   if len(frame) >= BACKGROUND_TABLE_ROWS]
         if not tables and len(self._frames) >= BACKGROUND_TABLE_COUNT:
             tables = list(self._frames)[len(self._frames) // 2:]
-        if not tables or not can_fork():
-            return []
         figures = list(self._figures)
-        return [tables] + ([figures[len(figures) // 2:]] if len(figures) >= 2 else [])
+        return (([tables] if tables else [])
+                + ([figures[len(figures) // 2:]] if len(figures) >= 2 else []))
 
     def _folders(self, names) -> list[Path]:
         """The run directory and the folders of ``names`` and of the previous run's files
