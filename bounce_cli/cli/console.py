@@ -10,7 +10,7 @@ import gc
 import os
 import sys
 
-from ..runtime.interrupts import Interrupted, install, report
+from ..runtime.interrupts import GC_THRESHOLDS, Interrupted, install, report
 from .stdout import WatchedStdout
 
 
@@ -35,6 +35,7 @@ def _report_stdout_failure(failure: OSError) -> int:
 def main() -> None:
     """The ``bounce`` console script: handlers first, then the CLI's imports and run."""
     install()
+    gc.set_threshold(*GC_THRESHOLDS)
     watched = sys.stdout = WatchedStdout(sys.stdout)
     try:
         from .commands import app

@@ -483,8 +483,12 @@ def _die_with_parent(parent_pid: int) -> None:
 def _serve(parent_pid: int) -> None:
     """Read (fn, task) pickles from stdin, write (ok, result or traceback) to stdout, until
     stdin closes. stdout is kept for the results: anything a task prints goes to stderr."""
+    import gc
     import signal
 
+    from .interrupts import GC_THRESHOLDS
+
+    gc.set_threshold(*GC_THRESHOLDS)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, signal.SIG_DFL)
     _die_with_parent(parent_pid)
