@@ -950,8 +950,14 @@ def report_files(frames, rendered: dict[str, bytes], units: list[Unit], manifest
             unit_failures = failures[failures["unit"] == unit.folder]
             if len(unit_failures):
                 parts.append("<p class='warn'>Failures:</p>" + html_table(unit_failures))
-            for name in sorted(n for n in rendered if n.startswith(unit.folder + "/")):
+            figures = sorted(n for n in rendered if n.startswith(unit.folder + "/"))
+            for name in figures:
                 parts.append(embed_png(rendered[name], name))
+            if not figures:
+                parts.append(f"<p>This unit's figures: <code>bounce study ... --figures "
+                             f"all</code>, or <code>bounce &lt;analysis&gt; --data "
+                             f"{html_escape(unit.folder)}/impacts.csv</code>; its tables are "
+                             f"in <code>{html_escape(unit.folder)}/</code>.</p>")
         section = Section(f"Subject {subject}", parts)
         subject_sections.append(section)
         files[f"{subject}/report.html"] = page(f"bounce study: subject {subject}",

@@ -122,9 +122,10 @@ def stability_figure(group: pd.DataFrame, table: pd.DataFrame | None):
     title = "Stability per unit: the data against the model"
     if table is not None and len(table):
         ols = table[table["estimate"] == "ols"]
-        title += "\n" + "; ".join(
-            f"{r.condition}: data - model {r.difference_mean:+.3f} [{r.ci_low:.3f}, "
-            f"{r.ci_high:.3f}]" for r in ols.itertuples())
+        # a line per condition: on one line, two conditions ran off the figure's edge
+        title += "".join(
+            f"\n{r.condition}: data - model (OLS) {r.difference_mean:+.3f} "
+            f"[{r.ci_low:.3f}, {r.ci_high:.3f}]" for r in ols.itertuples())
     ax.set_title(title, fontsize=9)
     ax.legend(fontsize=7, loc="upper right")
     return fig

@@ -654,6 +654,7 @@ def test_figures_option_draws_only_what_is_asked(tiny, tiny_study, tmp_path, cli
     assert (out / "s1" / "a" / "regression" / "regression.png").is_file() == unit_png
     report = (out / "report.html").read_text()
     assert ("s1/a/regression/regression.png" in report) == unit_png
+    assert ("--figures all" in report) == (not unit_png)  # how to get them, where absent
     assert (tiny_study / "s1" / "a" / "regression" / "regression.png").is_file()
     for name in ("group.csv", "group_regression.csv", "s1/a/regression/fit.csv"):
         pd.testing.assert_frame_equal(pd.read_csv(out / name), pd.read_csv(tiny_study / name))
