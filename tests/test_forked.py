@@ -44,3 +44,33 @@ def test_split_work_runs_the_later_half_elsewhere_and_keeps_the_order():
     pids = {item: pid for item, (_, pid) in out.items()}
     assert pids[0] == pids[1] == os.getpid() and pids[2] == pids[4] != os.getpid()
     assert split_work([7], run)[7][1] == os.getpid()  # one item: no child
+
+
+def test_a_signal_during_the_fork_stops_the_child_before_start_raises(tmp_path, monkeypatch):
+    """A signal held over the fork is raised as the fork's block ends, before the caller has
+    the child: start() kills it, so that it cannot go on to write a file the caller's
+    clean-up has already removed (an interrupted `basin --force` left a staged CSV so)."""
+    import contextlib
+    import time
+
+    from bounce_cli.runtime import forked
+    from bounce_cli.runtime.interrupts import Interrupted
+
+    @contextlib.contextmanager
+    def signal_at_the_end():
+        yield
+        raise Interrupted(2)
+
+    monkeypatch.setattr(forked, "deferred", signal_at_the_end)
+    late = tmp_path / "late"
+
+    def writes_later():
+        time.sleep(0.5)
+        late.write_text("the child outlived start()")
+
+    call = ForkedCall(writes_later)
+    with pytest.raises(Interrupted):
+        call.start()
+    assert call.pid == 0  # killed and reaped
+    time.sleep(0.8)
+    assert not late.exists()

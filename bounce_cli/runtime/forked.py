@@ -36,16 +36,23 @@ class ForkedCall:
 
     def start(self) -> ForkedCall:
         """Fork the child. Signals are held during the fork (a signal raised in an at-fork
-        handler would be lost) and raised after it, when ``pid`` is set for :meth:`kill`."""
+        handler would be lost) and raised after it; the child is then killed here, before
+        the signal leaves :meth:`start` (the caller never saw the child, and a child left
+        running would go on writing: a file it was to fill, made again after the caller's
+        clean-up removed it)."""
         read_end, write_end = os.pipe()
         self._pipe = read_end
         parent = os.getpid()
-        with deferred():
-            self.pid = os.fork()
-            if self.pid == 0:
-                os.close(read_end)
-                self._child(write_end, parent)  # never returns
-            os.close(write_end)
+        try:
+            with deferred():
+                self.pid = os.fork()
+                if self.pid == 0:
+                    os.close(read_end)
+                    self._child(write_end, parent)  # never returns
+                os.close(write_end)
+        except BaseException:
+            self.kill()
+            raise
         return self
 
     def _child(self, write_end: int, parent: int) -> None:
