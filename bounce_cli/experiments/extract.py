@@ -104,7 +104,7 @@ class CsvBlock(StrictModel):
 #: what a "no bounce found" asks the user to check: a recording read in the wrong unit or axis
 #: shows no bounce at all
 NO_BOUNCE_HINT = ("; check units.length (positions in mm read as m, or cm as mm), the vertical "
-                  "axis (c3d.vertical_axis; a CSV's columns must be heights) and that "
+                  "axis (markers.vertical_axis; a CSV's columns must be heights) and that "
                   "columns.ball and columns.racket name the ball and the racket")
 
 
@@ -283,8 +283,8 @@ def unit_slip_hint(g: float) -> str:
     """What a fitted g far from any set-up's suggests (lengths scaled by a power of ten)."""
     ratio = g / STANDARD_GRAVITY
     if not (math.isfinite(ratio) and ratio > 0.0):  # a ball that does not fall: no scale slip
-        return ("check the ball's column and the vertical axis (columns.ball, "
-                "c3d.vertical_axis): its flights do not fall")
+        return ("check units.length, the ball's column and the vertical axis (columns.ball, "
+                "markers.vertical_axis): its flights do not fall")
     for factor, slip in ((10.0, "millimetres read as centimetres, or centimetres as "
                                 "decimetres"), (100.0, "centimetres read as metres"),
                          (1000.0, "millimetres read as metres"),
@@ -294,7 +294,7 @@ def unit_slip_hint(g: float) -> str:
         if abs(math.log10(ratio / factor)) < 0.25:
             return (f"lengths {factor:g} times too {'large' if factor > 1 else 'small'}: "
                     f"{slip}? (units.length; a C3D file's POINT:UNITS)")
-    return "check units.length and the vertical axis (columns.ball, c3d.vertical_axis)"
+    return "check units.length and the vertical axis (columns.ball, markers.vertical_axis)"
 
 
 def extract_all(trials: list[Trial], events, settings: ExtractionSettings, source: str,

@@ -468,8 +468,11 @@ def format_validation_error(
     if any(loc == key or loc.startswith(key + ".") or key.startswith(loc + ".")
            for key in overridden):
         source = "--set"
-    elif not err["loc"] and any(key in str(err.get("msg", "")) for key in overridden):
-        source = "--set"  # a rule between keys (a model validator) names a key set by --set
+    elif not err["loc"] and any(named in str(err.get("msg", ""))
+                                for key in overridden for named in _as_named(key)):
+        # a rule between keys (a model validator) names a key set by --set, or a block's
+        # validator names its key after the block: 'extract: units.lenght'
+        source = "--set"
     if err["type"] == "extra_forbidden":
         reason = "unknown key"
         if schema is not None:
@@ -485,6 +488,14 @@ def format_validation_error(
     if not err["loc"] and source == "--set":
         return f"--set: {reason}{tail}"  # the reason names the keys
     return f"{source}: {loc}: {reason}{tail}"
+
+
+def _as_named(key: str) -> tuple[str, ...]:
+    """How a message may name a dotted key: ``a.b.c``, ``a: b.c`` or ``a.b: c`` (a block's
+    validator naming a key inside it)."""
+    parts = key.split(".")
+    return (key, *(".".join(parts[:i]) + ": " + ".".join(parts[i:])
+                   for i in range(1, len(parts))))
 
 
 def show_value(value: Any) -> str:
