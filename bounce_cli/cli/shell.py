@@ -171,7 +171,8 @@ JobsOption = Annotated[
     Optional[int],
     typer.Option(
         "--jobs", "-j", min=1,
-        help="Worker processes for the grid's points (default: all cores).",
+        help="Workers for the run's independent tasks: a grid's points, a study's units "
+        "(default: all cores).",
     ),
 ]
 def figure_formats(values: list[str] | None) -> list[str]:
@@ -202,8 +203,9 @@ DpiOption = Annotated[
 ]
 ResumeOption = Annotated[
     bool,
-    typer.Option("--resume", help="Continue an interrupted run in --out: the points it "
-                 "finished are kept, the rest computed (the config must be the same)."),
+    typer.Option("--resume", help="Continue an interrupted run in --out: the tasks it "
+                 "finished (in --out/points/) are kept, the rest computed (the config must be "
+                 "the same)."),
 ]
 SchedulerOption = Annotated[
     Optional[str],

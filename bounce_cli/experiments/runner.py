@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any
 from ..errors import ConfigError
 from ..runtime.artifacts import RunDirectory
 from ..runtime.figure_files import FIGURE_DPI
+from ..runtime.interrupts import Interrupted
 from ..runtime.config import (
     DATA_MODEL_KEYS,
     ExperimentConfig,
@@ -413,9 +414,13 @@ def execute(entry: Entry | str, config: Path | str | ExperimentConfig | None = N
         written = write_result(run_dir, result, agrees)
         if checkpoints is not None:
             checkpoints.remove()
-    except BaseException:
+    except BaseException as exc:
         if checkpoints is not None:
             checkpoints.discard_if_empty()
+            finished = checkpoints.finished()
+            if finished and isinstance(exc, Interrupted):
+                exc.note = (f"{finished} finished task{'s' if finished != 1 else ''} kept in "
+                            f"{checkpoints.folder}/: --resume continues")
         if run_dir is not None:
             run_dir.discard()
         raise

@@ -5,7 +5,8 @@ resumes without recomputing them (``bounce sweep --resume``).
 and one ``point-<index>.json`` per finished task, each written atomically (temporary name,
 then ``os.replace``), so a kill at any moment leaves whole points only. JSON keeps floats
 exactly (``repr`` round-trips), so a resumed run's tables are identical to an uninterrupted
-run's. The folder is removed once the run's results are committed.
+run's. The folder is removed once the run's results are committed; an interrupted run's
+stays (its one line says where, and that ``--resume`` continues).
 
 A folder of another config is never resumed into, and finished points are never discarded
 silently: without ``--resume`` a folder holding points is refused unless ``--force``.
@@ -91,6 +92,10 @@ class PointFolder:
     def remove(self) -> None:
         """After the results are committed: the points are in them."""
         shutil.rmtree(self.folder, ignore_errors=True)
+
+    def finished(self) -> int:
+        """How many finished tasks the folder holds."""
+        return len(self._point_files())
 
     def discard_if_empty(self) -> None:
         """After a failure before any point finished: leave no folder behind."""

@@ -33,6 +33,9 @@ class Interrupted(BaseException):
     def __init__(self, signum: int) -> None:
         super().__init__(signum)
         self.signum = signum
+        #: what the one line adds in parentheses (a resumable run: where its finished tasks
+        #: are kept), set on the way out
+        self.note = ""
 
     @property
     def exit_code(self) -> int:
@@ -81,7 +84,8 @@ def deferred() -> Iterator[None]:
 def report(exc: Interrupted) -> int:
     """Print the one line and return the exit code (128 + signal number)."""
     try:
-        print("bounce: interrupted", file=sys.stderr, flush=True)
+        note = f" ({exc.note})" if exc.note else ""
+        print(f"bounce: interrupted{note}", file=sys.stderr, flush=True)
     except (OSError, ValueError):  # stderr gone (terminal closed)
         pass
     return exc.exit_code

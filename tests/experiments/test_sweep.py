@@ -110,6 +110,9 @@ def test_an_interrupted_sweep_resumes_to_the_same_result(cli, tmp_path, monkeypa
     monkeypatch.setattr(checkpoints.PointFolder, "save", save_then_stop)
     stopped = run_sweep(cli, out, "--jobs", "1")
     assert stopped.exit_code == 130 and "bounce: interrupted" in stopped.stderr
+    # the one line says where the finished points are and how to go on
+    assert (f"bounce: interrupted (2 finished tasks kept in {out / 'points'}/: --resume "
+            "continues)") in " ".join(stopped.stderr.split())
     monkeypatch.setattr(checkpoints.PointFolder, "save", save)
     kept = sorted(p.name for p in (out / "points").glob("point-*.json"))
     assert kept == ["point-000000.json", "point-000001.json"]
