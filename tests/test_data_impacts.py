@@ -87,6 +87,26 @@ def test_bad_tables_are_one_line_errors(table, tmp_path, change, needles):
         assert needle in message
 
 
+def test_a_short_trial_is_left_out_with_a_warning_where_asked(table, tmp_path):
+    """A study's unit (``drop_short``): one short recording costs that trial, not the unit's
+    analysis; the other trials keep their numbers in the series. A file given with --data:
+    an error naming the setting to lower. All trials short: an error either way."""
+    short = table[(table.trial != 1) | (table.k < 3)]
+    warned = []
+    impacts = read_impacts(("s1", short), command="learning --data", min_bounces=5,
+                           min_bounces_key="min_bounces", drop_short=warned.append)
+    assert impacts.trials == ["2", "3"] and len(impacts.frame) == 60
+    assert [impacts.trial_number(t) for t in impacts.trials] == [2, 3]
+    assert warned == ["trial 1: 3 impacts, fewer than the 5 bounce learning --data needs per "
+                      "trial: left out (lower min_bounces to keep it)"]
+    with pytest.raises(ConfigError, match="trial 1: 3 impacts.*or lower min_bounces"):
+        read_impacts(write(tmp_path, short), command="learning --data", min_bounces=5,
+                     min_bounces_key="min_bounces")
+    with pytest.raises(ConfigError, match="trial 1: 30 impacts"):
+        read_impacts(("s1", table), min_bounces=31, drop_short=warned.append)
+    assert read_impacts(("s1", table)).trial_number("3") == 3  # nothing left out
+
+
 def test_unreadable_files(tmp_path):
     with pytest.raises(ConfigError, match="file not found"):
         read_impacts(tmp_path / "nope.csv")

@@ -40,7 +40,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Union
+from typing import Any, Callable, Union
 
 import numpy as np
 import pandas as pd
@@ -99,10 +99,17 @@ class Impacts:
 
     frame: pd.DataFrame
     path: Path
+    #: every trial of the table in its order, those left out for too few impacts included
+    #: (``read_impacts``'s ``drop_short``): a trial's number in the series is its place here
+    series: tuple = ()
 
     @property
     def trials(self) -> list:
         return list(dict.fromkeys(self.frame["trial"]))
+
+    def trial_number(self, trial) -> int:
+        """The trial's place in the session's series (1 first), counting trials left out."""
+        return (list(self.series) if self.series else self.trials).index(trial) + 1
 
     def by_trial(self):
         """(trial, rows) in the file's order of trials."""
@@ -198,10 +205,16 @@ def read_session(paths: list) -> pd.DataFrame:
 
 
 def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: str = "",
-                 min_bounces: int = 2, optional: tuple[str, ...] = ()) -> Impacts:
+                 min_bounces: int = 2, optional: tuple[str, ...] = (),
+                 min_bounces_key: str = "",
+                 drop_short: Callable[[str], None] | None = None) -> Impacts:
     """Read and check an impacts table (ours or a lab's own). Every problem is one line naming
     the file and the column, row or trial (ConfigError). ``needs``: the optional columns the
-    analysis ``command`` requires; ``min_bounces``: fewest impacts a trial may have.
+    analysis ``command`` requires; ``min_bounces``: fewest impacts a trial may have (the
+    config key that sets it: ``min_bounces_key``, named in the message); a shorter trial is
+    an error, or, with ``drop_short`` (a study's unit: one short recording must not cost the
+    unit its analysis), left out with a warning passed to ``drop_short`` while other trials
+    remain.
     ``source`` may also be ``(label, frame)``: a table in memory, checked the same way (the
     label stands for the file name in messages), or a list of files: the trials of one
     session (``read_session``). ``optional``: columns the analysis uses
@@ -292,11 +305,20 @@ def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: st
         raise _fail(path, f"trial {row['trial']}: impact k = {row['k']} appears twice")
     counts = frame.groupby("trial", sort=False).size()
     short = counts[counts < min_bounces]
+    needed = (f"fewer than the {min_bounces} {('bounce ' + command) if command else 'the analysis'}"
+              " needs per trial")
+    lower = f"lower {min_bounces_key}" if min_bounces_key else "lower the requirement"
+    if len(short) and (drop_short is None or len(short) == len(counts)):
+        raise _fail(path, f"trial {short.index[0]}: {int(short.iloc[0])} impacts, {needed} "
+                          f"(drop the trial or {lower})")
+    series = tuple(counts.index)
     if len(short):
-        raise _fail(path, f"trial {short.index[0]}: {int(short.iloc[0])} impacts, fewer than the "
-                          f"{min_bounces} {('bounce ' + command) if command else 'the analysis'} "
-                          "needs per trial (drop the trial or lower the requirement)")
-    return Impacts(frame, path)
+        assert drop_short is not None
+        for trial, count in short.items():
+            drop_short(f"trial {trial}: {int(count)} impacts, {needed}: left out ({lower} to "
+                       "keep it)")
+        frame = frame[~frame["trial"].isin(short.index)].reset_index(drop=True)
+    return Impacts(frame, path, series)
 
 
 def impacts_frame(sim, params, trial_names=None) -> pd.DataFrame:

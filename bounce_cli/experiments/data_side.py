@@ -262,13 +262,21 @@ def measurement_noise(block, source: ImpactsSource | None, data_path) -> Measure
     return MeasurementNoise(block.measurement_sd_v_m_s,
                             math.radians(block.measurement_sd_theta_deg), "assumed")
 
+def short_trials_warning(source: ImpactsSource | None, options: RunOptions):
+    """``read_impacts``'s ``drop_short`` for a table handed over in memory (a study's unit,
+    the Python API: a short trial is left out with a warning), None for a file given with
+    --data (a short trial is an error there, naming the setting to lower)."""
+    return options.warn if isinstance(source, tuple) else None
+
+
 def acf_data_run(config, options, source: ImpactsSource | None = None
                  ) -> tuple[dict[str, pd.DataFrame], list[str]]:
     """``source``: the impacts (default: the file ``config.data``)."""
     d = config.data_analysis
     impacts = read_impacts(config.data if source is None else source, needs=MODEL_COLUMNS,
-                           command="acf --data",
-                           min_bounces=config.max_lag + 2)
+                           command="acf --data", min_bounces=config.max_lag + 2,
+                           min_bounces_key="max_lag", drop_short=short_trials_warning(
+                               source, options))
     used = model_for_data(impacts, config, options, source)
     params = model_at_data(impacts, used, record=options.record)
     noise = measurement_noise(d, source, config.data)
@@ -1020,7 +1028,8 @@ def impulse_data_run(config, options, source: ImpactsSource | None = None
     d = config.data_analysis
     needs = ("alpha", "perturbed", *MODEL_COLUMNS)
     impacts = read_impacts(config.data if source is None else source, needs=needs,
-                           command="impulse --data", min_bounces=2)
+                           command="impulse --data", min_bounces=2,
+                           drop_short=short_trials_warning(source, options))
     frame = impacts.frame
     if not frame["perturbed"].any():
         raise ConfigError(f"data: {impacts.path}: column perturbed: no perturbed impact, nothing "
@@ -1204,7 +1213,7 @@ def trial_means_from_impacts(source: ImpactsSource, config, options
     circular mean phase of impact (theta_deg, in (-180, 180]), and the model's alpha and g
     (``data_parameters.model_for_data``: the data's unless set by the user); and that model."""
     impacts = read_impacts(source, needs=MODEL_COLUMNS, command="regression --data",
-                           min_bounces=2)
+                           min_bounces=2, drop_short=short_trials_warning(source, options))
     model = model_for_data(impacts, config, options, source)
     rows = []
     for trial, g in impacts.by_trial():

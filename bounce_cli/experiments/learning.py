@@ -108,16 +108,19 @@ def trial_table(config: LearningConfig, options: RunOptions, source=None
     mean racket period (NaN without that column), the model's alpha and g (the data's
     unless set by the user, ``data_parameters``) and the data's noise strengths (q_v, q_theta,
     pairs) from the VAR(1) residuals of each trial (``data_side.noise_from_trials``)."""
-    from .data_side import noise_from_trials
+    from .data_side import noise_from_trials, short_trials_warning
 
     if source is None:
         assert config.data is not None
         source = config.data
     impacts = read_impacts(source, needs=("racket_acc_g", "ball_apex_m"),
-                           command="learning --data", min_bounces=config.min_bounces)
+                           command="learning --data", min_bounces=config.min_bounces,
+                           min_bounces_key="min_bounces",
+                           drop_short=short_trials_warning(source, options))
     model = model_for_data(impacts, config, options, source)
     rows = []
-    for number, (trial, g) in enumerate(impacts.by_trial(), start=1):
+    for trial, g in impacts.by_trial():
+        number = impacts.trial_number(trial)  # its place in the series, short trials counted
         if "perturbed" in g.columns:  # the stationary state: not the relaxations
             g = g[settled_mask(g["perturbed"].to_numpy(), config.settle_after_perturbation)]
         theta = g["theta_rad"].to_numpy()
