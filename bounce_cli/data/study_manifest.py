@@ -16,13 +16,16 @@ column                     the factor's value ``""`` (printed as ``-``)
 =========================  =====================================================================
 
 Read before anything runs: a missing column, a column given twice, a file that does not exist
-or is not a recording (a folder, a device, a system file), a duplicate row or a factor value
-that cannot name a folder is one line naming the manifest, the line and the reason (never the
-bytes of a file).
+or is not a recording (a folder, a device, a system file), a recording listed twice (the same
+file with the same ``extract.*`` settings), or a factor value that cannot name a folder is one
+line naming the manifest, the line and the reason (never the bytes of a file). When the units
+are formed (:meth:`Manifest.units`), two recordings of a unit with one ``trial`` label, and two
+units whose folders differ only in case (one folder on macOS and Windows), are such a line too.
 """
 
 from __future__ import annotations
 
+import math
 import re
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -106,8 +109,51 @@ class Manifest:
         groups: dict[tuple[str, ...], list[ManifestRow]] = {}
         for row in self.rows:
             groups.setdefault(tuple(row.factors[g] for g in grouping), []).append(row)
-        return [Unit(key, tuple(grouping), tuple(sorted(rows, key=_trial_order)))
-                for key, rows in groups.items()]
+        units = [Unit(key, tuple(grouping), tuple(sorted(rows, key=_trial_order)))
+                 for key, rows in groups.items()]
+        where = f"manifest {self.path}"
+        folders: dict[str, Unit] = {}
+        for unit in units:
+            other = folders.setdefault(unit.folder.casefold(), unit)
+            if other is not unit:
+                raise ConfigError(
+                    f"{where}: lines {other.rows[0].line} and {unit.rows[0].line}: units "
+                    f"{other.folder!r} and {unit.folder!r} differ only in case: on macOS and "
+                    "Windows they would write into one folder (spell the values alike, or "
+                    "differently)")
+            lines: dict[str, int] = {}
+            for row in unit.rows:
+                trial = row.factors.get("trial", "")
+                if trial and lines.setdefault(trial, row.line) != row.line:
+                    first, second = sorted((lines[trial], row.line))
+                    raise ConfigError(
+                        f"{where}: lines {first} and {second}: {unit.label}: trial {trial!r} "
+                        "twice (each recording of a unit has its own trial label)")
+        return units
+
+    def trial_order_notes(self, unit: Unit) -> list[str]:
+        """Warnings for a unit whose ``trial`` labels mix numbers with other text (or an
+        empty cell): those recordings are ordered after the numbered ones, so that the
+        learning trend's trial numbers are not the labels."""
+        labels = [row.factors.get("trial") for row in unit.rows]
+        if "trial" not in self.factor_columns or not any(_is_number(t) for t in labels):
+            return []
+        return [f"{unit.label}: trial {_shown(row.factors['trial'])} (manifest line "
+                f"{row.line}) is not a number: ordered after the numbered trials, as trial "
+                f"{position} of {len(unit.rows)}"
+                for position, row in enumerate(unit.rows, start=1)
+                if not _is_number(row.factors["trial"])]
+
+
+def _shown(trial: str) -> str:
+    return repr(trial) if trial else "(an empty cell)"
+
+
+def _is_number(text: str | None) -> bool:
+    try:
+        return text is not None and math.isfinite(float(text))
+    except ValueError:
+        return False
 
 
 def _trial_order(row: ManifestRow) -> tuple[float, int]:
@@ -187,10 +233,13 @@ def read_manifest(path: str | Path) -> Manifest:
                     raise ConfigError(f"{where}: line {i}: {column}: cannot parse {cell!r} as a "
                                       "YAML value") from None
                 texts.append(f"{key}={cell}")
-        identity = (file, events, tuple(sorted(values.items())))
+        # one file twice is one recording counted twice (its impacts pooled twice), unless
+        # its rows read it differently (extract.* settings: two balls in one recording)
+        identity = (file, tuple(texts))
         if identity in seen:
-            raise ConfigError(f"{where}: line {i}: the same recording and factors as line "
-                              f"{seen[identity]} (duplicate row)")
+            raise ConfigError(f"{where}: line {i}: file {text!r}: the same recording as line "
+                              f"{seen[identity]} (list each recording once; one file read "
+                              "twice needs other extract.* settings per row)")
         seen[identity] = i
         rows.append(ManifestRow(i, file, events, values, tuple(texts)))
     return Manifest(path, tuple(rows), factors)

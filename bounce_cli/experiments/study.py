@@ -241,8 +241,9 @@ def frame_from_json(data: dict[str, Any]) -> pd.DataFrame:
 
 def recording_names(unit: Unit) -> list[str]:
     """A name for each recording of ``unit`` (in its rows' order) that no other of its
-    recordings has: the file's stem, and where several share one (``A/t.csv``, ``B/t.csv``)
-    the stem and the manifest line, ``t-line3`` (also where the stem names no folder: a
+    recordings has: the file's stem, and where several share one (``A/t.csv``, ``B/t.csv``,
+    or ``T.csv`` beside ``t.csv``: one folder on macOS and Windows) the stem and the manifest
+    line, ``t-line3`` (also where the stem names no folder: a
     file ``...csv`` has the stem ``..``, and gets ``file-line3``). Its per-recording outputs
     (``<unit>/extract/<name>/``) and its trials' labels are keyed by it, so that no two
     recordings overwrite or merge into each other.
@@ -258,16 +259,19 @@ def recording_names(unit: Unit) -> list[str]:
         One name per row, all different.
     """
     stems = [row.file.stem for row in unit.rows]
-    taken = {stem for stem in stems if stems.count(stem) == 1 and stem.strip(".")}
+    # compared without case: T.csv and t.csv would share a folder on macOS and Windows
+    folded = [stem.casefold() for stem in stems]
+    taken = {fold for stem, fold in zip(stems, folded)
+             if folded.count(fold) == 1 and stem.strip(".")}
     names = []
-    for row, stem in zip(unit.rows, stems):
+    for row, stem, fold in zip(unit.rows, stems, folded):
         name = stem
         # shared, or no folder's name ('.', '..': a file named ...csv would leave the unit)
-        if stems.count(stem) > 1 or not stem.strip("."):
+        if folded.count(fold) > 1 or not stem.strip("."):
             name = f"{stem.strip('.') or 'file'}-line{row.line}"
-            while name in taken:  # a file really named so: lengthen until free
+            while name.casefold() in taken:  # a file really named so: lengthen until free
                 name += "-"
-            taken.add(name)
+            taken.add(name.casefold())
         names.append(name)
     return names
 
@@ -505,7 +509,8 @@ def radius_entries(method: str, estimate: float, low: float, high: float,
     """group.csv's ``radius_<method>``, its interval and ``radius_<method>_note`` from a
     unit's stability_data.csv row: an estimate that is none (NaN there, or not finite or above
     1.5 here: :func:`bounce_cli.analysis.var_fit.radius_problem`) is NaN with the reason in
-    the note; an estimate is given with an empty note.
+    the note; an estimate is given with an empty note, or, where it has no interval, with
+    the row's note saying why (too few pairs for an interval the trust study vouches for).
 
     Parameters
     ----------
@@ -530,7 +535,9 @@ def radius_entries(method: str, estimate: float, low: float, high: float,
             f"spectral radius withheld: {problem}")
         return {name: math.nan, f"{name}_ci_low": math.nan, f"{name}_ci_high": math.nan,
                 f"{name}_note": why}
-    return {name: estimate, f"{name}_ci_low": low, f"{name}_ci_high": high, f"{name}_note": ""}
+    without = (math.isnan(low) or math.isnan(high)) and note and note != "nan"
+    return {name: estimate, f"{name}_ci_low": low, f"{name}_ci_high": high,
+            f"{name}_note": note if without else ""}
 
 
 # -- the study -----------------------------------------------------------------------------------
@@ -540,6 +547,9 @@ def run(config: StudyConfig, options: RunOptions) -> ExperimentResult:
                           "per recording with file, subject[, condition, trial])")
     manifest = read_manifest(config.manifest)
     units = manifest.units(tuple(config.grouping))
+    for unit in units:
+        for message in manifest.trial_order_notes(unit):
+            options.warn(message)
     dumped = config.model_dump(mode="json")
     tasks = [UnitTask(i, unit, dumped, unit_key(unit, dumped)) for i, unit in enumerate(units)]
     done = {i: r for i, r in options.checkpoints.load().items()

@@ -177,6 +177,31 @@ def test_a_damaged_file_is_one_failure_row_and_exit_1(tmp_path, cli_module):
     assert (out / "s2" / "a" / "regression" / "fit.csv").is_file()
 
 
+def test_one_short_recording_is_left_out_of_the_analyses_that_need_more(tmp_path, cli_module):
+    """A trial cut to 2 s (a few impacts) costs that trial, with a warning naming the setting,
+    not the unit's learning trend (the review's lab file failed the whole unit); the trials
+    after it keep their numbers in the series."""
+    sim = tmp_path / "sim"
+    assert cli_module("simulate-study", "--quiet", "--out", sim, "--set", "subjects.count=1",
+                      "--set", "conditions=[{name: a}]", "--set", "trials=4",
+                      "--set", "duration_s=10").exit_code == 0
+    manifest_frame = pd.read_csv(sim / "study.csv")
+    recording = pd.read_csv(sim / manifest_frame.loc[0, "file"])
+    cut = tmp_path / "short.csv"
+    recording[recording["t_s"] < recording["t_s"].min() + 2.0].to_csv(cut, index=False)
+    manifest_frame["file"] = [str(cut)] + [str(sim / f) for f in manifest_frame["file"][1:]]
+    manifest_frame.to_csv(tmp_path / "study.csv", index=False)
+    out = tmp_path / "out"
+    result = cli_module("study", "--manifest", tmp_path / "study.csv", "--out", out,
+                        "--set", "analyses=[learning]", "--figures", "none", *FAST)
+    assert result.exit_code == 0, result.output
+    said = " ".join(result.stderr.split())
+    assert "learning: trial 1:" in said and "left out (lower min_bounces to keep it)" in said
+    trials = pd.read_csv(out / "s1" / "a" / "learning" / "trials.csv")
+    assert trials["trial_number"].tolist() == [2, 3, 4]
+    assert pd.read_csv(out / "failures.csv").empty
+
+
 def test_two_recordings_with_one_stem_in_a_unit_keep_their_own_outputs(tiny, tmp_path,
                                                                         cli_module):
     """``A/t.csv`` and ``B/t.csv`` of one subject and condition (issue 36: one's files were
@@ -206,6 +231,10 @@ def test_recording_names_are_the_stems_unless_two_share_one(tmp_path):
                                     (5, "t-line4.csv")))
     names = study.recording_names(Unit(("s1",), ("subject",), rows))
     assert names == ["t-line2", "u", "t-line4-", "t-line4"]
+    rows = tuple(ManifestRow(line, tmp_path / path, None, {"subject": "s1"})
+                 for line, path in ((2, "T.csv"), (3, "t.csv"), (4, "u.csv")))
+    assert study.recording_names(Unit(("s1",), ("subject",), rows)) == ["T-line2", "t-line3",
+                                                                        "u"]
 
 
 def manifest(tmp_path, text, files=("a.csv",)):
@@ -219,7 +248,10 @@ def manifest(tmp_path, text, files=("a.csv",)):
 @pytest.mark.parametrize("text, needle", [
     ("file,condition\na.csv,x\n", "missing column(s) subject"),
     ("file,subject\nb.csv,s1\n", "line 2: file 'b.csv': no such file"),
-    ("file,subject\na.csv,s1\na.csv,s1\n", "line 3: the same recording and factors as line 2"),
+    ("file,subject\na.csv,s1\na.csv,s1\n", "line 3: file 'a.csv': the same recording as line 2"),
+    # one file under two trials (or two subjects) is one recording pooled twice
+    ("file,subject,trial\na.csv,s1,1\na.csv,s1,2\n", "line 3: file 'a.csv': the same recording"),
+    ("file,subject\na.csv,s1\na.csv,s2\n", "the same recording as line 2"),
     ("file,subject\na.csv,s/1\n", "line 2: subject 's/1': a factor value names a folder"),
     ("file,subject\n", "no rows"),
     ("file,subject,extract.units.length\na.csv,s1,[mm\n", "cannot parse"),
@@ -266,6 +298,47 @@ def test_a_device_in_the_manifest_is_not_a_recording(tmp_path, cli, user_error):
                "line 2", "file 'a.csv'", "not a regular file")
 
 
+@pytest.mark.parametrize("text, needle", [
+    # two recordings of a unit under one trial label: their impacts would merge (the run
+    # failed later in every analysis, "impact k = 0 appears twice", naming no file)
+    ("file,subject,condition,trial\na.csv,s1,x,1\nb.csv,s1,x,2\nc.csv,s1,x,1\n",
+     "lines 2 and 4: subject s1, condition x: trial '1' twice"),
+    # one folder on macOS and Windows
+    ("file,subject,condition\na.csv,s1,Vision\nb.csv,s1,vision\n",
+     "lines 2 and 3: units 's1/Vision' and 's1/vision' differ only in case"),
+])
+def test_units_that_would_merge_are_one_line_before_anything_runs(tmp_path, cli, user_error,
+                                                                  text, needle):
+    out = tmp_path / "out"
+    result = cli("study", "--manifest", manifest(tmp_path, text, ("a.csv", "b.csv", "c.csv")),
+                 "--out", out, "--set", "model.alpha=0.5", "--set", "model.g=9.81")
+    user_error(result, "manifest", needle)
+    assert not out.exists()
+
+
+def test_one_file_read_twice_with_other_settings_is_two_recordings(tmp_path):
+    """Two balls in one recording (a row each, its own marker) are two recordings."""
+    from bounce_cli.data.study_manifest import read_manifest
+
+    path = manifest(tmp_path, "file,subject,extract.markers.ball\na.csv,s1,b1\na.csv,s2,b2\n")
+    assert [row.overrides for row in read_manifest(path).rows] == [("markers.ball=b1",),
+                                                                  ("markers.ball=b2",)]
+
+
+def test_trials_that_are_not_numbers_are_named_where_they_are_ordered(tmp_path):
+    from bounce_cli.data.study_manifest import read_manifest
+
+    path = manifest(tmp_path, "file,subject,trial\na.csv,s1,practice\nb.csv,s1,2\n"
+                              "c.csv,s1,1\nd.csv,s2,\n", ("a.csv", "b.csv", "c.csv", "d.csv"))
+    found = read_manifest(path)
+    first, second = found.units(("subject",))
+    assert [row.factors["trial"] for row in first.rows] == ["1", "2", "practice"]
+    assert found.trial_order_notes(first) == [
+        "subject s1: trial 'practice' (manifest line 2) is not a number: ordered after the "
+        "numbered trials, as trial 3 of 3"]
+    assert found.trial_order_notes(second) == []  # no numbered trial: the order as listed
+
+
 def test_a_grouping_factor_the_manifest_lacks_is_one_line(tmp_path, cli, user_error):
     result = cli("study", "--manifest", manifest(tmp_path, "file,subject\na.csv,s1\n"),
                  "--out", tmp_path / "out")
@@ -276,6 +349,11 @@ def test_an_unknown_setting_fails_before_anything_runs(tmp_path, cli, user_error
     result = cli("study", "--manifest", manifest(tmp_path, "file,subject\na.csv,s1\n"),
                  "--set", "settings.acf.max_lagg=4", "--out", tmp_path / "out")
     user_error(result, "max_lagg")
+    # the message names --set, not the bundled study.yaml the key is not in
+    assert result.output.strip().startswith("bounce: error: --set: settings.acf: max_lagg")
+    result = cli("study", "--manifest", manifest(tmp_path, "file,subject\na.csv,s1\n"),
+                 "--set", "extract.units.lenght=mm", "--out", tmp_path / "out")
+    user_error(result, "--set: extract: units.lenght: unknown key (did you mean units.length?)")
 
 
 @pytest.mark.slow
@@ -536,6 +614,15 @@ def test_a_radius_that_is_no_estimate_never_enters_a_group_statistic():
     assert table.loc["ols", "data_mean"] == pytest.approx(0.41)
     assert table.loc["lag2", "units"] == 3 and table.loc["lag2", "units_withheld"] == 1
     assert table.loc["ols", "units_without_interval"] == 0
+
+
+def test_an_estimate_without_an_interval_says_why_in_group_csv():
+    why = ("no interval: 150 triples, fewer than the 1200 the lag2 interval needs without a "
+           "check; the trust study at this size: ... (below 90%)")
+    entries = study.radius_entries("lag2", 0.518, math.nan, math.nan, why)
+    assert entries["radius_lag2"] == 0.518 and entries["radius_lag2_note"] == why
+    with_interval = study.radius_entries("ols", 0.46, 0.32, 0.66, "delta method, log scale")
+    assert with_interval["radius_ols_note"] == ""  # the interval is there: nothing missing
 
 
 def test_estimates_without_an_interval_are_left_out_of_the_paired_difference():
