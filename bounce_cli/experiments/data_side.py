@@ -944,7 +944,7 @@ def acf_data_draw(frames: dict[str, pd.DataFrame]) -> dict:
 
 
 def _stability_figure(stab: pd.DataFrame, trust: pd.DataFrame | None):
-    fig, axes = new_figure(1, 2, width=11, height=4.8)
+    fig, axes = new_figure(1, 2, width=11, height=6.0)
     ax = axes[0, 0]
     s = stab.set_index(["quantity", "source"])
     styles = {"model_eq10": ("o", "k"), "ols": ("s", "tab:blue"), "lag2": ("D", "tab:red"),
@@ -986,7 +986,9 @@ def _stability_figure(stab: pd.DataFrame, trust: pd.DataFrame | None):
     ax.set_ylabel(r"Im $\lambda$")
     ax.set_title(r"eigenvalues of $J$ ($\pm$ SE): model eq. 10 vs VAR(1) and VARX fits",
                  fontsize=10)
-    ax.legend(fontsize=7, title="spectral radius [95 % CI]", title_fontsize=7, loc="center")
+    # below the circle: inside it, it hid real eigenvalues and ran over the axis' labels
+    ax.legend(fontsize=7, title="spectral radius [95 % CI]", title_fontsize=7,
+              loc="upper center", bbox_to_anchor=(0.5, -0.13), frameon=False)
     ax = axes[0, 1]
     if trust is not None and len(trust):
         sized = trust[~trust.get("data_size", pd.Series(False, index=trust.index))

@@ -64,15 +64,17 @@ def learning_figure(trials: pd.DataFrame, trends: pd.DataFrame | None):
     conditions = sorted(trials["condition"].astype(str).unique())
     fig, axes = new_figure(2, len(conditions), width=4.2 * len(conditions) + 1, height=6.4,
                            sharex=True)
-    quantities = (("ac_mean_g", "AC, trial mean (g)", 1.0),
-                  ("apex_sd_m", "SD of ball amplitude (cm)", 100.0))
+    quantities = (("ac_mean_g", "AC, trial mean (g)", 1.0, "g"),
+                  ("apex_sd_m", "SD of ball amplitude (cm)", 100.0, "cm"))
+    subjects = sorted(trials["subject"].astype(str).unique())
+    style = subject_styles(subjects)
     for j, condition in enumerate(conditions):
         part = trials[trials["condition"].astype(str) == condition]
-        for i, (column, label, scale) in enumerate(quantities):
+        for i, (column, label, scale, unit) in enumerate(quantities):
             ax = axes[i, j]
-            for k, (subject, rows) in enumerate(part.groupby("subject", sort=True)):
-                ax.plot(rows["trial_number"], rows[column] * scale, "-o", ms=3, lw=0.8,
-                        color=COLORS[1 + k % (len(COLORS) - 1)], alpha=0.6, label=str(subject))
+            for subject, rows in part.groupby(part["subject"].astype(str), sort=True):
+                ax.plot(rows["trial_number"], rows[column] * scale, "-", ms=3.5, lw=0.8,
+                        alpha=0.7, label=subject, **style[subject])
             if trends is not None and "intercept" in trends:
                 row = trends[(trends["condition"].astype(str) == condition)
                              & (trends["quantity"] == column)]
@@ -80,18 +82,37 @@ def learning_figure(trials: pd.DataFrame, trends: pd.DataFrame | None):
                     r = row.iloc[0]
                     xs = np.array([part["trial_number"].min(), part["trial_number"].max()])
                     ax.plot(xs, (r["intercept"] + r["slope_per_trial"] * xs) * scale, "k-",
-                            lw=2.2, label=f"fixed effect {r['slope_per_trial'] * scale:+.3g}/trial "
-                            f"[{r['ci_low'] * scale:.3g}, {r['ci_high'] * scale:.3g}]")
+                            lw=2.2, label=f"fixed effect {r['slope_per_trial'] * scale:+.3g} "
+                            f"{unit}/trial [{r['ci_low'] * scale:.3g}, "
+                            f"{r['ci_high'] * scale:.3g}]")
+                    # the panel's own legend: its fixed effect (the subjects: below)
+                    ax.legend(handles=ax.get_lines()[-1:], fontsize=7, loc="best")
             ax.set_ylabel(label)
             if column == "apex_sd_m":
                 ax.set_ylim(bottom=0.0)
-            ax.legend(fontsize=6, loc="best")
             ax.xaxis.set_major_locator(MaxNLocator(integer=True))
         axes[0, j].set_title(f"condition {condition}")
         axes[1, j].set_xlabel("trial number")
+    handles = {line.get_label(): line for ax in axes.flat for line in ax.get_lines()
+               if line.get_label() in style}
+    fig.legend(handles=[handles[s] for s in subjects if s in handles], loc="outside lower center",
+               ncol=min(len(subjects), 10), fontsize=7, frameon=False, title="subject",
+               title_fontsize=7)
     fig.suptitle("Fig. 6 over the study: learning trends (mixed model, random intercept and "
                  "slope per subject)", fontsize=10)
     return fig
+
+
+def subject_styles(subjects: list[str]) -> dict[str, dict[str, Any]]:
+    """A colour and marker per subject, no two subjects alike: tab10's colours (tab20's
+    beyond ten subjects), then a new marker each time the colours run out."""
+    from matplotlib import colormaps
+
+    colours = colormaps["tab10" if len(subjects) <= 10 else "tab20"].colors
+    markers = "o^sDvP*X<>"
+    return {subject: {"color": colours[k % len(colours)],
+                      "marker": markers[(k // len(colours)) % len(markers)]}
+            for k, subject in enumerate(subjects)}
 
 
 def stability_figure(group: pd.DataFrame, table: pd.DataFrame | None):
@@ -104,19 +125,28 @@ def stability_figure(group: pd.DataFrame, table: pd.DataFrame | None):
     fig, axes = new_figure(1, 1, width=max(6.0, 0.45 * len(order) + 2.5), height=4.8)
     ax = axes[0, 0]
     x = np.arange(len(order))
+    highest = 1.0
     for offset, method, color, label in ((-0.12, "ols", "k", "data, OLS VAR(1)"),
                                          (0.12, "lag2", "tab:blue", "data, lag-2 (noise-robust)")):
         y = order[f"radius_{method}"].to_numpy(float)
-        low = y - order[f"radius_{method}_ci_low"].to_numpy(float)
-        high = order[f"radius_{method}_ci_high"].to_numpy(float) - y
-        ax.errorbar(x + offset, y, yerr=np.vstack([low, high]), fmt="o", color=color, ms=4,
-                    capsize=2, label=f"{label} with interval")
+        ci_low = order[f"radius_{method}_ci_low"].to_numpy(float)
+        ci_high = order[f"radius_{method}_ci_high"].to_numpy(float)
+        bounded = np.isfinite(ci_low) & np.isfinite(ci_high)
+        if bounded.any():
+            ax.errorbar((x + offset)[bounded], y[bounded],
+                        yerr=np.vstack([y - ci_low, ci_high - y])[:, bounded], fmt="o",
+                        color=color, ms=4, capsize=2, label=f"{label} with interval")
+        alone = np.isfinite(y) & ~bounded
+        if alone.any():  # an estimate without an interval (too few pairs: group.csv's note)
+            ax.plot((x + offset)[alone], y[alone], "o", mfc="white", mec=color, ms=4.5,
+                    label=f"{label}, no interval (see radius_{method}_note)")
+        highest = max(highest, np.nanmax(np.r_[y, ci_high[bounded], 0.0]))
     ax.plot(x, order["model_spectral_radius"], "x", color="tab:red", ms=8, mew=2,
             label="model, eq. 10 at the unit's parameters")
     labels = [f"{s}\n{c}" for s, c in zip(order["subject"].astype(str), order["_c"])]
     ax.set_xticks(x, labels, fontsize=7)
     ax.axhline(1.0, color="0.7", lw=0.8, ls=":")
-    ax.set_ylim(0.0, 1.2)
+    ax.set_ylim(0.0, max(1.2, 1.08 * highest))
     ax.set_ylabel("spectral radius")
     ax.set_xlabel("unit (subject, condition)")
     title = "Stability per unit: the data against the model"
@@ -127,7 +157,11 @@ def stability_figure(group: pd.DataFrame, table: pd.DataFrame | None):
             f"\n{r.condition}: data - model (OLS) {r.difference_mean:+.3f} "
             f"[{r.ci_low:.3f}, {r.ci_high:.3f}]" for r in ols.itertuples())
     ax.set_title(title, fontsize=9)
-    ax.legend(fontsize=7, loc="upper right")
+    # below the axes: inside, it covered a unit's estimate
+    entries = sorted(zip(*ax.get_legend_handles_labels()),  # OLS, lag-2, then the model
+                     key=lambda e: (e[1].startswith("model"), "lag-2" in e[1],
+                                    "no interval" in e[1]))
+    fig.legend(*zip(*entries), loc="outside lower center", ncol=2, fontsize=7, frameon=False)
     return fig
 
 
