@@ -107,6 +107,13 @@ def test_a_short_trial_is_left_out_with_a_warning_where_asked(table, tmp_path):
     assert read_impacts(("s1", table)).trial_number("3") == 3  # nothing left out
 
 
+def test_a_recording_given_as_impacts_says_to_extract_it_first(tmp_path):
+    recording = pd.DataFrame({"trial": 1, "t_s": [0.0, 0.01], "racket_x_m": 0.0,
+                              "ball_x_m": [0.5, 0.49]})
+    with pytest.raises(ConfigError, match="not an impacts table.*bounce extract --data it"):
+        read_impacts(write(tmp_path, recording))
+
+
 def test_unreadable_files(tmp_path):
     with pytest.raises(ConfigError, match="file not found"):
         read_impacts(tmp_path / "nope.csv")

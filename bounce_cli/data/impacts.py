@@ -235,8 +235,12 @@ def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: st
     if "theta_rad" not in frame.columns and "theta_deg" not in frame.columns:
         missing.append("theta_rad (or theta_deg)")
     if missing:
+        # a recording (positions over time) is what a lab has first: say how to get impacts
+        recording = "t_s" in frame.columns and "k" not in frame.columns
+        hint = ("; a recording of positions? bounce extract --data it first (or run bounce "
+                "study on a manifest of recordings)" if recording else "")
         raise _fail(path, f"missing column(s) {', '.join(missing)}: not an impacts table "
-                          f"(required: trial, k, v_m_s, theta_rad or theta_deg)")
+                          f"(required: trial, k, v_m_s, theta_rad or theta_deg){hint}")
     for column in needs:
         if column not in frame.columns:
             purpose = COLUMN_PURPOSE.get(column, column)
