@@ -402,6 +402,11 @@ def analyse_unit(task: UnitTask) -> dict[str, Any]:
                 if name in NEEDS_PERTURBATIONS and not (
                         "perturbed" in pooled.columns and pooled["perturbed"].astype(bool).any()):
                     continue  # nothing to align on: not a failure, the data have no perturbations
+                if name == "acf":
+                    crowded = perturbations_leave_no_run(pooled, cfg, alpha, g, seed)
+                    if crowded:  # a perturbation session: the stationary analysis needs
+                        warnings.append(f"{unit.label}: acf: not run: {crowded}")  # others
+                        continue
                 try:
                     result = run_analysis(name, cfg, alpha, g, seed, unit, pooled, warnings)
                 except RECORDED_ERRORS as exc:
@@ -423,6 +428,28 @@ def analyse_unit(task: UnitTask) -> dict[str, Any]:
     return {"index": task.index, "key": task.key,
             "frames": {name: frame_to_json(f) for name, f in frames.items()}, "pngs": pngs,
             "row": row, "summary": summary, "warnings": warnings, "failures": failures}
+
+
+def perturbations_leave_no_run(pooled: pd.DataFrame, cfg: dict[str, Any], alpha: float,
+                               g: float, seed: int) -> str:
+    """Why ``acf`` cannot run on a unit whose perturbations leave no run of ``max_lag`` + 2
+    consecutive unperturbed, settled impacts (the virtual set-up's every fifth impact: the
+    stationary analyses need a session without perturbations); '' where a run exists, or
+    where the data have no perturbations (a short trial is then acf's own error)."""
+    from ..data.impacts import read_impacts
+    from .data_side import stationary_segments
+
+    if not ("perturbed" in pooled.columns and pooled["perturbed"].astype(bool).any()):
+        return ""
+    config = analysis_config("acf", cfg["settings"].get("acf", {}), alpha, g, seed, None)
+    need = config.max_lag + 2
+    impacts = read_impacts(("unit", pooled), min_bounces=1)
+    if stationary_segments(impacts, config.data_analysis.settle_after_perturbation, need):
+        return ""
+    return (f"the perturbations leave no run of {need} consecutive unperturbed impacts "
+            "(max_lag + 2, after settle_after_perturbation): the stationary analyses need a "
+            "session without perturbations, or with sparser ones (e.g. the virtual set-up's "
+            "steady protocol)")
 
 
 def run_analysis(name: str, cfg: dict[str, Any], alpha: float, g: float, seed: int, unit: Unit,

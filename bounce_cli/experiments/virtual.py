@@ -312,6 +312,7 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
     kept: list[int] = []  # the trials recorded (a live trial without samples is left out)
     every_impact: list[Impact] = []  # impacts.csv leaves out those without a phase
     stopped = ""
+    interrupted_by = 0
     live = display is not None or getattr(source, "live", False)  # in real time: say so
     options.progress.start(config.trials, "virtual")
     try:
@@ -369,10 +370,18 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
         if display is not None:
             display.show_status(phase="done", message="done: thank you")
     except (KeyboardInterrupt, Interrupted) as stop:
-        if not impacts or (isinstance(stop, Interrupted) and stop.signum != signal.SIGINT):
+        # Ctrl-C, kill or a closed terminal (SIGHUP: an SSH session dropped): a subject's
+        # finished trials are kept whichever ended the session; run.json and the exit status
+        # (128 + signal) say it was interrupted
+        if not impacts:
             raise
-        stopped = (f"; stopped by Ctrl-C in trial {finished + 1}: {len(kept)} finished "
+        signum = stop.signum if isinstance(stop, Interrupted) else signal.SIGINT
+        how = "Ctrl-C" if signum == signal.SIGINT else signal.Signals(signum).name
+        stopped = (f"; stopped by {how} in trial {finished + 1}: {len(kept)} finished "
                    "trial(s) kept, the interrupted one left out")
+        interrupted_by = signum
+        options.record["status"] = "interrupted"
+        options.record["interrupted"] = stopped[2:]
     if not impacts:
         raise ConfigError(f"racket: {source.description}: no trial had racket samples (was the "
                           "page open, the stream sending?)")
@@ -405,7 +414,8 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
         f"stream gap(s){stopped}; run `bounce study --manifest <out>/study.csv`"]
     if display is not None:
         summary.append(latency_summary(display.latency) + " (latency.csv)")
-    return ExperimentResult(frames=frames, figures=figures, summary=summary)
+    return ExperimentResult(frames=frames, figures=figures, summary=summary,
+                            exit_code=128 + interrupted_by if interrupted_by else 0)
 
 
 def _screen(display: Display, config: VirtualConfig, trial: int):

@@ -770,3 +770,27 @@ def test_a_unit_table_passes_through_json_unchanged():
     empty = frame.drop(columns="kind").iloc[:0]  # (an empty category keeps no categories)
     pd.testing.assert_frame_equal(frame_from_json(frame_to_json(empty)), empty,
                                   check_index_type=False)
+
+
+def test_a_perturbation_session_skips_acf_with_its_reason():
+    """The virtual set-up's protocol perturbs every fifth impact: no run of max_lag + 2
+    unperturbed impacts, so acf is not run (a warning, not a failure of the unit: the docs'
+    first virtual-to-study example exited 1); perturbations every 40 impacts leave runs."""
+    from bounce_cli.analysis.data_stats import perturbation_schedule, simulate_impacts
+    from bounce_cli.data.impacts import impacts_frame
+    from bounce_cli.model.params import ModelParams
+
+    params = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.3, racket_period=0.92)
+    from bounce_cli.runtime.config import bundled_config_path
+
+    cfg = load_config(study.StudyConfig, bundled_config_path("study")).model_dump(mode="json")
+    for every, skipped in ((5, True), (40, False)):
+        alpha = perturbation_schedule(2, 120, every, 0.5, [(0.4, 0.45), (0.55, 0.6)], seed=1)
+        pooled = impacts_frame(simulate_impacts(params, 0.01, 0.01, 2, 120, seed=2,
+                                                alpha=alpha), params)
+        why = study.perturbations_leave_no_run(pooled, cfg, 0.5, 9.81, 1)
+        assert bool(why) == skipped, (every, why)
+    assert "no run of 12 consecutive unperturbed impacts" in study.perturbations_leave_no_run(
+        impacts_frame(simulate_impacts(params, 0.01, 0.01, 2, 120, seed=2, alpha=(
+            perturbation_schedule(2, 120, 5, 0.5, [(0.4, 0.45)], seed=1))), params),
+        cfg, 0.5, 9.81, 1)

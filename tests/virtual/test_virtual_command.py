@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import signal
 import subprocess
 import sys
@@ -195,8 +196,11 @@ def test_realtime_paces_a_headless_sine_and_leaves_the_physics_alone():
 
 
 @pytest.mark.slow
-def test_ctrl_c_keeps_the_finished_trials(tmp_path):
-    """SIGINT in trial 2 of a paced session: trial 1 is written whole, trial 2 left out."""
+@pytest.mark.parametrize("signum, how", [(signal.SIGINT, "Ctrl-C"), (signal.SIGTERM, "SIGTERM"),
+                                         (signal.SIGHUP, "SIGHUP")])
+def test_a_stop_signal_keeps_the_finished_trials(tmp_path, signum, how):
+    """SIGINT (or kill, or a closed terminal) in trial 2 of a paced session: trial 1 is
+    written whole, trial 2 left out (SIGTERM and SIGHUP once threw the session away)."""
     out = tmp_path / "v"
     process = subprocess.Popen(
         [sys.executable, "-m", "bounce_cli", "virtual", "--headless", "--realtime", "--set",
@@ -208,10 +212,12 @@ def test_ctrl_c_keeps_the_finished_trials(tmp_path):
         assert line, seen
         seen += line
     time.sleep(0.5)
-    process.send_signal(signal.SIGINT)
+    process.send_signal(signum)
     stdout, stderr = process.communicate(timeout=60)
-    assert process.returncode == 0, stderr
-    assert "stopped by Ctrl-C in trial 2" in stdout + stderr
+    assert process.returncode == 128 + signum, stderr  # written, and said to be interrupted
+    assert f"stopped by {how} in trial 2" in stdout + stderr
+    record = json.loads((out / "run.json").read_text())
+    assert record["status"] == "interrupted" and "trial 2" in record["interrupted"]
     assert sorted(p.name for p in (out / "recordings").iterdir()) == ["s1_virtual_t1.csv"]
     manifest = pd.read_csv(out / "study.csv")
     assert list(manifest["trial"]) == [1]
