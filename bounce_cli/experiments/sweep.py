@@ -152,15 +152,18 @@ def point_tasks_of(config: SweepConfig, points: list[ModelParams] | None = None)
 
 def run(config: SweepConfig, options: RunOptions) -> ExperimentResult:
     axes = config.sweep.axes()
-    points, index = parameter_grid(config)
     theta_axis, v_axis = config.basin.theta0_deg, config.basin.v0_m_s
     basin_points = theta_axis.num * v_axis.num
-    if len(points) * basin_points > config.limits.max_basin_points:
+    # counted from the axes before any point is made (10^8 parameter points took minutes and
+    # gigabytes to build, only to be refused)
+    n_points = math.prod(a.num for a in config.sweep.axes())
+    if n_points * basin_points > config.limits.max_basin_points:
         raise ConfigError(
-            f"limits.max_basin_points: {len(points):,} parameter points x {basin_points:,} "
-            f"basin points = {len(points) * basin_points:,}, more than "
+            f"limits.max_basin_points: {n_points:,} parameter points x {basin_points:,} "
+            f"basin points = {n_points * basin_points:,}, more than "
             f"limits.max_basin_points = {config.limits.max_basin_points:,}; reduce sweep.*.num "
             "or basin.*.num, or raise limits.max_basin_points")
+    points, index = parameter_grid(config)
     tasks = point_tasks_of(config, points)
 
     done = {i: r for i, r in options.checkpoints.load().items() if 0 <= i < len(tasks)}

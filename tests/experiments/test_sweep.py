@@ -353,3 +353,16 @@ def test_the_committed_atlas_agrees_with_eq14_and_with_the_bifurcation_diagram()
     assert abs(nearest - point.gamma) < 0.005
     assert set(attractors.loc[attractors.gamma == nearest, "attractor"]) == {"sticking"}
     assert point.fraction_sticking > 0.85 and point.fraction_undecided < 0.01
+
+
+def test_a_sweep_too_large_is_refused_before_any_point_is_made(cli, user_error, monkeypatch,
+                                                                tmp_path):
+    """10^8 parameter points took minutes and gigabytes to build before the refusal."""
+    def never(config):
+        raise AssertionError("the parameter grid was built")
+
+    monkeypatch.setattr(sweep_experiment, "parameter_grid", never)
+    user_error(cli("sweep", "--set", "sweep.x.num=10000", "--set", "sweep.y.num=10000",
+                   "--out", tmp_path / "sweep"),
+               "limits.max_basin_points", "100,000,000 parameter points")
+    assert not (tmp_path / "sweep").exists()
