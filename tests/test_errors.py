@@ -348,3 +348,12 @@ def test_a_fitted_g_that_is_no_fall_gets_a_hint_not_a_math_error(g):
     from bounce_cli.experiments.extract import unit_slip_hint
 
     assert "columns.ball" in unit_slip_hint(g)
+
+
+@pytest.mark.parametrize("theta, v, needle", [
+    ("43", "1e200", "--v0: 1e+200 m/s is beyond what the map can follow"),
+    ("1e308", "5", "--theta0-deg: 1e+308 deg is beyond what the map can follow"),
+])
+def test_an_orbit_launched_beyond_reach_is_one_line(theta, v, needle):
+    """--v0 1e200 printed numpy's overflow warnings and a NaN row (a new-user review)."""
+    one_error_line(run("orbit", "--theta0-deg", theta, "--v0", v), needle)

@@ -123,6 +123,12 @@ def _model_or_fail(config: Path | None, overrides: list[str] | None, *,
         fail(str(exc))
 
 
+#: ``bounce orbit``'s largest launch velocity (m/s) and phase (deg): a hop of 200 s at 9.81
+#: m/s^2, and a phase a thousand cycles out (both far beyond any ball on a racket)
+ORBIT_MAX_V0_M_S = 1000.0
+ORBIT_MAX_THETA0_DEG = 360_000.0
+
+
 @app.command("fixed-point")
 def fixed_point_command(
     config: ConfigOption = None,
@@ -202,6 +208,14 @@ def orbit_command(
             fail(str(exc))
     if not (math.isfinite(theta0_deg) and math.isfinite(v0)):
         fail("--theta0-deg and --v0 must be finite numbers")
+    # beyond these the flight's phase has no digits left for the contact (a NaN row and
+    # numpy's overflow warnings at --v0 1e200; a phase that never advanced at 1e308 deg)
+    if abs(v0) > ORBIT_MAX_V0_M_S:
+        fail(f"--v0: {v0:g} m/s is beyond what the map can follow (|v0| <= "
+             f"{ORBIT_MAX_V0_M_S:g} m/s)")
+    if abs(theta0_deg) > ORBIT_MAX_THETA0_DEG:
+        fail(f"--theta0-deg: {theta0_deg:g} deg is beyond what the map can follow (give the "
+             f"phase within a cycle; |theta0| <= {ORBIT_MAX_THETA0_DEG:g} deg)")
     theta0 = math.radians(theta0_deg)
     if controller is not None:
         if min_hop_s == 0.0:
