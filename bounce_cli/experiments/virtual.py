@@ -37,6 +37,7 @@ from ..data.simulated_lab import LAB_MIN_HOP_S
 from ..errors import ConfigError, ModelError, NoFixedPointError
 from ..model.flight import restitution_of
 from ..runtime.config import ControlBlock, ExperimentConfig, ModelBlock, StrictModel
+from ..runtime.artifacts import RECORDED_LIVE
 from ..runtime.interrupts import Interrupted
 from ..virtual.display import Display, MouseSource, View, latency_summary
 from ..virtual.physics import Impact
@@ -403,6 +404,8 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
             "subject": config.subject, "condition": config.condition, "trial": list(trials)}),
     })
     options.record["racket_source"] = source.description
+    if config.racket == "mouse" or config.racket.startswith("lsl"):  # a person's racket
+        options.record[RECORDED_LIVE] = True  # a rerun into --out needs --force
     figures = draw(frames)
     caption_figures(figures, params, f"{len(kept)} trials x {config.trial_s:g} s, "
                     f"{source.description}, seed {config.seed}")

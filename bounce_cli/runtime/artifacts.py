@@ -265,6 +265,12 @@ def files_named_in(config: Any) -> set[Path]:
     return found
 
 
+#: run.json's key marking results recorded from a person or a live stream (``bounce
+#: virtual`` with the page's mouse or an LSL stream): never replaced without --force, since
+#: no rerun can make them again
+RECORDED_LIVE = "recorded_live"
+
+
 class RunDirectoryLock:
     """One run at a time in an output directory: an advisory lock (``flock``) on
     ``<out>/.bounce.lock``, held from the directory's check until the run has committed or
@@ -400,6 +406,11 @@ class RunDirectory:
                 f"(a run of bounce {previous.get('command', '?')}); "
                 "use --force to replace them or choose another --out"
             )
+        if previous.get(RECORDED_LIVE):  # a person's session: a rerun cannot make it again
+            raise OutputDirError(
+                f"--out {self.out_dir}: holds a session recorded live (bounce "
+                f"{previous.get('command', '?')}, {previous.get('racket_source', 'a person')}): "
+                "a rerun would replace it; choose another --out, or use --force to replace it")
 
     def release(self) -> None:
         """The run is over: the directory's lock is released (``commit`` does it)."""

@@ -223,3 +223,20 @@ def test_a_stop_signal_keeps_the_finished_trials(tmp_path, signum, how):
     assert list(manifest["trial"]) == [1]
     recording = pd.read_csv(out / "recordings" / "s1_virtual_t1.csv")
     assert recording["t_s"].iloc[-1] == pytest.approx(2.0)
+
+
+def test_a_session_recorded_live_is_not_replaced_without_force(tmp_path, cli, user_error):
+    """A person's session (the page's mouse, an LSL stream: run.json's recorded_live) cannot
+    be made again: a rerun into its folder needs --force (it was replaced silently)."""
+    out = tmp_path / "v"
+    args = ("virtual", "--headless", "--set", "trials=1", "--set", "trial_s=2", "--out", out)
+    assert cli(*args).exit_code == 0
+    assert "recorded_live" not in json.loads((out / "run.json").read_text())  # a sine racket
+    assert cli(*args).exit_code == 0  # a simulated session is made again: replaced
+    record = json.loads((out / "run.json").read_text())
+    record["recorded_live"] = True
+    (out / "run.json").write_text(json.dumps(record, indent=2) + "\n")
+    before = (out / "impacts.csv").read_bytes()
+    user_error(cli(*args), "holds a session recorded live", "--force")
+    assert (out / "impacts.csv").read_bytes() == before
+    assert cli(*args, "--force").exit_code == 0
