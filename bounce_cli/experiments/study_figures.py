@@ -108,7 +108,8 @@ def subject_styles(subjects: list[str]) -> dict[str, dict[str, Any]]:
     beyond ten subjects), then a new marker each time the colours run out."""
     from matplotlib import colormaps
 
-    colours = colormaps["tab10" if len(subjects) <= 10 else "tab20"].colors
+    cmap = colormaps["tab10" if len(subjects) <= 10 else "tab20"]
+    colours = [cmap(i) for i in range(cmap.N)]  # its 10 (20) listed colours
     markers = "o^sDvP*X<>"
     return {subject: {"color": colours[k % len(colours)],
                       "marker": markers[(k // len(colours)) % len(markers)]}

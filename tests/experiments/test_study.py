@@ -794,3 +794,12 @@ def test_a_perturbation_session_skips_acf_with_its_reason():
         impacts_frame(simulate_impacts(params, 0.01, 0.01, 2, 120, seed=2, alpha=(
             perturbation_schedule(2, 120, 5, 0.5, [(0.4, 0.45)], seed=1))), params),
         cfg, 0.5, 9.81, 1)
+
+
+@pytest.mark.parametrize("n", [6, 12, 45])
+def test_no_two_subjects_share_a_colour_and_marker(n):
+    """group_learning.png gave s1 and s6 one colour (a five-colour cycle)."""
+    from bounce_cli.experiments.study_figures import subject_styles
+
+    styles = subject_styles([f"s{i}" for i in range(n)])
+    assert len({(tuple(s["color"]), s["marker"]) for s in styles.values()}) == n
