@@ -318,8 +318,11 @@ def test_a_real_ctrl_c_mid_sweep_then_resume(cli, tmp_path):
     os.killpg(process.pid, signal.SIGINT)
     _, stderr = process.communicate(timeout=30)
     assert process.returncode == 130, stderr
-    assert stderr.strip() == "bounce: interrupted"
     kept = len(list((out / "points").glob("point-*.json")))
+    # one line, saying where the finished points are and how to go on
+    assert " ".join(stderr.split()) == (
+        f"bounce: interrupted ({kept} finished task{'s' if kept != 1 else ''} kept in "
+        f"{out / 'points'}/: --resume continues)")
     assert 1 <= kept < 24 and not (out / "sweep.csv").exists()
 
     resumed = subprocess.run([*command, "--resume"], capture_output=True, text=True,
