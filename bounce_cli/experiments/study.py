@@ -399,8 +399,7 @@ def analyse_unit(task: UnitTask) -> dict[str, Any]:
                            f"({g_source})")
             seed = unit_seed(cfg["seed"], unit)
             for name in cfg["analyses"]:
-                if name in NEEDS_PERTURBATIONS and not (
-                        "perturbed" in pooled.columns and pooled["perturbed"].astype(bool).any()):
+                if name in NEEDS_PERTURBATIONS and not has_perturbations(pooled):
                     continue  # nothing to align on: not a failure, the data have no perturbations
                 if name == "acf":
                     crowded = perturbations_leave_no_run(pooled, cfg, alpha, g, seed)
@@ -430,20 +429,25 @@ def analyse_unit(task: UnitTask) -> dict[str, Any]:
             "row": row, "summary": summary, "warnings": warnings, "failures": failures}
 
 
+def has_perturbations(pooled: pd.DataFrame) -> bool:
+    """Whether a unit's pooled impacts hold a perturbed impact."""
+    return "perturbed" in pooled.columns and bool(pooled["perturbed"].astype(bool).any())
+
+
 def perturbations_leave_no_run(pooled: pd.DataFrame, cfg: dict[str, Any], alpha: float,
                                g: float, seed: int) -> str:
     """Why ``acf`` cannot run on a unit whose perturbations leave no run of ``max_lag`` + 2
     consecutive unperturbed, settled impacts (the virtual set-up's every fifth impact: the
     stationary analyses need a session without perturbations); '' where a run exists, or
     where the data have no perturbations (a short trial is then acf's own error)."""
-    from ..data.impacts import read_impacts
     from .data_side import stationary_segments
 
-    if not ("perturbed" in pooled.columns and pooled["perturbed"].astype(bool).any()):
+    if not has_perturbations(pooled):
         return ""
     config = analysis_config("acf", cfg["settings"].get("acf", {}), alpha, g, seed, None)
     need = config.max_lag + 2
-    impacts = read_impacts(("unit", pooled), min_bounces=1)
+    # the pooled table is checked already (read or extracted): no second reading
+    impacts = Impacts(pooled, Path("unit"))
     if stationary_segments(impacts, config.data_analysis.settle_after_perturbation, need):
         return ""
     return (f"the perturbations leave no run of {need} consecutive unperturbed impacts "
