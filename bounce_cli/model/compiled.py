@@ -8,37 +8,50 @@ unconverged solves). Environment variable ``BOUNCE_KERNEL=numpy`` turns the kern
 
 Why it is faster, measured on the 2-core machine the benchmarks run on (``benchmarks/``):
 the Fig. 4 grid at 1000 x 1000 takes about 12.5 M impacts at about 5 evaluations of the gap
-each (``impact.first_impact_phase``, eq. 6), each with two transcendental functions (sin and
-cos of s/2). numpy evaluates them one array function after another (np.sin 10 ns and np.cos
-12.7 ns a value) plus some thirty array passes of arithmetic: 4.6 s for the grid on one core.
-Here all points of a tile advance in lock step as in numpy (an impact, then the safe steps
-of all points still flying), but each step is three tight loops: sin and cos of the same
-argument (LLVM joins them into one ``sincos``: about 12 ns for both), the step's arithmetic
-(about 4 ns a point) and the compaction of the points still flying: 1.5 s on one core,
-0.8 s on two threads. A per-point scalar loop of the same algorithm is slower (about 35 ns a
-step: the dependent chain sin -> G -> sqrt -> next s leaves the core idle), which is why a
-first numba trial barely beat numpy.
+each (``impact.first_impact_phase``, eq. 6), each with a sine and a cosine (of s/2). numpy
+evaluates them one array function after another plus some thirty array passes of
+arithmetic: 4.5 s for the grid on one core. Here all points of a tile advance in lock step
+as in numpy (an impact, then the safe steps of all points still flying), each step in two
+tight loops: one evaluation and one safe step of every flight, without a branch and without
+a call (the sine and cosine are ``trig.sincos``'s arithmetic, inlined; the stopping rule is
+selects), which LLVM vectorises (AVX-512 here: about 4.5 ns a flight, where the C library's
+``sin`` and ``cos`` alone took 24 ns), and the compaction of the flights still in the air
+(2.3 ns, also without a branch). An impact's own work (the new phase, its sine and cosine,
+eq. 5, the launch's first step) is split the same way into loops that vectorise and loops
+that compact. The grid takes 0.73 s on one thread (was 1.5 s with the C library's
+functions), 0.37 s on two.
 
 Bit-for-bit: every expression below is the numpy code's expression in the same order
-(IEEE double arithmetic, no fast-math, so no contraction into fused multiply-adds), the
-scalars derived from the parameters are computed once in Python by the numpy code's own
-expressions (``_constants``), and sin/cos/sqrt are the C library's, as numpy's are.
-The functions release the GIL: tiles of a grid run in threads (``parallel.Threads``).
+(IEEE double arithmetic, no fast-math, so no contraction into fused multiply-adds;
+vectorising changes no result, as each flight's arithmetic is its own), the scalars
+derived from the parameters are computed once in Python by the numpy code's own
+expressions (``_constants``), sqrt is correctly rounded everywhere, and sin and cos are
+``trig.sincos`` (the numpy code's classifier takes the same function, ``trig=sincos``),
+so the results do not depend on the C library either. The functions release the GIL:
+tiles of a grid run in threads (``parallel.Threads``).
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
+import sys
+from typing import Iterator
 
 import numba
 import numpy as np
 
 from .impact import LAST_STEP_LEVEL, POLISH_LIMIT, ROUNDING_LEVEL, STEP_FLOOR
 from .params import FixedPoint, ModelParams
+from .trig import (C1, C2, C3, C4, C5, C6, INV_PIO2, PIO2_1, PIO2_2, PIO2_2T, REDUCTION_LIMIT,
+                   ROUND_SHIFT, S1, S2, S3, S4, S5, S6, sincos)
 
 TWO_PI = 2.0 * math.pi
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
+#: small functions inlined into the loops that call them (in the numba IR: the loop stays
+#: one block of arithmetic that LLVM vectorises)
+_inline = numba.njit(inline="always", error_model="numpy")
 
 # indices into the constants array (see _constants)
 (_A, _W, _G, _AW, _NEG_G_W2, _NEG_G_WW, _BOUND, _W_SQ, _TWO_W_SQ, _TWO_A, _TWO_BOUND,
@@ -77,6 +90,35 @@ def _constants(params: ModelParams, fp: FixedPoint, tolerance: float,
     return c
 
 
+@_inline
+def _sincos(x):
+    """``trig.sincos`` of one float: the same expressions in the same order."""
+    n = (x * INV_PIO2 + ROUND_SHIFT) - ROUND_SHIFT
+    t = x - n * PIO2_1
+    w = n * PIO2_2
+    r = t - w
+    w = n * PIO2_2T - ((t - r) - w)
+    y0 = r - w
+    y1 = (r - y0) - w
+    z = y0 * y0
+    zz = z * z
+    poly = S2 + z * (S3 + z * S4) + z * zz * (S5 + z * S6)
+    v = z * y0
+    sin_y = y0 - ((z * (0.5 * y1 - v * poly) - y1) - v * S1)
+    poly = z * (C1 + z * (C2 + z * C3)) + zz * zz * (C4 + z * (C5 + z * C6))
+    half_z = 0.5 * z
+    one_minus = 1.0 - half_z
+    cos_y = one_minus + (((1.0 - one_minus) - half_z) + (z * poly - y0 * y1))
+    quadrant = n - 4.0 * np.floor(n * 0.25)
+    odd = (quadrant == 1.0) | (quadrant == 3.0)
+    sin_x = cos_y if odd else sin_y
+    cos_x = sin_y if odd else cos_y
+    sin_x = -sin_x if quadrant >= 2.0 else sin_x
+    cos_x = -cos_x if (quadrant == 1.0) | (quadrant == 2.0) else cos_x
+    inside = abs(x) <= REDUCTION_LIMIT
+    return (sin_x if inside else np.nan), (cos_x if inside else np.nan)
+
+
 @_jit
 def _launch(i, slope, curvature, idx, m, outcome, iterations):
     """can_fly of initial condition i from G'(0) and G''(0): queue it (idx[m] = i, returns
@@ -95,23 +137,25 @@ def _wrap(x):
     return x if 0.0 < x < TWO_PI else x % TWO_PI
 
 
-@_jit
+@_inline
 def _safe_step(s, G, d, terms, bound, two_bound):
     """One step of ``impact.first_contact`` for one flight at s, where the gap is G, its slope
     d, the sum of its terms' magnitudes ``terms`` and M = ``bound`` >= |G''| (``two_bound``
     = 2 M): (its root, NaN while not finished; the next s). The same stopping rule, with the
-    same constants, in the same order of operations."""
+    same constants, in the same order of operations; written as selects without a branch
+    (an expression a branch would skip is computed and not used), so that the loop around it
+    vectorises."""
     G_pos = G if (G >= 0.0 or G != G) else 0.0  # np.maximum(G, 0.0)
     step = (math.sqrt(G_pos * two_bound + d * d) + d) / bound
     s_next = s + step
-    if (G <= terms * ROUNDING_LEVEL) | (step <= STEP_FLOOR * s):  # converged: the polish
-        corr = G / d if d < 0.0 else 0.0
-        return (s - corr if abs(corr) < POLISH_LIMIT * max(s, -d / bound) else s), s_next
+    converged = (G <= terms * ROUNDING_LEVEL) | (step <= STEP_FLOOR * s)
+    corr = G / d  # the polish, where the crossing is transversal (d < 0)
+    corr = corr if d < 0.0 else 0.0
+    polished = s - corr if abs(corr) < POLISH_LIMIT * max(s, -d / bound) else s
     delta = -(bound * step + d)  # the last step
-    if ((delta > 0.0) & (two_bound * step * step <= LAST_STEP_LEVEL * s_next * delta)
-            & (-d <= bound * s_next)):
-        return s_next, s_next
-    return np.nan, s_next
+    last = ((delta > 0.0) & (two_bound * step * step <= LAST_STEP_LEVEL * s_next * delta)
+            & (-d <= bound * s_next))
+    return (polished if converged else (s_next if last else np.nan)), s_next
 
 
 @_jit
@@ -121,27 +165,26 @@ def _first_impact(vv, cos_th, sin_th, m, c, max_steps, hop, pos, S, D0, C, SN, V
     a, w, g = c[_A], c[_W], c[_G]
     two_a, bound, two_bound = c[_TWO_A], c[_BOUND], c[_TWO_BOUND]
     w_sq, two_w_sq = c[_W_SQ], c[_TWO_W_SQ]
-    q = 0
-    for j in range(m):
-        hop[j] = np.nan
+    for j in range(m):  # can_fly, and the first step of each state (vectorised)
         slope = (vv[j] - c[_AW] * cos_th[j]) / w
         curvature = c[_NEG_G_W2] + a * sin_th[j]
-        if slope > 0.0 or (slope == 0.0 and curvature > 0.0):  # can_fly
-            d0 = vv[j] / w - a * cos_th[j]
-            c0 = c[_NEG_G_WW] + a * sin_th[j]
-            d0_pos = d0 if (d0 >= 0.0 or d0 != d0) else 0.0  # np.maximum(d0, 0.0)
-            S[q] = (c0 / 2.0 + math.sqrt(c0 * c0 / 4.0 + two_a * d0_pos / 3.0)) / c[_A_3]
-            D0[q], C[q], SN[q], V[q], pos[q] = d0, cos_th[j], sin_th[j], vv[j], j
-            q += 1
+        d0 = vv[j] / w - a * cos_th[j]
+        c0 = c[_NEG_G_WW] + a * sin_th[j]
+        d0_pos = d0 if (d0 >= 0.0 or d0 != d0) else 0.0  # np.maximum(d0, 0.0)
+        SH[j] = (c0 / 2.0 + math.sqrt(c0 * c0 / 4.0 + two_a * d0_pos / 3.0)) / c[_A_3]
+        D0[j] = d0
+        CH[j] = 1.0 if (slope > 0.0) | ((slope == 0.0) & (curvature > 0.0)) else 0.0
+    q = 0
+    for j in range(m):  # the flights (without a branch)
+        hop[j] = np.nan
+        S[q], D0[q], C[q], SN[q], V[q], pos[q] = SH[j], D0[j], cos_th[j], sin_th[j], vv[j], j
+        q += CH[j] == 1.0
     for _ in range(max_steps):
         if q == 0:
             break
-        for j in range(q):  # sin and cos of one argument: one sincos call
-            half = S[j] / 2.0
-            SH[j] = math.sin(half)
-            CH[j] = math.cos(half)
-        for j in range(q):
-            s, sin_half, cos_half = S[j], SH[j], CH[j]
+        for j in range(q):  # one evaluation and one safe step of each flight (vectorised)
+            s = S[j]
+            sin_half, cos_half = _sincos(s / 2.0)
             cos_mid = C[j] * cos_half - SN[j] * sin_half
             sin_mid = SN[j] * cos_half + C[j] * sin_half
             racket_rise = two_a * cos_mid * sin_half
@@ -154,13 +197,11 @@ def _first_impact(vv, cos_th, sin_th, m, c, max_steps, hop, pos, S, D0, C, SN, V
             # NaN: not finished (a finished phase is finite)
             SH[j], CH[j] = _safe_step(s, G, d, terms, bound, two_bound)
         r = 0
-        for j in range(q):
-            if SH[j] == SH[j]:
-                hop[pos[j]] = SH[j]
-            else:
-                S[r], D0[r], C[r], SN[r], V[r], pos[r] = (CH[j], D0[j], C[j], SN[j], V[j],
-                                                          pos[j])
-                r += 1
+        for j in range(q):  # store the finished, compact the others (without a branch)
+            root, at = SH[j], pos[j]
+            hop[at] = root  # NaN while not finished: overwritten when it is
+            S[r], D0[r], C[r], SN[r], V[r], pos[r] = CH[j], D0[j], C[j], SN[j], V[j], at
+            r += root != root
         q = r
 
 
@@ -181,20 +222,22 @@ def _classify(theta0, v0, c, max_iterations, max_steps, outcome, iterations):
     for j in range(m):
         th[j] = _wrap(theta0[idx[j]])
         vv[j] = v0[idx[j]]
-        cos_th[j] = math.cos(th[j])
-        sin_th[j] = math.sin(th[j])
+        sin_th[j], cos_th[j] = _sincos(th[j])
     tol, v_fp, th_fp = c[_TOL], c[_V_FP], c[_TH_FP]
     for k in range(1, max_iterations + 1):
         if m == 0:
             break
         _first_impact(vv, cos_th, sin_th, m, c, max_steps, hop, pos, S, D0, C, SN, V, SH, CH)
+        # the impact's phase (wrapped: fmod, a call, in its own loop) and then its sin, cos
+        # and eq. 5 (a loop that vectorises) into the solver's scratch
+        for j in range(m):
+            S[j] = _wrap(th[j] + hop[j])
+        for j in range(m):
+            SN[j], C[j] = _sincos(S[j])
+            V[j] = c[_V_COEF] * C[j] - c[_ALPHA] * vv[j] + c[_G_ALPHA_W] * hop[j]
         p = 0
         for j in range(m):
-            h = hop[j]
-            t = _wrap(th[j] + h)
-            ct = math.cos(t)
-            st = math.sin(t)
-            v = c[_V_COEF] * ct - c[_ALPHA] * vv[j] + c[_G_ALPHA_W] * h
+            h, t, v, ct, st = hop[j], S[j], V[j], C[j], SN[j]
             if not h / w >= c[_MIN_HOP]:  # sticking (NaN hop: cannot leave the racket)
                 outcome[idx[j]] = 1
                 iterations[idx[j]] = k
@@ -262,7 +305,8 @@ def _classify_controlled(theta0, v0, tau0, k, max_iterations, max_steps, outcome
                 tau = np.nan  # no racket has a period <= 0
             w = TWO_PI / tau
             _flight_constants(a, w, g, c)
-            one[0, 0], one[1, 0], one[2, 0] = vv[j], math.cos(th[j]), math.sin(th[j])
+            one[0, 0] = vv[j]
+            one[2, 0], one[1, 0] = _sincos(th[j])
             _first_impact(one[0], one[1], one[2], 1, c, max_steps, one[3], pos, one[4],
                           one[5], one[6], one[7], one[8], one[9], one[10])
             h = one[3, 0]
@@ -312,20 +356,42 @@ def classify_controlled_arrays(theta0: np.ndarray, v0: np.ndarray, tau0: np.ndar
 
 
 def first_impact_phase(theta, v, params: ModelParams, *, max_steps: int) -> np.ndarray:
-    """``impact.first_impact_phase`` at one parameter point (flat arrays; for the tests that
-    hold the two solvers to the same bits)."""
+    """``impact.first_impact_phase(..., trig=trig.sincos)`` at one parameter point (flat
+    arrays; for the tests that hold the two solvers to the same bits)."""
     th = np.mod(np.asarray(theta, dtype=float).ravel(), TWO_PI)
     vv = np.ascontiguousarray(np.asarray(v, dtype=float).ravel())
     m = th.size
     fp = FixedPoint(v_m_s=math.nan, theta_rad=math.nan)
     hop, S, D0, C, SN, V, SH, CH = (np.empty(m) for _ in range(8))
-    _first_impact(vv, np.cos(th), np.sin(th), m, _constants(params, fp, 0.0, 0.0), max_steps,
+    sin_th, cos_th = sincos(th)
+    _first_impact(vv, cos_th, sin_th, m, _constants(params, fp, 0.0, 0.0), max_steps,
                   hop, np.empty(m, np.int64), S, D0, C, SN, V, SH, CH)
     return hop
 
 
 def load() -> None:
-    """Load (or compile) the kernel now: one call on one point."""
+    """Load (or compile) the kernel now: one call on one point (``numba_without_blas``)."""
     params = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.3, racket_period=0.92)
-    classify_arrays(np.array([1.0]), np.array([5.0]), params, params.fixed_point(), 1, 1e-3,
-                    1e-3, 10)
+    with numba_without_blas():
+        classify_arrays(np.array([1.0]), np.array([5.0]), params, params.fixed_point(), 1,
+                        1e-3, 1e-3, 10)
+
+
+@contextlib.contextmanager
+def numba_without_blas() -> Iterator[None]:
+    """numba's first dispatch in a process sets up its typing registries, and with them
+    looks for BLAS in ``scipy.linalg`` (for np.dot and np.linalg in compiled code), whose
+    import is about 0.08 s of a basin's start-up (a 1000^2 grid's whole command takes about
+    1.8 s). No kernel here calls BLAS: inside this block ``scipy.linalg`` cannot be
+    imported (numba then records that it has no BLAS, and would refuse np.dot in compiled
+    code with a clear error); afterwards it imports as usual. Nothing is blocked where
+    scipy.linalg is imported already or numba's registries are set up."""
+    if "scipy.linalg" in sys.modules:
+        yield
+        return
+    sys.modules["scipy.linalg"] = None  # type: ignore[assignment]  # import -> ImportError
+    try:
+        yield
+    finally:
+        if sys.modules.get("scipy.linalg", 0) is None:
+            del sys.modules["scipy.linalg"]

@@ -57,6 +57,7 @@ import numpy as np
 from .chatter import release_phase
 from .flight import simulate_with_racket
 from .impact import MAX_SAFE_STEPS, SinusoidGap, can_fly_at, first_contact, first_impact_phase
+from .trig import numpy_sincos, sincos
 from .linear import jacobian, racket_acceleration_at_impact_g
 from .maps import ClassifySettings, State, Step, iterate_map_orbit, iterate_states, velocity_map
 from .params import FixedPoint, ModelError, ModelParams, phase_difference
@@ -182,7 +183,9 @@ def controlled_step(theta, v, tau, params: ModelParams, controller: Controller, 
         return _step_switching_at_crossing(theta, v, tau, tau_next, params, alpha,
                                            velocity_noise, phase_noise, wrap)
     omega = 2.0 * np.pi / tau_next
-    hop = first_impact_phase(theta, v, params.racket_amplitude, omega, params.g)
+    # wrapped: the classifier's step, whose sine and cosine the compiled kernel repeats
+    hop = first_impact_phase(theta, v, params.racket_amplitude, omega, params.g,
+                             trig=sincos if wrap else numpy_sincos)
     theta_next = theta + hop + phase_noise
     if wrap:
         theta_next = np.mod(theta_next, TWO_PI)

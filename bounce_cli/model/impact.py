@@ -65,27 +65,33 @@ The gaps:
 
 Each evaluation of ``SinusoidGap`` takes two transcendental functions, sin and cos of s/2:
 sin and cos of theta + s/2 follow from them and the launch's sin theta, cos theta by the
-angle-addition formulas. Against a long-double reference on 2 x 10^5 random flights (Fig. 4's
+angle-addition formulas. Which sine and cosine is the caller's choice (``trig``): numpy's by
+default, ``trig.sincos`` in the basin's classifier (the same bits as its compiled kernel and
+on every machine). Against a long-double reference on 2 x 10^5 random flights (Fig. 4's
 racket, and a = 0.6 m), the mean error is 0.8-0.9 ulp, the error of the root finder this
 replaced (three transcendental functions, no last-step rule) 1.0-1.3 ulp; larger errors (up to
 a few hundred ulp) only where G' at the root is small (|G'| < 0.01: the root is
-ill-conditioned).
+ill-conditioned). With ``trig.sincos`` the errors are the same (4000 flights against a 40-digit
+root: mean 0.78 and 1.00 ulp at a = 0.3 and 0.6 m where |G'| >= 0.01, numpy's 0.77 and 0.99).
 """
 
 from __future__ import annotations
 
 import math
-from typing import Any, NamedTuple, Protocol
+from typing import Any, Callable, NamedTuple, Protocol
 
 import numpy as np
 
 from .params import ModelParams
+from .trig import numpy_sincos
 
 #: steps after which a state still not converged is reported as NaN (never seen in tests:
 #: typical flights converge in 10-30 steps)
 MAX_SAFE_STEPS = 2000
 
 _EPS = float(np.finfo(float).eps)
+#: a sine-and-cosine function: x -> (sin x, cos x) (``trig.numpy_sincos``, ``trig.sincos``)
+Trig = Callable[[Any], tuple[np.ndarray, np.ndarray]]
 #: the stopping rule (module docstring): converged where G <= ROUNDING_LEVEL * (sum of |G's
 #: terms|), or where the next safe step is below STEP_FLOOR * s
 ROUNDING_LEVEL = 8.0 * _EPS
@@ -254,9 +260,11 @@ class SinusoidGap:
     angular frequency w and g (each a float or one value per flight), and optionally a height
     h above the racket at s = 0 (None: 0, the arithmetic of an impact)."""
 
-    def __init__(self, cos_theta, sin_theta, v, slope0, amplitude, omega, g, height=None):
+    def __init__(self, cos_theta, sin_theta, v, slope0, amplitude, omega, g, height=None,
+                 trig: Trig = numpy_sincos):
         self.cos_th, self.sin_th, self.v, self.d0 = cos_theta, sin_theta, v, slope0
         self.a, self.w, self.g, self.height = amplitude, omega, g, height
+        self.trig = trig
         self.bound: Any = g / (omega * omega) + amplitude  # M >= |G''|
         # scalars of the evaluation, computed once (the values the array expressions give)
         self.w_sq: Any = omega * omega
@@ -267,17 +275,16 @@ class SinusoidGap:
         def part(x):
             return x if x is None or isinstance(x, float) else x[keep]
 
-        return SinusoidGap(*(part(x) for x in (self.cos_th, self.sin_th, self.v, self.d0,
-                                               self.a, self.w, self.g, self.height)))
+        cos_th, sin_th, v, d0, a, w, g, height = (part(x) for x in (
+            self.cos_th, self.sin_th, self.v, self.d0, self.a, self.w, self.g, self.height))
+        return SinusoidGap(cos_th, sin_th, v, d0, a, w, g, height, trig=self.trig)
 
     def at(self, s: np.ndarray) -> GapAt:
         """G, G' and the terms at s, written to compute each subexpression once
         (``model.compiled`` repeats these expressions in the same order)."""
         cos_th, sin_th, two_a = self.cos_th, self.sin_th, self.two_a
         tmp = np.empty_like(s)
-        half = s / 2.0
-        sin_half = np.sin(half)
-        cos_half = np.cos(half, out=half)
+        sin_half, cos_half = self.trig(s / 2.0)
         # cos and sin of theta + s/2 by the angle-addition formulas: two transcendental
         # functions per step instead of three (the same expressions as model.compiled)
         cos_mid = cos_th * cos_half
@@ -370,16 +377,19 @@ def next_impact_phase(theta, v, params: ModelParams, *, max_steps: int = MAX_SAF
 
 
 def first_impact_phase(theta, v, amplitude, omega, g, *, max_steps: int = MAX_SAFE_STEPS,
-                       cos_theta=None, sin_theta=None, released=None):
+                       cos_theta=None, sin_theta=None, released=None,
+                       trig: Trig = numpy_sincos):
     """``next_impact_phase`` with the racket's amplitude a (m), angular frequency w (rad/s)
     and gravity g (m/s^2) given directly, each a scalar or an array broadcasting with theta
     and v: one call serves states at different parameters (a sweep of the map, or a racket
     whose period changes from one flight to the next under period control). Scalars take the
     same arithmetic as arrays of one value, so results do not depend on the form.
 
-    ``cos_theta`` and ``sin_theta``, when given, are ``np.cos`` and ``np.sin`` of theta
-    wrapped to [0, 2 pi) (a caller that has them, the basin's classifier, saves two
-    transcendental functions per state); the result is the same to the last bit.
+    ``trig``: the sine and cosine the solve takes (of theta and of s/2 at each evaluation):
+    numpy's (``trig.numpy_sincos``), or the basin classifier's ``trig.sincos``, which the
+    compiled kernel repeats bit for bit. ``cos_theta`` and ``sin_theta``, when given, are
+    ``trig`` of theta wrapped to [0, 2 pi) (a caller that has them, the basin's classifier,
+    saves their evaluation); the result is the same to the last bit.
 
     ``released``: None, or a boolean (array broadcasting with theta) marking states that
     leave the racket at a release point of exact sticking (``model.chatter``): there the
@@ -402,8 +412,12 @@ def first_impact_phase(theta, v, amplitude, omega, g, *, max_steps: int = MAX_SA
     # racket parameters: plain floats when they are one value (the fast path), else arrays
     # that are compacted with the states
     a, w, g = (_per_flight(x) for x in given)
-    cos_th = np.cos(theta) if cos_theta is None else np.broadcast_to(cos_theta, shape).ravel()
-    sin_th = np.sin(theta) if sin_theta is None else np.broadcast_to(sin_theta, shape).ravel()
+    if cos_theta is None or sin_theta is None:
+        sin_th, cos_th = trig(theta)
+    if cos_theta is not None:
+        cos_th = np.broadcast_to(cos_theta, shape).ravel()
+    if sin_theta is not None:
+        sin_th = np.broadcast_to(sin_theta, shape).ravel()
 
     result = np.full(theta.shape, np.nan)
     slope = (v - a * w * cos_th) / w
@@ -424,6 +438,6 @@ def first_impact_phase(theta, v, amplitude, omega, g, *, max_steps: int = MAX_SA
         at_release = release[idx]
         d0 = np.where(at_release, 0.0, d0)
         s = np.where(at_release, 2.0 * cos_th, s)
-    result[idx] = first_contact(SinusoidGap(cos_th, sin_th, vv, d0, a, w, g), s,
+    result[idx] = first_contact(SinusoidGap(cos_th, sin_th, vv, d0, a, w, g, trig=trig), s,
                                 max_steps=max_steps)
     return result.reshape(shape)

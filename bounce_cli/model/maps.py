@@ -22,6 +22,7 @@ import numpy as np
 from .chatter import tail_is_summable
 from .impact import can_fly, first_impact_phase, next_impact_phase
 from .params import MIN_HOP_S, FixedPoint, ModelParams, phase_difference
+from .trig import sincos
 
 TWO_PI = 2.0 * math.pi
 
@@ -103,8 +104,8 @@ class State:
 
     theta: phase of the impact (rad; wrapped to [0, 2 pi) or unwrapped, as the caller asked);
     v: ball velocity just after it (m/s); extra: the map's own further arrays (the controlled
-    map's racket period; the passive map's cos(theta) of a wrapped state, a cache), which the
-    algorithms carry along without reading them."""
+    map's racket period; the passive map's cos and sin of a wrapped state's theta, a cache),
+    which the algorithms carry along without reading them."""
 
     theta: np.ndarray
     v: np.ndarray
@@ -152,10 +153,9 @@ class PassiveMap:
 
     ``target``: the fixed point the period-1 test compares with (default eqs. 7, 8; NaN: no
     state is near it, for parameter sweeps where eq. 8 has no solution). The arithmetic is
-    ``map_step``'s (unwrapped) and the basin classifier's (wrapped: cos(theta) computed once
-    per impact and shared by eq. 5 and the solver's start, the same values each would
-    compute), so every result is the one of the passive code before the protocol, bit for
-    bit."""
+    ``map_step``'s (unwrapped) and the basin classifier's (wrapped: cos and sin of theta by
+    ``trig.sincos`` once per impact, shared by eq. 5 and the solver's start, the values
+    ``first_impact_phase`` would compute), which ``model.compiled`` repeats bit for bit."""
 
     params: ModelParams
     target: FixedPoint = field(default=FixedPoint(math.nan, math.nan))
@@ -173,7 +173,8 @@ class PassiveMap:
         if not wrap:
             return State(theta0, v0)
         theta = np.mod(theta0, TWO_PI)
-        return State(theta, v0, (np.cos(theta),))
+        sin_th, cos_th = sincos(theta)
+        return State(theta, v0, (cos_th, sin_th))
 
     def launches(self, state: State) -> np.ndarray:
         return can_fly(state.theta, state.v, self.params)
@@ -183,13 +184,13 @@ class PassiveMap:
         if not wrap:
             out = map_step(state.theta, state.v, p)
             return Step(State(out.theta, out.v), out.hop_phase, out.hop_phase / p.omega)
-        th, cos_th = state.theta, state.extra[0]
+        th, (cos_th, sin_th) = state.theta, state.extra
         hop = first_impact_phase(th, state.v, p.racket_amplitude, p.omega, p.g,
-                                 cos_theta=cos_th, sin_theta=np.sin(th))
+                                 cos_theta=cos_th, sin_theta=sin_th, trig=sincos)
         th = np.mod(th + hop, TWO_PI)
-        cos_th = np.cos(th)
+        sin_th, cos_th = sincos(th)
         v = velocity_after_impact(th, state.v, hop, p, cos_theta_next=cos_th)
-        return Step(State(th, v, (cos_th,)), hop, hop / p.omega)
+        return Step(State(th, v, (cos_th, sin_th)), hop, hop / p.omega)
 
     def near_fixed_point(self, state: State, tolerance: float) -> np.ndarray:
         return ((np.abs(state.v - self.target.v_m_s) < tolerance)

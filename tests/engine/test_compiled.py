@@ -14,6 +14,7 @@ import pytest
 from bounce_cli.analysis import classify as classify_module
 from bounce_cli.analysis.classify import ClassifySettings, classify_batch, classify_grid
 from bounce_cli.model.impact import first_impact_phase
+from bounce_cli.model.trig import sincos
 from bounce_cli.model.params import ModelParams
 
 pytest.importorskip("numba")
@@ -53,7 +54,8 @@ def test_random_states_same_first_impact_phase_to_the_last_bit(params):
     theta = rng.uniform(-20.0, 20.0, 4000)  # unwrapped phases too
     racket_v = params.racket_amplitude * params.omega
     v = rng.uniform(-racket_v, 3.0 * racket_v + params.g * params.racket_period, 4000)
-    expected = first_impact_phase(theta, v, params.racket_amplitude, params.omega, params.g)
+    expected = first_impact_phase(theta, v, params.racket_amplitude, params.omega, params.g,
+                                  trig=sincos)
     got = compiled.first_impact_phase(theta, v, params, max_steps=2000)
     np.testing.assert_array_equal(got, expected)  # NaN where the ball cannot fly, in both
     assert np.isnan(expected).any() and np.isfinite(expected).any()
@@ -81,7 +83,7 @@ def test_edge_cases_grazing_launch_no_flight_unconverged_and_no_fixed_point():
     v = a * w * np.cos(theta)  # exactly the racket's velocity: grazing / cannot fly
     v[-1] += 1.0
     for max_steps in (1, 2, 3, 2000):  # unconverged solves are NaN in both
-        expected = first_impact_phase(theta, v, a, w, g, max_steps=max_steps)
+        expected = first_impact_phase(theta, v, a, w, g, max_steps=max_steps, trig=sincos)
         got = compiled.first_impact_phase(theta, v, params, max_steps=max_steps)
         np.testing.assert_array_equal(got, expected)
     # no period-1 orbit (amplitude below eq. 8's minimum): NaN target in both kernels
@@ -191,3 +193,25 @@ def test_controlled_basin_compiled_in_threads_is_one_process():
     assert not classify_module.has_compiled_kernel(cycle)
     assert_same(classify_grid(theta, v, cycle, kernel="numpy"),
                 classify_grid(theta, v, cycle, kernel="compiled"))
+
+
+def test_loading_the_kernel_leaves_scipy_linalg_importable():
+    """``compiled.load`` keeps numba's set-up from importing scipy.linalg (start-up time), and
+    scipy.linalg imports as usual afterwards; where it is imported already, nothing changes."""
+    import subprocess
+    import sys
+
+    code = ("import sys\n"
+            "from bounce_cli.model import compiled\n"
+            "compiled.load()\n"
+            "assert 'scipy.linalg' not in sys.modules\n"
+            "import scipy.linalg\n"
+            "assert scipy.linalg.solve([[2.0]], [4.0])[0] == 2.0\n"
+            "with compiled.numba_without_blas():\n"
+            "    import scipy.linalg as again\n"
+            "assert again is scipy.linalg\n"
+            "print('ok')\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "ok"

@@ -159,6 +159,7 @@ def test_each_state_is_solved_alone_to_the_last_bit(paper_params):
     takes cos/sin of the phase from a caller that has them: neither may change a bit of any
     state's result, whatever batch it shares (the basin's results depend on it)."""
     from bounce_cli.model.impact import first_impact_phase
+    from bounce_cli.model.trig import sincos
 
     rng = np.random.default_rng(11)
     n = 3000
@@ -174,6 +175,17 @@ def test_each_state_is_solved_alone_to_the_last_bit(paper_params):
     alone = np.array([first_impact_phase(t, x, a, w, g) for t, x in zip(theta[::37], v[::37])])
     np.testing.assert_array_equal(given, batch)
     np.testing.assert_array_equal(alone, batch[::37])
+    # the basin classifier's sine and cosine (trig.sincos), given or not, batch or alone
+    exact = first_impact_phase(theta, v, a, w, g, trig=sincos)
+    sin_theta, cos_theta = sincos(theta)
+    np.testing.assert_array_equal(
+        first_impact_phase(theta, v, a, w, g, trig=sincos, cos_theta=cos_theta,
+                           sin_theta=sin_theta), exact)
+    np.testing.assert_array_equal(
+        [first_impact_phase(t, x, a, w, g, trig=sincos) for t, x in zip(theta[::37], v[::37])],
+        exact[::37])
+    # the two sines differ in the last bit; hops near sticking keep their start's rounding
+    np.testing.assert_allclose(exact, batch, rtol=1e-12, atol=1e-13)
     assert np.isfinite(batch).all()
     # one state per parameter point (arrays of a), carried and compacted alike
     amplitudes = rng.uniform(0.1, 0.4, n)
