@@ -402,7 +402,9 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     """basin.png and basin_iterations.png, from basin.csv (or basin.npz / basin.parquet) and
     markers.csv only."""
     import pandas as pd
-    from matplotlib.colors import BoundaryNorm, ListedColormap
+    from matplotlib import colormaps
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import BoundaryNorm, ListedColormap, Normalize
     from matplotlib.patches import Patch
 
     from .plotting import integer_axis, new_figure
@@ -424,7 +426,9 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     ax = axes[0, 0]
     cmap = ListedColormap([OUTCOME_COLOURS[o] for o in EXACT_OUTCOMES])
     norm = BoundaryNorm(np.arange(len(EXACT_OUTCOMES) + 1) - 0.5, cmap.N)
-    ax.imshow(image, origin="lower", extent=extent, aspect="auto", cmap=cmap, norm=norm,
+    # the cells' colours as bytes (the pixels the colormap gives, cmap(norm(code))): the
+    # renderer then resamples bytes, not an array of floats (0.06 s less a figure)
+    ax.imshow(cmap(norm(image), bytes=True), origin="lower", extent=extent, aspect="auto",
               interpolation="nearest")
     _draw_markers(ax, markers, extent)
     handles = [Patch(facecolor=OUTCOME_COLOURS[o], edgecolor="0.3", label=labels[o])
@@ -441,10 +445,13 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     fig2, axes2 = new_figure(width=7.5, height=6.2)
     ax2 = axes2[0, 0]
     shaded = np.ma.masked_array(iters.astype(float), mask=below.astype(bool))
-    im = ax2.imshow(shaded, origin="lower", extent=extent, aspect="auto", cmap="viridis",
-                    interpolation="nearest")
+    # as bytes, as above: the colour bar's mappable (of the same colormap and range) stands
+    # for the image; masked cells (below the racket) transparent, the axes' black behind
+    scale = ScalarMappable(Normalize(shaded.min(), shaded.max()), colormaps["viridis"])
+    ax2.imshow(scale.to_rgba(shaded, bytes=True), origin="lower", extent=extent,
+               aspect="auto", interpolation="nearest")
     ax2.set_facecolor("black")
-    integer_axis(fig2.colorbar(im, ax=ax2, label="impacts until classified").ax, which="y")
+    integer_axis(fig2.colorbar(scale, ax=ax2, label="impacts until classified").ax, which="y")
     _draw_markers(ax2, markers, extent)
     fig2.legend(
         handles=[Patch(facecolor="black", label="below the racket")]

@@ -99,7 +99,8 @@ def test_draw_accepts_rows_in_any_order_and_subsamples_large_grids(monkeypatch):
                                       shuffled[name].axes[0].images[0].get_array())
     monkeypatch.setattr(basin, "MAX_IMAGE_CELLS", 8)
     small = basin.draw({"basin.csv": df, "markers.csv": markers})["basin.png"]
-    assert small.axes[0].images[0].get_array().shape == (7, 8)  # every 3rd v0, 4th theta0
+    # every 3rd v0, 4th theta0 (the cells drawn as RGBA bytes)
+    assert small.axes[0].images[0].get_array().shape == (7, 8, 4)
 
 
 def test_run_reports_progress_per_tile_and_summary():
@@ -264,3 +265,33 @@ def test_controlled_basin_cli_jobs_2_is_jobs_1(tmp_path, cli, monkeypatch, kerne
         assert (out1 / name).read_bytes() == (out2 / name).read_bytes(), name
     fractions = pd.read_csv(out1 / "fractions.csv").set_index("outcome")["count"]
     assert fractions["period1"] > 0 and fractions["sticking"] > 0
+
+
+def test_figures_colour_each_cell_by_its_outcome_and_impact_count():
+    """The cells are drawn as RGBA bytes: each outcome in its colour (white, grey, black as
+    in the paper), and the impact counts on viridis over their range with the cells below
+    the racket transparent (the axes' black shows), as the colour bar says."""
+    from matplotlib import colormaps
+    from matplotlib.colors import to_rgba
+
+    th, v = np.meshgrid(np.linspace(0, 360, 6), np.linspace(0, 10, 5))
+    codes = np.array(["below_racket", "sticking", "period1", "period1", "sticking"])
+    outcome = codes[np.arange(5)][:, None].repeat(6, axis=1)
+    iterations = np.where(outcome == "below_racket", 0, np.arange(30).reshape(5, 6) + 2)
+    df = pd.DataFrame({"theta0_rad": np.deg2rad(th.ravel()), "theta0_deg": th.ravel(),
+                       "v0_m_s": v.ravel(), "outcome": outcome.ravel(),
+                       "iterations": iterations.ravel()})
+    markers = pd.DataFrame({"marker": ["fixed_point"], "theta0_deg": [42.8], "v0_m_s": [4.5],
+                            "outcome": ["period1"], "iterations": [1]})
+    figures = basin.draw({"basin.csv": df, "markers.csv": markers})
+    cells = figures["basin.png"].axes[0].images[0].get_array()
+    for row, name in enumerate(codes):
+        expected = np.round(np.array(to_rgba(basin.OUTCOME_COLOURS[name])) * 255)
+        np.testing.assert_array_equal(cells[row], np.tile(expected, (6, 1)))
+    shaded = figures["basin_iterations.png"].axes[0].images[0].get_array()
+    assert (shaded[0, :, 3] == 0).all()  # below the racket: transparent
+    counts = iterations[1:].astype(float)
+    scaled = (counts - counts.min()) / (counts.max() - counts.min())
+    np.testing.assert_array_equal(shaded[1:], colormaps["viridis"](scaled, bytes=True))
+    colour_bar = figures["basin_iterations.png"].axes[1]
+    assert colour_bar.get_ylim() == (counts.min(), counts.max())
