@@ -169,7 +169,7 @@ def _sincos_array(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 #: arrays up to this size take ``_sincos_float`` value by value
-_FEW = 4
+_FEW = 8
 #: larger arrays go through in chunks of this size: their temporaries (32 kB) stay in the
 #: cache and in malloc's pool (at 32768 values a call would take 3 times as long)
 _CHUNK = 4096
