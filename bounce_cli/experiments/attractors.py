@@ -261,12 +261,25 @@ def run(config: AttractorsConfig, options: RunOptions) -> ExperimentResult:
         frames["continuation.csv"] = continue_fractions(config, options)
     figures = draw(frames, config)
     caption_figures(figures, params, f"{th.shape[1]} x {th.shape[0]} starts")
-    undecided = int(np.sum(labels == UNDECIDED))
-    summary = [f"{len(attractors)} attractor(s): " + ", ".join(
-        f"{a.name} {shares.get(a.index, (0, 0.0))[1]:.1%}" for a in attractors),
-        f"undecided: {undecided} of {labels.size} starts ({undecided / labels.size:.2%}); "
-        f"{finder.rediscovered} needed a second discovery"]
-    return ExperimentResult(frames=frames, figures=figures, summary=summary)
+    return ExperimentResult(frames=frames, figures=figures,
+                            summary=summary_lines(attractors, shares, labels.size,
+                                                  finder.rediscovered))
+
+
+def summary_lines(attractors, shares: dict[int, tuple], n_starts: int,
+                  rediscovered: int) -> list[str]:
+    """The run's summary: each attractor's share of the starts, then where the other starts
+    went (sticking, below the racket, resting, undecided), so that the shares add up to the
+    grid; and how many starts met none of the attractors the sampled discovery catalogued
+    and were followed further."""
+    count = (f"{len(attractors)} attractor{'s' if len(attractors) != 1 else ''}"
+             if attractors else "no attractor")
+    parts = [", ".join(f"{a.name} {shares.get(a.index, (0, 0.0))[1]:.1%}" for a in attractors),
+             ", ".join(f"{OTHER_LABELS[label].replace('_', ' ')} {shares[label][1]:.1%}"
+                       for label in sorted(OTHER_LABELS) if shares.get(label, (0,))[0])]
+    return [f"{count} in {n_starts:,} starts: " + "; ".join(p for p in parts if p),
+            f"second discovery: {rediscovered:,} starts (orbits that met no catalogued "
+            "attractor at first, followed further)"]
 
 
 def _measures(config: AttractorsConfig, finder: AttractorFinder, labels, theta_deg, v0):

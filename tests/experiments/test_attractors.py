@@ -53,7 +53,29 @@ def test_attractors_writes_every_table_and_section_3_s_classes_agree(tmp_path):
     # past eq. 14's flip (Gamma 1.5268) the period-1 orbit's basin has gone to period 2
     late = continued[continued["gamma"] == continued["gamma"].max()]
     assert "period-1" not in set(late["name"]) and "period-2" in set(late["name"])
-    assert "undecided: 0 of 3600" in " ".join(result.summary)
+    # every start accounted for in the summary, nothing undecided
+    assert result.summary[0].startswith("1 attractor in 3,600 starts: period-1 ")
+    assert "undecided" not in result.summary[0]
+
+
+def test_summary_accounts_for_every_start():
+    from bounce_cli.analysis.attractors import BELOW_RACKET, STICKING, UNDECIDED
+    from bounce_cli.experiments.attractors import summary_lines
+
+    class Found:
+        def __init__(self, index, name):
+            self.index, self.name = index, name
+
+    shares = {0: (30, 0.3), 1: (10, 0.1), STICKING: (50, 0.5), BELOW_RACKET: (6, 0.06),
+              UNDECIDED: (4, 0.04)}
+    lines = summary_lines([Found(0, "period-1"), Found(1, "period-2")], shares, 100, 7)
+    assert lines[0] == ("2 attractors in 100 starts: period-1 30.0%, period-2 10.0%; "
+                        "sticking 50.0%, below racket 6.0%, undecided 4.0%")
+    assert lines[1].startswith("second discovery: 7 starts")
+    none = summary_lines([], {STICKING: (100, 1.0), UNDECIDED: (0, 0.0)}, 100, 0)
+    assert none[0] == "no attractor in 100 starts: sticking 100.0%"
+    one = summary_lines([Found(0, "period-1")], {0: (100, 1.0)}, 100, 0)
+    assert one[0] == "1 attractor in 100 starts: period-1 100.0%"
 
 
 def test_a_grid_above_max_points_is_one_line(cli, user_error, tmp_path):
