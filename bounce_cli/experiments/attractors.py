@@ -124,10 +124,22 @@ class AttractorsConfig(ExperimentConfig):
 
     @model_validator(mode="after")
     def _size(self):
-        n = self.grid.theta0_deg.num * self.grid.v0_m_s.num
-        if n > self.max_points:
-            raise ValueError(f"the grid has {n} points, more than max_points = "
-                             f"{self.max_points}")
+        """The grid, and the continuation's grid at all its values, within max_points (a
+        guard against runs of hours), in a message that names the keys to change."""
+        th, v = self.grid.theta0_deg.num, self.grid.v0_m_s.num
+        if th * v > self.max_points:
+            raise ValueError(
+                f"grid.theta0_deg.num x grid.v0_m_s.num = {th} x {v} = {th * v:,} starts, "
+                f"more than max_points = {self.max_points:,}; reduce the grid or raise "
+                "max_points")
+        c = self.continuation
+        th, v = c.grid.theta0_deg.num, c.grid.v0_m_s.num
+        if c.num * th * v > self.max_points:
+            raise ValueError(
+                f"continuation.num x continuation.grid.theta0_deg.num x "
+                f"continuation.grid.v0_m_s.num = {c.num} x {th} x {v} = {c.num * th * v:,} "
+                f"starts, more than max_points = {self.max_points:,}; reduce them or raise "
+                "max_points")
         return self
 
 

@@ -80,5 +80,10 @@ def test_summary_accounts_for_every_start():
 
 def test_a_grid_above_max_points_is_one_line(cli, user_error, tmp_path):
     user_error(cli("attractors", "--set", "grid.theta0_deg.num=3000", "--set",
-                   "grid.v0_m_s.num=3000", "--out", tmp_path / "x"), "max_points")
+                   "grid.v0_m_s.num=3000", "--out", tmp_path / "x"),
+               "--set: grid.theta0_deg.num x grid.v0_m_s.num = 3000 x 3000")
+    assert not (tmp_path / "x").exists()
+    # the continuation's grid at all its values too (it ran for hours before)
+    user_error(cli("attractors", "--set", "continuation.grid.v0_m_s.num=3000",
+                   "--out", tmp_path / "x"), "17 x 90 x 3000 = 4,590,000 starts")
     assert not (tmp_path / "x").exists()
