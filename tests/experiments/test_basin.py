@@ -11,6 +11,18 @@ from bounce_cli.experiments import basin
 SMALL = ["--set", "grid.theta0_deg.num=40", "--set", "grid.v0_m_s.num=40"]
 
 
+def cell_codes(image) -> np.ndarray:
+    """The outcome codes (``basin.EXACT_OUTCOMES``) of basin.png's cells, drawn as RGBA bytes
+    in ``basin.OUTCOME_COLOURS`` (each colour one outcome's)."""
+    from matplotlib.colors import to_rgba
+
+    colours = np.array([np.round(np.array(to_rgba(basin.OUTCOME_COLOURS[o])) * 255)
+                        for o in basin.EXACT_OUTCOMES])
+    match = (np.asarray(image)[..., None, :] == colours).all(axis=-1)
+    assert (match.sum(axis=-1) == 1).all(), "a cell of no outcome's colour"
+    return match.argmax(axis=-1)
+
+
 @pytest.mark.slow
 def test_basin_cli_small_grid_jobs_independent(tmp_path, paper_params, cli):
     out1, out2 = tmp_path / "j1", tmp_path / "j2"
@@ -59,13 +71,13 @@ def test_basin_figures_redraw_from_csv(tmp_path, cli):
     image = figures["basin.png"].axes[0].images[0].get_array()
     df = frames["basin.csv"].sort_values(["v0_m_s", "theta0_deg"])
     codes = df.outcome.map({o: i for i, o in enumerate(basin.OUTCOMES)}).to_numpy()
-    np.testing.assert_array_equal(np.asarray(image), codes.reshape(40, 40))
+    np.testing.assert_array_equal(cell_codes(image), codes.reshape(40, 40))
     ax = figures["basin.png"].axes[0]
     assert "deg" in ax.get_xlabel() and "m/s" in ax.get_ylabel() and "Fig. 4" in ax.get_title()
     labels = [t.get_text() for t in figures["basin.png"].legends[0].get_texts()]
     assert any("undecided" in t for t in labels) and any("Fig. 3" in t for t in labels)
-    iters = figures["basin_iterations.png"].axes[0].images[0].get_array()
-    assert iters.max() == df.iterations.max()
+    colour_bar = figures["basin_iterations.png"].axes[1]  # the cells' scale
+    assert colour_bar.get_ylim()[1] == df.iterations.max()
 
 
 def test_basin_grid_limit_and_bad_grid_are_one_line_errors(tmp_path, cli):
@@ -155,7 +167,7 @@ def test_one_value_axes_run_and_draw(tmp_path, paper_params, cli):
         figures = basin.draw({n: pd.read_csv(out / n) for n in ("basin.csv", "markers.csv")})
         for fig in figures.values():
             image = np.asarray(fig.axes[0].images[0].get_array())
-            assert image.shape == shape
+            assert image.shape == (*shape, 4)  # RGBA bytes
             x0, x1, y0, y1 = fig.axes[0].images[0].get_extent()
             assert x1 > x0 and y1 > y0  # a one-value axis still has a width
     point = pd.read_csv(tmp_path / "point" / "basin.csv")
@@ -241,7 +253,7 @@ def test_exact_sticking_basin_separates_locked_orbits_with_their_period(tmp_path
                                                           "fractions.csv")}
     assert frames["markers.csv"].set_index("marker").loc["fig3_sticking", "outcome"] == "locked"
     figures = basin.draw(frames)
-    image = np.asarray(figures["basin.png"].axes[0].images[0].get_array())
+    image = cell_codes(figures["basin.png"].axes[0].images[0].get_array())
     assert (image == basin.EXACT_OUTCOMES.index("locked")).sum() == locked["count"]
     labels = [t.get_text() for t in figures["basin.png"].legends[0].get_texts()]
     assert any("locked" in t and "period 1 racket cycle" in t for t in labels)
