@@ -60,7 +60,8 @@ class LaunchBlock(StrictModel):
     t_s: float | None = Field(None, ge=0.0, description="state: the launch's time in the "
                               "trial instead, s (a replayed recording's first impact)")
     v_m_s: float = Field(4.5, description="state: the ball's velocity at launch, m/s")
-    height_m: float = Field(1.0, description="drop: the ball's height at rest, m")
+    height_m: float = Field(1.0, gt=0.0, description="drop: the ball's height at rest "
+                            "above the racket's mid-position, m")
 
 
 class PerturbationsBlock(StrictModel):

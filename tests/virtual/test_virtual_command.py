@@ -75,6 +75,13 @@ def test_replay_of_a_sine_recording_gives_the_sine_source_s_impacts(tmp_path):
     assert np.allclose(a["v_m_s"], b["v_m_s"], atol=1e-9)
 
 
+def test_a_drop_from_below_the_racket_is_one_line(cli, user_error, tmp_path):
+    user_error(cli("virtual", "--headless", "--set", "launch.mode=drop", "--set",
+                   "launch.height_m=-1", "--out", tmp_path / "x"),
+               "--set: launch.height_m", "greater than 0")
+    assert not (tmp_path / "x").exists()
+
+
 def test_an_unknown_racket_source_is_one_line(cli, user_error, tmp_path):
     user_error(cli("virtual", "--headless", "--racket", "lsl", "--out", tmp_path / "x"),
                "unknown source")
