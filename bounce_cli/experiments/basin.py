@@ -448,8 +448,10 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     # as bytes, as above: the colour bar's mappable (of the same colormap and range) stands
     # for the image; masked cells (below the racket) transparent, the axes' black behind
     scale = ScalarMappable(Normalize(shaded.min(), shaded.max()), colormaps["viridis"])
-    ax2.imshow(scale.to_rgba(shaded, bytes=True), origin="lower", extent=extent,
-               aspect="auto", interpolation="nearest")
+    cells = scale.to_rgba(shaded, bytes=True)
+    if scale.norm.vmin == scale.norm.vmax:  # one count everywhere: imshow's middle colour
+        cells[~np.ma.getmaskarray(shaded)] = scale.cmap(0.5, bytes=True)
+    ax2.imshow(cells, origin="lower", extent=extent, aspect="auto", interpolation="nearest")
     ax2.set_facecolor("black")
     integer_axis(fig2.colorbar(scale, ax=ax2, label="impacts until classified").ax, which="y")
     _draw_markers(ax2, markers, extent)

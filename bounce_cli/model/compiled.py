@@ -27,7 +27,9 @@ vectorising changes no result, as each flight's arithmetic is its own), the scal
 derived from the parameters are computed once in Python by the numpy code's own
 expressions (``_constants``), sqrt is correctly rounded everywhere, and sin and cos are
 ``trig.sincos`` (the numpy code's classifier takes the same function, ``trig=sincos``),
-so the results do not depend on the C library either. The functions release the GIL:
+so the results do not depend on the C library either -- except the launch test on the
+grid's theta0 (``_launch``: cos and sin of the unwrapped phase), where both routes call the
+C library's functions, as numpy does for float64. The functions release the GIL:
 tiles of a grid run in threads (``parallel.Threads``).
 """
 
@@ -43,8 +45,8 @@ import numpy as np
 
 from .impact import LAST_STEP_LEVEL, POLISH_LIMIT, ROUNDING_LEVEL, STEP_FLOOR
 from .params import FixedPoint, ModelParams
-from .trig import (C1, C2, C3, C4, C5, C6, INV_PIO2, PIO2_1, PIO2_2, PIO2_2T, REDUCTION_LIMIT,
-                   ROUND_SHIFT, S1, S2, S3, S4, S5, S6, sincos)
+from .trig import (C1, C2, C3, C4, C5, C6, INV_PIO2, PIO2_1, PIO2_2, PIO2_3, REDUCTION_LIMIT,
+                   PIO2_3T, ROUND_SHIFT, S1, S2, S3, S4, S5, S6, sincos)
 
 TWO_PI = 2.0 * math.pi
 
@@ -97,7 +99,11 @@ def _sincos(x):
     t = x - n * PIO2_1
     w = n * PIO2_2
     r = t - w
-    w = n * PIO2_2T - ((t - r) - w)
+    d2 = (t - r) - w
+    t = r
+    w = n * PIO2_3
+    r = t - w
+    w = n * PIO2_3T - (((t - r) - w) + d2)
     y0 = r - w
     y1 = (r - y0) - w
     z = y0 * y0
@@ -311,7 +317,8 @@ def _classify_controlled(theta0, v0, tau0, k, max_iterations, max_steps, outcome
                           one[5], one[6], one[7], one[8], one[9], one[10])
             h = one[3, 0]
             t = _wrap(th[j] + h)
-            v = k[_C_V_COEF_A] * w * math.cos(t) - k[_C_ALPHA] * vv[j] + k[_C_G_ALPHA] / w * h
+            cos_t = _sincos(t)[1]  # controlled_step's wrapped eq. 5: trig.sincos
+            v = k[_C_V_COEF_A] * w * cos_t - k[_C_ALPHA] * vv[j] + k[_C_G_ALPHA] / w * h
             if not h / w >= k[_C_MIN_HOP]:  # sticking (NaN: cannot leave, or no period)
                 outcome[idx[j]] = 1
                 iterations[idx[j]] = it

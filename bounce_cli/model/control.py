@@ -190,8 +190,10 @@ def controlled_step(theta, v, tau, params: ModelParams, controller: Controller, 
     if wrap:
         theta_next = np.mod(theta_next, TWO_PI)
     alpha = params.alpha if alpha is None else alpha
+    # wrapped, eq. 5 takes the classifier's cosine too (``PassiveMap.step``'s)
+    cos_next = sincos(theta_next)[1] if wrap else None
     v_next = velocity_map(theta_next, v, hop, alpha, params.racket_amplitude, omega,
-                          params.g) + velocity_noise
+                          params.g, cos_theta_next=cos_next) + velocity_noise
     return ControlledStep(theta=theta_next, v=v_next, tau=np.broadcast_to(tau_next, hop.shape),
                           hop_phase=hop, omega=np.broadcast_to(omega, hop.shape))
 

@@ -1,13 +1,15 @@
 """Sine and cosine of the basin classifier's phases, written out: the same bits everywhere.
 
-The basin's classifier (``analysis.classify``, ``bounce basin`` and ``bounce sweep``) takes
+The basin's classifier (``analysis.classify``: ``bounce basin``, ``bounce sweep``; and the
+wrapped steps ``bounce attractors`` follows its starts with) takes
 the sine and cosine of half the elapsed phase at every evaluation of the gap (``impact``) and
 those of every new impact phase: about 75 million pairs on the Fig. 4 grid, in two routes that
 must agree to the last bit (numpy, and the compiled kernel ``model.compiled``). ``sincos``
 computes both from one argument reduction with FreeBSD's fdlibm kernels (``k_sin.c``,
-``k_cos.c``; the reduction is ``e_rem_pio2.c``'s medium case, both stages always), in plain
-IEEE double arithmetic (additions, multiplications, ``floor``, no fused multiply-add, no
-table, no branch):
+``k_cos.c``; the reduction is ``e_rem_pio2.c``'s medium case with its three stages, each
+always taken, the second stage's rounding carried into the third), in plain IEEE double
+arithmetic (additions, multiplications, ``floor``, no fused multiply-add; in the compiled
+kernel no branch either: the quadrant's signs are selects):
 
 * the result is the same to the last bit whatever the CPU, the C library or numpy's SIMD
   dispatch (``np.sin`` and the C library's ``sin`` differ from one machine to the next in
@@ -17,13 +19,18 @@ table, no branch):
   route's bits, and LLVM vectorises its loops (no call into the C library): about 2 ns for
   both functions against about 24 ns for ``math.sin`` and ``math.cos``;
 * accuracy: below 0.76 ulp, 0.25 ulp on average, against 120-bit mpmath on random
-  arguments from 1e-6 to 1e5 (``tests/engine/test_trig.py``), as the C library's.
+  arguments from 1e-6 to 1e5, and at most 0.5 ulp at the doubles nearest to n pi/2 for n up
+  to 2^19, where the reduction cancels most (``tests/engine/test_trig.py``; with two stages
+  those reached 1.06 ulp).
 
 Everything else in the map (orbits, bifurcation diagrams, the data side's model) keeps
 numpy's functions (``numpy_sincos``): one route, and on a few values numpy's are faster.
+The classifier's launch test on the grid's (unwrapped) theta0 (``can_fly``) takes numpy's
+``cos`` and ``sin`` in the numpy route and the C library's in the compiled one, which numpy
+calls for float64: the one place where the routes' agreement rests on the C library.
 
-The reduction x = n pi/2 + (y0 + y1) is exact enough for |x| <= ``REDUCTION_LIMIT`` (2^19
-pi/2, about 8.2e5 rad: n pi/2's first 33-bit part times n stays exact); beyond it, and for
+The reduction x = n pi/2 + (y0 + y1) holds for |x| <= ``REDUCTION_LIMIT`` (2^19 pi/2, about
+8.2e5 rad: n times each 33-bit part of pi/2 stays exact); beyond it, and for
 inf and NaN, both functions give NaN. The map's arguments are wrapped phases (below 2 pi)
 and half the phase of one flight: 8.2e5 rad is a flight of 260,000 racket cycles.
 """
@@ -37,11 +44,12 @@ import numpy as np
 #: |x| above which ``sincos`` gives NaN (module docstring)
 REDUCTION_LIMIT = 2.0**19 * (math.pi / 2.0)
 
-# e_rem_pio2.c: 2/pi; pi/2 as 33 + 33 + 53 bits
+# e_rem_pio2.c: 2/pi; pi/2 as 33 + 33 + 33 + 53 bits
 INV_PIO2 = 6.36619772367581382433e-01
 PIO2_1 = 1.57079632673412561417e00
 PIO2_2 = 6.07710050630396597660e-11
-PIO2_2T = 2.02226624879595063154e-21
+PIO2_3 = 2.02226624871116645580e-21
+PIO2_3T = 8.47842766036889956997e-32
 #: 1.5 * 2^52: (x + ROUND_SHIFT) - ROUND_SHIFT rounds |x| < 2^51 to the nearest integer
 ROUND_SHIFT = 6755399441055744.0
 # k_sin.c and k_cos.c: the minimax polynomials on [-pi/4, pi/4]
@@ -62,7 +70,8 @@ def numpy_sincos(x) -> tuple[np.ndarray, np.ndarray]:
 
 
 def sincos(x) -> tuple[np.ndarray, np.ndarray]:
-    """(sin x, cos x) of an array (or a float) to within 0.76 ulp, the same bits everywhere.
+    """(sin x, cos x) of an array (or a float) to within 0.76 ulp (module docstring), the
+    same bits everywhere.
 
     Parameters
     ----------
@@ -101,7 +110,7 @@ def _sincos_array(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     outside = ~(np.abs(x) <= REDUCTION_LIMIT)
     if outside.any():  # computed at 0 there (no overflow warnings), then NaN
         x = np.where(outside, 0.0, x)
-    # x = n pi/2 + (y0 + y1), |y0| <= pi/4 (e_rem_pio2.c, medium case, both stages)
+    # x = n pi/2 + (y0 + y1), |y0| <= pi/4 (e_rem_pio2.c, medium case, three stages)
     n = x * INV_PIO2
     n += ROUND_SHIFT
     n -= ROUND_SHIFT
@@ -110,9 +119,16 @@ def _sincos_array(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     w = n * PIO2_2
     r = t - w
     t -= r
-    t -= w
-    w = n * PIO2_2T
-    w -= t  # w = n PIO2_2T - ((t - r) - w)
+    t -= w  # d2 = (t - r) - w: the rounding of r = t - w
+    d2 = t
+    w = n * PIO2_3
+    t = r - w
+    r -= t
+    r -= w  # d3 = (r - t) - w
+    r += d2
+    w = n * PIO2_3T
+    w -= r  # w = n PIO2_3T - (d3 + d2)
+    r = t
     y0 = r - w
     r -= y0
     r -= w
@@ -149,7 +165,7 @@ def _sincos_array(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     poly += part
     half_z = np.multiply(z, 0.5, out=zz)
     one_minus = np.subtract(1.0, half_z, out=v)
-    cos_y = np.subtract(1.0, one_minus, out=t)
+    cos_y = np.subtract(1.0, one_minus, out=d2)  # (t holds y1)
     cos_y -= half_z
     poly *= z
     poly -= np.multiply(y0, y1, out=part)
@@ -186,7 +202,11 @@ def _sincos_float(x: float) -> tuple[float, float]:
     t = x - n * PIO2_1
     w = n * PIO2_2
     r = t - w
-    w = n * PIO2_2T - ((t - r) - w)
+    d2 = (t - r) - w
+    t = r
+    w = n * PIO2_3
+    r = t - w
+    w = n * PIO2_3T - (((t - r) - w) + d2)
     y0 = r - w
     y1 = (r - y0) - w
     z = y0 * y0

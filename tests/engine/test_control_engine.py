@@ -7,6 +7,7 @@ controlled step against ballistics and the impact law; the fit against trials si
 known K and c.
 """
 
+import importlib.util
 import math
 
 import numpy as np
@@ -15,7 +16,7 @@ import pytest
 from bounce_cli.analysis.classify import ClassifySettings, classify_batch
 from bounce_cli.analysis.impulse import find_threshold, impulse_response_full
 from bounce_cli.model.linear import eigenvalues, jacobian, racket_acceleration_at_impact_g
-from bounce_cli.model.maps import iterate_map, map_step
+from bounce_cli.model.maps import PassiveMap, iterate_map, map_step
 from bounce_cli.model.params import ModelParams
 from bounce_cli.model.control import (
     PASSIVE,
@@ -71,6 +72,33 @@ def test_zero_gain_classification_is_the_passive_basin(paper_params):
     controlled = classify_controlled(theta, v, paper_params, PeriodController(0.0, 1.0))
     assert np.array_equal(passive.outcome, controlled.outcome)
     assert np.array_equal(passive.iterations, controlled.iterations)
+
+
+@pytest.mark.parametrize("params", [
+    ModelParams(alpha=0.8, g=9.81, racket_amplitude=0.6, racket_period=0.92),
+    ModelParams(alpha=0.765, g=10.66, racket_amplitude=0.37, racket_period=0.643),
+])
+def test_zero_gain_classifier_step_is_the_passive_one_bit_for_bit(params):
+    """The wrapped step (the classifier's: ``trig.sincos`` for the solve and for eq. 5) of a
+    controller with K = 0 is the passive map's to the last bit, and so are the basins, with
+    either kernel, where chaotic orbits would show any last-bit difference (eq. 5 once took
+    numpy's cosine here and sincos there: 269 of 6400 points differed)."""
+    rng = np.random.default_rng(9)
+    theta, v = rng.uniform(0, 2 * np.pi, 4000), rng.uniform(0, 10, 4000)
+    passive = PassiveMap.of(params, require_fixed_point=False)
+    state = passive.start(theta, v, wrap=True)
+    a = passive.step(state, wrap=True)
+    b = controlled_step(state.theta, state.v, params.racket_period, params,
+                        PeriodController(0.0, 1.0), wrap=True)
+    assert np.array_equal(a.state.theta, b.theta, equal_nan=True)
+    assert np.array_equal(a.state.v, b.v, equal_nan=True)
+    th, vv = np.meshgrid(np.linspace(0, 2 * np.pi, 50), np.linspace(0, 10, 50))
+    kernels = ["numpy"] + (["compiled"] if importlib.util.find_spec("numba") else [])
+    for kernel in kernels:
+        one = classify_batch(th, vv, params, kernel=kernel)
+        other = classify_controlled(th, vv, params, PeriodController(0.0, 1.0), kernel=kernel)
+        assert np.array_equal(one.outcome, other.outcome), kernel
+        assert np.array_equal(one.iterations, other.iterations), kernel
 
 
 def test_zero_gain_impulse_response_is_the_passive_one(paper_params):

@@ -39,6 +39,14 @@ def test_hard_arguments():
     sin_x, cos_x = sincos(near)
     assert ulp_errors(near, sin_x, mpmath.sin).max() < 0.76
     assert ulp_errors(near, cos_x, mpmath.cos).max() < 0.76
+    # the doubles nearest to n pi/2 where the reduction cancels most (n up to 2^19, found by
+    # an exact search): 1.06 ulp with two stages of the reduction, 0.5 with three
+    hardest = np.array([413441.44719405076, 229174.47169039503, 458348.94338079006,
+                        346205.081221922, 65359.26436160885, 490807.8786776798,
+                        245403.9393388399])
+    sin_h, cos_h = sincos(hardest)
+    assert ulp_errors(hardest, sin_h, mpmath.sin).max() < 0.51
+    assert ulp_errors(hardest, cos_h, mpmath.cos).max() < 0.51
     tiny = np.array([0.0, 1e-300, 5e-324, 1e-9, -1e-12])
     sin_t, cos_t = sincos(tiny)
     np.testing.assert_array_equal(sin_t, tiny)

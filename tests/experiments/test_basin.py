@@ -307,3 +307,9 @@ def test_figures_colour_each_cell_by_its_outcome_and_impact_count():
     np.testing.assert_array_equal(shaded[1:], colormaps["viridis"](scaled, bytes=True))
     colour_bar = figures["basin_iterations.png"].axes[1]
     assert colour_bar.get_ylim() == (counts.min(), counts.max())
+    # one count everywhere (every flight sticks at its first impact): imshow's middle colour
+    df["iterations"] = np.where(df["outcome"] == "below_racket", 0, 1)
+    shaded = basin.draw({"basin.csv": df, "markers.csv": markers})[
+        "basin_iterations.png"].axes[0].images[0].get_array()
+    np.testing.assert_array_equal(shaded[1:], np.broadcast_to(
+        colormaps["viridis"](0.5, bytes=True), shaded[1:].shape))
