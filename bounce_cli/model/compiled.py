@@ -45,8 +45,7 @@ import numpy as np
 
 from .impact import LAST_STEP_LEVEL, POLISH_LIMIT, ROUNDING_LEVEL, STEP_FLOOR
 from .params import FixedPoint, ModelParams
-from .trig import (C1, C2, C3, C4, C5, C6, INV_PIO2, PIO2_1, PIO2_2, PIO2_3, REDUCTION_LIMIT,
-                   PIO2_3T, ROUND_SHIFT, S1, S2, S3, S4, S5, S6, sincos)
+from .trig import sincos, sincos_of_float
 
 TWO_PI = 2.0 * math.pi
 
@@ -92,37 +91,8 @@ def _constants(params: ModelParams, fp: FixedPoint, tolerance: float,
     return c
 
 
-@_inline
-def _sincos(x):
-    """``trig.sincos`` of one float: the same expressions in the same order."""
-    n = (x * INV_PIO2 + ROUND_SHIFT) - ROUND_SHIFT
-    t = x - n * PIO2_1
-    w = n * PIO2_2
-    r = t - w
-    d2 = (t - r) - w
-    t = r
-    w = n * PIO2_3
-    r = t - w
-    w = n * PIO2_3T - (((t - r) - w) + d2)
-    y0 = r - w
-    y1 = (r - y0) - w
-    z = y0 * y0
-    zz = z * z
-    poly = S2 + z * (S3 + z * S4) + z * zz * (S5 + z * S6)
-    v = z * y0
-    sin_y = y0 - ((z * (0.5 * y1 - v * poly) - y1) - v * S1)
-    poly = z * (C1 + z * (C2 + z * C3)) + zz * zz * (C4 + z * (C5 + z * C6))
-    half_z = 0.5 * z
-    one_minus = 1.0 - half_z
-    cos_y = one_minus + (((1.0 - one_minus) - half_z) + (z * poly - y0 * y1))
-    quadrant = n - 4.0 * np.floor(n * 0.25)
-    odd = (quadrant == 1.0) | (quadrant == 3.0)
-    sin_x = cos_y if odd else sin_y
-    cos_x = sin_y if odd else cos_y
-    sin_x = -sin_x if quadrant >= 2.0 else sin_x
-    cos_x = -cos_x if (quadrant == 1.0) | (quadrant == 2.0) else cos_x
-    inside = abs(x) <= REDUCTION_LIMIT
-    return (sin_x if inside else np.nan), (cos_x if inside else np.nan)
+#: ``trig.sincos`` of one float, inlined into the loops that call it
+_sincos = _inline(sincos_of_float)
 
 
 @_jit

@@ -93,7 +93,7 @@ def sincos(x) -> tuple[np.ndarray, np.ndarray]:
     """
     x = np.asarray(x, dtype=float)
     if x.size <= _FEW:
-        pairs = [_sincos_float(float(xi)) for xi in x.flat]
+        pairs = [sincos_of_float(float(xi)) for xi in x.flat]
         return (np.array([p[0] for p in pairs]).reshape(x.shape),
                 np.array([p[1] for p in pairs]).reshape(x.shape))
     if x.size <= _CHUNK:
@@ -184,7 +184,7 @@ def _sincos_array(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return sin_x, cos_x
 
 
-#: arrays up to this size take ``_sincos_float`` value by value
+#: arrays up to this size take ``sincos_of_float`` value by value
 _FEW = 8
 #: larger arrays go through in chunks of this size: their temporaries (32 kB) stay in the
 #: cache and in malloc's pool (at 32768 values a call would take 3 times as long)
@@ -194,10 +194,12 @@ _SIN_SIGN = np.array([1.0, 1.0, -1.0, -1.0])
 _COS_SIGN = np.array([1.0, -1.0, -1.0, 1.0])
 
 
-def _sincos_float(x: float) -> tuple[float, float]:
-    """``sincos`` of one Python float: the same operations in the same order."""
-    if not abs(x) <= REDUCTION_LIMIT:
-        return math.nan, math.nan
+def sincos_of_float(x: float) -> tuple[float, float]:
+    """``sincos`` of one float: the same operations in the same order, written with selects
+    and no branch, so that ``model.compiled`` inlines this very function into loops that LLVM
+    vectorises (Python's floats and numba's doubles give the same bits)."""
+    inside = abs(x) <= REDUCTION_LIMIT
+    x = x if inside else 0.0  # computed at 0 there, then NaN (as the array path)
     n = (x * INV_PIO2 + ROUND_SHIFT) - ROUND_SHIFT
     t = x - n * PIO2_1
     w = n * PIO2_2
@@ -218,7 +220,11 @@ def _sincos_float(x: float) -> tuple[float, float]:
     half_z = 0.5 * z
     one_minus = 1.0 - half_z
     cos_y = one_minus + (((1.0 - one_minus) - half_z) + (z * poly - y0 * y1))
-    quadrant = int(n) & 3
-    if quadrant & 1:
-        sin_y, cos_y = cos_y, sin_y
-    return (-sin_y if quadrant & 2 else sin_y), (-cos_y if quadrant in (1, 2) else cos_y)
+    # the quadrant n mod 4: (sin, cos) = (s, c), (c, -s), (-s, -c), (-c, s)
+    quadrant = n - 4.0 * math.floor(n * 0.25)
+    odd = (quadrant == 1.0) | (quadrant == 3.0)
+    sin_x = cos_y if odd else sin_y
+    cos_x = sin_y if odd else cos_y
+    sin_x = -sin_x if quadrant >= 2.0 else sin_x
+    cos_x = -cos_x if (quadrant == 1.0) | (quadrant == 2.0) else cos_x
+    return (sin_x if inside else math.nan), (cos_x if inside else math.nan)
