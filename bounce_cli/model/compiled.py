@@ -263,9 +263,11 @@ def _classify_controlled(theta0, v0, tau0, k, max_iterations, max_steps, outcome
         w = TWO_PI / tau0[i]
         m = _launch(i, (v0[i] - a * w * math.cos(theta0[i])) / w,
                     -g / (w * w) + a * math.sin(theta0[i]), idx, m, outcome, iterations)
-    th, vv, tt = np.empty(m), np.empty(m), np.empty(m)
+    state = np.empty((5, m))  # theta, v, tau and theta's cos and sin
+    th, vv, tt, cos_th, sin_th = state[0], state[1], state[2], state[3], state[4]
     for j in range(m):
         th[j], vv[j], tt[j] = _wrap(theta0[idx[j]]), v0[idx[j]], tau0[idx[j]]
+        sin_th[j], cos_th[j] = _sincos(th[j])
     c = np.empty(_N_CONSTANTS)
     one = np.empty((11, 1))  # one state's v, cos, sin, its hop and the solver's scratch
     pos = np.empty(1, np.int64)
@@ -281,13 +283,12 @@ def _classify_controlled(theta0, v0, tau0, k, max_iterations, max_steps, outcome
                 tau = np.nan  # no racket has a period <= 0
             w = TWO_PI / tau
             _flight_constants(a, w, g, c)
-            one[0, 0] = vv[j]
-            one[2, 0], one[1, 0] = _sincos(th[j])
+            one[0, 0], one[1, 0], one[2, 0] = vv[j], cos_th[j], sin_th[j]
             _first_impact(one[0], one[1], one[2], 1, c, max_steps, one[3], pos, one[4],
                           one[5], one[6], one[7], one[8], one[9], one[10])
             h = one[3, 0]
             t = _wrap(th[j] + h)
-            cos_t = _sincos(t)[1]  # controlled_step's wrapped eq. 5: trig.sincos
+            sin_t, cos_t = _sincos(t)  # eq. 5's cosine, and the next solve's
             v = k[_C_V_COEF_A] * w * cos_t - k[_C_ALPHA] * vv[j] + k[_C_G_ALPHA] / w * h
             if not h / w >= k[_C_MIN_HOP]:  # sticking (NaN: cannot leave, or no period)
                 outcome[idx[j]] = 1
@@ -299,6 +300,7 @@ def _classify_controlled(theta0, v0, tau0, k, max_iterations, max_steps, outcome
                 iterations[idx[j]] = it
             else:
                 idx[p], th[p], vv[p], tt[p] = idx[j], t, v, tau
+                cos_th[p], sin_th[p] = cos_t, sin_t
                 p += 1
         m = p
     for j in range(m):
