@@ -12,6 +12,7 @@ from __future__ import annotations
 import subprocess
 import sys
 from contextlib import contextmanager
+from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
@@ -118,3 +119,25 @@ def test_the_command_line_imports_no_numpy_until_a_command_runs():
     shown = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                            check=True)
     assert shown.stdout.strip() == "[]"
+
+
+def test_a_suggested_command_names_the_run_directory_as_a_shell_takes_it(tmp_path):
+    import re
+    import shlex
+
+    out = tmp_path / "sessions of 'today'"  # a space and quotes: the path must be quoted
+    made = invoke("simulate-study", "--out", out, "--set", "subjects.count=1",
+                  "--set", "conditions=[{name: a}]", "--set", "trials=1",
+                  "--set", "duration_s=5")
+    assert made.exit_code == 0, made.output
+    suggested = re.search(r"run `(bounce study [^`]+)`", made.stderr)
+    assert suggested is not None, made.stderr
+    words = shlex.split(suggested.group(1))
+    assert words[:3] == ["bounce", "study", "--manifest"]
+    assert Path(words[3]) == out / "study.csv" and Path(words[3]).is_file()
+    assert "<out>" not in made.stderr
+    # run without a directory (the API without out): the placeholder is left as it is
+    unwritten = bounce_cli.run("simulate-study", set={"subjects.count": 1, "trials": 1,
+                                                      "duration_s": 5,
+                                                      "conditions": [{"name": "a"}]})
+    assert "--manifest <out>/study.csv" in unwritten.summary[0]

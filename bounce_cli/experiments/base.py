@@ -39,7 +39,9 @@ produces. Parallel work goes through
 
 from __future__ import annotations
 
+import shlex
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Protocol
 
 from ..runtime.config import ExperimentConfig
@@ -124,6 +126,12 @@ class RunOptions:
     figures: bool = True
 
 
+#: where a summary line names the run directory, which ``run`` does not know (it writes
+#: nothing): ``f"run `bounce study --manifest {OUT_DIR}/study.csv`"``; a run that is written
+#: shows the directory there (:meth:`ExperimentResult.name_out_dir`)
+OUT_DIR = "<out>"
+
+
 @dataclass
 class ExperimentResult:
     """Tables (file name -> DataFrame), figures (file name -> matplotlib Figure), a few
@@ -136,6 +144,13 @@ class ExperimentResult:
     summary: list[str] = field(default_factory=list)
     files: dict[str, bytes] = field(default_factory=dict)
     exit_code: int = 0
+
+    def name_out_dir(self, out_dir: Path) -> None:
+        """The summary's :data:`OUT_DIR` replaced by ``out_dir`` as a shell takes it (quoted
+        where it holds a space or other special characters), so that a command it suggests
+        can be pasted as printed."""
+        shown = shlex.quote(str(out_dir))
+        self.summary = [line.replace(OUT_DIR, shown) for line in self.summary]
 
 
 @dataclass(frozen=True)

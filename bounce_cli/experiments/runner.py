@@ -412,6 +412,7 @@ def execute(entry: Entry | str, config: Path | str | ExperimentConfig | None = N
         if run_dir is None:
             return Execution(result, cfg)
         written = write_result(run_dir, result, agrees)
+        result.name_out_dir(run_dir.out_dir)
         if checkpoints is not None:
             checkpoints.remove()
     except BaseException as exc:

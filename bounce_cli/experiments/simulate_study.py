@@ -29,7 +29,7 @@ from pydantic import Field, ValidationError, model_validator
 from ..runtime.config import ConfigError, ExperimentConfig, ModelBlock, StrictModel
 from ..model.linear import racket_amplitude_for_ac, stable_ac_range_g
 from ..model.params import ModelError
-from .base import Experiment, ExperimentResult, RunOptions
+from .base import OUT_DIR, Experiment, ExperimentResult, RunOptions
 from .simulate_recording import PerturbationBlock, RacketBlock, RecordingConfig, session_frames
 
 
@@ -215,7 +215,7 @@ def run(config: SimulateStudyConfig, options: RunOptions) -> ExperimentResult:
                + (f", {config.damaged_files} damaged" if config.damaged_files else "")
                + (f"; {sum(restarts)} trial(s) restarted after the ball fell into sticking"
                   if sum(restarts) else "")
-               + "; run `bounce study --manifest <out>/study.csv`"]
+               + f"; run `bounce study --manifest {OUT_DIR}/study.csv`"]
     return ExperimentResult(frames=frames, figures={}, summary=summary)
 
 

@@ -44,7 +44,7 @@ from ..virtual.physics import Impact
 from ..virtual.session import Launch, Paced, Schedule, TrialRecord, run_trial
 from ..virtual.sources import LslSettings, open_source
 from ..virtual.subject import DEFAULT_GAIN, SubjectControl
-from .base import Experiment, ExperimentResult, RunOptions
+from .base import OUT_DIR, Experiment, ExperimentResult, RunOptions
 from .plotting import caption_figures, draw_fig2, publication_style
 
 
@@ -415,7 +415,7 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
         f"{len(kept)} trial(s) x {config.trial_s:g} s ({source.description}): "
         f"{len(every_impact)} impacts ({sum(bool(i.perturbed) for i in every_impact)} perturbed"
         + (f", {stuck} left the ball on the racket" if stuck else "") + f"), {len(gaps)} "
-        f"stream gap(s){stopped}; run `bounce study --manifest <out>/study.csv`"]
+        f"stream gap(s){stopped}; run `bounce study --manifest {OUT_DIR}/study.csv`"]
     if display is not None:
         summary.append(latency_summary(display.latency) + " (latency.csv)")
     return ExperimentResult(frames=frames, figures=figures, summary=summary,
