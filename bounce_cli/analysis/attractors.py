@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import builtins
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable
 
 import numpy as np
@@ -50,7 +50,7 @@ from ..model.chatter import iterate_exact_orbit, release_fate, release_phase
 from ..model.maps import PassiveMap, State
 from ..model.params import MIN_HOP_S, ModelError, ModelParams, phase_difference
 from .bifurcation import SweepSettings, detect_period, iterate_sweep, sweep_parameters
-from .classify import DEFAULT_TILE_POINTS, tile_slices
+from .classify import DEFAULT_TILE_POINTS, compiled_kernel_available, tile_slices
 from .continuation import evaluate_orbit
 
 TWO_PI = 2.0 * math.pi
@@ -520,7 +520,11 @@ class AttractorFinder:
 
     def __init__(self, params: ModelParams, settings: RecurrenceSettings = RecurrenceSettings()):
         self.params, self.settings = params, settings
-        self.map = PassiveMap.of(params, require_fixed_point=False)
+        # the first-impact solves compiled where numba is installed (the same bits): the
+        # discovery follows a few hundred orbits for thousands of impacts, where numpy's
+        # cost is its calls (at a chaotic point 20-40x the solve's arithmetic)
+        self.map = replace(PassiveMap.of(params, require_fixed_point=False),
+                           compiled_hops=compiled_kernel_available())
         self.catalogue = _Catalogue(params, settings, Tessellation.of(settings))
         self.stick = _stick_label(self.catalogue, self.map)
         self.rediscovered = 0

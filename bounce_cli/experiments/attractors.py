@@ -204,38 +204,51 @@ def _same(a: Attractor, b: Attractor) -> bool:
 
 def continue_fractions(config: AttractorsConfig, options: RunOptions) -> pd.DataFrame:
     """The shares of every attractor at each parameter value, an attractor continued from one
-    value to the next where ``_same`` holds (its ``branch`` number kept)."""
+    value to the next where ``_same`` holds (its ``branch`` number kept). The values are
+    independent tasks (``continuation_point``) on ``options.jobs`` workers; the branches are
+    matched here, in the values' order, so the table does not depend on the workers."""
     c = config.continuation
     values = np.linspace(c.start, c.stop, c.num)
-    th, vv = np.meshgrid(np.radians(c.grid.theta0_deg.values()), c.grid.v0_m_s.values())
-    settings = config.recurrence.settings()
     rows: list[dict] = []
     previous: list[tuple[int, Attractor]] = []
     branches = 0
     options.progress.start(len(values), "continuation")
-    for value in values:
-        params = parameter_point(config.params, c.parameter, float(value))
-        finder = AttractorFinder(params, settings)
-        rng = np.random.default_rng(config.measures.seed)
-        pick = rng.choice(th.size, size=min(settings.sample, th.size), replace=False)
-        finder.discover(th.ravel()[pick], vv.ravel()[pick])
-        labels, _ = finder.label(th, vv)
-        current: list[tuple[int, Attractor]] = []
-        for a in finder.attractors:
-            match = next((b for b, old in previous if _same(old, a)), None)
-            if match is None:
-                match, branches = branches, branches + 1
-            current.append((match, a))
-        branch_of = {a.index: b for b, a in current}
-        for f in basin_fractions(labels):
-            rows.append({c.parameter: float(value), "label": f.label,
-                         "branch": branch_of.get(f.label, f.label),
-                         "name": label_name(f.label, finder.attractors), "fraction": f.fraction,
-                         "low": f.low, "high": f.high})
-        previous = current
-        options.progress.advance(1)
+    tasks = [(config, float(value)) for value in values]
+    with parallel.executor(min(options.jobs, len(tasks)), options.scheduler) as executor:
+        for value, (attractors, fractions) in zip(values, executor.map(continuation_point,
+                                                                      tasks)):
+            current: list[tuple[int, Attractor]] = []
+            for a in attractors:
+                match = next((b for b, old in previous if _same(old, a)), None)
+                if match is None:
+                    match, branches = branches, branches + 1
+                current.append((match, a))
+            branch_of = {a.index: b for b, a in current}
+            for f in fractions:
+                rows.append({c.parameter: float(value), "label": f.label,
+                             "branch": branch_of.get(f.label, f.label),
+                             "name": label_name(f.label, attractors), "fraction": f.fraction,
+                             "low": f.low, "high": f.high})
+            previous = current
+            options.progress.advance(1)
     return pd.DataFrame(rows, columns=[c.parameter, "label", "branch", "name", "fraction",
                                        "low", "high"])
+
+
+def continuation_point(task: tuple[AttractorsConfig, float]):
+    """One value of the continuation (a worker's task): the attractors found on
+    ``continuation.grid`` at it (discovery on the sample ``measures.seed`` draws, then the
+    labelling) and each label's share, ``basin_fractions``."""
+    config, value = task
+    c = config.continuation
+    th, vv = np.meshgrid(np.radians(c.grid.theta0_deg.values()), c.grid.v0_m_s.values())
+    settings = config.recurrence.settings()
+    finder = AttractorFinder(parameter_point(config.params, c.parameter, value), settings)
+    rng = np.random.default_rng(config.measures.seed)
+    pick = rng.choice(th.size, size=min(settings.sample, th.size), replace=False)
+    finder.discover(th.ravel()[pick], vv.ravel()[pick])
+    labels, _ = finder.label(th, vv)
+    return finder.attractors, basin_fractions(labels)
 
 
 # -- the run ------------------------------------------------------------------------------------

@@ -36,6 +36,7 @@ tiles of a grid run in threads (``parallel.Threads``).
 from __future__ import annotations
 
 import contextlib
+import functools
 import math
 import sys
 from typing import Iterator
@@ -338,14 +339,34 @@ def first_impact_phase(theta, v, params: ModelParams, *, max_steps: int) -> np.n
     """``impact.first_impact_phase(..., trig=trig.sincos)`` at one parameter point (flat
     arrays; for the tests that hold the two solvers to the same bits)."""
     th = np.mod(np.asarray(theta, dtype=float).ravel(), TWO_PI)
-    vv = np.ascontiguousarray(np.asarray(v, dtype=float).ravel())
-    m = th.size
-    fp = FixedPoint(v_m_s=math.nan, theta_rad=math.nan)
-    hop, S, D0, C, SN, V, SH, CH = (np.empty(m) for _ in range(8))
     sin_th, cos_th = sincos(th)
-    _first_impact(vv, cos_th, sin_th, m, _constants(params, fp, 0.0, 0.0), max_steps,
+    return first_impact_phase_of(v, cos_th, sin_th, params, max_steps=max_steps)
+
+
+def first_impact_phase_of(v, cos_theta, sin_theta, params: ModelParams, *,
+                          max_steps: int) -> np.ndarray:
+    """``impact.first_impact_phase(theta, v, ..., cos_theta=, sin_theta=, trig=trig.sincos)``
+    of states whose cos and sin of the wrapped phase are known (``maps.PassiveMap``'s wrapped
+    states), the same bits, at one parameter point: the map's step at compiled speed, for an
+    iteration of a few hundred orbits over thousands of impacts (``analysis.attractors``),
+    where numpy's cost is its calls. Arrays broadcast; the result has their shape."""
+    vv, cos_th, sin_th = (np.ascontiguousarray(x, dtype=float) for x in
+                          np.broadcast_arrays(v, cos_theta, sin_theta))
+    shape = vv.shape
+    vv, cos_th, sin_th = vv.ravel(), cos_th.ravel(), sin_th.ravel()
+    m = vv.size
+    hop, S, D0, C, SN, V, SH, CH = (np.empty(m) for _ in range(8))
+    _first_impact(vv, cos_th, sin_th, m, _solver_constants(params), max_steps,
                   hop, np.empty(m, np.int64), S, D0, C, SN, V, SH, CH)
-    return hop
+    return hop.reshape(shape)
+
+
+@functools.lru_cache(maxsize=64)
+def _solver_constants(params: ModelParams) -> np.ndarray:
+    """``_constants`` of the solver alone (no fixed point, tolerance or hop), once per
+    parameter point, shared by the calls (which only read it: a read-only array would be
+    another type to numba, compiled anew)."""
+    return _constants(params, FixedPoint(v_m_s=math.nan, theta_rad=math.nan), 0.0, 0.0)
 
 
 def load() -> None:

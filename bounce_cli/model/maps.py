@@ -20,7 +20,7 @@ from typing import Protocol
 import numpy as np
 
 from .chatter import tail_is_summable
-from .impact import can_fly, first_impact_phase, next_impact_phase
+from .impact import MAX_SAFE_STEPS, can_fly, first_impact_phase, next_impact_phase
 from .params import MIN_HOP_S, FixedPoint, ModelParams, phase_difference
 from .trig import sincos
 
@@ -155,10 +155,14 @@ class PassiveMap:
     state is near it, for parameter sweeps where eq. 8 has no solution). The arithmetic is
     ``map_step``'s (unwrapped) and the basin classifier's (wrapped: cos and sin of theta by
     ``trig.sincos`` once per impact, shared by eq. 5 and the solver's start, the values
-    ``first_impact_phase`` would compute), which ``model.compiled`` repeats bit for bit."""
+    ``first_impact_phase`` would compute), which ``model.compiled`` repeats bit for bit.
+    ``compiled_hops``: a wrapped step's first-impact solve by that compiled kernel
+    (``compiled.first_impact_phase_of``, needs numba), the same bits at a fraction of the
+    cost on a few hundred states (numpy's cost there is its calls, not its arithmetic)."""
 
     params: ModelParams
     target: FixedPoint = field(default=FixedPoint(math.nan, math.nan))
+    compiled_hops: bool = False
 
     @classmethod
     def of(cls, params: ModelParams, *, require_fixed_point: bool = True) -> "PassiveMap":
@@ -185,8 +189,13 @@ class PassiveMap:
             out = map_step(state.theta, state.v, p)
             return Step(State(out.theta, out.v), out.hop_phase, out.hop_phase / p.omega)
         th, (cos_th, sin_th) = state.theta, state.extra
-        hop = first_impact_phase(th, state.v, p.racket_amplitude, p.omega, p.g,
-                                 cos_theta=cos_th, sin_theta=sin_th, trig=sincos)
+        if self.compiled_hops:
+            from .compiled import first_impact_phase_of
+
+            hop = first_impact_phase_of(state.v, cos_th, sin_th, p, max_steps=MAX_SAFE_STEPS)
+        else:
+            hop = first_impact_phase(th, state.v, p.racket_amplitude, p.omega, p.g,
+                                     cos_theta=cos_th, sin_theta=sin_th, trig=sincos)
         th = np.mod(th + hop, TWO_PI)
         sin_th, cos_th = sincos(th)
         v = velocity_after_impact(th, state.v, hop, p, cos_theta_next=cos_th)

@@ -215,3 +215,58 @@ def test_loading_the_kernel_leaves_scipy_linalg_importable():
                          timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "ok"
+
+
+@pytest.mark.parametrize("params", PARAMETERS)
+def test_the_map_s_wrapped_step_with_compiled_hops_is_numpy_s_to_the_last_bit(params):
+    # the attractors' iteration (PassiveMap.step, wrapped): 200 impacts of 300 random states,
+    # each state's phase, velocity, cos, sin and hop the same bits by either solver; states
+    # that cannot fly (NaN hop) are dropped as the callers drop them
+    from dataclasses import replace
+
+    from bounce_cli.model.maps import PassiveMap
+
+    rng = np.random.default_rng(5)
+    racket_v = params.racket_amplitude * params.omega
+    theta = rng.uniform(0.0, 2.0 * np.pi, 300)
+    v = rng.uniform(racket_v, 3.0 * racket_v + params.g * params.racket_period, 300)
+    plain = PassiveMap.of(params, require_fixed_point=False)
+    fast = replace(plain, compiled_hops=True)
+    a = plain.start(theta, v, wrap=True)
+    b = fast.start(theta, v, wrap=True)
+    flown = 0
+    for _ in range(200):
+        step_a, step_b = plain.step(a, wrap=True), fast.step(b, wrap=True)
+        np.testing.assert_array_equal(step_b.hop_phase, step_a.hop_phase)
+        for x, y in ((step_a.state.theta, step_b.state.theta), (step_a.state.v, step_b.state.v),
+                     *zip(step_a.state.extra, step_b.state.extra)):
+            np.testing.assert_array_equal(y, x)
+        keep = np.isfinite(step_a.hop_phase)
+        flown += int(keep.sum())
+        a, b = step_a.state.take(keep), step_b.state.take(keep)
+        if a.theta.size == 0:
+            break
+    assert flown > 300  # the states flew, not only failed to
+
+
+def test_attractors_label_the_same_with_and_without_the_compiled_hops(monkeypatch):
+    # a chaotic point (alpha 0.85, Gamma 1.8: no periodic attractor, long recurrences): the
+    # labels and impact counts do not depend on the solver
+    from bounce_cli.analysis.attractors import AttractorFinder, RecurrenceSettings
+    from bounce_cli.analysis.bifurcation import parameter_point
+
+    params = parameter_point(ModelParams(alpha=0.85, g=9.81, racket_amplitude=0.30,
+                                         racket_period=0.92), "gamma", 1.8)
+    settings = RecurrenceSettings(transient=200, window=64, max_period=16, sample=20,
+                                  recurrence=30, recurrence_impacts=2000, max_impacts=100)
+    theta, v = np.meshgrid(np.linspace(0.0, 2.0 * np.pi, 12), np.linspace(0.0, 10.0, 12))
+    found = {}
+    for kernel in ("auto", "numpy"):
+        monkeypatch.setenv("BOUNCE_KERNEL", kernel)
+        finder = AttractorFinder(params, settings)
+        assert finder.map.compiled_hops == (kernel == "auto")
+        finder.discover(theta.ravel()[::7], v.ravel()[::7])
+        found[kernel] = (*finder.label(theta, v), [a.kind for a in finder.attractors])
+    np.testing.assert_array_equal(found["auto"][0], found["numpy"][0])
+    np.testing.assert_array_equal(found["auto"][1], found["numpy"][1])
+    assert found["auto"][2] == found["numpy"][2]

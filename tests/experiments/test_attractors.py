@@ -87,3 +87,23 @@ def test_a_grid_above_max_points_is_one_line(cli, user_error, tmp_path):
     user_error(cli("attractors", "--set", "continuation.grid.v0_m_s.num=3000",
                    "--out", tmp_path / "x"), "17 x 90 x 3000 = 4,590,000 starts")
     assert not (tmp_path / "x").exists()
+
+
+def test_the_continuation_does_not_depend_on_its_workers():
+    # its values run as tasks on --jobs workers; the branches are matched in the values'
+    # order afterwards: one table whatever the workers
+    from bounce_cli.experiments import runner
+    from bounce_cli.experiments.attractors import continue_fractions
+    from bounce_cli.experiments.base import RunOptions
+
+    tiny = {**SMALL, "recurrence.sample": 40, "continuation.num": 4,
+            "continuation.start": 1.45, "continuation.stop": 1.65,
+            "continuation.grid.theta0_deg.num": 12, "continuation.grid.v0_m_s.num": 12}
+    _, _, config = runner.load_run_config(runner.find_entry("attractors"), None,
+                                          [f"{k}={v}" for k, v in tiny.items()])
+    one = continue_fractions(config, RunOptions(jobs=1))
+    two = continue_fractions(config, RunOptions(jobs=2))
+    pd.testing.assert_frame_equal(one, two)
+    # across eq. 14's flip (Gamma 1.5268) the period-1 branch hands over to period 2
+    assert {"period-1", "period-2"} <= set(one["name"])
+    assert one.groupby("gamma")["fraction"].sum().to_numpy() == pytest.approx(1.0)
