@@ -9,6 +9,8 @@ people; a program tells the errors apart by their classes (never by a message's 
     +-- ConfigError                  a config or an override (key, value, range, YAML)
     +-- DataError                    data that cannot be analysed as asked
     |   +-- NoPerturbedImpactError     impacts without a perturbed one (section 7's windows)
+    |   +-- TooFewObservationsError    fewer trials or points than an estimate needs (a
+    |                                  design that cannot answer: a study skips the analysis)
     +-- ModelError                   parameters the map cannot be evaluated with
     |   +-- NoFixedPointError          eq. 8 has no solution (|cos theta~| > 1)
     |   +-- NotStableError             the fixed point is not linearly stable (eq. 10),
@@ -45,6 +47,7 @@ __all__ = [
     "NotStableError",
     "OutputDirError",
     "RunDirectoryBusy",
+    "TooFewObservationsError",
 ]
 
 
@@ -73,6 +76,13 @@ class NoFixedPointError(ModelError):
 class NotStableError(ModelError):
     """The period-1 fixed point is not linearly stable (spectral radius of eq. 9's J not
     below 1, eq. 10): the stationary statistics of eq. 19 do not exist."""
+
+
+class TooFewObservationsError(DataError, ConfigError, ModelError):
+    """Fewer trials or points than an estimate needs (a trend over trials from 2 trials, a
+    line through 2 points): the data may be fine, the design cannot answer the question.
+    ``bounce study`` then skips that analysis of the unit with this reason (a warning, not a
+    failure). A ConfigError and a ModelError too, as the checks raised before it had a class."""
 
 
 class NoPerturbedImpactError(DataError, ModelError):

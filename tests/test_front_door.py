@@ -135,6 +135,8 @@ def test_a_suggested_command_names_the_run_directory_as_a_shell_takes_it(tmp_pat
     words = shlex.split(suggested.group(1))
     assert words[:3] == ["bounce", "study", "--manifest"]
     assert Path(words[3]) == out / "study.csv" and Path(words[3]).is_file()
+    # the study beside the session, so that the next session's study does not collide
+    assert words[4:] == ["--out", f"{out}-study"]
     assert "<out>" not in made.stderr
     # run without a directory (the API without out): the placeholder is left as it is
     unwritten = bounce_cli.run("simulate-study", set={"subjects.count": 1, "trials": 1,

@@ -20,6 +20,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from ..errors import TooFewObservationsError
 from .regression import eq15_slope
 
 
@@ -68,7 +69,7 @@ def mixed_trend(frame: pd.DataFrame, y: str, x: str = "trial_number", group: str
     n_groups = int(data[group].nunique())
     n_obs = len(data)
     if n_obs < 3:
-        raise ValueError(f"a trend of {y} needs at least 3 trials (got {n_obs})")
+        raise TooFewObservationsError(f"a trend of {y} needs at least 3 trials (got {n_obs})")
     z = stats.norm.ppf(0.5 + confidence / 2.0)
     if n_groups >= 2:
         import statsmodels.formula.api as smf

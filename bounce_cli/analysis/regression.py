@@ -11,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import stdtrit
 
+from ..errors import TooFewObservationsError
 from ..model.params import ModelError, ModelParams, wrap_phase
 from .stochastic import simulate_stochastic_map
 
@@ -63,7 +64,8 @@ def ols_line(x, y, confidence: float = 0.95) -> LineFit:
     y = np.asarray(y, float)
     n = x.shape[-1]
     if n < 3:
-        raise ModelError(f"a line fit with confidence intervals needs at least 3 points (got {n})")
+        raise TooFewObservationsError(
+            f"a line fit with confidence intervals needs at least 3 points (got {n})")
     xm = x.mean(axis=-1, keepdims=True)
     ym = y.mean(axis=-1, keepdims=True)
     sxx = np.sum((x - xm) ** 2, axis=-1)

@@ -127,8 +127,8 @@ class RunOptions:
 
 
 #: where a summary line names the run directory, which ``run`` does not know (it writes
-#: nothing): ``f"run `bounce study --manifest {OUT_DIR}/study.csv`"``; a run that is written
-#: shows the directory there (:meth:`ExperimentResult.name_out_dir`)
+#: nothing), as in ``f"bounce study --manifest {OUT_DIR}/study.csv --out {OUT_DIR}-study"``;
+#: a run that is written shows the directory there (:meth:`ExperimentResult.name_out_dir`)
 OUT_DIR = "<out>"
 
 

@@ -24,6 +24,7 @@ import pandas as pd
 from pydantic import Field, field_validator
 
 from ..memory import check_array_memory
+from ..errors import TooFewObservationsError
 from ..runtime.config import (
     ConfigError,
     DataFiles,
@@ -175,8 +176,8 @@ def run(config: LearningConfig, options: RunOptions, source=None) -> ExperimentR
         lines.append(model.text())
         if len(trials) < 3:
             label = data_text(config.data) if source is None else source[0]
-            raise ConfigError(f"data: {label}: {len(trials)} trial(s); a trend over "
-                              "trials needs at least 3")
+            raise TooFewObservationsError(f"data: {label}: {len(trials)} trial(s); a trend "
+                                          "over trials needs at least 3")
         if math.isfinite(data_period):
             period = data_period
         if math.isfinite(data_q_v) and data_q_v > 0.0:

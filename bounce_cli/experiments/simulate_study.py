@@ -215,7 +215,8 @@ def run(config: SimulateStudyConfig, options: RunOptions) -> ExperimentResult:
                + (f", {config.damaged_files} damaged" if config.damaged_files else "")
                + (f"; {sum(restarts)} trial(s) restarted after the ball fell into sticking"
                   if sum(restarts) else "")
-               + f"; run `bounce study --manifest {OUT_DIR}/study.csv`"]
+               + f"; run `bounce study --manifest {OUT_DIR}/study.csv --out {OUT_DIR}-study`"
+               ]
     return ExperimentResult(frames=frames, figures={}, summary=summary)
 
 

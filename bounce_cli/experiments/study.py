@@ -16,7 +16,10 @@ Figs. 8, 9, 11 averaged over subjects; and ``report.html`` (self-contained) with
 subject, and ``<subject>/report.html``.
 
 A recording that cannot be read or a unit that cannot be analysed does not stop the study: it
-is a row of ``failures.csv``, and the command exits 1 once everything else is written.
+is a row of ``failures.csv``, and the command exits 1 once everything else is written. An
+analysis the unit's design cannot answer (fewer trials than a trend or a line needs,
+``TooFewObservationsError``; a perturbation session for acf; no perturbation for impulse)
+is not run, with a warning saying why.
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ import numpy as np
 import pandas as pd
 from pydantic import Field, field_validator, model_validator
 
+from ..errors import TooFewObservationsError
 from ..runtime import parallel
 from ..runtime.config import (
     DATA_MODEL_KEYS,
@@ -408,6 +412,10 @@ def analyse_unit(task: UnitTask) -> dict[str, Any]:
                         continue
                 try:
                     result = run_analysis(name, cfg, alpha, g, seed, unit, pooled, warnings)
+                except TooFewObservationsError as exc:  # the design cannot answer it (two
+                    # trials for a trend: the virtual set-up's steady protocol): not a failure
+                    warnings.append(f"{unit.label}: {name}: not run: {one_line(exc)}")
+                    continue
                 except RECORDED_ERRORS as exc:
                     failures.append({"unit": unit.folder, "file": "", "stage": name,
                                      "error": one_line(exc)})

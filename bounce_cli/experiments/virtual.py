@@ -415,7 +415,8 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
         f"{len(kept)} trial(s) x {config.trial_s:g} s ({source.description}): "
         f"{len(every_impact)} impacts ({sum(bool(i.perturbed) for i in every_impact)} perturbed"
         + (f", {stuck} left the ball on the racket" if stuck else "") + f"), {len(gaps)} "
-        f"stream gap(s){stopped}; run `bounce study --manifest {OUT_DIR}/study.csv`"]
+        f"stream gap(s){stopped}; run `bounce study --manifest {OUT_DIR}/study.csv "
+        f"--out {OUT_DIR}-study`"]
     if display is not None:
         summary.append(latency_summary(display.latency) + " (latency.csv)")
     return ExperimentResult(frames=frames, figures=figures, summary=summary,

@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import json
+import re
+import shlex
 import signal
 import subprocess
 import sys
@@ -16,6 +18,7 @@ import pytest
 import bounce_cli
 
 PROTOCOL = Path(__file__).resolve().parents[2] / "configs" / "virtual" / "perturbation.yaml"
+STEADY = PROTOCOL.with_name("steady.yaml")
 
 #: the tests run without a page (--headless); the page has a test of its own
 HEADLESS = {"display.headless": True}
@@ -247,3 +250,24 @@ def test_a_session_recorded_live_is_not_replaced_without_force(tmp_path, cli, us
     user_error(cli(*args), "holds a session recorded live", "--force")
     assert (out / "impacts.csv").read_bytes() == before
     assert cli(*args, "--force").exit_code == 0
+
+
+def test_a_steady_session_s_study_skips_what_two_trials_cannot_answer(tmp_path, cli):
+    # section 6's steady protocol (2 trials) studied as its summary says: learning (a trend
+    # over trials) and regression (a line through the trials) need 3 trials; they are not
+    # run, with the reason, and the study exits 0 with acf's stability (it exited 1 with two
+    # failure rows)
+    out = tmp_path / "steady session"
+    made = cli("virtual", "--headless", "--config", STEADY, "--set", "trial_s=25",
+               "--out", out)
+    assert made.exit_code == 0, made.output
+    suggested = re.search(r"run `(bounce study [^`]+)`", made.stderr).group(1)
+    words = shlex.split(suggested)
+    result = cli(*words[1:], "--quiet")
+    assert result.exit_code == 0, result.output
+    said = " ".join(result.stderr.split())
+    assert "learning: not run: " in said and "at least 3" in said
+    assert "regression: not run: " in said
+    study_dir = Path(words[words.index("--out") + 1])
+    assert pd.read_csv(study_dir / "failures.csv").empty
+    assert (study_dir / "s1" / "virtual" / "acf" / "stability_data.csv").is_file()
