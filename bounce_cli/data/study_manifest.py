@@ -49,6 +49,14 @@ SYSTEM_FOLDERS = ("/etc", "/proc", "/sys", "/dev", "/boot", "/run", "/var/log", 
 _SAFE = re.compile(r"^[A-Za-z0-9._\-][A-Za-z0-9._\- ]*$")
 
 
+def names_a_folder(value: str) -> bool:
+    """Whether a factor value (a subject, a condition) can name a folder of the study's
+    outputs: letters, digits, '.', '_', '-' and spaces inside, and not '.' or '..' (which
+    name the folder itself or its parent). The sessions ``bounce virtual`` writes take the
+    same rule, so that a session's manifest is one the study reads."""
+    return bool(_SAFE.match(value)) and value not in (".", "..")
+
+
 @dataclass(frozen=True)
 class ManifestRow:
     """One recording of the study: its file (absolute), events file, factors (column ->
@@ -219,7 +227,7 @@ def read_manifest(path: str | Path) -> Manifest:
         if not values["subject"]:
             raise ConfigError(f"{where}: line {i}: empty subject cell")
         for name, value in values.items():
-            if value and (not _SAFE.match(value) or value in (".", "..")):
+            if value and not names_a_folder(value):
                 raise ConfigError(f"{where}: line {i}: {name} {value!r}: a factor value names a "
                                   "folder (use letters, digits, '.', '_', '-' and spaces)")
         texts = []

@@ -60,6 +60,7 @@ from ..data.data_parameters import (
     model_at_data,
 )
 from ..data.impacts import Impacts
+from ..data.recordings import keys_in_block
 from ..data.setup_table import SETUP_FILE, SetupQuantity, setup_frame
 from .plotting import publication_style
 from .report import Section, embed_png, html_table, page
@@ -315,9 +316,10 @@ def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures:
                 setup_frame = result.frames.get("setup.csv")
                 setup = ({} if setup_frame is None else
                          dict(zip(setup_frame["quantity"], setup_frame["estimate"])))
-        except RECORDED_ERRORS as exc:
+        except RECORDED_ERRORS as exc:  # the keys it names as the study takes them
+            named = keys_in_block(exc, "extract") if isinstance(exc, ConfigError) else exc
             failures.append({"unit": unit.folder, "file": str(row.file), "stage": "extract",
-                             "error": one_line(exc)})
+                             "error": one_line(named)})
             continue
         trials = table["trial"].astype(str)
         single = trials.nunique() == 1 and "trial" in row.factors and row.factors["trial"]

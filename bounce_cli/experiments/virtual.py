@@ -28,12 +28,13 @@ from typing import Literal
 
 import numpy as np
 import pandas as pd
-from pydantic import Field, model_validator
+from pydantic import Field, field_validator, model_validator
 
 from ..data.extraction import ExtractionSettings, racket_cycles
 from ..data.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS, ball_apex
 from ..data.setup_table import SETUP_FILE, SetupQuantity, setup_frame
 from ..data.simulated_lab import LAB_MIN_HOP_S
+from ..data.study_manifest import names_a_folder
 from ..errors import ConfigError, ModelError, NoFixedPointError
 from ..model.flight import restitution_of
 from ..runtime.config import ControlBlock, ExperimentConfig, ModelBlock, StrictModel
@@ -45,6 +46,7 @@ from ..virtual.session import Launch, Paced, Schedule, TrialRecord, run_trial
 from ..virtual.sources import LslSettings, open_source
 from ..virtual.subject import DEFAULT_GAIN, SubjectControl
 from .base import OUT_DIR, Experiment, ExperimentResult, RunOptions
+from .extract import RECORDING_FORMATS, ColumnsBlock, CsvBlock, MarkersBlock, UnitsBlock
 from .plotting import caption_figures, draw_fig2, publication_style
 
 
@@ -137,10 +139,22 @@ class SubjectControlBlock(ControlBlock):
                         "flight time in full, 0 = the sine racket")
 
 
+class ReplayBlock(StrictModel):
+    """How ``--racket replay:<file>`` reads its recording: ``bounce extract``'s keys of the
+    same names (the racket column or marker, units, the CSV's format, the file's format)."""
+
+    columns: ColumnsBlock = ColumnsBlock()
+    csv: CsvBlock = CsvBlock()
+    units: UnitsBlock = UnitsBlock()
+    markers: MarkersBlock = MarkersBlock()
+    format: Literal[RECORDING_FORMATS] = "auto"  # type: ignore[valid-type]
+
+
 class VirtualConfig(ExperimentConfig):
     model: ModelBlock = ModelBlock()
     racket: str = Field("sine", description="the racket's source: sine | replay:<file> | "
                         "lsl:<stream name> | mouse | subject")
+    replay: ReplayBlock = ReplayBlock()
     lsl: LslBlock = LslBlock()
     subject_control: SubjectControlBlock = SubjectControlBlock()
     display: DisplayBlock = DisplayBlock()
@@ -165,6 +179,14 @@ class VirtualConfig(ExperimentConfig):
     max_gap_s: float = Field(0.05, gt=0.0, description="longer stretches without racket "
                              "samples stop the ball's clock (logged in gaps.csv)")
 
+    @field_validator("subject", "condition")
+    @classmethod
+    def _names_a_folder(cls, value: str) -> str:
+        if not names_a_folder(value):  # '.', '..': bounce study would refuse the manifest
+            raise ValueError(f"{value!r} names a folder's own or parent folder, not a subject "
+                             "or condition (use letters, digits, '.', '_', '-')")
+        return value
+
     @model_validator(mode="after")
     def _size(self):
         if (self.racket in ("sine", "subject")
@@ -173,13 +195,16 @@ class VirtualConfig(ExperimentConfig):
         return self
 
 
-def _read_racket(path: Path, warn):
-    from ..data.recordings import read_recording
-    from .extract import ExtractConfig
+def _read_racket(path: Path, how: ReplayBlock, warn):
+    """The racket of each trial of a recording, read as ``replay`` says; a reading error
+    names the keys as this command takes them (``replay.columns.racket``)."""
+    from ..data.recordings import keys_in_block, read_recording
 
-    defaults = ExtractConfig()
-    trials = read_recording(path, defaults.columns, defaults.units, defaults.markers,
-                            warn=warn)
+    try:
+        trials = read_recording(path, how.columns, how.units, how.markers, how.csv,
+                                how.format, warn=warn)
+    except ConfigError as exc:
+        raise keys_in_block(exc, "replay") from None
     return [(np.asarray(tr.t, float), np.asarray(tr.racket, float)) for tr in trials]
 
 
@@ -277,7 +302,7 @@ def run(config: VirtualConfig, options: RunOptions) -> ExperimentResult:
     if config.racket != "mouse":  # a source that cannot be opened stops the run before a page
         source = open_source(config.racket, params.racket_amplitude, params.racket_period,
                              config.sample_rate_hz,
-                             lambda path: _read_racket(path, options.warn),
+                             lambda path: _read_racket(path, config.replay, options.warn),
                              config.lsl.settings(), config.rest_s, options.warn,
                              subject_control_of(config))
     if not config.display.headless:
@@ -300,6 +325,11 @@ def run(config: VirtualConfig, options: RunOptions) -> ExperimentResult:
             display.stop()
 
 
+#: a source's trial may end this much before ``trial_s`` (its last sample interval) without
+#: a warning that it was shorter
+SHORT_TRIAL_SLACK_S = 0.05
+
+
 def _session(config: VirtualConfig, options: RunOptions, source, display) -> ExperimentResult:
     """The trials in turn (with a page: the wait for it, each trial's countdown, the rests);
     Ctrl-C ends the session at the trial it interrupts and keeps the finished ones."""
@@ -315,6 +345,8 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
     every_impact: list[Impact] = []  # impacts.csv leaves out those without a phase
     stopped = ""
     interrupted_by = 0
+    short: list[tuple[int, float]] = []  # (trial, s) the source ended before trial_s
+    without_impact: list[int] = []
     live = display is not None or getattr(source, "live", False)  # in real time: say so
     options.progress.start(config.trials, "virtual")
     try:
@@ -346,6 +378,10 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
                 finished = n
                 options.progress.advance(1)
                 continue
+            if not live and record.t[-1] - record.t[0] < config.trial_s - SHORT_TRIAL_SLACK_S:
+                short.append((n, float(record.t[-1] - record.t[0])))
+            if not record.impacts:
+                without_impact.append(n)
             frames[trial_name(config, n, "recordings")] = pd.DataFrame({
                 "trial": n, "t_s": record.t, "racket_x_m": record.racket,
                 "ball_x_m": record.ball})
@@ -387,6 +423,16 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
     if not impacts:
         raise ConfigError(f"racket: {source.description}: no trial had racket samples (was the "
                           "page open, the stream sending?)")
+    if short:  # a replayed recording's trials shorter than the protocol's
+        options.warn(f"trial_s = {config.trial_s:g} s, but {len(short)} trial(s) ended with "
+                     f"their racket ({source.description}): "
+                     + ", ".join(f"trial {n} after {d:.1f} s" for n, d in short[:5])
+                     + (", ..." if len(short) > 5 else ""))
+    if without_impact:
+        options.warn(f"no impact in trial(s) {', '.join(map(str, without_impact[:10]))}"
+                     f"{', ...' if len(without_impact) > 10 else ''} within trial_s = "
+                     f"{config.trial_s:g} s (the ball's first flight is longer, or it was "
+                     "launched after the trial's end): lengthen trial_s or launch earlier")
     trials = kept
     impacts_table = pd.concat(impacts, ignore_index=True)
     latency = pd.DataFrame(display.latency if display is not None else [],

@@ -11,6 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+import bounce_cli
 from bounce_cli.runtime.artifacts import read_frames
 from bounce_cli.runtime.config import load_config
 from bounce_cli.experiments import study
@@ -806,3 +807,24 @@ def test_no_two_subjects_share_a_colour_and_marker(n):
 
     styles = subject_styles([f"s{i}" for i in range(n)])
     assert len({(tuple(s["color"]), s["marker"]) for s in styles.values()}) == n
+
+
+def test_a_recording_s_reading_error_names_the_study_s_key(tmp_path):
+    # extraction errors said 'set columns.racket'; in a study that key is extract.columns...
+    from bounce_cli.data.recordings import keys_in_block
+    from bounce_cli.errors import ConfigError
+
+    said = keys_in_block(ConfigError("f.csv: no column 'x' (the file has: a; set "
+                                     "columns.racket); another separator? set csv.separator"),
+                         "extract")
+    assert str(said) == ("f.csv: no column 'x' (the file has: a; set extract.columns.racket); "
+                         "another separator? set csv.separator".replace(
+                             "set csv", "set extract.csv"))
+    assert str(keys_in_block(ConfigError("a settings text"), "extract")) == "a settings text"
+    bad = tmp_path / "lab.csv"
+    bad.write_text("trial,time,racket,ball\n1,0.0,0.1,0.5\n1,0.01,0.1,0.5\n")
+    (tmp_path / "study.csv").write_text("file,subject,condition\nlab.csv,s1,a\n")
+    result = bounce_cli.run("study", set={"manifest": str(tmp_path / "study.csv"),
+                                          "analyses": ["regression"]})
+    error = result.frames["failures.csv"]["error"].iloc[0]
+    assert "set extract.columns.time" in error, error

@@ -271,3 +271,51 @@ def test_a_steady_session_s_study_skips_what_two_trials_cannot_answer(tmp_path, 
     study_dir = Path(words[words.index("--out") + 1])
     assert pd.read_csv(study_dir / "failures.csv").empty
     assert (study_dir / "s1" / "virtual" / "acf" / "stability_data.csv").is_file()
+
+
+def test_a_lab_s_recording_is_replayed_by_its_own_column_names_and_units(tmp_path, cli,
+                                                                          user_error):
+    # replay.columns / replay.units, as bounce extract reads the file; a missing column names
+    # the key as this command takes it (it named extract's 'columns.time', which virtual
+    # refused as an unknown key)
+    sine = bounce_cli.run("virtual", set={**HEADLESS, "trials": 1, "trial_s": 8.0})
+    recording = sine.frames["recordings/s1_virtual_t1.csv"]
+    lab = tmp_path / "lab.csv"
+    pd.DataFrame({"time_s": recording["t_s"], "paddle_mm": recording["racket_x_m"] * 1000.0}
+                 ).to_csv(lab, index=False)
+    user_error(cli("virtual", "--headless", "--racket", f"replay:{lab}", "--out",
+                   tmp_path / "x"),
+               "no column 't_s'", "set replay.columns.time")
+    assert not (tmp_path / "x").exists()
+    replay = bounce_cli.run("virtual", set={
+        **HEADLESS, "trials": 1, "trial_s": 8.0, "racket": f"replay:{lab}",
+        "replay.columns.time": "time_s", "replay.columns.racket": "paddle_mm",
+        "replay.columns.trial": None, "replay.columns.ball": None,
+        "replay.units.length": "mm"})
+    a, b = sine.frames["impacts.csv"], replay.frames["impacts.csv"]
+    assert len(a) == len(b) >= 5
+    assert np.allclose(a["t_s"], b["t_s"], atol=1e-9)
+    assert np.allclose(a["v_m_s"], b["v_m_s"], atol=1e-9)
+
+
+def test_trials_the_source_or_the_launch_cut_short_are_said(tmp_path):
+    # a replayed trial shorter than trial_s, and trials without an impact, ran without a word
+    sine = bounce_cli.run("virtual", set={**HEADLESS, "trials": 1, "trial_s": 8.0})
+    path = tmp_path / "racket.csv"
+    sine.frames["recordings/s1_virtual_t1.csv"].to_csv(path, index=False)
+    with pytest.warns(UserWarning, match=r"trial_s = 12 s, but 2 trial\(s\) ended with their "
+                      r"racket .* trial 1 after 8\.0 s, trial 2 after 8\.0 s"):
+        bounce_cli.run("virtual", set={**HEADLESS, "trials": 2, "trial_s": 12.0,
+                                       "racket": f"replay:{path}"})
+    with pytest.warns(UserWarning, match=r"no impact in trial\(s\) 1, 2 within trial_s = 1\.01"):
+        empty = bounce_cli.run("virtual", set={**HEADLESS, "trials": 2, "trial_s": 1.01})
+    assert empty.frames["impacts.csv"].empty
+
+
+@pytest.mark.parametrize("key", ["subject", "condition"])
+@pytest.mark.parametrize("value", [".", ".."])
+def test_a_name_the_study_would_refuse_is_one_line(cli, user_error, tmp_path, key, value):
+    user_error(cli("virtual", "--headless", "--set", f"{key}={value}", "--out",
+                   tmp_path / "x"),
+               f"--set: {key}", "folder")
+    assert not (tmp_path / "x").exists()

@@ -19,6 +19,7 @@ Every problem is one line naming the file and the column or trial (``ConfigError
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
@@ -198,6 +199,19 @@ def read_recording(path: Path, columns, units, markers, csv_format=None, file_fo
     if not trials:
         raise ConfigError(f"{path}: no samples (a header and no rows?)")
     return trials
+
+
+#: the extraction's config keys that its errors name ("set columns.racket", "set csv.separator")
+_READING_KEY = re.compile(
+    r"\bset (?=(?:columns|event_columns|csv|units|markers|format|extraction)\b)")
+
+
+def keys_in_block(exc: ConfigError, block: str) -> ConfigError:
+    """``exc`` (a reading error) with the keys it names as a command whose reading settings
+    sit in ``block`` takes them: "set columns.racket" is "set extract.columns.racket" in
+    ``bounce study`` (its ``extract:`` block) and "set replay.columns.racket" in ``bounce
+    virtual --racket replay:FILE``."""
+    return ConfigError(_READING_KEY.sub(f"set {block}.", str(exc)))
 
 
 def read_events(path: Path, event_columns, units, trials: list[Trial],
