@@ -460,7 +460,10 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
     summary = [
         f"{len(kept)} trial(s) x {config.trial_s:g} s ({source.description}): "
         f"{len(every_impact)} impacts ({sum(bool(i.perturbed) for i in every_impact)} perturbed"
-        + (f", {stuck} left the ball on the racket" if stuck else "") + f"), {len(gaps)} "
+        + (f", {stuck} left the ball on the racket" if stuck else "")
+        + (f"; impacts.csv holds {len(impacts_table)}, as an impact outside a complete racket "
+           "cycle has no phase" if len(impacts_table) < len(every_impact) else "")
+        + f"), {len(gaps)} "
         f"stream gap(s){stopped}; run `bounce study --manifest {OUT_DIR}/study.csv "
         f"--out {OUT_DIR}-study`"]
     if display is not None:
