@@ -60,7 +60,7 @@ def draw_group(frames: dict[str, pd.DataFrame], names: Iterable[str] | None = No
 
 def learning_figure(trials: pd.DataFrame, trends: pd.DataFrame | None):
     """Fig. 6 over the study: each subject's per-trial AC and SD of ball amplitude (thin), the
-    mixed model's fixed-effect line (thick), one column per condition."""
+    trend's fixed-effect line (thick; the title names its method), one column per condition."""
     conditions = sorted(trials["condition"].astype(str).unique())
     fig, axes = new_figure(2, len(conditions), width=4.2 * len(conditions) + 1, height=6.4,
                            sharex=True)
@@ -98,8 +98,12 @@ def learning_figure(trials: pd.DataFrame, trends: pd.DataFrame | None):
     fig.legend(handles=[handles[s] for s in subjects if s in handles], loc="outside lower center",
                ncol=min(len(subjects), 10), fontsize=7, frameon=False, title="subject",
                title_fontsize=7)
-    fig.suptitle("Fig. 6 over the study: learning trends (mixed model, random intercept and "
-                 "slope per subject)", fontsize=10)
+    # the fit the trends were made with (a mixed model from two subjects on; with one, OLS),
+    # on a line of its own: a one-condition figure is narrow
+    methods = (sorted(trends["method"].dropna().astype(str).unique())
+               if trends is not None and "method" in trends else [])
+    fig.suptitle("Fig. 6 over the study: learning trends"
+                 + (f"\n(fixed effect: {'; '.join(methods)})" if methods else ""), fontsize=10)
     return fig
 
 
