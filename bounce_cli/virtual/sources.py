@@ -221,7 +221,12 @@ def open_source(spec: str, amplitude_m: float, period_s: float, rate_hz: float,
     if spec == "subject":
         return SubjectSource(amplitude_m, period_s, rate_hz, subject)
     if spec.startswith("replay:"):
-        path = Path(spec[len("replay:"):])
+        text = spec[len("replay:"):]
+        path = Path(text)
+        if not text.strip():
+            raise ConfigError("racket: replay: names no recording (replay:<file>)")
+        if path.is_dir():
+            raise ConfigError(f"racket: replay:{path}: a folder, not a recording")
         if not path.is_file():
             raise ConfigError(f"racket: replay:{path}: no such file")
         return ReplaySource(path, tuple(read_racket(path)))

@@ -92,6 +92,12 @@ def test_an_unknown_racket_source_is_one_line(cli, user_error, tmp_path):
     user_error(cli("virtual", "--headless", "--racket", "replay:nope.csv", "--out",
                    tmp_path / "y"),
                "no such file")
+    user_error(cli("virtual", "--headless", "--racket", "replay:", "--out", tmp_path / "y"),
+               "replay: names no recording")
+    user_error(cli("virtual", "--headless", "--racket", f"replay:{tmp_path}", "--out",
+                   tmp_path / "y"),
+               "a folder, not a recording")
+    assert not (tmp_path / "y").exists()
 
 
 @pytest.mark.slow
