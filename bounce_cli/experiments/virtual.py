@@ -22,6 +22,7 @@ import itertools
 import math
 import signal
 import time
+import dataclasses
 from dataclasses import fields
 from pathlib import Path
 from typing import Literal
@@ -37,6 +38,7 @@ from ..data.simulated_lab import LAB_MIN_HOP_S
 from ..data.study_manifest import names_a_folder
 from ..errors import ConfigError, ModelError, NoFixedPointError
 from ..model.flight import restitution_of
+from ..model.params import ModelParams
 from ..runtime.config import ControlBlock, ExperimentConfig, ModelBlock, StrictModel
 from ..runtime.artifacts import RECORDED_LIVE
 from ..runtime.interrupts import Interrupted
@@ -208,8 +210,20 @@ def _read_racket(path: Path, how: ReplayBlock, warn):
     return [(np.asarray(tr.t, float), np.asarray(tr.racket, float)) for tr in trials]
 
 
-def launch_of(config: VirtualConfig) -> Launch:
+def virtual_racket_params(config: VirtualConfig) -> ModelParams:
+    """The model of the ball and the racket it meets: the config's, with the racket's
+    amplitude times ``visual_gain`` (the virtual racket; the sine and subject sources move
+    ``model.racket_amplitude``)."""
     params = config.params
+    return dataclasses.replace(params,
+                               racket_amplitude=config.visual_gain * params.racket_amplitude)
+
+
+def launch_of(config: VirtualConfig) -> Launch:
+    """Where each trial's ball starts: ``fixed_point`` is eqs. 7, 8 of the racket the ball
+    meets (``virtual_racket_params``), so that a sine session with a visual gain starts on
+    its period-1 orbit."""
+    params = virtual_racket_params(config)
     if config.launch.mode == "drop":
         return Launch(None, None, config.launch.height_m)
     if config.launch.mode == "state":
@@ -277,8 +291,8 @@ def view_of(config: VirtualConfig) -> View:
     if config.display.view_m is not None:
         low, high = config.display.view_m
         return View(low, high, config.display.target_m)
-    params = config.params
-    racket = config.visual_gain * params.racket_amplitude
+    params = virtual_racket_params(config)
+    racket = params.racket_amplitude
     try:
         fixed = params.fixed_point()
         top = racket * math.sin(fixed.theta_rad) + fixed.v_m_s ** 2 / (2.0 * params.g)
@@ -458,7 +472,9 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
                     f"{source.description}, seed {config.seed}")
     stuck = sum(bool(i.stuck) for i in every_impact)
     summary = [
-        f"{len(kept)} trial(s) x {config.trial_s:g} s ({source.description}): "
+        f"{len(kept)} trial(s) x {config.trial_s:g} s ({source.description}"
+        + (f"; visual gain {config.visual_gain:g}: the ball meets that racket x "
+           f"{config.visual_gain:g}" if config.visual_gain != 1.0 else "") + "): "
         f"{len(every_impact)} impacts ({sum(bool(i.perturbed) for i in every_impact)} perturbed"
         + (f", {stuck} left the ball on the racket" if stuck else "")
         + (f"; impacts.csv holds {len(impacts_table)}, as an impact outside a complete racket "

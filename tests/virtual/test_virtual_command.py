@@ -325,3 +325,22 @@ def test_a_name_the_study_would_refuse_is_one_line(cli, user_error, tmp_path, ke
                    tmp_path / "x"),
                f"--set: {key}", "folder")
     assert not (tmp_path / "x").exists()
+
+
+def test_a_visual_gain_s_session_starts_on_the_gained_racket_s_fixed_point():
+    # the ball meets the virtual racket (a_r x visual_gain): fixed_point launches on its
+    # period-1 orbit (eqs. 7, 8 at 0.45 m), where it started on the source's (0.3 m) and
+    # bounced far from it
+    import dataclasses
+
+    from bounce_cli.model.params import ModelParams
+
+    result = bounce_cli.run("virtual", set={**HEADLESS, "trials": 1, "trial_s": 6.0,
+                                            "visual_gain": 1.5, "model.racket_amplitude": 0.3})
+    gained = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.45, racket_period=0.92)
+    fixed = gained.fixed_point()
+    first = result.frames["impacts.csv"].iloc[:3]
+    assert np.allclose(first["theta_deg"], fixed.theta_deg, atol=1e-3)
+    assert np.allclose(first["v_m_s"], fixed.v_m_s, atol=1e-4)
+    assert "visual gain 1.5" in result.summary[0]
+    assert dataclasses.replace(gained, racket_amplitude=0.3).fixed_point().theta_deg < 45.0
