@@ -18,6 +18,10 @@ PAIRS = (("v_v", "$v \\to v$"), ("theta_to_v", "$\\theta \\to v$"),
 RESPONSES = (("v_m_s", "$\\Delta v_k$ (m/s)"), ("theta_deg", "$\\Delta \\theta_k$ (deg)"),
              ("racket_period_s", "$\\Delta$ racket period (s)"),
              ("racket_amplitude_m", "$\\Delta$ racket amplitude (m)"))
+#: the smallest half-span a response panel shows, in its unit: a response within it (a
+#: sine racket's period, unchanged up to rounding, 1e-16 s) is drawn flat, not magnified
+RESPONSE_FLOOR = {"v_m_s": 1e-3, "theta_deg": 0.1, "racket_period_s": 1e-3,
+                  "racket_amplitude_m": 1e-3}
 
 
 def group_figure_builders(frames: dict[str, pd.DataFrame]) -> dict[str, Callable[[], Any]]:
@@ -213,6 +217,11 @@ def impulse_figure(table: pd.DataFrame):
                 ax.errorbar(part["k"] + 0.08 * c, part["mean"], yerr=part["sd"], fmt="-o",
                             ms=3, color=COLORS[c % len(COLORS)], capsize=2, label=condition)
             ax.axhline(0, color="0.8", lw=0.8)
+            low, high = ax.get_ylim()
+            floor = RESPONSE_FLOOR[quantity]
+            if high - low < 2.0 * floor:
+                middle = 0.5 * (low + high)
+                ax.set_ylim(middle - floor, middle + floor)
             ax.xaxis.set_major_locator(MaxNLocator(integer=True))
             if j == 0:
                 ax.set_ylabel(label)
