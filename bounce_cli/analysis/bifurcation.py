@@ -510,6 +510,17 @@ class FlipBracket:
     v0: float
 
 
+def flip_multiplier_floor(settings: SweepSettings) -> float:
+    """The least modulus of the period-1 orbit's multiplier at the period-1 end of a narrowed
+    flip bracket. At a flip the multiplier is -1; the end is where the orbit still settled,
+    within ``period_tolerance`` in ``transient_impacts``, which an orbit with multiplier
+    1 - eps does once eps > ln(1 / tolerance) / transient: so the end's multiplier is above
+    1 - ln(1 / tolerance) / transient, and the floor allows four times that, at most 0.95
+    (a narrowed bracket is 1/256 of a sweep step wide: a true flip's end is at 0.999)."""
+    eps = math.log(1.0 / settings.period_tolerance) / max(settings.transient_impacts, 1)
+    return max(0.0, min(0.95, 1.0 - 4.0 * eps))
+
+
 def locate_period_doublings(
     base: ModelParams,
     parameter: str,
@@ -544,10 +555,14 @@ def locate_period_doublings(
                                on_impact)
         return attractor_names(orbits, settings)[1], orbits
 
-    def confirm(which: np.ndarray, settled: bool) -> tuple[np.ndarray, list[int]]:
+    def confirm(which: np.ndarray, settled: bool,
+                least_multiplier: float = 0.0) -> tuple[np.ndarray, list[int]]:
         """Which brackets of ``which`` show a flip at their ends (low: period 1, high: a
         period 2 continuing it; with ``settled`` False, right at the flip, the high end may
-        also not have settled), and the period-1 orbit's racket cycles per hop."""
+        also not have settled), and the period-1 orbit's racket cycles per hop. With
+        ``least_multiplier``, the period-1 orbit at the low end must also be about to flip:
+        its largest multiplier in modulus (the Lyapunov exponent's, the tangent's growth per
+        impact) at least that."""
         ends, orbits = run(np.concatenate([low[which], high[which]]), np.tile(theta0[which], 2),
                            np.tile(v0[which], 2))
         m = which.size
@@ -555,6 +570,9 @@ def locate_period_doublings(
         for i, k in enumerate(which):
             if ends[i] != 1:
                 continue
+            if least_multiplier > 0.0 and not (
+                    orbits.lyapunov[i] >= math.log(least_multiplier)):
+                continue  # a stable period-1 orbit beside a period-2 one: a jump
             at_low = parameter_point(base, parameter, low[k])
             cycles[i] = hop_cycles(orbits.v[i, -1], at_low)
             if ends[m + i] == 2:
@@ -575,8 +593,11 @@ def locate_period_doublings(
             values = np.concatenate([[low[k]], inner[:, row], [high[k]]])
             first_other = int(np.argmax(seq != 1))  # seq[-1] = 2: there is one
             low[k], high[k] = values[first_other - 1], values[first_other]
-    if active.size:  # the narrowed ends: a jump can hide inside a flip's bracket too
-        confirmed[active] = confirm(active, settled=False)[0]
+    if active.size:  # the narrowed ends: a jump can hide inside a flip's bracket too, and a
+        # period-2 orbit that coexists with a stable period-1 one passes the tests above (g 1.62
+        # m/s^2: a 'flip' at Gamma 1.4928 where the period-1 multiplier is 0.85)
+        least = flip_multiplier_floor(settings) if rounds > 0 else 0.0
+        confirmed[active] = confirm(active, settled=False, least_multiplier=least)[0]
     return [FlipLocation(float(low[k]), float(high[k]), cycles[k]) if confirmed[k] else None
             for k in range(n)]
 

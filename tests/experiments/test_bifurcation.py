@@ -22,6 +22,7 @@ from bounce_cli.analysis.bifurcation import (
     gamma_of,
     hop_cycles,
     iterate_sweep,
+    flip_multiplier_floor,
     locate_period_doubling,
     period_doubling_candidates,
     parameter_point,
@@ -453,3 +454,22 @@ def test_exact_sticking_sweep_resolves_the_grey_bands_into_locked_orbits(paper_p
         period = [k for k in range(releases[-2], releases[-1]) if exact.event[k] == IMPACT]
         np.testing.assert_allclose(np.sort(np.unique(np.round(orbits.v[i], 9))),
                                    np.sort(np.unique(np.round(exact.v[period], 9))), atol=2e-9)
+
+
+@pytest.mark.slow
+def test_leaving_the_period1_basin_beside_a_stable_orbit_is_not_a_flip():
+    """g 1.62 m/s^2 (the Moon), Gamma swept, from (135 deg, 5 m/s): period 1 at Gamma 1.4848,
+    sticking at the next two values, period 2 at 1.5333; the narrowing followed the start out
+    of the period-1 basin and reported a flip at 1.4928 (-2.2 % from eq. 14), where the
+    period-1 orbit is stable (multiplier 0.85). A located flip's period-1 end must have its
+    multiplier near -1 (``flip_multiplier_floor``)."""
+    base = ModelParams(0.5, 1.62, 0.3, 0.92)
+    settings = SweepSettings(transient_impacts=5000, measured_impacts=64, recorded_impacts=64)
+    with pytest.raises(ModelError, match="cannot bracket the flip"):
+        locate_period_doubling(base, "gamma", 1.4848484848, 1.5333333333,
+                               theta0=math.radians(135.0), v0=5.0, settings=settings)
+    assert flip_multiplier_floor(settings) == pytest.approx(0.95)
+    flip = period1_thresholds(base, "gamma").flip
+    loc = locate_period_doubling(base, "gamma", 0.97 * flip, 1.03 * flip, theta0=math.pi / 2,
+                                 v0=base.fixed_point().v_m_s, settings=settings)
+    assert abs(loc.value / flip - 1.0) < 1e-3
