@@ -264,6 +264,13 @@ def run(config: AttractorsConfig, options: RunOptions) -> ExperimentResult:
     jobs = options.jobs if th.size >= POOL_MIN_POINTS else 1
     with parallel.executor(jobs) as executor:
         labels, impacts = finder.label(th, vv, map=executor.map, workers=executor.workers)
+    beyond = finder.beyond_cells()
+    if beyond is not None:
+        low, high = config.recurrence.v_range_m_s
+        options.warn(f"orbits reached {beyond:.1f} m/s, above recurrence.v_range_m_s "
+                     f"[{low:g}, {high:g}], where the cells cannot tell attractors apart: "
+                     f"widen it (e.g. --set 'recurrence.v_range_m_s=[{low:g}, "
+                     f"{math.ceil(2.0 * beyond):g}]')")
     attractors = finder.attractors
     fractions, shares = _fractions_frame(labels, attractors)
     names = np.array([label_name(x, attractors) for x in range(-4, len(attractors))],
@@ -307,6 +314,11 @@ def summary_lines(attractors, shares: dict[int, tuple], n_starts: int,
             "attractor at first, followed further)"]
 
 
+#: above this share of undecided starts the basin measures say they do not measure the
+#: attractors' basins (measures.csv's notes)
+UNDECIDED_CAVEAT = 0.05
+
+
 def _measures(config: AttractorsConfig, finder: AttractorFinder, labels, theta_deg, v0):
     """(measures.csv, uncertainty.csv): basin entropy, boundary basin entropy (Daza et al.
     2016) and the uncertainty exponent with its SE (McDonald et al. 1985)."""
@@ -331,6 +343,11 @@ def _measures(config: AttractorsConfig, finder: AttractorFinder, labels, theta_d
     else:
         uncertainty = pd.DataFrame(columns=["eps", "uncertain_fraction"])
     undecided = float(np.mean(labels == UNDECIDED))
+    if undecided > UNDECIDED_CAVEAT:  # the measures see 'undecided' as one more outcome
+        caveat = (f"; {undecided:.0%} of the starts are undecided, which these measures count "
+                  "as one outcome: not a measure of the attractors' basins")
+        for row in rows:
+            row["note"] += caveat
     rows.append({"quantity": "undecided_fraction", "value": undecided, "se": math.nan,
                  "note": "starts no attractor was found for within the budgets"})
     return pd.DataFrame(rows, columns=["quantity", "value", "se", "note"]), uncertainty

@@ -107,3 +107,37 @@ def test_the_continuation_does_not_depend_on_its_workers():
     # across eq. 14's flip (Gamma 1.5268) the period-1 branch hands over to period 2
     assert {"period-1", "period-2"} <= set(one["name"])
     assert one.groupby("gamma")["fraction"].sum().to_numpy() == pytest.approx(1.0)
+
+
+def test_orbits_above_the_cells_are_found():
+    # alpha 0.9: a chaotic attractor up to about 40 m/s; with the cells up to 12 m/s 83 % of
+    # the starts were undecided without a word, and measures.csv reported basin entropies of
+    # the undecided; with the range widened the attractor is found
+    from bounce_cli.analysis.attractors import AttractorFinder, RecurrenceSettings
+    from bounce_cli.model.params import ModelParams
+
+    params = ModelParams(alpha=0.9, g=9.81, racket_amplitude=0.3, racket_period=0.92)
+    theta, v = np.meshgrid(np.linspace(0.0, 2.0 * np.pi, 5), np.linspace(1.0, 9.0, 4))
+    small = dict(transient=200, window=64, max_period=16, recurrence=30,
+                 recurrence_impacts=3000, max_impacts=100)
+    narrow = AttractorFinder(params, RecurrenceSettings(v_range=(0.0, 12.0), **small))
+    narrow.discover(theta, v)
+    assert narrow.beyond_cells() is not None and narrow.beyond_cells() > 15.0
+    wide = AttractorFinder(params, RecurrenceSettings(v_range=(0.0, 80.0), transient=200,
+                                                      window=64, max_period=16))
+    wide.discover(theta, v)
+    assert wide.beyond_cells() is None
+    assert "chaotic" in {a.kind for a in wide.attractors}
+
+
+@pytest.mark.slow
+def test_the_command_warns_of_orbits_above_the_cells_and_flags_undecided_measures():
+    with pytest.warns(UserWarning, match=r"above recurrence.v_range_m_s \[0, 12\]"):
+        result = bounce_cli.run("attractors", set={
+            **SMALL, "model.alpha": 0.9, "grid.theta0_deg.num": 6, "grid.v0_m_s.num": 6,
+            "recurrence.sample": 12, "recurrence.recurrence_impacts": 2000,
+            "measures.box": 2, "measures.samples": 10, "continuation.num": 0})
+    measures = result.frames["measures.csv"].set_index("quantity")
+    if measures.loc["undecided_fraction", "value"] > 0.05:
+        assert "undecided, which these measures count as one outcome" in \
+            measures.loc["basin_entropy", "note"]
