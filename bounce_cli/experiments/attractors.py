@@ -13,7 +13,7 @@ same result seen coarser: ``paper_class`` in ``basin.csv``.
 from __future__ import annotations
 
 import math
-from typing import Literal
+from typing import Any, Literal
 
 import numpy as np
 import pandas as pd
@@ -323,7 +323,7 @@ def _measures(config: AttractorsConfig, finder: AttractorFinder, labels, theta_d
     """(measures.csv, uncertainty.csv): basin entropy, boundary basin entropy (Daza et al.
     2016) and the uncertainty exponent with its SE (McDonald et al. 1985)."""
     m = config.measures
-    rows = []
+    rows: list[dict[str, Any]] = []
     if min(labels.shape) >= m.box:
         be = basin_entropy(labels, m.box)
         rows += [{"quantity": "basin_entropy", "value": be.basin_entropy, "se": math.nan,
@@ -347,7 +347,7 @@ def _measures(config: AttractorsConfig, finder: AttractorFinder, labels, theta_d
         caveat = (f"; {undecided:.0%} of the starts are undecided, which these measures count "
                   "as one outcome: not a measure of the attractors' basins")
         for row in rows:
-            row["note"] += caveat
+            row["note"] = f"{row['note']}{caveat}"
     rows.append({"quantity": "undecided_fraction", "value": undecided, "se": math.nan,
                  "note": "starts no attractor was found for within the budgets"})
     return pd.DataFrame(rows, columns=["quantity", "value", "se", "note"]), uncertainty
