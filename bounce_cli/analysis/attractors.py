@@ -123,8 +123,10 @@ class Tessellation:
         return self.cells_theta * (self.cells_v + 2)
 
     def code(self, theta, v) -> np.ndarray:
-        i = np.clip((np.mod(theta, TWO_PI) * (self.cells_theta / TWO_PI)).astype(np.int64),
-                    0, self.cells_theta - 1)
+        # a NaN phase (a ball that could not fly) in the first column, as the cast and the
+        # clip put it, without the cast's warning
+        column = np.nan_to_num(np.mod(theta, TWO_PI) * (self.cells_theta / TWO_PI), nan=0.0)
+        i = np.clip(column.astype(np.int64), 0, self.cells_theta - 1)
         j = np.floor((np.asarray(v) - self.v_low) * (self.cells_v / (self.v_high - self.v_low)))
         j = np.clip(np.nan_to_num(j, nan=-1.0, posinf=self.cells_v, neginf=-1.0), -1,
                     self.cells_v).astype(np.int64) + 1

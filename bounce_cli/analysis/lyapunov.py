@@ -53,14 +53,17 @@ def map_jacobian(theta, v, hop_phase, params) -> np.ndarray:
     v_before = v - g * s / w  # eq. 2 at the next impact
     racket_now = a * w * np.cos(theta)
     approach = a * w * np.cos(theta_next) - v_before  # racket minus ball velocity, > 0
-    dtheta_dtheta = (racket_now - v_before) / approach
-    dtheta_dv = s / approach
-    k = -(1.0 + alpha) * a * w * np.sin(theta_next) + g * alpha / w
-    jac = np.empty(theta.shape + (2, 2))
-    jac[..., 0, 0] = k * dtheta_dv - alpha
-    jac[..., 0, 1] = k * dtheta_dtheta - g * alpha / w
-    jac[..., 1, 0] = dtheta_dv
-    jac[..., 1, 1] = dtheta_dtheta
+    # a grazing impact (approach 0: alpha 0 lets the ball land with the racket's velocity)
+    # has no derivative: inf or NaN entries, which the callers take as such, without warning
+    with np.errstate(divide="ignore", invalid="ignore"):
+        dtheta_dtheta = (racket_now - v_before) / approach
+        dtheta_dv = s / approach
+        k = -(1.0 + alpha) * a * w * np.sin(theta_next) + g * alpha / w
+        jac = np.empty(theta.shape + (2, 2))
+        jac[..., 0, 0] = k * dtheta_dv - alpha
+        jac[..., 0, 1] = k * dtheta_dtheta - g * alpha / w
+        jac[..., 1, 0] = dtheta_dv
+        jac[..., 1, 1] = dtheta_dtheta
     return jac
 
 
@@ -77,9 +80,11 @@ def advance_tangent(tangent: np.ndarray, jac: np.ndarray, params) -> tuple[np.nd
     scale = params.omega / params.g  # m/s -> dimensionless velocity
     du_v = tangent[:, 0] / scale  # back to (m/s, rad)
     du_t = tangent[:, 1]
-    new_v = (jac[:, 0, 0] * du_v + jac[:, 0, 1] * du_t) * scale
-    new_t = jac[:, 1, 0] * du_v + jac[:, 1, 1] * du_t
-    norm = np.hypot(new_v, new_t)
+    # a grazing impact's infinite derivatives (``map_jacobian``) give inf - inf here: NaN,
+    # the growth of a state that has no tangent, taken as such by the callers
     with np.errstate(invalid="ignore", divide="ignore"):
+        new_v = (jac[:, 0, 0] * du_v + jac[:, 0, 1] * du_t) * scale
+        new_t = jac[:, 1, 0] * du_v + jac[:, 1, 1] * du_t
+        norm = np.hypot(new_v, new_t)
         unit = np.stack([new_v / norm, new_t / norm], axis=1)
         return unit, np.log(norm)

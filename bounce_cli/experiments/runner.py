@@ -152,7 +152,7 @@ def warn_if_unstable(params: ModelParams, controller=None,
     if not st.stable:
         say(f"the period-1 fixed point is linearly unstable at these parameters (spectral "
             f"radius {st.spectral_radius:.3g}, AC = {st.ac_g:.3g} g; stable for "
-            f"{float(flip_boundary_g(params.alpha)):.3g} g < AC < 0, eq. 14)")
+            f"{float(flip_boundary_g(params.alpha)):.4g} g < AC < 0, eq. 14)")
 
 
 def warn_if_implausible_racket(model, warn: Callable[[str], None] | None = None) -> None:
