@@ -391,10 +391,16 @@ def draw(frames: dict[str, pd.DataFrame], config: AttractorsConfig | None = None
               extent=(theta[0], theta[-1], v[0], v[-1]),
               cmap=ListedColormap([colours[n] for n in order]), vmin=-0.5,
               vmax=len(order) - 0.5)
+    # a periodic orbit's points in its colour ringed white and black, a chaotic attractor's
+    # sample as black dots: white edges alone vanished where an attractor lies above the grid
+    # (white), and a dot in its basin's own colour vanishes inside its basin
     for name, part in points.groupby("name", sort=False):
-        ax.plot(part["theta_deg"], part["v_m_s"], "o" if len(part) < 100 else ".",
-                ms=5 if len(part) < 100 else 1.5, mfc=colours.get(name, "k"), mec="w",
-                mew=0.8, ls="none")
+        if len(part) < 100:  # a ring of white and black around the colour: seen on any ground
+            ax.plot(part["theta_deg"], part["v_m_s"], "o", ms=8, mfc="k", mec="k", ls="none")
+            ax.plot(part["theta_deg"], part["v_m_s"], "o", ms=6, mfc=colours.get(name, "k"),
+                    mec="w", mew=1.0, ls="none")
+        else:
+            ax.plot(part["theta_deg"], part["v_m_s"], ".", ms=1.5, color="k", ls="none")
     ax.set_xlabel(r"initial phase $\theta_0$ (deg)")
     ax.set_ylabel(r"initial velocity $v_0$ (m/s)")
     ax.set_title("Basins of the attractors found by recurrence (markers: the attractors)")

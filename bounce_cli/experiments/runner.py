@@ -192,6 +192,33 @@ def check_model(entry: Entry, cfg: ExperimentConfig,
         warn_if_unstable(cfg.params, controller, warn)
 
 
+#: the blocks whose ``parameter`` replaces a model key over the whole run (bifurcation's
+#: sweep, continuation's range), and the model key each swept parameter replaces (gamma is set
+#: through a_r at the model's tau and g)
+SWEPT_BLOCKS = ("sweep", "range")
+SWEPT_MODEL_KEY = {"gamma": "racket_amplitude", "racket_amplitude": "racket_amplitude",
+                   "racket_period": "racket_period", "alpha": "alpha"}
+
+
+def warn_if_swept_over(cfg: ExperimentConfig, config: Path | None, overrides: list[str],
+                       warn: Callable[[str], None] | None = None) -> None:
+    """Warn where the user set a model key that the run's swept parameter replaces at every
+    value (``--set model.racket_amplitude=0.02`` with a sweep of Gamma: the CSVs are those
+    of the bundled a_r, a reviewer found), so that a setting never goes without effect in
+    silence."""
+    for block in SWEPT_BLOCKS:
+        parameter = getattr(getattr(cfg, block, None), "parameter", None)
+        key = SWEPT_MODEL_KEY.get(str(parameter))
+        if key is None or not hasattr(getattr(cfg, "model", None), key):
+            continue
+        if f"model.{key}" in keys_set_by_user(config, overrides):
+            message = (f"model.{key} has no effect: {block}.parameter {parameter} sets it at "
+                       f"every value of the run"
+                       + (" (Gamma through a_r, at the model's racket_period and g)"
+                          if parameter == "gamma" else ""))
+            (warn if warn is not None else python_warning)(message)
+
+
 def run_options(entry: Entry, cfg: ExperimentConfig, config: Path | None, overrides: list[str],
                 **options: Any) -> RunOptions:
     """The run's :class:`RunOptions` (``options``: jobs, warn, scheduler), with the model keys
@@ -372,6 +399,8 @@ def execute(entry: Entry | str, config: Path | str | ExperimentConfig | None = N
         experiment, path, cfg = load_run_config(entry, config, overrides)
     if impacts is None:  # with impacts the model is the data's, not the config's
         check_model(entry, cfg, warn)
+        if not isinstance(config, ExperimentConfig):
+            warn_if_swept_over(cfg, config, overrides, warn)
     run_dir = None
     checkpoints = None
     try:

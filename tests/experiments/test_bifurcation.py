@@ -473,3 +473,20 @@ def test_leaving_the_period1_basin_beside_a_stable_orbit_is_not_a_flip():
     loc = locate_period_doubling(base, "gamma", 0.97 * flip, 1.03 * flip, theta0=math.pi / 2,
                                  v0=base.fixed_point().v_m_s, settings=settings)
     assert abs(loc.value / flip - 1.0) < 1e-3
+
+
+def test_a_model_key_the_sweep_replaces_is_said_to_have_no_effect(tmp_path):
+    # --set model.racket_amplitude=0.02 with a sweep of Gamma wrote the bundled a_r's tables
+    # without a word; a key the sweep does not touch is not mentioned
+    result = runner.invoke(app, ["bifurcation", "--set", "model.racket_amplitude=0.02",
+                                 "--set", "sweep.num=3", "--set", "iterate.transient_impacts=50",
+                                 "--set", "iterate.measured_impacts=64", "--set",
+                                 "flip.locate=false", "--out", str(tmp_path / "a"), "--quiet"])
+    assert result.exit_code == 0, result.output
+    assert ("model.racket_amplitude has no effect: sweep.parameter gamma sets it"
+            in " ".join(result.stderr.split()))
+    result = runner.invoke(app, ["bifurcation", "--set", "model.racket_period=0.9",
+                                 "--set", "sweep.num=3", "--set", "iterate.transient_impacts=50",
+                                 "--set", "iterate.measured_impacts=64", "--set",
+                                 "flip.locate=false", "--out", str(tmp_path / "b"), "--quiet"])
+    assert result.exit_code == 0 and "no effect" not in result.stderr
