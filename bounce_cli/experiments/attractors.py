@@ -26,6 +26,7 @@ from ..analysis.attractors import (
     AttractorFinder,
     RecurrenceSettings,
     basin_fractions,
+    find_attractors,
 )
 from ..analysis.basin_measures import basin_entropy, uncertainty_exponent
 from ..analysis.bifurcation import SWEEPABLE, parameter_point, period1_thresholds
@@ -236,19 +237,16 @@ def continue_fractions(config: AttractorsConfig, options: RunOptions) -> pd.Data
 
 
 def continuation_point(task: tuple[AttractorsConfig, float]):
-    """One value of the continuation (a worker's task): the attractors found on
-    ``continuation.grid`` at it (discovery on the sample ``measures.seed`` draws, then the
-    labelling) and each label's share, ``basin_fractions``."""
+    """One value of the continuation (a worker's task): the attractors ``find_attractors``
+    finds on ``continuation.grid`` at it (discovery on the sample ``measures.seed`` draws,
+    then the labelling) and each label's share, ``basin_fractions``."""
     config, value = task
     c = config.continuation
     th, vv = np.meshgrid(np.radians(c.grid.theta0_deg.values()), c.grid.v0_m_s.values())
-    settings = config.recurrence.settings()
-    finder = AttractorFinder(parameter_point(config.params, c.parameter, value), settings)
-    rng = np.random.default_rng(config.measures.seed)
-    pick = rng.choice(th.size, size=min(settings.sample, th.size), replace=False)
-    finder.discover(th.ravel()[pick], vv.ravel()[pick])
-    labels, _ = finder.label(th, vv)
-    return finder.attractors, basin_fractions(labels)
+    found = find_attractors(th, vv, parameter_point(config.params, c.parameter, value),
+                            config.recurrence.settings(),
+                            np.random.default_rng(config.measures.seed))
+    return found.attractors, basin_fractions(found.labels)
 
 
 # -- the run ------------------------------------------------------------------------------------

@@ -201,10 +201,10 @@ def fit_frame(trials: pd.DataFrame, config: RegressionConfig,
         y = group["a_r_m"].to_numpy()
         try:
             fit = ols_line(x, y, config.confidence)
-        except ModelError as exc:  # keeping its class (too few trials: a study skips it)
-            kind = TooFewObservationsError if isinstance(exc, TooFewObservationsError) else \
-                ConfigError
-            raise kind(f"data: condition {condition!r}: {exc}") from None
+        except TooFewObservationsError as exc:  # its class kept: a study skips the analysis
+            raise TooFewObservationsError(f"data: condition {condition!r}: {exc}") from None
+        except ModelError as exc:
+            raise ConfigError(f"data: condition {condition!r}: {exc}") from None
         alpha = _eq15_value(group, "alpha", None if model is None else model.alpha,
                             config.model.alpha, condition)
         g = _eq15_value(group, "g", None if model is None else model.g, config.model.g,

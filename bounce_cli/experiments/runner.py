@@ -200,23 +200,35 @@ SWEPT_MODEL_KEY = {"gamma": "racket_amplitude", "racket_amplitude": "racket_ampl
                    "racket_period": "racket_period", "alpha": "alpha"}
 
 
-def warn_if_swept_over(cfg: ExperimentConfig, config: Path | None, overrides: list[str],
-                       warn: Callable[[str], None] | None = None) -> None:
+def warn_if_swept_over(entry: Entry, cfg: ExperimentConfig, config: Path | None,
+                       overrides: list[str], warn: Callable[[str], None] | None = None) -> None:
     """Warn where the user set a model key that the run's swept parameter replaces at every
     value (``--set model.racket_amplitude=0.02`` with a sweep of Gamma: the CSVs are those
     of the bundled a_r, a reviewer found), so that a setting never goes without effect in
-    silence."""
-    for block in SWEPT_BLOCKS:
-        parameter = getattr(getattr(cfg, block, None), "parameter", None)
-        key = SWEPT_MODEL_KEY.get(str(parameter))
-        if key is None or not hasattr(getattr(cfg, "model", None), key):
-            continue
-        if f"model.{key}" in keys_set_by_user(config, overrides):
+    silence. What the user set is ``user_keys``', as for a ``--data`` analysis."""
+    swept = [(block, parameter, SWEPT_MODEL_KEY[parameter]) for block in SWEPT_BLOCKS
+             if (parameter := str(getattr(getattr(cfg, block, None), "parameter", None)))
+             in SWEPT_MODEL_KEY and hasattr(getattr(cfg, "model", None),
+                                            SWEPT_MODEL_KEY[parameter])]
+    if not swept:
+        return
+    given = user_keys(entry, cfg, config, overrides)
+    for block, parameter, key in swept:
+        if f"model.{key}" in given:
             message = (f"model.{key} has no effect: {block}.parameter {parameter} sets it at "
                        f"every value of the run"
                        + (" (Gamma through a_r, at the model's racket_period and g)"
                           if parameter == "gamma" else ""))
             (warn if warn is not None else python_warning)(message)
+
+
+def user_keys(entry: Entry, cfg: ExperimentConfig, config: Path | None,
+              overrides: list[str]) -> frozenset[str]:
+    """The dotted keys the user gave (``keys_set_by_user``: ``--set``'s, and their own
+    config's where it differs from the bundled one)."""
+    defaults = None if config is None else load_config(
+        type(cfg), bundled_config_path(entry.config)).model_dump(mode="json")
+    return keys_set_by_user(config, overrides, defaults)
 
 
 def run_options(entry: Entry, cfg: ExperimentConfig, config: Path | None, overrides: list[str],
@@ -226,9 +238,7 @@ def run_options(entry: Entry, cfg: ExperimentConfig, config: Path | None, overri
     ``config.keys_set_by_user``) where a ``data`` analysis takes the others from the data."""
     run = RunOptions(**options)
     if getattr(cfg, "data", None) is not None:
-        defaults = None if config is None else load_config(
-            type(cfg), bundled_config_path(entry.config)).model_dump(mode="json")
-        given = keys_set_by_user(config, overrides, defaults)
+        given = user_keys(entry, cfg, config, overrides)
         run.model_set_by_user = frozenset(
             key for key in DATA_MODEL_KEYS if f"model.{key}" in given)
     return run
@@ -400,7 +410,7 @@ def execute(entry: Entry | str, config: Path | str | ExperimentConfig | None = N
     if impacts is None:  # with impacts the model is the data's, not the config's
         check_model(entry, cfg, warn)
         if not isinstance(config, ExperimentConfig):
-            warn_if_swept_over(cfg, config, overrides, warn)
+            warn_if_swept_over(entry, cfg, config, overrides, warn)
     run_dir = None
     checkpoints = None
     try:

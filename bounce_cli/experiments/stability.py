@@ -148,6 +148,7 @@ def predictions_frame(params: ModelParams, block: PredictionsBlock) -> pd.DataFr
     cx_low, cx_high = (float(x) for x in complex_boundaries_g(alpha))
     best = min_stable_spectral_radius(alpha, block.n_ac)
     human = [float(spectral_radius(alpha, ac)) for ac in block.human_ac_g]
+    paper_low = paper_stable_ac_low(alpha)  # the paper's value at its alpha only
     rows = [
         ("ac_model_g", st.ac_g, math.nan, "g",
          f"AC of the model block; {'stable' if st.stable else 'unstable'}, {st.regime} regime"),
@@ -155,9 +156,9 @@ def predictions_frame(params: ModelParams, block: PredictionsBlock) -> pd.DataFr
          abs(alpha) if st.regime == "complex" else math.nan, "1",
          "largest |lambda| at the model block (eq. 12: |alpha| in the complex regime; "
          "the real regime has no closed form beside it)"),
-        ("stable_ac_low_g", low, paper_stable_ac_low(alpha), "g",
+        ("stable_ac_low_g", low, paper_low, "g",
          "eq. 14's flip boundary" + (f"; section 5: AC between 0 and {paper.STABLE_AC_LOW}"
-                                      if alpha == paper.STABLE_AC_ALPHA else "")),
+                                      if math.isfinite(paper_low) else "")),
         ("stable_ac_high_g", high, 0.0, "g", "section 5 / eq. 14: upper bound AC = 0"),
         ("complex_ac_low_g", cx_low, -1.0, "g", "eq. 11 (bounds in increasing order)"),
         ("complex_ac_high_g", cx_high, -(((1 - alpha) / (1 + alpha)) ** 2), "g", "eq. 11"),

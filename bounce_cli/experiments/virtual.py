@@ -22,8 +22,7 @@ import itertools
 import math
 import signal
 import time
-import dataclasses
-from dataclasses import fields
+from dataclasses import fields, replace
 from pathlib import Path
 from typing import Literal
 
@@ -215,8 +214,7 @@ def virtual_racket_params(config: VirtualConfig) -> ModelParams:
     amplitude times ``visual_gain`` (the virtual racket; the sine and subject sources move
     ``model.racket_amplitude``)."""
     params = config.params
-    return dataclasses.replace(params,
-                               racket_amplitude=config.visual_gain * params.racket_amplitude)
+    return replace(params, racket_amplitude=config.visual_gain * params.racket_amplitude)
 
 
 def launch_of(config: VirtualConfig) -> Launch:
