@@ -649,3 +649,23 @@ def test_cli_refuses_an_out_another_run_is_writing(tmp_path, cli, user_error):
                "choose another --out")
     holder.discard()
     assert not out.exists()  # the refused run wrote nothing, the holder's folder is gone
+
+
+@pytest.mark.parametrize("size", [0, 1, 4095, 4096, 4097, 3 * 4096 + 17])
+def test_same_bytes_compares_every_chunk_and_the_tail(tmp_path, monkeypatch, size):
+    """Files compared in chunks (here of 4096 bytes): equal files are the same, and a change
+    in any chunk -- the first byte, one at a chunk's border, the last byte -- is seen."""
+    monkeypatch.setattr(artifacts, "COMPARE_CHUNK_BYTES", 4096)
+    content = np.random.default_rng(size).integers(0, 256, size, dtype=np.uint8).tobytes()
+    a, b = tmp_path / "a", tmp_path / "b"
+    a.write_bytes(content)
+    b.write_bytes(content)
+    assert artifacts.same_bytes(a, b)
+    for at in sorted({0, 4095, 4096, size - 1} & set(range(size))):
+        changed = bytearray(content)
+        changed[at] ^= 1
+        b.write_bytes(bytes(changed))
+        assert not artifacts.same_bytes(a, b), at
+    b.write_bytes(content + b"x")
+    assert not artifacts.same_bytes(a, b)
+    assert not artifacts.same_bytes(a, tmp_path / "missing")

@@ -234,12 +234,29 @@ def records_agree(a: Any, b: Any, rtol: float = RECORD_RTOL) -> bool:
     return type(a) is type(b) and a == b
 
 
+#: ``same_bytes`` reads both files in chunks of this size into two buffers it reuses: reading
+#: each whole file into new memory cost the 1000 x 1000 basin's rerun 0.08 s (its 67 MB
+#: basin.csv twice, mostly in the kernel's page faults), the chunks 0.015 s
+COMPARE_CHUNK_BYTES = 1 << 20
+
+
 def same_bytes(a: Path, b: Path) -> bool:
     """Whether two files hold the same bytes (False when ``b`` does not exist)."""
     try:
         if a.stat().st_size != b.stat().st_size:
             return False
-        return a.read_bytes() == b.read_bytes()
+        chunk_a, chunk_b = bytearray(COMPARE_CHUNK_BYTES), bytearray(COMPARE_CHUNK_BYTES)
+        with open(a, "rb", buffering=0) as file_a, open(b, "rb", buffering=0) as file_b:
+            while True:
+                n = file_a.readinto(chunk_a)
+                if file_b.readinto(chunk_b) != n:
+                    return False  # one file changed size while read
+                if n == 0:
+                    return True
+                # whole buffers compare as one memcmp; a short read compares its bytes
+                if (chunk_a != chunk_b if n == COMPARE_CHUNK_BYTES
+                        else chunk_a[:n] != chunk_b[:n]):
+                    return False
     except OSError:
         return False
 
