@@ -370,3 +370,34 @@ def test_no_figure_parses_its_tick_labels_as_mathtext(figures):
                 checked += len(labels)
     assert not found, "\n".join(found[:10])
     assert checked > 500
+
+
+@pytest.mark.parametrize("name", ["basin", "stability", "bifurcation"])
+def test_a_png_laid_out_before_saving_is_what_savefig_writes(name):
+    """``save_figure`` runs the layout engine itself before ``savefig`` (which then draws the
+    figure once instead of twice): the PNG is, byte for byte, what ``savefig`` alone writes
+    with its own first draw; the figure keeps its engine, canvas and resolution and still
+    saves as PDF."""
+    from matplotlib import rc_context
+
+    from bounce_cli.runtime import figure_files
+    from bounce_cli.runtime.figure_files import SAVE_STYLE, figure_metadata, save_figure
+
+    def drawn():
+        return next(iter(entry(name).load().draw(committed_frames(name)).values()))
+
+    ours, theirs = io.BytesIO(), io.BytesIO()
+    fig = drawn()
+    engine, canvas, dpi = fig.get_layout_engine(), fig.canvas, fig.dpi
+    save_figure(fig, ours, "png", dpi=150, source="test")  # type: ignore[arg-type]
+    assert fig.get_layout_engine() is engine and fig.canvas is canvas and fig.dpi == dpi
+    reference = drawn()
+    with rc_context(SAVE_STYLE):  # type: ignore[arg-type]
+        reference.savefig(theirs, format="png", dpi=150,
+                          metadata=figure_metadata(reference, "png", "test"))
+    assert ours.getvalue() == theirs.getvalue()
+    with figure_files.laid_out(fig, "pdf", 150):  # a vector format: left to savefig
+        assert fig.get_layout_engine() is engine
+    pdf = io.BytesIO()
+    save_figure(fig, pdf, "pdf", dpi=150, source="test")  # type: ignore[arg-type]
+    assert pdf.getvalue()[:5] == b"%PDF-"
