@@ -82,6 +82,9 @@ def test_run_writes_nothing_without_out(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     result = bounce_cli.run("basin", set=SMALL_BASIN)
     assert set(result.figures) == {"basin.png", "basin_iterations.png"}
+    from matplotlib.figure import Figure  # drawn, though the run defers them to its writer
+
+    assert all(isinstance(f, Figure) for f in result.figures.values())
     assert result.summary and result.exit_code == 0
     assert list(tmp_path.iterdir()) == []
 

@@ -1,5 +1,6 @@
 """Run directories: atomic writes, refusal to overwrite another config's results, run.json."""
 
+import functools
 import json
 import sys
 from pathlib import Path
@@ -669,3 +670,60 @@ def test_same_bytes_compares_every_chunk_and_the_tail(tmp_path, monkeypatch, siz
     b.write_bytes(content + b"x")
     assert not artifacts.same_bytes(a, b)
     assert not artifacts.same_bytes(a, tmp_path / "missing")
+
+
+def line_figure(y1: float):
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(3, 2), layout="constrained")
+    ax = fig.subplots()
+    ax.plot([0, 1], [0, y1])
+    ax.set_xlabel(r"$\theta_0$ (deg)")
+    return fig
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="written in children on Linux")
+def test_deferred_figures_are_drawn_by_the_process_that_writes_them(tmp_path):
+    """Two deferred figures: the later is drawn and written by a child, the first here
+    (this process draws it alone); both files are what the figures drawn at once write,
+    caption included."""
+    from bounce_cli.runtime.figure_files import CAPTION_ATTRIBUTE, DeferredFigure
+
+    drawn_here: list[float] = []
+
+    def draw(y1):
+        drawn_here.append(y1)  # the child's own list is its copy: not seen here
+        return line_figure(y1)
+
+    eager, deferred = make_run(tmp_path / "eager", {"a": 1}), make_run(tmp_path / "later",
+                                                                        {"a": 1})
+    for y1, name in ((1.0, "first.png"), (2.0, "second.png")):
+        fig = line_figure(y1)
+        setattr(fig, CAPTION_ATTRIBUTE, f"alpha {y1}")
+        eager.add_figure(name, fig)
+        later = DeferredFigure(functools.partial(draw, y1))
+        setattr(later, CAPTION_ATTRIBUTE, f"alpha {y1}")
+        deferred.add_figure(name, later)
+    eager.commit()
+    deferred.commit()
+    assert drawn_here == [1.0]
+    for name in ("first.png", "second.png"):
+        assert (tmp_path / "later" / name).read_bytes() == (tmp_path / "eager" / name).read_bytes()
+        assert b"alpha" in (tmp_path / "later" / name).read_bytes()
+
+
+def test_a_rerun_that_keeps_its_figures_never_draws_them(tmp_path):
+    """``bounce reproduce``: every table as before, the figures there: not drawn at all."""
+    from bounce_cli.runtime.figure_files import DeferredFigure
+
+    out = tmp_path / "r"
+    first = make_run(out, {"a": 1})
+    first.add_csv("t.csv", pd.DataFrame({"x": [1.0, 2.0]}))
+    first.add_figure("f.png", line_figure(1.0))
+    first.commit()
+    calls: list[int] = []
+    again = make_run(out, {"a": 1})
+    again.add_csv("t.csv", pd.DataFrame({"x": [1.0, 2.0]}))
+    again.add_figure("f.png", DeferredFigure(lambda: calls.append(1) or line_figure(1.0)))
+    again.commit(agrees=lambda *args: True)
+    assert again.comparison["f.png"] == "kept" and calls == []

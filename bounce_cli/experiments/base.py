@@ -134,16 +134,25 @@ OUT_DIR = "<out>"
 
 @dataclass
 class ExperimentResult:
-    """Tables (file name -> DataFrame), figures (file name -> matplotlib Figure), a few
-    human-readable summary lines for the terminal, other files (name -> bytes: a report), and
-    the exit status once everything is written (1: some of the work failed, as a study's
-    ``failures.csv`` says). File names may hold folders (``s1/vision/acf/acf.csv``)."""
+    """Tables (file name -> DataFrame), figures (file name -> matplotlib Figure, or a
+    :class:`~bounce_cli.runtime.figure_files.DeferredFigure` drawn where it is written), a
+    few human-readable summary lines for the terminal, other files (name -> bytes: a
+    report), and the exit status once everything is written (1: some of the work failed, as
+    a study's ``failures.csv`` says). File names may hold folders
+    (``s1/vision/acf/acf.csv``)."""
 
     frames: dict[str, pd.DataFrame]
     figures: dict[str, Any]
     summary: list[str] = field(default_factory=list)
     files: dict[str, bytes] = field(default_factory=dict)
     exit_code: int = 0
+
+    def draw_figures(self) -> None:
+        """Every deferred figure drawn: ``figures`` then holds matplotlib Figures only (what
+        a caller that writes no run directory gets, e.g. ``bounce_cli.run``)."""
+        from ..runtime.figure_files import drawn
+
+        self.figures = {name: drawn(figure) for name, figure in self.figures.items()}
 
     def name_out_dir(self, out_dir: Path) -> None:
         """The summary's :data:`OUT_DIR` replaced by ``out_dir`` as a shell takes it (quoted

@@ -12,7 +12,7 @@ from __future__ import annotations
 import functools
 import importlib.util
 import math
-from typing import TYPE_CHECKING, Any, Callable, Literal
+from typing import TYPE_CHECKING, Any, Callable, Collection, Literal
 
 import numpy as np
 from pydantic import Field, model_validator
@@ -42,6 +42,7 @@ from ..analysis.classify import (
 from ..model.control import ControlledMap, is_passive
 from ..model.maps import ImpactMap, PassiveMap
 from ..model.params import ModelParams
+from ..runtime.figure_files import DeferredFigure
 from .plotting import publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
@@ -226,7 +227,9 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
         summary.append("Fig. 3 initial conditions: " + ", ".join(
             f"v0 = {row.v0_m_s:g} m/s -> {row.outcome} after {row.iterations}"
             for row in markers.itertuples() if row.marker != "fixed_point"))
-    figures = draw(frames)
+    # each figure drawn by the process that writes it, beside basin.csv (RunDirectory)
+    figures = {name: DeferredFigure(functools.partial(draw_one, frames, name))
+               for name in FIGURES}
     caption_figures(figures, params, f"{theta_deg.size} x {v0.size} grid")
     return ExperimentResult(frames=frames, figures=figures, summary=summary)
 
@@ -261,10 +264,13 @@ def classify_map_grid(theta0, v0, impact_map: ImpactMap, settings: ClassifySetti
 
 
 def import_output_libraries() -> None:
-    """Import what the tables and figures need (pandas, matplotlib and its Agg backend,
-    about 0.5 s): done while the compiled kernel classifies in threads that do not hold
-    the GIL, so that the import costs no wall time on a machine with a core to spare."""
+    """Import what the tables and figures need (pandas, matplotlib and its Agg backend, and
+    ``matplotlib.figure`` with its axes, about 0.6 s): done while the compiled kernel
+    classifies in threads that do not hold the GIL, so that the import costs no wall time
+    on a machine with a core to spare, and before the run directory forks the processes
+    that draw the figures (each would import ``matplotlib.figure`` again: 0.1 s)."""
     import matplotlib.backends.backend_agg  # noqa: F401
+    import matplotlib.figure  # noqa: F401
     import pandas  # noqa: F401
 
     from . import plotting  # noqa: F401
@@ -397,17 +403,20 @@ def basin_table(frames: dict[str, pd.DataFrame]) -> pd.DataFrame:
     raise KeyError("basin.csv")
 
 
-@publication_style
-def draw(frames: dict[str, pd.DataFrame]) -> dict:
-    """basin.png and basin_iterations.png, from basin.csv (or basin.npz / basin.parquet) and
-    markers.csv only."""
-    import pandas as pd
-    from matplotlib import colormaps
-    from matplotlib.cm import ScalarMappable
-    from matplotlib.colors import BoundaryNorm, ListedColormap, Normalize
-    from matplotlib.patches import Patch
+#: the run's figures, in the order ``draw`` makes them
+FIGURES = ("basin.png", "basin_iterations.png")
 
-    from .plotting import integer_axis, new_figure
+
+def draw_one(frames: dict[str, pd.DataFrame], name: str):
+    """The figure ``name`` (one of :data:`FIGURES`) alone, as ``draw`` makes it."""
+    return draw(frames, only=(name,))[name]
+
+
+@publication_style
+def draw(frames: dict[str, pd.DataFrame], only: Collection[str] = FIGURES) -> dict:
+    """basin.png and basin_iterations.png (those of them named in ``only``), from basin.csv
+    (or basin.npz / basin.parquet) and markers.csv only."""
+    import pandas as pd
 
     basin, markers = basin_table(frames), frames["markers.csv"]
     codes = pd.Categorical(basin["outcome"], categories=list(EXACT_OUTCOMES)).codes
@@ -420,8 +429,23 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         labels["locked"] += f", period {cycles} racket cycle{'s' if cycles != 1 else ''}"
         labels["undecided"] = "undecided in max impacts (chaotic or a long transient)"
     grid = _Grid(basin)
-    image, extent = grid.image(codes), grid.extent
+    figures = {}
+    if "basin.png" in only:
+        figures["basin.png"] = _outcome_figure(grid, codes, markers, shown, labels, exact)
+    if "basin_iterations.png" in only:
+        figures["basin_iterations.png"] = _iterations_figure(grid, codes, basin, markers)
+    return figures
 
+
+def _outcome_figure(grid: _Grid, codes, markers: pd.DataFrame, shown: list[str],
+                    labels: dict[str, str], exact: bool):
+    """basin.png: each start's outcome (Fig. 4's white, grey and black), with the markers."""
+    from matplotlib.colors import BoundaryNorm, ListedColormap
+    from matplotlib.patches import Patch
+
+    from .plotting import new_figure
+
+    image, extent = grid.image(codes), grid.extent
     fig, axes = new_figure(width=7.5, height=6.2)
     ax = axes[0, 0]
     cmap = ListedColormap([OUTCOME_COLOURS[o] for o in EXACT_OUTCOMES])
@@ -439,7 +463,19 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     ax.set_ylabel(r"initial velocity $v_0$ (m/s)")
     ax.set_title("Domain of attraction of the period-1 attractor (paper Fig. 4)"
                  + (",\nexact sticking (min_hop_s 0)" if exact else ""))
+    return fig
 
+
+def _iterations_figure(grid: _Grid, codes, basin: pd.DataFrame, markers: pd.DataFrame):
+    """basin_iterations.png: the impacts until each start was classified."""
+    from matplotlib import colormaps
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import Normalize
+    from matplotlib.patches import Patch
+
+    from .plotting import integer_axis, new_figure
+
+    extent = grid.extent
     iters = grid.image(basin["iterations"].to_numpy())
     below = grid.image(codes == OUTCOMES.index("below_racket"))
     fig2, axes2 = new_figure(width=7.5, height=6.2)
@@ -463,7 +499,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     ax2.set_xlabel(r"initial phase $\theta_0$ (deg)")
     ax2.set_ylabel(r"initial velocity $v_0$ (m/s)")
     ax2.set_title("Impacts until classified (paper Fig. 4, section 3)")
-    return {"basin.png": fig, "basin_iterations.png": fig2}
+    return fig2
 
 
 EXPERIMENT = Experiment(name="basin", schema=BasinConfig, run=run, draw=draw)

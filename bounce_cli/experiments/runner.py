@@ -448,7 +448,8 @@ def execute(entry: Entry | str, config: Path | str | ExperimentConfig | None = N
                 stop()
         if not figures:  # the tables alone, whether or not the experiment reads the flag
             result.figures = {}
-        if run_dir is None:
+        if run_dir is None:  # the caller gets the figures themselves
+            result.draw_figures()
             return Execution(result, cfg)
         written = write_result(run_dir, result, agrees)
         result.name_out_dir(run_dir.out_dir)

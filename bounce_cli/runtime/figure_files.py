@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import contextlib
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, BinaryIO, Iterator
+from typing import TYPE_CHECKING, Any, BinaryIO, Callable, Iterator
 
 if TYPE_CHECKING:  # matplotlib is imported when a figure is written
     from matplotlib.figure import Figure
@@ -75,15 +75,46 @@ def encodable(value: Any) -> Any:
     return value.encode("utf-8", "surrogateescape").decode("utf-8", "replace")
 
 
-def save_figure(fig: Figure, path: Path | BinaryIO, kind: str, *, dpi: float, source: str,
-                png_options: dict[str, Any] | None = None) -> None:
+class DeferredFigure:
+    """A figure drawn when it is first needed: where it is written.
+
+    An experiment may hand its figures to the run as ``DeferredFigure(draw)``, ``draw`` a
+    function of no arguments returning the Figure. A run directory writes half of a run's
+    figures in a child process (``RunDirectory.commit``): a deferred figure is then drawn in
+    the process that writes it, beside the other files, instead of before any is written;
+    and a rerun that keeps its figures (``bounce reproduce`` with every table unchanged)
+    never draws them. A caption set on it (``plotting.caption_figures``) goes onto the
+    figure. Drawn once per process: :meth:`figure` returns the same Figure afterwards."""
+
+    def __init__(self, draw: Callable[[], Figure]) -> None:
+        self._draw = draw
+        self._figure: Figure | None = None
+
+    def figure(self) -> Figure:
+        """The figure, drawn on the first call."""
+        if self._figure is None:
+            figure = self._draw()
+            caption = getattr(self, CAPTION_ATTRIBUTE, None)
+            if caption is not None:
+                setattr(figure, CAPTION_ATTRIBUTE, caption)
+            self._figure = figure
+        return self._figure
+
+
+def drawn(figure: Figure | DeferredFigure) -> Figure:
+    """The Figure itself: a :class:`DeferredFigure` drawn (once), any other returned as it is."""
+    return figure.figure() if isinstance(figure, DeferredFigure) else figure
+
+
+def save_figure(fig: Figure | DeferredFigure, path: Path | BinaryIO, kind: str, *, dpi: float,
+                source: str, png_options: dict[str, Any] | None = None) -> None:
     """Write ``fig`` to ``path`` as ``kind`` (one of :data:`FIGURE_FORMATS`) at ``dpi``, with
     :func:`figure_metadata`, in :data:`SAVE_STYLE`.
 
     Parameters
     ----------
-    fig : Figure
-        The figure (from an experiment's ``draw``).
+    fig : Figure or DeferredFigure
+        The figure (from an experiment's ``draw``); a deferred one is drawn here.
     path : Path or binary file object
         The file to write (its name's suffix is not consulted).
     kind : str
@@ -101,6 +132,7 @@ def save_figure(fig: Figure, path: Path | BinaryIO, kind: str, *, dpi: float, so
     """
     from matplotlib import rc_context
 
+    fig = drawn(fig)
     extra: dict[str, Any] = {"pil_kwargs": png_options} if kind == "png" and png_options else {}
     with rc_context(SAVE_STYLE), laid_out(fig, kind, dpi):  # type: ignore[arg-type]
         fig.savefig(path, format=kind, dpi=dpi, metadata=figure_metadata(fig, kind, source),
