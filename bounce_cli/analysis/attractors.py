@@ -47,6 +47,7 @@ from typing import Callable
 import numpy as np
 
 from ..model.chatter import iterate_exact_orbit, release_fate, release_phase
+from ..model.impact import MAX_SAFE_STEPS
 from ..model.maps import PassiveMap, State
 from ..model.params import MIN_HOP_S, ModelError, ModelParams, phase_difference
 from .bifurcation import SweepSettings, detect_period, iterate_sweep, sweep_parameters
@@ -122,12 +123,19 @@ class Tessellation:
     def size(self) -> int:
         return self.cells_theta * (self.cells_v + 2)
 
+    @property
+    def scales(self) -> tuple[float, float]:
+        """Cells per radian of phase and per m/s of velocity."""
+        return self.cells_theta / TWO_PI, self.cells_v / (self.v_high - self.v_low)
+
     def code(self, theta, v) -> np.ndarray:
+        """The cell of each state (wrapped theta, v); ``model.compiled._cell`` repeats it."""
+        theta_scale, v_scale = self.scales
         # a NaN phase (a ball that could not fly) in the first column, as the cast and the
         # clip put it, without the cast's warning
-        column = np.nan_to_num(np.mod(theta, TWO_PI) * (self.cells_theta / TWO_PI), nan=0.0)
+        column = np.nan_to_num(np.mod(theta, TWO_PI) * theta_scale, nan=0.0)
         i = np.clip(column.astype(np.int64), 0, self.cells_theta - 1)
-        j = np.floor((np.asarray(v) - self.v_low) * (self.cells_v / (self.v_high - self.v_low)))
+        j = np.floor((np.asarray(v) - self.v_low) * v_scale)
         j = np.clip(np.nan_to_num(j, nan=-1.0, posinf=self.cells_v, neginf=-1.0), -1,
                     self.cells_v).astype(np.int64) + 1
         return i * (self.cells_v + 2) + j
@@ -373,6 +381,17 @@ def _recurrence(cat: _Catalogue, impact_map: PassiveMap, th_rec, v_rec):
     recurred = np.zeros(m, dtype=bool)
     idx = rows.copy()
     state = impact_map.start(th_rec[:, -1], v_rec[:, -1], wrap=True)
+    if impact_map.compiled_hops and s.min_hop_s > 0.0:  # the loop below, compiled
+        from ..model.compiled import recurrence_arrays
+
+        cells = cat.cells
+        theta_scale, v_scale = cells.scales
+        cat.saw(np.array([recurrence_arrays(
+            state.theta, state.v, *state.extra, impact_map.params, min_hop_s=s.min_hop_s,
+            cells=(cells.cells_theta, theta_scale, cells.cells_v, cells.v_low, v_scale),
+            recurrence=s.recurrence, max_impacts=s.recurrence_impacts, visited=visited,
+            recurred=recurred, max_steps=MAX_SAFE_STEPS)]))
+        return recurred, visited
     for _ in range(s.recurrence_impacts):
         if idx.size == 0:
             break

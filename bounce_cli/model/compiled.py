@@ -335,6 +335,91 @@ def classify_controlled_arrays(theta0: np.ndarray, v0: np.ndarray, tau0: np.ndar
     return outcome, iterations
 
 
+# -- the recurrence of ``analysis.attractors`` -------------------------------------------------
+@_jit
+def _cell(theta, v, cells_theta, scale_theta, cells_v, v_low, scale_v):
+    """``analysis.attractors.Tessellation.code`` of one state, the same expressions (a NaN
+    phase in the first column, a NaN velocity below the range, the range's ends clipped)."""
+    column = (theta % TWO_PI) * scale_theta
+    if column != column:
+        column = 0.0
+    i = min(max(np.int64(column), 0), cells_theta - 1)
+    j = np.floor((v - v_low) * scale_v)
+    if j != j:
+        j = -1.0
+    j = min(max(j, -1.0), float(cells_v))
+    return i * (cells_v + 2) + np.int64(j) + 1
+
+
+@_jit
+def _recurrence(theta, v, cos_theta, sin_theta, c, max_steps, cells_theta, scale_theta,
+                cells_v, v_low, scale_v, recurrence, max_impacts, visited, recurred):
+    """``analysis.attractors._recurrence``'s loop on wrapped states: each orbit one impact at
+    a time (``PassiveMap.step``'s arithmetic, as ``_classify`` repeats it), its cell marked
+    in its row of ``visited``, until ``recurrence`` impacts in a row land in visited cells
+    (``recurred``), it sticks (a hop shorter than ``min_hop_s``, or NaN), or
+    ``max_impacts``. Returns the largest finite velocity after impact seen (-inf: none)."""
+    m = theta.size
+    w = c[_W]
+    work = np.empty((12, m))
+    th, vv, cos_th, sin_th, hop = work[0], work[1], work[2], work[3], work[4]
+    S, D0, C, SN, V, SH, CH = work[5], work[6], work[7], work[8], work[9], work[10], work[11]
+    pos = np.empty(m, np.int64)
+    idx = np.empty(m, np.int64)
+    streak = np.zeros(m, np.int64)
+    for j in range(m):
+        th[j], vv[j], cos_th[j], sin_th[j], idx[j] = theta[j], v[j], cos_theta[j], \
+            sin_theta[j], j
+    v_max = -np.inf
+    for _ in range(max_impacts):
+        if m == 0:
+            break
+        _first_impact(vv, cos_th, sin_th, m, c, max_steps, hop, pos, S, D0, C, SN, V, SH, CH)
+        for j in range(m):
+            S[j] = _wrap(th[j] + hop[j])
+        for j in range(m):
+            SN[j], C[j] = _sincos(S[j])
+            V[j] = c[_V_COEF] * C[j] - c[_ALPHA] * vv[j] + c[_G_ALPHA_W] * hop[j]
+        p = 0
+        for j in range(m):
+            t, u = S[j], V[j]
+            if v_max < u < np.inf:  # finite velocities only (NaN compares False)
+                v_max = u
+            stuck = not hop[j] / w >= c[_MIN_HOP]
+            code = _cell(t, u, cells_theta, scale_theta, cells_v, v_low, scale_v)
+            row = idx[j]
+            run = 0 if not visited[row, code] else streak[j] + 1
+            visited[row, code] = True
+            done = run >= recurrence
+            if done:
+                recurred[row] = True
+            if not (done or stuck):
+                idx[p], th[p], vv[p], cos_th[p], sin_th[p], streak[p] = row, t, u, C[j], \
+                    SN[j], run
+                p += 1
+        m = p
+    return v_max
+
+
+def recurrence_arrays(theta, v, cos_theta, sin_theta, params: ModelParams, *,
+                      min_hop_s: float, cells: tuple[int, float, int, float, float],
+                      recurrence: int, max_impacts: int, visited: np.ndarray,
+                      recurred: np.ndarray, max_steps: int) -> float:
+    """``analysis.attractors._recurrence``'s loop at compiled speed, the same bits: wrapped
+    states (their cos and sin by ``trig.sincos``) followed until they recur, stick or reach
+    ``max_impacts``; ``cells`` = (cells_theta, cells_theta / 2 pi, cells_v, v_low,
+    cells_v / (v_high - v_low)), each computed by the tessellation's own expression;
+    ``visited`` (orbits x cells, bool) and ``recurred`` (bool) are filled in place. Returns
+    the largest finite velocity after impact the orbits reached (-inf: none). Section 3's
+    sticking rule only (``min_hop_s`` > 0; exact sticking is numpy's)."""
+    cells_theta, scale_theta, cells_v, v_low, scale_v = cells
+    f64 = [np.ascontiguousarray(x, dtype=float) for x in (theta, v, cos_theta, sin_theta)]
+    return float(_recurrence(*f64, _constants(params, FixedPoint(math.nan, math.nan), 0.0,
+                                              min_hop_s),
+                             max_steps, cells_theta, scale_theta, cells_v, v_low, scale_v,
+                             recurrence, max_impacts, visited, recurred))
+
+
 def first_impact_phase(theta, v, params: ModelParams, *, max_steps: int) -> np.ndarray:
     """``impact.first_impact_phase(..., trig=trig.sincos)`` at one parameter point (flat
     arrays; for the tests that hold the two solvers to the same bits)."""

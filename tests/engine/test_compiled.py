@@ -270,3 +270,34 @@ def test_attractors_label_the_same_with_and_without_the_compiled_hops(monkeypatc
     np.testing.assert_array_equal(found["auto"][0], found["numpy"][0])
     np.testing.assert_array_equal(found["auto"][1], found["numpy"][1])
     assert found["auto"][2] == found["numpy"][2]
+
+
+@pytest.mark.parametrize("params", PARAMETERS + [
+    ModelParams(alpha=0.9, g=9.81, racket_amplitude=0.30, racket_period=0.92)])  # chaotic
+def test_the_attractors_recurrence_compiled_is_numpy_s_to_the_last_bit(params):
+    # the chaotic orbits' recurrence (analysis.attractors._recurrence): every orbit's visited
+    # cells, whether it recurred, and the largest velocity seen, by the numpy loop and by the
+    # compiled one; states that cannot fly, cells above and below the velocity range
+    from dataclasses import replace
+
+    from bounce_cli.analysis import attractors
+    from bounce_cli.model.maps import PassiveMap
+
+    rng = np.random.default_rng(11)
+    racket_v = params.racket_amplitude * params.omega
+    theta = rng.uniform(-1.0, 8.0, (160, 3))  # unwrapped: the start wraps the last column
+    v = rng.uniform(0.5 * racket_v, 3.0 * racket_v + params.g * params.racket_period, (160, 3))
+    settings = attractors.RecurrenceSettings(cells_theta=60, cells_v=40, v_range=(0.5, 6.0),
+                                             recurrence=30, recurrence_impacts=1500,
+                                             window=64, max_period=16)
+    plain = PassiveMap.of(params, require_fixed_point=False)
+    results = []
+    for impact_map in (plain, replace(plain, compiled_hops=True)):
+        cat = attractors._Catalogue(params, settings, attractors.Tessellation.of(settings))
+        recurred, visited = attractors._recurrence(cat, impact_map, theta, v)
+        results.append((recurred, visited, cat.v_max_seen))
+    (r_a, vis_a, top_a), (r_b, vis_b, top_b) = results
+    np.testing.assert_array_equal(r_b, r_a)
+    np.testing.assert_array_equal(vis_b, vis_a)
+    assert top_b == top_a
+    assert vis_a.sum() > theta.size  # the orbits moved on (beyond their recorded cells)
