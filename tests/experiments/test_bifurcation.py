@@ -107,6 +107,47 @@ def test_period_detection_tolerance_noise_and_chaos():
     assert detect_period(v8[None], t8[None], 4, 1e-6)[0] == 0
 
 
+def test_period_detection_is_the_full_comparison_at_every_period():
+    """``detect_period`` compares a row in full only where its last point repeats: the
+    periods are those of the plain comparison of every row at every p, on rows built to
+    repeat, to repeat only in their later part, to repeat across 0 = 2 pi, with NaN."""
+    from bounce_cli.model.params import phase_difference
+
+    def plain(v, theta, max_period, tolerance):
+        period = np.zeros(v.shape[0], dtype=np.int64)
+        open_ = np.isfinite(v).all(axis=1) & np.isfinite(theta).all(axis=1)
+        for p in range(1, max_period + 1):
+            if not open_.any() or p >= v.shape[1]:
+                break
+            dv = np.abs(v[:, p:] - v[:, :-p]).max(axis=1)
+            dth = np.abs(phase_difference(theta[:, p:], theta[:, :-p])).max(axis=1)
+            hit = open_ & (dv < tolerance) & (dth < tolerance)
+            period[hit] = p
+            open_ &= ~hit
+        return period
+
+    rng = np.random.default_rng(3)
+    n, width = 600, 40
+    k = np.arange(width)
+    base_v, base_t = rng.uniform(2, 6, (n, 12)), rng.uniform(0, TWO_PI, (n, 12))
+    periods = rng.integers(1, 13, n)
+    v = np.take_along_axis(base_v, (k[None, :] % periods[:, None]), axis=1)
+    theta = np.take_along_axis(base_t, (k[None, :] % periods[:, None]), axis=1)
+    v += rng.normal(0, 1e-9, v.shape) * rng.integers(0, 2, (n, 1))  # within the tolerance
+    early = rng.random(n) < 0.3  # repeats only from column 10 on: the last point does
+    v[early, :10] += rng.uniform(-1, 1, (int(early.sum()), 10))
+    wrap = rng.random(n) < 0.1  # a phase at 0 = 2 pi, recorded on either side
+    theta[wrap, ::2] = np.where(rng.random((int(wrap.sum()), 1)) < 0.5, 1e-10, TWO_PI - 1e-10)
+    v[rng.random(n) < 0.05, 3] = np.nan
+    chaos = rng.random(n) < 0.2
+    v[chaos], theta[chaos] = rng.uniform(2, 6, (int(chaos.sum()), width)), rng.uniform(
+        0, TWO_PI, (int(chaos.sum()), width))
+    for max_period, tolerance in ((16, 1e-7), (8, 1e-6), (3, 1e-12)):
+        expected = plain(v, theta, max_period, tolerance)
+        np.testing.assert_array_equal(detect_period(v, theta, max_period, tolerance), expected)
+        assert len(np.unique(expected)) > 3  # periods found, and none
+
+
 # -- attractors ---------------------------------------------------------------------------------
 def classify(gammas, theta0_deg, v0, alpha=0.5, **settings):
     base = ModelParams(alpha, 9.81, 0.3, 0.92)
