@@ -259,16 +259,14 @@ def run(config: AttractorsConfig, options: RunOptions) -> ExperimentResult:
     rng = np.random.default_rng(config.measures.seed)
     pick = rng.choice(th.size, size=min(settings.sample, th.size), replace=False)
     finder.discover(th.ravel()[pick], vv.ravel()[pick])
+    # said as soon as the sample shows it: with most starts undecided, the labelling that
+    # follows takes minutes (alpha 0.9: 5 min with the bundled range, 30 s with a wide one)
+    warned = warn_if_beyond_cells(finder, config, options)
     jobs = options.jobs if th.size >= POOL_MIN_POINTS else 1
     with parallel.executor(jobs) as executor:
         labels, impacts = finder.label(th, vv, map=executor.map, workers=executor.workers)
-    beyond = finder.beyond_cells()
-    if beyond is not None:
-        low, high = config.recurrence.v_range_m_s
-        options.warn(f"orbits reached {beyond:.1f} m/s, above recurrence.v_range_m_s "
-                     f"[{low:g}, {high:g}], where the cells cannot tell attractors apart: "
-                     f"widen it (e.g. --set 'recurrence.v_range_m_s=[{low:g}, "
-                     f"{math.ceil(2.0 * beyond):g}]')")
+    if not warned:
+        warn_if_beyond_cells(finder, config, options)
     attractors = finder.attractors
     fractions, shares = _fractions_frame(labels, attractors)
     names = np.array([label_name(x, attractors) for x in range(-4, len(attractors))],
@@ -294,6 +292,21 @@ def run(config: AttractorsConfig, options: RunOptions) -> ExperimentResult:
     return ExperimentResult(frames=frames, figures=figures,
                             summary=summary_lines(attractors, shares, labels.size,
                                                   finder.rediscovered))
+
+
+def warn_if_beyond_cells(finder: AttractorFinder, config: AttractorsConfig,
+                         options: RunOptions) -> bool:
+    """Warn, with a range to use, where the orbits followed so far went above
+    ``recurrence.v_range_m_s`` (``AttractorFinder.beyond_cells``); True if it warned."""
+    beyond = finder.beyond_cells()
+    if beyond is None:
+        return False
+    low, high = config.recurrence.v_range_m_s
+    options.warn(f"orbits reached {beyond:.1f} m/s, above recurrence.v_range_m_s "
+                 f"[{low:g}, {high:g}], where the cells cannot tell attractors apart: "
+                 f"widen it (e.g. --set 'recurrence.v_range_m_s=[{low:g}, "
+                 f"{math.ceil(2.0 * beyond):g}]')")
+    return True
 
 
 def summary_lines(attractors, shares: dict[int, tuple], n_starts: int,

@@ -141,3 +141,25 @@ def test_the_command_warns_of_orbits_above_the_cells_and_flags_undecided_measure
     if measures.loc["undecided_fraction", "value"] > 0.05:
         assert "undecided, which these measures count as one outcome" in \
             measures.loc["basin_entropy", "note"]
+
+
+def test_the_warning_of_orbits_above_the_cells_comes_before_the_long_labelling(monkeypatch):
+    """Where the sample's orbits already leave the cells, the user is told before the grid
+    is labelled (which then takes minutes), once."""
+    from bounce_cli.analysis.attractors import AttractorFinder
+    from bounce_cli.experiments import attractors as experiment
+    from bounce_cli.experiments.base import RunOptions
+
+    said: list[str] = []
+    label = AttractorFinder.label
+    monkeypatch.setattr(AttractorFinder, "label",
+                        lambda self, *a, **k: said.append("labelling") or label(self, *a, **k))
+    config = experiment.AttractorsConfig.model_validate({
+        "model": {"alpha": 0.9}, "grid": {"theta0_deg": {"start": 0, "stop": 360, "num": 6},
+                                          "v0_m_s": {"start": 0, "stop": 10, "num": 6}},
+        "recurrence": {"sample": 12, "recurrence_impacts": 2000, "transient": 200,
+                       "window": 64, "max_period": 16},
+        "measures": {"box": 2, "samples": 10}, "continuation": {"num": 0}})
+    experiment.run(config, RunOptions(warn=said.append))
+    assert "above recurrence.v_range_m_s" in said[0] and said[1] == "labelling"
+    assert sum("above recurrence" in s for s in said) == 1
