@@ -204,11 +204,9 @@ class _Catalogue:
     def __post_init__(self) -> None:
         self.owner = np.full(self.cells.size, -1, dtype=np.int64)
 
-    def saw(self, v: np.ndarray) -> None:
+    def saw(self, v: np.ndarray | float) -> None:
         """Keep the largest finite velocity of ``v`` in ``v_max_seen``."""
-        finite = np.asarray(v)[np.isfinite(v)]
-        if finite.size:
-            self.v_max_seen = max(self.v_max_seen, float(finite.max()))
+        self.v_max_seen = _largest_finite(v, self.v_max_seen)
 
     def add(self, attractor: Attractor) -> int:
         attractor.index = len(self.attractors)
@@ -225,6 +223,12 @@ class _Catalogue:
                     (np.abs(a.v - v) < tol) & (np.abs(phase_difference(a.theta, theta)) < tol)):
                 return a.index
         return None
+
+
+def _largest_finite(v, top: float) -> float:
+    """The largest of ``top`` and the finite values of ``v``."""
+    finite = np.asarray(v)[np.isfinite(v)]
+    return max(top, float(finite.max())) if finite.size else top
 
 
 def _impact(impact_map: PassiveMap, state: State, settings: RecurrenceSettings):
@@ -305,10 +309,14 @@ def _least_period(theta: np.ndarray, v: np.ndarray, tolerance: float = 1e-8) -> 
     return p
 
 
-def _discover(cat: _Catalogue, impact_map: PassiveMap, theta, v,
-              stick_label: int) -> np.ndarray:
+def _discover(cat: _Catalogue, impact_map: PassiveMap, theta, v, stick_label: int,
+              follow: Callable = builtins.map) -> np.ndarray:
     """Discovery (module docstring, pass 1) of the states (theta, v): their labels (those
-    that stick: ``stick_label``); the attractors found are added to the catalogue."""
+    that stick: ``stick_label``); the attractors found are added to the catalogue.
+    ``follow``: the map over chunks of orbits without a period whose recurrence is followed
+    (``_recurrence``: it reads the catalogue's cells only), e.g. an executor's of threads,
+    as the compiled loop releases the GIL; the attractors they find are catalogued in the
+    chunks' order, so the result is the same for any map."""
     s = cat.settings
     labels = np.full(np.size(theta), UNDECIDED, dtype=np.int64)
     if labels.size == 0:
@@ -353,11 +361,12 @@ def _discover(cat: _Catalogue, impact_map: PassiveMap, theta, v,
         open_, v_rec, th_rec = open_[still], v_rec[still], th_rec[still]
     if open_.size == 0:
         return labels
-    period = np.zeros(open_.size, dtype=np.int64)
-    rest = np.flatnonzero(period == 0)
-    for chunk in range(0, rest.size, RECURRENCE_CHUNK):
-        part = rest[chunk:chunk + RECURRENCE_CHUNK]
-        recurred, visited = _recurrence(cat, impact_map, th_rec[part], v_rec[part])
+    parts = [np.arange(c, min(c + RECURRENCE_CHUNK, open_.size))
+             for c in range(0, open_.size, RECURRENCE_CHUNK)]
+    followed = follow(lambda part: _recurrence(s, cat.cells, impact_map, th_rec[part],
+                                               v_rec[part]), parts)
+    for part, (recurred, visited, v_max) in zip(parts, followed):
+        cat.saw(v_max)
         _add_recurrent(cat, open_[part[recurred]], visited[recurred], th_rec[part[recurred]],
                        v_rec[part[recurred]], labels)
     return labels
@@ -367,16 +376,16 @@ def _discover(cat: _Catalogue, impact_map: PassiveMap, theta, v,
 RECURRENCE_CHUNK = 256
 
 
-def _recurrence(cat: _Catalogue, impact_map: PassiveMap, th_rec, v_rec):
+def _recurrence(s: RecurrenceSettings, cells: Tessellation, impact_map: PassiveMap, th_rec,
+                v_rec):
     """Orbits without a period, from their last recorded state on: each followed until
     ``recurrence`` impacts in a row land in cells it had visited (Datseris & Wagemakers'
     criterion for an attractor found), for at most ``recurrence_impacts``. (recurred mask,
-    visited cells per orbit as a boolean row)."""
-    s = cat.settings
+    visited cells per orbit as a boolean row, the largest finite velocity reached)."""
     m = th_rec.shape[0]
-    visited = np.zeros((m, cat.cells.size), dtype=bool)
+    visited = np.zeros((m, cells.size), dtype=bool)
     rows = np.arange(m)
-    visited[np.repeat(rows, th_rec.shape[1]), cat.cells.code(th_rec, v_rec).ravel()] = True
+    visited[np.repeat(rows, th_rec.shape[1]), cells.code(th_rec, v_rec).ravel()] = True
     streak = np.zeros(m, dtype=np.int64)
     recurred = np.zeros(m, dtype=bool)
     idx = rows.copy()
@@ -384,21 +393,21 @@ def _recurrence(cat: _Catalogue, impact_map: PassiveMap, th_rec, v_rec):
     if impact_map.compiled_hops and s.min_hop_s > 0.0:  # the loop below, compiled
         from ..model.compiled import recurrence_arrays
 
-        cells = cat.cells
         theta_scale, v_scale = cells.scales
-        cat.saw(np.array([recurrence_arrays(
+        v_max = recurrence_arrays(
             state.theta, state.v, *state.extra, impact_map.params, min_hop_s=s.min_hop_s,
             cells=(cells.cells_theta, theta_scale, cells.cells_v, cells.v_low, v_scale),
             recurrence=s.recurrence, max_impacts=s.recurrence_impacts, visited=visited,
-            recurred=recurred, max_steps=MAX_SAFE_STEPS)]))
-        return recurred, visited
+            recurred=recurred, max_steps=MAX_SAFE_STEPS)
+        return recurred, visited, v_max
+    v_max = -math.inf
     for _ in range(s.recurrence_impacts):
         if idx.size == 0:
             break
         step, stuck = _impact(impact_map, state, s)
         state = step.state
-        cat.saw(state.v)
-        code = cat.cells.code(state.theta, state.v)
+        v_max = _largest_finite(state.v, v_max)
+        code = cells.code(state.theta, state.v)
         new = ~visited[idx, code]
         visited[idx, code] = True
         streak = np.where(new, 0, streak + 1)
@@ -406,7 +415,7 @@ def _recurrence(cat: _Catalogue, impact_map: PassiveMap, th_rec, v_rec):
         recurred[idx[done]] = True
         keep = ~(done | stuck)
         idx, state, streak = idx[keep], state.take(keep), streak[keep]
-    return recurred, visited
+    return recurred, visited, v_max
 
 
 def _add_recurrent(cat: _Catalogue, which, visited, theta, v, labels) -> None:
@@ -580,17 +589,21 @@ class AttractorFinder:
                            dtype=bool)
         return theta0.shape, theta0.ravel(), v0.ravel(), flies
 
-    def discover(self, theta0, v0) -> None:
-        """Discovery (pass 1) from the starts that can leave the racket."""
+    def discover(self, theta0, v0, *, follow: Callable = builtins.map) -> None:
+        """Discovery (pass 1) from the starts that can leave the racket; ``follow`` as for
+        :meth:`label`."""
         _, theta0, v0, flies = self._flat(theta0, v0)
-        _discover(self.catalogue, self.map, theta0[flies], v0[flies], self.stick)
+        _discover(self.catalogue, self.map, theta0[flies], v0[flies], self.stick, follow)
 
     def label(self, theta0, v0, *, map: Callable = builtins.map, workers: int = 1,
-              tile_points: int = DEFAULT_TILE_POINTS) -> tuple[np.ndarray, np.ndarray]:
+              tile_points: int = DEFAULT_TILE_POINTS,
+              follow: Callable = builtins.map) -> tuple[np.ndarray, np.ndarray]:
         """(labels, impacts followed) of starts (arrays broadcast), in their shape. The
         labelling pass runs in tiles through ``map`` (an executor's: worker processes),
-        the discovery of what it leaves here, so that the catalogue is one; the result is
-        the same for any ``map``, ``workers`` and ``tile_points``."""
+        the discovery of what it leaves here, so that the catalogue is one, its orbits'
+        recurrences through ``follow`` (an executor's of threads: the compiled loop releases
+        the GIL; ``_discover``); the result is the same for any ``map``, ``workers``,
+        ``tile_points`` and ``follow``."""
         shape, theta0, v0, flies = self._flat(theta0, v0)
         s = self.settings
         labels = np.full(theta0.size, BELOW_RACKET, dtype=np.int64)
@@ -608,7 +621,7 @@ class AttractorFinder:
         left = np.flatnonzero(got == UNDECIDED)
         if left.size:
             labels[idx[left]] = _discover(self.catalogue, self.map, th[left], vv[left],
-                                          self.stick)
+                                          self.stick, follow)
             impacts[idx[left]] += s.transient + s.window
             self.rediscovered += int(left.size)
         return labels.reshape(shape), impacts.reshape(shape)

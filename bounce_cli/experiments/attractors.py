@@ -13,7 +13,7 @@ same result seen coarser: ``paper_class`` in ``basin.csv``.
 from __future__ import annotations
 
 import math
-from typing import Any, Literal
+from typing import Any, Callable, Literal
 
 import numpy as np
 import pandas as pd
@@ -258,15 +258,21 @@ def run(config: AttractorsConfig, options: RunOptions) -> ExperimentResult:
     finder = AttractorFinder(params, settings)
     rng = np.random.default_rng(config.measures.seed)
     pick = rng.choice(th.size, size=min(settings.sample, th.size), replace=False)
-    finder.discover(th.ravel()[pick], vv.ravel()[pick])
-    # said as soon as the sample shows it: with most starts undecided, the labelling that
-    # follows takes minutes (alpha 0.9: 5 min with the bundled range, 30 s with a wide one)
-    warned = warn_if_beyond_cells(finder, config, options)
-    jobs = options.jobs if th.size >= POOL_MIN_POINTS else 1
-    with parallel.executor(jobs) as executor:
-        labels, impacts = finder.label(th, vv, map=executor.map, workers=executor.workers)
-    if not warned:
-        warn_if_beyond_cells(finder, config, options)
+    # the recurrences of orbits without a period in threads (the compiled loop releases the
+    # GIL), the grid's labelling in worker processes
+    with parallel.executor(options.jobs, threads=True) as threads:
+        finder.discover(th.ravel()[pick], vv.ravel()[pick], follow=threads.map)
+        # said as soon as the sample shows it: with most starts undecided, the labelling
+        # that follows takes minutes (alpha 0.9: 5 min with the bundled range, 30 s with a
+        # wide one)
+        warned = warn_if_beyond_cells(finder, config, options)
+        jobs = options.jobs if th.size >= POOL_MIN_POINTS else 1
+        with parallel.executor(jobs) as executor:
+            labels, impacts = finder.label(th, vv, map=executor.map, workers=executor.workers,
+                                           follow=threads.map)
+        if not warned:
+            warn_if_beyond_cells(finder, config, options)
+        measures = _measures(config, finder, labels, theta_deg, v0, threads.map)
     attractors = finder.attractors
     fractions, shares = _fractions_frame(labels, attractors)
     names = np.array([label_name(x, attractors) for x in range(-4, len(attractors))],
@@ -281,7 +287,6 @@ def run(config: AttractorsConfig, options: RunOptions) -> ExperimentResult:
     points = pd.DataFrame([{"attractor": a.index, "name": a.name, "theta_deg": math.degrees(t),
                             "v_m_s": v} for a in attractors for t, v in zip(a.theta, a.v)],
                           columns=["attractor", "name", "theta_deg", "v_m_s"])
-    measures = _measures(config, finder, labels, theta_deg, v0)
     frames = {"attractors.csv": attractor_rows(attractors, shares),
               "attractor_points.csv": points, "fractions.csv": fractions, "basin.csv": basin,
               "measures.csv": measures[0], "uncertainty.csv": measures[1]}
@@ -330,9 +335,11 @@ def summary_lines(attractors, shares: dict[int, tuple], n_starts: int,
 UNDECIDED_CAVEAT = 0.05
 
 
-def _measures(config: AttractorsConfig, finder: AttractorFinder, labels, theta_deg, v0):
+def _measures(config: AttractorsConfig, finder: AttractorFinder, labels, theta_deg, v0,
+              follow: Callable = map):
     """(measures.csv, uncertainty.csv): basin entropy, boundary basin entropy (Daza et al.
-    2016) and the uncertainty exponent with its SE (McDonald et al. 1985)."""
+    2016) and the uncertainty exponent with its SE (McDonald et al. 1985); ``follow`` as
+    for ``AttractorFinder.label``."""
     m = config.measures
     rows: list[dict[str, Any]] = []
     if min(labels.shape) >= m.box:
@@ -345,7 +352,8 @@ def _measures(config: AttractorsConfig, finder: AttractorFinder, labels, theta_d
     x_range = (math.radians(theta_deg[0]), math.radians(theta_deg[-1]))
     y_range = (float(v0[0]), float(v0[-1]))
     if x_range[1] > x_range[0] and y_range[1] > y_range[0]:
-        ue = uncertainty_exponent(lambda x, y: finder.label(x, y)[0], x_range, y_range,
+        ue = uncertainty_exponent(lambda x, y: finder.label(x, y, follow=follow)[0],
+                                  x_range, y_range,
                                   np.asarray(m.eps), m.samples, np.random.default_rng(m.seed))
         rows.append({"quantity": "uncertainty_exponent", "value": ue.alpha, "se": ue.alpha_se,
                      "note": "f(eps) ~ eps^alpha; 1: a smooth boundary, < 1: fractal "

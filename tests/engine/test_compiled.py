@@ -293,11 +293,44 @@ def test_the_attractors_recurrence_compiled_is_numpy_s_to_the_last_bit(params):
     plain = PassiveMap.of(params, require_fixed_point=False)
     results = []
     for impact_map in (plain, replace(plain, compiled_hops=True)):
-        cat = attractors._Catalogue(params, settings, attractors.Tessellation.of(settings))
-        recurred, visited = attractors._recurrence(cat, impact_map, theta, v)
-        results.append((recurred, visited, cat.v_max_seen))
+        results.append(attractors._recurrence(settings, attractors.Tessellation.of(settings),
+                                              impact_map, theta, v))
     (r_a, vis_a, top_a), (r_b, vis_b, top_b) = results
     np.testing.assert_array_equal(r_b, r_a)
     np.testing.assert_array_equal(vis_b, vis_a)
     assert top_b == top_a
     assert vis_a.sum() > theta.size  # the orbits moved on (beyond their recorded cells)
+
+
+def test_attractors_follow_recurrences_in_threads_to_the_same_result():
+    # a chaotic point, the recurrences' chunks followed by two threads at a time (small
+    # chunks: many of them): labels, impact counts, attractors as with one after another
+    from bounce_cli.analysis import attractors
+    from bounce_cli.analysis.attractors import AttractorFinder, RecurrenceSettings
+    from bounce_cli.analysis.bifurcation import parameter_point
+    from bounce_cli.runtime import parallel
+
+    params = parameter_point(ModelParams(alpha=0.9, g=9.81, racket_amplitude=0.30,
+                                         racket_period=0.92), "gamma", 1.6)
+    # coarse cells: the chaotic attractor recurs; 5 impacts of labelling: most starts are
+    # discovered again
+    settings = RecurrenceSettings(transient=200, window=64, max_period=16, sample=40,
+                                  recurrence=30, recurrence_impacts=3000, max_impacts=5,
+                                  cells_theta=30, cells_v=30, v_range=(0.0, 40.0))
+    theta, v = np.meshgrid(np.linspace(0.0, 2.0 * np.pi, 14), np.linspace(0.0, 10.0, 14))
+    found = []
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(attractors, "RECURRENCE_CHUNK", 16)
+        for jobs in (1, 2):
+            with parallel.executor(jobs, threads=True) as threads:
+                finder = AttractorFinder(params, settings)
+                finder.discover(theta.ravel()[::5], v.ravel()[::5], follow=threads.map)
+                labels, impacts = finder.label(theta, v, follow=threads.map)
+            found.append((labels, impacts, [(a.kind, a.cells.tolist()) for a in
+                                            finder.attractors], finder.catalogue.v_max_seen,
+                          finder.rediscovered))
+    np.testing.assert_array_equal(found[1][0], found[0][0])
+    np.testing.assert_array_equal(found[1][1], found[0][1])
+    assert found[1][2:] == found[0][2:]
+    assert found[0][4] > 16  # the labelling left starts to the threads, in several chunks
+    assert [kind for kind, _ in found[0][2]] == ["chaotic"] and (found[0][0] == 0).mean() > 0.5
