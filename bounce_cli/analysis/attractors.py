@@ -394,8 +394,9 @@ def _recurrence(s: RecurrenceSettings, cells: Tessellation, impact_map: PassiveM
         from ..model.compiled import recurrence_arrays
 
         theta_scale, v_scale = cells.scales
+        cos_th, sin_th = state.extra
         v_max = recurrence_arrays(
-            state.theta, state.v, *state.extra, impact_map.params, min_hop_s=s.min_hop_s,
+            state.theta, state.v, cos_th, sin_th, impact_map.params, min_hop_s=s.min_hop_s,
             cells=(cells.cells_theta, theta_scale, cells.cells_v, cells.v_low, v_scale),
             recurrence=s.recurrence, max_impacts=s.recurrence_impacts, visited=visited,
             recurred=recurred, max_steps=MAX_SAFE_STEPS)

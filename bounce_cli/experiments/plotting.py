@@ -15,12 +15,12 @@ from __future__ import annotations
 import functools
 import math
 import re
-from typing import TYPE_CHECKING, Any, Callable, TypeVar
+from typing import TYPE_CHECKING, Any, Callable, Mapping, TypeVar
 
 import numpy as np
 
 from ..paper.values import parameters_text
-from ..runtime.figure_files import CAPTION_ATTRIBUTE
+from ..runtime.figure_files import CAPTION_ATTRIBUTE, DeferredFigure
 
 if TYPE_CHECKING:  # matplotlib is imported when a figure is drawn (an experiment's module
     # can be imported, and its draw decorated, without it)
@@ -128,12 +128,12 @@ def integer_axis(*axes: Any, which: str = "x") -> None:
         getattr(ax, f"{which}axis").set_major_locator(MaxNLocator(integer=True))
 
 
-def caption_figures(figures: dict[str, Figure], params: ModelParams | None,
-                    extra: str = "") -> None:
+def caption_figures(figures: Mapping[str, Figure | DeferredFigure],
+                    params: ModelParams | None, extra: str = "") -> None:
     """Record the parameters a run was made at (and ``extra``, e.g. the run's size and seed)
-    as each figure's caption: written into the file's metadata (``figure_files.save_figure``), not
-    into its title, so that figures of two runs can be told apart without the title carrying
-    run metadata."""
+    as each figure's caption (a deferred figure's: set on the figure once drawn): written
+    into the file's metadata (``figure_files.save_figure``), not into its title, so that
+    figures of two runs can be told apart without the title carrying run metadata."""
     parts = ([parameters_text(params)] if params is not None else []) + ([extra] if extra else [])
     for fig in figures.values():
         setattr(fig, CAPTION_ATTRIBUTE, "; ".join(parts))

@@ -413,11 +413,12 @@ def recurrence_arrays(theta, v, cos_theta, sin_theta, params: ModelParams, *,
     the largest finite velocity after impact the orbits reached (-inf: none). Section 3's
     sticking rule only (``min_hop_s`` > 0; exact sticking is numpy's)."""
     cells_theta, scale_theta, cells_v, v_low, scale_v = cells
-    f64 = [np.ascontiguousarray(x, dtype=float) for x in (theta, v, cos_theta, sin_theta)]
-    return float(_recurrence(*f64, _constants(params, FixedPoint(math.nan, math.nan), 0.0,
-                                              min_hop_s),
-                             max_steps, cells_theta, scale_theta, cells_v, v_low, scale_v,
-                             recurrence, max_impacts, visited, recurred))
+    th, vv, cos_th, sin_th = (np.ascontiguousarray(x, dtype=float)
+                              for x in (theta, v, cos_theta, sin_theta))
+    c = _constants(params, FixedPoint(math.nan, math.nan), 0.0, min_hop_s)
+    return float(_recurrence(th, vv, cos_th, sin_th, c, max_steps, cells_theta, scale_theta,
+                             cells_v, v_low, scale_v, recurrence, max_impacts, visited,
+                             recurred))
 
 
 def first_impact_phase(theta, v, params: ModelParams, *, max_steps: int) -> np.ndarray:
