@@ -118,8 +118,11 @@ def run(name: str, config: str | Path | None = None,
         overrides.append(f"data={json.dumps(str(data))}")
     if int(jobs) < 1:
         raise ConfigError(f"jobs: {jobs} (at least 1)")
-    return execute(entry, config, overrides, write=out is not None, out=out, force=force,
-                   jobs=int(jobs), warn=python_warning).result
+    result = execute(entry, config, overrides, write=out is not None, out=out, force=force,
+                     jobs=int(jobs), warn=python_warning).result
+    # figures the run directory drew where it wrote them (DeferredFigure): drawn here too
+    result.draw_figures()
+    return result
 
 
 #: the columns of a recording frame (as ``bounce simulate-recording`` writes recording.csv)

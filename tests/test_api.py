@@ -78,6 +78,19 @@ def test_run_returns_what_the_cli_writes_and_out_writes_the_same_files(cli, tmp_
         bounce_cli.run("basin", set={"grid.v0_m_s.num": 5}, out=by_api)
 
 
+def test_run_with_out_returns_figures_too(tmp_path):
+    """With out= the run directory draws the deferred figures where it writes them; what the
+    API returns are still matplotlib Figures (saved again here, as a user would)."""
+    from matplotlib.figure import Figure
+
+    result = bounce_cli.run("basin", set=SMALL_BASIN, out=tmp_path / "run")
+    assert (tmp_path / "run" / "basin_iterations.png").is_file()
+    for name, figure in result.figures.items():
+        assert isinstance(figure, Figure), name
+        figure.savefig(tmp_path / name)
+        assert (tmp_path / name).stat().st_size > 1000
+
+
 def test_run_writes_nothing_without_out(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     result = bounce_cli.run("basin", set=SMALL_BASIN)
