@@ -365,8 +365,9 @@ def _discover(cat: _Catalogue, impact_map: PassiveMap, theta, v, stick_label: in
              for c in range(0, open_.size, RECURRENCE_CHUNK)]
     followed = follow(lambda part: _recurrence(s, cat.cells, impact_map, th_rec[part],
                                                v_rec[part]), parts)
-    for part, (recurred, visited, v_max) in zip(parts, followed):
+    for part, (recurred, visited, v_max, stuck) in zip(parts, followed):
         cat.saw(v_max)
+        labels[open_[part[stuck]]] = stick_label  # stuck before it recurred: it sticks
         _add_recurrent(cat, open_[part[recurred]], visited[recurred], th_rec[part[recurred]],
                        v_rec[part[recurred]], labels)
     return labels
@@ -380,14 +381,16 @@ def _recurrence(s: RecurrenceSettings, cells: Tessellation, impact_map: PassiveM
                 v_rec):
     """Orbits without a period, from their last recorded state on: each followed until
     ``recurrence`` impacts in a row land in cells it had visited (Datseris & Wagemakers'
-    criterion for an attractor found), for at most ``recurrence_impacts``. (recurred mask,
-    visited cells per orbit as a boolean row, the largest finite velocity reached)."""
+    criterion for an attractor found), for at most ``recurrence_impacts``, or until it
+    sticks. (recurred mask, visited cells per orbit as a boolean row, the largest finite
+    velocity reached, the mask of the orbits that stuck before they recurred)."""
     m = th_rec.shape[0]
     visited = np.zeros((m, cells.size), dtype=bool)
     rows = np.arange(m)
     visited[np.repeat(rows, th_rec.shape[1]), cells.code(th_rec, v_rec).ravel()] = True
     streak = np.zeros(m, dtype=np.int64)
     recurred = np.zeros(m, dtype=bool)
+    stuck_rows = np.zeros(m, dtype=bool)
     idx = rows.copy()
     state = impact_map.start(th_rec[:, -1], v_rec[:, -1], wrap=True)
     if impact_map.compiled_hops and s.min_hop_s > 0.0:  # the loop below, compiled
@@ -399,8 +402,8 @@ def _recurrence(s: RecurrenceSettings, cells: Tessellation, impact_map: PassiveM
             state.theta, state.v, cos_th, sin_th, impact_map.params, min_hop_s=s.min_hop_s,
             cells=(cells.cells_theta, theta_scale, cells.cells_v, cells.v_low, v_scale),
             recurrence=s.recurrence, max_impacts=s.recurrence_impacts, visited=visited,
-            recurred=recurred, max_steps=MAX_SAFE_STEPS)
-        return recurred, visited, v_max
+            recurred=recurred, stuck=stuck_rows, max_steps=MAX_SAFE_STEPS)
+        return recurred, visited, v_max, stuck_rows
     v_max = -math.inf
     for _ in range(s.recurrence_impacts):
         if idx.size == 0:
@@ -414,9 +417,10 @@ def _recurrence(s: RecurrenceSettings, cells: Tessellation, impact_map: PassiveM
         streak = np.where(new, 0, streak + 1)
         done = streak >= s.recurrence
         recurred[idx[done]] = True
+        stuck_rows[idx[stuck & ~done]] = True
         keep = ~(done | stuck)
         idx, state, streak = idx[keep], state.take(keep), streak[keep]
-    return recurred, visited, v_max
+    return recurred, visited, v_max, stuck_rows
 
 
 def _add_recurrent(cat: _Catalogue, which, visited, theta, v, labels) -> None:

@@ -353,12 +353,13 @@ def _cell(theta, v, cells_theta, scale_theta, cells_v, v_low, scale_v):
 
 @_jit
 def _recurrence(theta, v, cos_theta, sin_theta, c, max_steps, cells_theta, scale_theta,
-                cells_v, v_low, scale_v, recurrence, max_impacts, visited, recurred):
+                cells_v, v_low, scale_v, recurrence, max_impacts, visited, recurred, stuck):
     """``analysis.attractors._recurrence``'s loop on wrapped states: each orbit one impact at
     a time (``PassiveMap.step``'s arithmetic, as ``_classify`` repeats it), its cell marked
     in its row of ``visited``, until ``recurrence`` impacts in a row land in visited cells
-    (``recurred``), it sticks (a hop shorter than ``min_hop_s``, or NaN), or
-    ``max_impacts``. Returns the largest finite velocity after impact seen (-inf: none)."""
+    (``recurred``), it sticks (a hop shorter than ``min_hop_s``, or NaN: ``stuck``, where it
+    did not recur on that impact), or ``max_impacts``. Returns the largest finite velocity
+    after impact seen (-inf: none)."""
     m = theta.size
     w = c[_W]
     work = np.empty((12, m))
@@ -385,7 +386,7 @@ def _recurrence(theta, v, cos_theta, sin_theta, c, max_steps, cells_theta, scale
             t, u = S[j], V[j]
             if v_max < u < np.inf:  # finite velocities only (NaN compares False)
                 v_max = u
-            stuck = not hop[j] / w >= c[_MIN_HOP]
+            sticks = not hop[j] / w >= c[_MIN_HOP]
             code = _cell(t, u, cells_theta, scale_theta, cells_v, v_low, scale_v)
             row = idx[j]
             run = 0 if not visited[row, code] else streak[j] + 1
@@ -393,7 +394,9 @@ def _recurrence(theta, v, cos_theta, sin_theta, c, max_steps, cells_theta, scale
             done = run >= recurrence
             if done:
                 recurred[row] = True
-            if not (done or stuck):
+            elif sticks:
+                stuck[row] = True
+            if not (done or sticks):
                 idx[p], th[p], vv[p], cos_th[p], sin_th[p], streak[p] = row, t, u, C[j], \
                     SN[j], run
                 p += 1
@@ -404,12 +407,13 @@ def _recurrence(theta, v, cos_theta, sin_theta, c, max_steps, cells_theta, scale
 def recurrence_arrays(theta, v, cos_theta, sin_theta, params: ModelParams, *,
                       min_hop_s: float, cells: tuple[int, float, int, float, float],
                       recurrence: int, max_impacts: int, visited: np.ndarray,
-                      recurred: np.ndarray, max_steps: int) -> float:
+                      recurred: np.ndarray, stuck: np.ndarray, max_steps: int) -> float:
     """``analysis.attractors._recurrence``'s loop at compiled speed, the same bits: wrapped
     states (their cos and sin by ``trig.sincos``) followed until they recur, stick or reach
     ``max_impacts``; ``cells`` = (cells_theta, cells_theta / 2 pi, cells_v, v_low,
     cells_v / (v_high - v_low)), each computed by the tessellation's own expression;
-    ``visited`` (orbits x cells, bool) and ``recurred`` (bool) are filled in place. Returns
+    ``visited`` (orbits x cells, bool), ``recurred`` and ``stuck`` (bool: the orbits that
+    stuck before they recurred) are filled in place. Returns
     the largest finite velocity after impact the orbits reached (-inf: none). Section 3's
     sticking rule only (``min_hop_s`` > 0; exact sticking is numpy's)."""
     cells_theta, scale_theta, cells_v, v_low, scale_v = cells
@@ -418,7 +422,7 @@ def recurrence_arrays(theta, v, cos_theta, sin_theta, params: ModelParams, *,
     c = _constants(params, FixedPoint(math.nan, math.nan), 0.0, min_hop_s)
     return float(_recurrence(th, vv, cos_th, sin_th, c, max_steps, cells_theta, scale_theta,
                              cells_v, v_low, scale_v, recurrence, max_impacts, visited,
-                             recurred))
+                             recurred, stuck))
 
 
 def first_impact_phase(theta, v, params: ModelParams, *, max_steps: int) -> np.ndarray:

@@ -295,10 +295,12 @@ def test_the_attractors_recurrence_compiled_is_numpy_s_to_the_last_bit(params):
     for impact_map in (plain, replace(plain, compiled_hops=True)):
         results.append(attractors._recurrence(settings, attractors.Tessellation.of(settings),
                                               impact_map, theta, v))
-    (r_a, vis_a, top_a), (r_b, vis_b, top_b) = results
+    (r_a, vis_a, top_a, stuck_a), (r_b, vis_b, top_b, stuck_b) = results
     np.testing.assert_array_equal(r_b, r_a)
     np.testing.assert_array_equal(vis_b, vis_a)
+    np.testing.assert_array_equal(stuck_b, stuck_a)
     assert top_b == top_a
+    assert not (r_a & stuck_a).any()
     assert vis_a.sum() > theta.size  # the orbits moved on (beyond their recorded cells)
 
 

@@ -126,3 +126,22 @@ def test_a_smooth_boundary_has_uncertainty_exponent_one(paper_params):
                                np.array([0.002, 0.004, 0.008, 0.016, 0.032]), 4000,
                                np.random.default_rng(1))
     assert abs(fit.alpha - 1.0) < max(3 * fit.alpha_se, 0.05)
+
+
+@pytest.mark.parametrize("kernel", ["auto", "numpy"])
+def test_an_orbit_that_sticks_while_its_recurrence_is_followed_is_sticking(monkeypatch, kernel):
+    """A chaotic transient that sticks after 4446 impacts (alpha 0.85, a_r 0.2945 m): past
+    the discovery's 1256 impacts, while its recurrence is followed, it sticks; it is
+    'sticking', as a start that sticks sooner is (it was left 'undecided')."""
+    from bounce_cli.analysis.attractors import STICKING, RecurrenceSettings, find_attractors
+    from bounce_cli.model.maps import iterate_orbit
+    from bounce_cli.model.params import MIN_HOP_S, ModelParams
+
+    monkeypatch.setenv("BOUNCE_KERNEL", kernel)
+    params = ModelParams(alpha=0.85, g=9.81, racket_amplitude=0.2944509508080423,
+                         racket_period=0.92)
+    theta0, v0 = np.radians(86.89655172413794), 3.103448275862069
+    orbit = iterate_orbit(theta0, v0, params, 6000, MIN_HOP_S)
+    assert orbit.stop_reason == "sticking" and 1256 < orbit.v.size - 1 < 6000
+    found = find_attractors(np.array([theta0]), np.array([v0]), params, RecurrenceSettings())
+    assert found.labels.tolist() == [STICKING]
