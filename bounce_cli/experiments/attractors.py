@@ -270,6 +270,7 @@ def run(config: AttractorsConfig, options: RunOptions) -> ExperimentResult:
         with parallel.executor(jobs) as executor:
             labels, impacts = finder.label(th, vv, map=executor.map, workers=executor.workers,
                                            follow=threads.map)
+        rediscovered = finder.rediscovered  # the grid's (the measures' starts come next)
         if not warned:
             warn_if_beyond_cells(finder, config, options)
         measures = _measures(config, finder, labels, theta_deg, v0, threads.map)
@@ -296,7 +297,7 @@ def run(config: AttractorsConfig, options: RunOptions) -> ExperimentResult:
     caption_figures(figures, params, f"{th.shape[1]} x {th.shape[0]} starts")
     return ExperimentResult(frames=frames, figures=figures,
                             summary=summary_lines(attractors, shares, labels.size,
-                                                  finder.rediscovered))
+                                                  rediscovered))
 
 
 def warn_if_beyond_cells(finder: AttractorFinder, config: AttractorsConfig,
@@ -392,9 +393,10 @@ def _colours(names: list[str]) -> dict[str, str]:
 
 @publication_style
 def draw(frames: dict[str, pd.DataFrame], config: AttractorsConfig | None = None) -> dict:
-    import matplotlib.pyplot as plt
     from matplotlib.colors import ListedColormap
     from matplotlib.patches import Patch
+
+    from .plotting import new_figure
 
     figures = {}
     basin, fractions = frames["basin.csv"], frames["fractions.csv"]
@@ -405,7 +407,8 @@ def draw(frames: dict[str, pd.DataFrame], config: AttractorsConfig | None = None
     colours = _colours(order)
     code = {name: i for i, name in enumerate(order)}
     grid = basin["attractor"].map(code).to_numpy().reshape(v.size, theta.size)
-    fig, ax = plt.subplots(figsize=(7.0, 5.6), layout="constrained")
+    fig, axes = new_figure(width=7.0, height=5.6)
+    ax = axes[0, 0]
     ax.imshow(grid, origin="lower", aspect="auto", interpolation="nearest",
               extent=(theta[0], theta[-1], v[0], v[-1]),
               cmap=ListedColormap([colours[n] for n in order]), vmin=-0.5,
@@ -424,7 +427,7 @@ def draw(frames: dict[str, pd.DataFrame], config: AttractorsConfig | None = None
     ax.set_ylabel(r"initial velocity $v_0$ (m/s)")
     ax.set_title("Basins of the attractors found by recurrence (markers: the attractors)")
     handles = [Patch(facecolor=colours[row.name], edgecolor="0.3",
-                     label=f"{row.name}: {row.fraction:.1%}")
+                     label=f"{shown(row.name)}: {row.fraction:.1%}")
                for row in fractions.itertuples()]
     fig.legend(handles=handles, loc="outside lower center", ncol=3, fontsize=8,
                frameon=False)
@@ -435,8 +438,17 @@ def draw(frames: dict[str, pd.DataFrame], config: AttractorsConfig | None = None
     return figures
 
 
+def shown(name: str) -> str:
+    """A label as a legend shows it: ``below_racket`` -> ``below the racket``."""
+    return OTHER_NAMES_SHOWN.get(name, name)
+
+
+#: the tables' names of the starts no attractor took, as the figures' legends say them
+OTHER_NAMES_SHOWN = {"below_racket": "below the racket"}
+
+
 def _draw_continuation(table: pd.DataFrame, config: AttractorsConfig | None):
-    import matplotlib.pyplot as plt
+    from .plotting import new_figure
 
     parameter = next(c for c in table.columns if c in SWEEPABLE)
     values = np.unique(table[parameter])
@@ -449,13 +461,21 @@ def _draw_continuation(table: pd.DataFrame, config: AttractorsConfig | None):
     for i, k in enumerate(keys):
         part = table[table["key"] == k].groupby(parameter)["fraction"].sum()
         stack[i] = part.reindex(values, fill_value=0.0).to_numpy()
-    fig, ax = plt.subplots(figsize=(7.0, 4.6), layout="constrained")
+    fig, axes = new_figure(width=7.0, height=4.6)
+    ax = axes[0, 0]
     repeated = {n for n in first_name.values() if list(first_name.values()).count(n) > 1}
-    labels = [first_name[k] + (f" (branch {k[1:]})" if first_name[k] in repeated else "")
-              for k in keys]
-    ax.stackplot(values, stack, colors=[colours[first_name[k] if not k.startswith("b") else k]
-                                        for k in keys],
-                 labels=labels, edgecolor="w", linewidth=0.3)
+    labels = [shown(first_name[k]) + (f" (branch {k[1:]})" if first_name[k] in repeated
+                                      else "") for k in keys]
+    fills = [colours[first_name[k] if not k.startswith("b") else k] for k in keys]
+    if values.size > 1:
+        ax.stackplot(values, stack, colors=fills, labels=labels, edgecolor="w", linewidth=0.3)
+        ax.set_xlim(values[0], values[-1])
+    else:  # one value (continuation.num 1): one stacked bar
+        width = 0.1 * max(abs(float(values[0])), 1e-3)
+        bottoms = np.concatenate([[0.0], np.cumsum(stack[:, 0])[:-1]])
+        ax.bar(np.repeat(values, len(keys)), stack[:, 0], width=width, bottom=bottoms,
+               color=fills, label=labels, edgecolor="w", linewidth=0.3)
+        ax.set_xlim(values[0] - width, values[0] + width)
     if config is not None:
         th = period1_thresholds(config.params, parameter)
         for x, text in ((th.existence, "eq. 8: period-1 exists"),
@@ -464,7 +484,6 @@ def _draw_continuation(table: pd.DataFrame, config: AttractorsConfig | None):
                 ax.axvline(x, color="k", ls="--", lw=0.8)
                 ax.text(x, 1.01, text, rotation=0, ha="center", va="bottom", fontsize=7,
                         transform=ax.get_xaxis_transform())
-    ax.set_xlim(values[0], values[-1])
     ax.set_ylim(0.0, 1.0)
     ax.set_xlabel(SWEEPABLE[parameter][1])
     ax.set_ylabel("share of the starts (basin fraction)")
