@@ -42,7 +42,7 @@ from __future__ import annotations
 import builtins
 import math
 from dataclasses import dataclass, field, replace
-from typing import Callable
+from typing import Any, Callable
 
 import numpy as np
 
@@ -315,14 +315,17 @@ def _least_period(theta: np.ndarray, v: np.ndarray, tolerance: float = 1e-8) -> 
 
 
 def _discover(cat: _Catalogue, impact_map: PassiveMap, theta, v, stick_label: int,
-              follow: Callable = builtins.map) -> np.ndarray:
+              follow: Callable = builtins.map,
+              on_done: Callable[[int], object] | None = None) -> np.ndarray:
     """Discovery (module docstring, pass 1) of the states (theta, v): their labels (those
     that stick: ``stick_label``); the attractors found are added to the catalogue.
     ``follow``: the map over chunks of orbits without a period whose recurrence is followed
     (``_recurrence``: it reads the catalogue's cells only), e.g. an executor's of threads,
     as the compiled loop releases the GIL; the attractors they find are catalogued in the
-    chunks' order, so the result is the same for any map."""
+    chunks' order, so the result is the same for any map. ``on_done(n)``: n more of the
+    states are done (a progress bar's advance; all of them in the end)."""
     s = cat.settings
+    done = on_done if on_done is not None else (lambda n: None)
     labels = np.full(np.size(theta), UNDECIDED, dtype=np.int64)
     if labels.size == 0:
         return labels
@@ -363,6 +366,7 @@ def _discover(cat: _Catalogue, impact_map: PassiveMap, theta, v, stick_label: in
                                           refined=refined))
             labels[open_[i]] = found
         still = period == 0
+        done(int(stuck.sum() + (~still).sum()))
         open_, v_rec, th_rec = open_[still], v_rec[still], th_rec[still]
     if open_.size == 0:
         return labels
@@ -375,6 +379,7 @@ def _discover(cat: _Catalogue, impact_map: PassiveMap, theta, v, stick_label: in
         labels[open_[part[stuck]]] = stick_label  # stuck before it recurred: it sticks
         _add_recurrent(cat, open_[part[recurred]], visited[recurred], th_rec[part[recurred]],
                        v_rec[part[recurred]], labels)
+        done(part.size)
     return labels
 
 
@@ -611,13 +616,15 @@ class AttractorFinder:
 
     def label(self, theta0, v0, *, map: Callable = builtins.map, workers: int = 1,
               tile_points: int = DEFAULT_TILE_POINTS,
-              follow: Callable = builtins.map) -> tuple[np.ndarray, np.ndarray]:
+              follow: Callable = builtins.map,
+              progress: Any = None) -> tuple[np.ndarray, np.ndarray]:
         """(labels, impacts followed) of starts (arrays broadcast), in their shape. The
         labelling pass runs in tiles through ``map`` (an executor's: worker processes),
         the discovery of what it leaves here, so that the catalogue is one, its orbits'
         recurrences through ``follow`` (an executor's of threads: the compiled loop releases
         the GIL; ``_discover``); the result is the same for any ``map``, ``workers``,
-        ``tile_points`` and ``follow``."""
+        ``tile_points`` and ``follow``. ``progress`` (``start(total, description)``,
+        ``advance(n)``, e.g. a run's progress bar) hears of both passes."""
         shape, theta0, v0, flies = self._flat(theta0, v0)
         s = self.settings
         labels = np.full(theta0.size, BELOW_RACKET, dtype=np.int64)
@@ -629,13 +636,20 @@ class AttractorFinder:
         tiles = tile_slices(idx.size, tile_points, workers)
         tasks = ((self.catalogue, self.map, theta0[idx[t]], v0[idx[t]], self.stick)
                  for t in tiles)
+        if progress is not None:
+            progress.start(idx.size, "attractors: labelling the starts")
         for t, part in zip(tiles, map(label_tile, tasks)):
             got[t], used[t], th[t], vv[t] = part
+            if progress is not None:
+                progress.advance(got[t].size)
         labels[idx], impacts[idx] = got, used
         left = np.flatnonzero(got == UNDECIDED)
         if left.size:
+            if progress is not None:
+                progress.start(left.size, "attractors: following the undecided starts further")
             labels[idx[left]] = _discover(self.catalogue, self.map, th[left], vv[left],
-                                          self.stick, follow)
+                                          self.stick, follow,
+                                          None if progress is None else progress.advance)
             impacts[idx[left]] += s.transient + s.window
             self.rediscovered += int(left.size)
         return labels.reshape(shape), impacts.reshape(shape)

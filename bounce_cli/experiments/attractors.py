@@ -269,7 +269,7 @@ def run(config: AttractorsConfig, options: RunOptions) -> ExperimentResult:
         jobs = options.jobs if th.size >= POOL_MIN_POINTS else 1
         with parallel.executor(jobs) as executor:
             labels, impacts = finder.label(th, vv, map=executor.map, workers=executor.workers,
-                                           follow=threads.map)
+                                           follow=threads.map, progress=options.progress)
         rediscovered = finder.rediscovered  # the grid's (the measures' starts come next)
         if not warned:
             warn_if_beyond_cells(finder, config, options)

@@ -166,3 +166,34 @@ def test_the_warning_of_orbits_above_the_cells_comes_before_the_long_labelling(m
     # the summary's second discovery counts the grid's starts, not the measures' own
     second = int(result.summary[1].split(":")[1].split()[0].replace(",", ""))
     assert 0 < second <= 36
+
+
+def test_the_long_passes_report_progress_to_their_totals():
+    """The labelling and the following of the undecided starts each start a progress bar
+    and advance it to its total (alpha 0.9: minutes of work otherwise silent)."""
+    from bounce_cli.experiments import attractors as experiment
+    from bounce_cli.experiments.base import RunOptions
+
+    class Recorder:
+        def __init__(self):
+            self.phases: list[list] = []
+
+        def start(self, total, description):
+            self.phases.append([description, total, 0])
+
+        def advance(self, n=1):
+            self.phases[-1][2] += n
+
+    config = experiment.AttractorsConfig.model_validate({
+        "model": {"alpha": 0.9}, "grid": {"theta0_deg": {"start": 0, "stop": 360, "num": 8},
+                                          "v0_m_s": {"start": 0, "stop": 10, "num": 8}},
+        "recurrence": {"sample": 12, "recurrence_impacts": 2000, "transient": 200,
+                       "window": 64, "max_period": 16, "max_impacts": 20},
+        "measures": {"box": 2, "samples": 10}, "continuation": {"num": 0}})
+    progress = Recorder()
+    experiment.run(config, RunOptions(progress=progress))
+    names = [p[0] for p in progress.phases]
+    assert names[:2] == ["attractors: labelling the starts",
+                         "attractors: following the undecided starts further"]
+    for description, total, advanced in progress.phases:
+        assert advanced == total > 0, description
