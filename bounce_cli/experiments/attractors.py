@@ -350,6 +350,11 @@ def _measures(config: AttractorsConfig, finder: AttractorFinder, labels, theta_d
                  {"quantity": "boundary_basin_entropy", "value": be.boundary_basin_entropy,
                   "se": math.nan, "note": f"{be.boundary_boxes} boundary boxes; > ln 2 = "
                   "0.693: a fractal boundary (sufficient)"}]
+    else:  # said, not left out
+        note = (f"not measured: the grid ({labels.shape[1]} x {labels.shape[0]} starts) is "
+                f"smaller than one box of measures.box = {m.box} starts a side")
+        rows += [{"quantity": q, "value": math.nan, "se": math.nan, "note": note}
+                 for q in ("basin_entropy", "boundary_basin_entropy")]
     x_range = (math.radians(theta_deg[0]), math.radians(theta_deg[-1]))
     y_range = (float(v0[0]), float(v0[-1]))
     if x_range[1] > x_range[0] and y_range[1] > y_range[0]:

@@ -197,3 +197,13 @@ def test_the_long_passes_report_progress_to_their_totals():
                          "attractors: following the undecided starts further"]
     for description, total, advanced in progress.phases:
         assert advanced == total > 0, description
+
+
+def test_a_box_larger_than_the_grid_is_said_in_the_measures():
+    result = bounce_cli.run("attractors", set={
+        "grid.theta0_deg.num": 6, "grid.v0_m_s.num": 5, "recurrence.sample": 10,
+        "measures.box": 8, "measures.samples": 10, "continuation.num": 0})
+    measures = result.frames["measures.csv"].set_index("quantity")
+    for quantity in ("basin_entropy", "boundary_basin_entropy"):
+        assert np.isnan(measures.loc[quantity, "value"])
+        assert "smaller than one box of measures.box = 8" in measures.loc[quantity, "note"]
