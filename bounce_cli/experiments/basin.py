@@ -187,7 +187,7 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
                                meanwhile=import_output_libraries)
     import pandas as pd
 
-    from .plotting import caption_figures
+    from .plotting import caption_figures, control_caption
 
     basin = pd.DataFrame(
         {
@@ -230,7 +230,8 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
     # each figure drawn by the process that writes it, beside basin.csv (RunDirectory)
     figures = {name: DeferredFigure(functools.partial(draw_one, frames, name))
                for name in FIGURES}
-    caption_figures(figures, params, f"{theta_deg.size} x {v0.size} grid")
+    caption_figures(figures, params, "; ".join(
+        t for t in (f"{theta_deg.size} x {v0.size} grid", control_caption(controller)) if t))
     return ExperimentResult(frames=frames, figures=figures, summary=summary)
 
 

@@ -36,6 +36,7 @@ from .plotting import (
     PHASE_LABEL,
     VELOCITY_LABEL,
     caption_figures,
+    control_caption,
     integer_axis,
     perturbation_title,
     publication_style,
@@ -229,7 +230,7 @@ def run(config: ImpulseConfig, options: RunOptions) -> ExperimentResult:
             f"{r.alpha_p:g}: {relaxed_text(r.relaxation_impacts, config.relaxation.max_impacts)}"
             for r in part.itertuples()))
     figures = draw(frames)
-    caption_figures(figures, params)
+    caption_figures(figures, params, control_caption(config.model.controller()))
     return ExperimentResult(frames=frames, figures=figures, summary=summary)
 
 

@@ -139,6 +139,13 @@ def caption_figures(figures: Mapping[str, Figure | DeferredFigure],
         setattr(fig, CAPTION_ATTRIBUTE, "; ".join(parts))
 
 
+def control_caption(controller: Any) -> str:
+    """A caption's words for the racket period controller (``model.control``), '' for the
+    passive map (None)."""
+    return ("" if controller is None else
+            f"racket period control K = {controller.gain:g}, c = {controller.rate:g}")
+
+
 def data_caption(config: Any, source: Any = None, record: dict | None = None) -> str:
     """A data-side figure's caption line: where the impacts came from and the model's alpha
     and g with their sources (``record``: a run's ``RunOptions.record``, whose

@@ -17,7 +17,7 @@ from pydantic import Field, model_validator
 from ..runtime.config import ConfigError, ControllableModelBlock, ExperimentConfig, StrictModel
 from ..model.flight import FlightSettings, simulate
 from ..model.params import ModelParams, wrap_phase
-from .plotting import caption_figures, integer_axis, publication_style
+from .plotting import caption_figures, control_caption, integer_axis, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
 
@@ -198,8 +198,7 @@ def run(config: TrajectoryConfig, options: RunOptions) -> ExperimentResult:
         {"v_m_s": [fp.v_m_s], "theta_deg": [fp.theta_deg], "integrator": [config.integrator]}
     )
     figures = draw(frames)
-    caption_figures(figures, params, "" if controller is None else
-                    f"racket period control K = {controller.gain:g}, c = {controller.rate:g}")
+    caption_figures(figures, params, control_caption(controller))
     return ExperimentResult(frames=frames, figures=figures, summary=summary)
 
 

@@ -129,3 +129,15 @@ def test_fit_to_passive_data_says_no_control_is_detected(tmp_path):
     assert result.exit_code == 0, result.output
     text = " ".join(result.stderr.split())
     assert "K's interval includes 0, no period control is detected" in text
+
+
+def test_the_controlled_runs_figures_name_the_controller_in_their_caption():
+    """A figure of the controlled map says so in its caption (the file's metadata), as the
+    passive map's does not."""
+    from bounce_cli.runtime.figure_files import drawn, figure_caption
+
+    controlled = drawn(run_basin("model.control.gain=0.7").figures["basin.png"])
+    assert "racket period control K = 0.7, c = 1" in figure_caption(controlled)
+    assert "racket period control" not in figure_caption(drawn(run_basin().figures["basin.png"]))
+    for fig in run_impulse("model.control.gain=0.7").figures.values():
+        assert "racket period control K = 0.7" in figure_caption(drawn(fig))
