@@ -434,7 +434,8 @@ def draw(frames: dict[str, pd.DataFrame], only: Collection[str] = FIGURES) -> di
     if "basin.png" in only:
         figures["basin.png"] = _outcome_figure(grid, codes, markers, shown, labels, exact)
     if "basin_iterations.png" in only:
-        figures["basin_iterations.png"] = _iterations_figure(grid, codes, basin, markers)
+        figures["basin_iterations.png"] = _iterations_figure(grid, codes, basin, markers,
+                                                             exact)
     return figures
 
 
@@ -467,7 +468,8 @@ def _outcome_figure(grid: _Grid, codes, markers: pd.DataFrame, shown: list[str],
     return fig
 
 
-def _iterations_figure(grid: _Grid, codes, basin: pd.DataFrame, markers: pd.DataFrame):
+def _iterations_figure(grid: _Grid, codes, basin: pd.DataFrame, markers: pd.DataFrame,
+                       exact: bool):
     """basin_iterations.png: the impacts until each start was classified."""
     from matplotlib import colormaps
     from matplotlib.cm import ScalarMappable
@@ -499,7 +501,8 @@ def _iterations_figure(grid: _Grid, codes, basin: pd.DataFrame, markers: pd.Data
     )
     ax2.set_xlabel(r"initial phase $\theta_0$ (deg)")
     ax2.set_ylabel(r"initial velocity $v_0$ (m/s)")
-    ax2.set_title("Impacts until classified (paper Fig. 4, section 3)")
+    ax2.set_title("Impacts until classified (paper Fig. 4, section 3)"
+                  + (",\nexact sticking (min_hop_s 0)" if exact else ""))
     return fig2
 
 

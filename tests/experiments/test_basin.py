@@ -257,6 +257,8 @@ def test_exact_sticking_basin_separates_locked_orbits_with_their_period(tmp_path
     assert (image == basin.EXACT_OUTCOMES.index("locked")).sum() == locked["count"]
     labels = [t.get_text() for t in figures["basin.png"].legends[0].get_texts()]
     assert any("locked" in t and "period 1 racket cycle" in t for t in labels)
+    for fig in figures.values():  # both figures say which rule they were made with
+        assert "exact sticking" in fig.axes[0].get_title()
 
 
 @pytest.mark.slow
