@@ -372,7 +372,8 @@ def test_no_figure_parses_its_tick_labels_as_mathtext(figures):
     assert checked > 500
 
 
-@pytest.mark.parametrize("name", ["basin", "stability", "bifurcation"])
+@pytest.mark.parametrize("name", ["basin", pytest.param("stability", marks=pytest.mark.slow),
+                                  "bifurcation"])
 def test_a_png_laid_out_before_saving_is_what_savefig_writes(name):
     """``save_figure`` runs the layout engine itself before ``savefig`` (which then draws the
     figure once instead of twice): the PNG is, byte for byte, what ``savefig`` alone writes

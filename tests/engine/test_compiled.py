@@ -288,7 +288,7 @@ def test_the_attractors_recurrence_compiled_is_numpy_s_to_the_last_bit(params):
     theta = rng.uniform(-1.0, 8.0, (160, 3))  # unwrapped: the start wraps the last column
     v = rng.uniform(0.5 * racket_v, 3.0 * racket_v + params.g * params.racket_period, (160, 3))
     settings = attractors.RecurrenceSettings(cells_theta=60, cells_v=40, v_range=(0.5, 6.0),
-                                             recurrence=30, recurrence_impacts=1500,
+                                             recurrence=30, recurrence_impacts=1000,
                                              window=64, max_period=16)
     plain = PassiveMap.of(params, require_fixed_point=False)
     results = []
@@ -304,6 +304,7 @@ def test_the_attractors_recurrence_compiled_is_numpy_s_to_the_last_bit(params):
     assert vis_a.sum() > theta.size  # the orbits moved on (beyond their recorded cells)
 
 
+@pytest.mark.slow
 def test_attractors_follow_recurrences_in_threads_to_the_same_result():
     # a chaotic point, the recurrences' chunks followed by two threads at a time (small
     # chunks: many of them): labels, impact counts, attractors as with one after another

@@ -128,6 +128,7 @@ def test_a_smooth_boundary_has_uncertainty_exponent_one(paper_params):
     assert abs(fit.alpha - 1.0) < max(3 * fit.alpha_se, 0.05)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kernel", ["auto", "numpy"])
 def test_an_orbit_that_sticks_while_its_recurrence_is_followed_is_sticking(monkeypatch, kernel):
     """A chaotic transient that sticks after 4446 impacts (alpha 0.85, a_r 0.2945 m): past
