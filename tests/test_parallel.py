@@ -3,10 +3,12 @@ dead workers are errors, not hangs; no worker outlives its ``with`` block."""
 
 from __future__ import annotations
 
+import concurrent.futures
 import os
 import signal
 import time
 
+import numpy as np
 import pytest
 
 from bounce_cli.runtime import parallel
@@ -131,3 +133,35 @@ def test_results_held_for_a_slow_first_task_are_bounded():
             assert next(results) == 0
             assert len(read) <= 2 * parallel.AHEAD + 1 < 100
             assert list(results) == list(range(1, 100))
+
+
+def test_an_interrupt_while_waiting_for_threads_is_the_interrupt():
+    """Ctrl-C while this thread waits for a thread's task (``Threads.map``): the interrupt
+    itself, at any moment of the wait, and the futures' locks left whole (a second map
+    works); was, once, 'cannot release un-acquired lock' from inside Future.result."""
+    import threading
+
+    from bounce_cli.runtime import interrupts
+
+    previous = {s: signal.getsignal(s) for s in interrupts.SIGNALS}
+    try:
+        for delay in np.linspace(0.001, 0.06, 12):
+            interrupts.install()
+            timer = threading.Timer(delay, os.kill, (os.getpid(), signal.SIGINT))
+            with pytest.raises(interrupts.Interrupted):
+                with parallel.Threads(2) as threads:
+                    timer.start()
+                    list(threads.map(time.sleep, [0.05] * 8))
+            timer.join()
+        with parallel.Threads(2) as threads:
+            assert list(threads.map(slow_square, range(6))) == [x * x for x in range(6)]
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, handler)
+
+
+def test_result_of_returns_or_raises_what_the_task_did():
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        assert parallel.result_of(pool.submit(slow_square, 4)) == 16
+        with pytest.raises(ValueError, match="three"):
+            parallel.result_of(pool.submit(fail_on_three, 3))

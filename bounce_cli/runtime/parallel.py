@@ -35,6 +35,7 @@ import os
 import pickle
 import subprocess
 import sys
+import time
 import traceback
 import typing
 from collections import deque
@@ -118,13 +119,34 @@ class Threads:
                     futures.append(self._pool.submit(fn, task))
                 if not futures:
                     return
-                yield futures.popleft().result()
+                yield result_of(futures.popleft())
         finally:
             for future in futures:
                 future.cancel()
 
 
 _DONE = object()
+
+#: how often ``result_of`` looks at a thread's future while it waits for it (s)
+POLL_S = 0.005
+
+
+def result_of(future: concurrent.futures.Future) -> Any:
+    """``future.result()`` of a thread's task, waited for where an interrupt is safe.
+
+    ``Future.result`` waits inside the future's lock, and the exception an interrupt raises
+    there (``runtime.interrupts``: Ctrl-C) could leave the lock half released: "cannot
+    release un-acquired lock" then replaced the interrupt (a traceback and exit 1 instead of
+    130; seen once in a sweep's Ctrl-C test). Here the wait is a sleep, and the future's
+    lock is only taken with signals held (``deferred``), which raises a signal that came
+    meanwhile at its end."""
+    while True:
+        with deferred():
+            if future.done():
+                break
+        time.sleep(POLL_S)
+    with deferred():
+        return future.result()
 
 
 class _Worker:
@@ -443,7 +465,7 @@ def meanwhile(work: Callable[[], Any], other: Callable[[], Any]) -> Any:
     future = pool.submit(work)
     try:
         other()
-        return future.result()
+        return result_of(future)
     finally:
         # not waiting when left by an exception: the caller's executor, left next, cancels
         # the tasks ``work`` is waiting for, and ``work`` ends with them
