@@ -165,3 +165,30 @@ def test_result_of_returns_or_raises_what_the_task_did():
         assert parallel.result_of(pool.submit(slow_square, 4)) == 16
         with pytest.raises(ValueError, match="three"):
             parallel.result_of(pool.submit(fail_on_three, 3))
+
+
+def test_a_thread_other_than_the_main_one_never_holds_the_signals(monkeypatch):
+    """``meanwhile``'s driver thread waits for ``Threads.map`` too: holding signals there
+    (``deferred``) would take the main thread's interrupt away from it (the handler, seeing
+    signals held, leaves it to the holder: the driver raised it in itself, and the run
+    crashed at exit). Only the main thread holds them."""
+    import contextlib
+    import threading
+
+    holders: list[str] = []
+    real = parallel.deferred
+
+    @contextlib.contextmanager
+    def recording():
+        holders.append(threading.current_thread().name)
+        with real():
+            yield
+
+    monkeypatch.setattr(parallel, "deferred", recording)
+
+    def drive():
+        with parallel.Threads(2) as threads:
+            return list(threads.map(slow_square, range(6)))
+
+    assert parallel.meanwhile(drive, lambda: time.sleep(0.05)) == [x * x for x in range(6)]
+    assert holders and set(holders) == {threading.main_thread().name}

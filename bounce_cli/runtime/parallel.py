@@ -35,6 +35,7 @@ import os
 import pickle
 import subprocess
 import sys
+import threading
 import time
 import traceback
 import typing
@@ -139,7 +140,11 @@ def result_of(future: concurrent.futures.Future) -> Any:
     release un-acquired lock" then replaced the interrupt (a traceback and exit 1 instead of
     130; seen once in a sweep's Ctrl-C test). Here the wait is a sleep, and the future's
     lock is only taken with signals held (``deferred``), which raises a signal that came
-    meanwhile at its end."""
+    meanwhile at its end. In any other thread (``meanwhile``'s driver) no signal handler
+    runs, and holding signals there would take the main thread's interrupt away from it:
+    ``Future.result`` as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        return future.result()
     while True:
         with deferred():
             if future.done():
