@@ -447,7 +447,9 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
                      "launched after the trial's end): lengthen trial_s or launch earlier")
     trials = kept
     impacts_table = pd.concat(impacts, ignore_index=True)
-    latency = pd.DataFrame(display.latency if display is not None else [],
+    # a copy first (one step under the GIL): the page's server thread may still append a
+    # row while the table is built from the list (CI once: 467 values for 468 rows)
+    latency = pd.DataFrame(list(display.latency) if display is not None else [],
                            columns=LATENCY_COLUMNS)
     frames.update({
         "impacts.csv": impacts_table,
@@ -481,7 +483,7 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
         f"stream gap(s){stopped}; run `bounce study --manifest {OUT_DIR}/study.csv "
         f"--out {OUT_DIR}-study`"]
     if display is not None:
-        summary.append(latency_summary(display.latency) + " (latency.csv)")
+        summary.append(latency_summary(latency.to_dict("records")) + " (latency.csv)")
     return ExperimentResult(frames=frames, figures=figures, summary=summary,
                             exit_code=128 + interrupted_by if interrupted_by else 0)
 
