@@ -183,6 +183,20 @@ def _first_impact(vv, cos_th, sin_th, m, c, max_steps, hop, pos, S, D0, C, SN, V
 
 
 @_jit
+def _impact(th, vv, cos_th, sin_th, m, c, max_steps, hop, pos, S, D0, C, SN, V, SH, CH):
+    """One impact of the m wrapped states (``PassiveMap.step``'s arithmetic): hop[j] the
+    flight's phase (``_first_impact``), then into the solver's scratch the impact's phase
+    S (wrapped: fmod, a call, in its own loop), its sine SN and cosine C and eq. 5's
+    velocity V (a loop that vectorises)."""
+    _first_impact(vv, cos_th, sin_th, m, c, max_steps, hop, pos, S, D0, C, SN, V, SH, CH)
+    for j in range(m):
+        S[j] = _wrap(th[j] + hop[j])
+    for j in range(m):
+        SN[j], C[j] = _sincos(S[j])
+        V[j] = c[_V_COEF] * C[j] - c[_ALPHA] * vv[j] + c[_G_ALPHA_W] * hop[j]
+
+
+@_jit
 def _classify(theta0, v0, c, max_iterations, max_steps, outcome, iterations):
     """``classify.classify_batch`` of flat arrays into ``outcome`` / ``iterations``."""
     n = theta0.size
@@ -204,14 +218,7 @@ def _classify(theta0, v0, c, max_iterations, max_steps, outcome, iterations):
     for k in range(1, max_iterations + 1):
         if m == 0:
             break
-        _first_impact(vv, cos_th, sin_th, m, c, max_steps, hop, pos, S, D0, C, SN, V, SH, CH)
-        # the impact's phase (wrapped: fmod, a call, in its own loop) and then its sin, cos
-        # and eq. 5 (a loop that vectorises) into the solver's scratch
-        for j in range(m):
-            S[j] = _wrap(th[j] + hop[j])
-        for j in range(m):
-            SN[j], C[j] = _sincos(S[j])
-            V[j] = c[_V_COEF] * C[j] - c[_ALPHA] * vv[j] + c[_G_ALPHA_W] * hop[j]
+        _impact(th, vv, cos_th, sin_th, m, c, max_steps, hop, pos, S, D0, C, SN, V, SH, CH)
         p = 0
         for j in range(m):
             h, t, v, ct, st = hop[j], S[j], V[j], C[j], SN[j]
@@ -375,12 +382,7 @@ def _recurrence(theta, v, cos_theta, sin_theta, c, max_steps, cells_theta, scale
     for _ in range(max_impacts):
         if m == 0:
             break
-        _first_impact(vv, cos_th, sin_th, m, c, max_steps, hop, pos, S, D0, C, SN, V, SH, CH)
-        for j in range(m):
-            S[j] = _wrap(th[j] + hop[j])
-        for j in range(m):
-            SN[j], C[j] = _sincos(S[j])
-            V[j] = c[_V_COEF] * C[j] - c[_ALPHA] * vv[j] + c[_G_ALPHA_W] * hop[j]
+        _impact(th, vv, cos_th, sin_th, m, c, max_steps, hop, pos, S, D0, C, SN, V, SH, CH)
         p = 0
         for j in range(m):
             t, u = S[j], V[j]
