@@ -348,8 +348,6 @@ class DaskCluster:
         service) or make it fail in odd ways (an HTTP server's reply read as a frame length:
         a MemoryError). Either is one ClusterError; a client made after it was given up is
         closed by the helper thread."""
-        import threading
-
         made: dict[str, Any] = {}
         done = threading.Event()
 
