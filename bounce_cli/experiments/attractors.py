@@ -236,6 +236,38 @@ def continue_fractions(config: AttractorsConfig, options: RunOptions) -> pd.Data
                                        "low", "high"])
 
 
+#: the model parameters each continued parameter changes (gamma: a_r = gamma g / w_r^2)
+CONTINUATION_VARIES = {"gamma": "a_r", "racket_amplitude": "a_r", "racket_period": "tau"}
+
+
+def continuation_caption(config: AttractorsConfig) -> str:
+    """The continuation figure's caption: the model's parameters that stay, the one
+    continued over its range, and the continuation's own grid (not the run's main grid).
+
+    Parameters
+    ----------
+    config : AttractorsConfig
+        The run's config (``model`` and ``continuation``).
+
+    Returns
+    -------
+    str
+        e.g. ``alpha = 0.5, g = 9.81 m/s^2, tau = 0.92 s; gamma from 1.4 to 1.8 (17
+        values, a_r = gamma g / w_r^2); 90 x 90 starts at each value``.
+    """
+    c, p = config.continuation, config.params
+    kept = {"alpha": f"alpha = {p.alpha:g}", "g": f"g = {p.g:g} m/s^2",
+            "a_r": f"a_r = {p.racket_amplitude:g} m", "tau": f"tau = {p.racket_period:g} s"}
+    del kept[CONTINUATION_VARIES[c.parameter]]
+    values = (f"{c.parameter} = {c.start:g}" if c.num == 1 else
+              f"{c.parameter} from {c.start:g} to {c.stop:g} ({c.num} values"
+              + (", a_r = gamma g / w_r^2)" if c.parameter == "gamma" else ")"))
+    if c.num == 1 and c.parameter == "gamma":
+        values += " (a_r = gamma g / w_r^2)"
+    grid = f"{c.grid.theta0_deg.num} x {c.grid.v0_m_s.num} starts at each value"
+    return "; ".join([", ".join(kept.values()), values, grid])
+
+
 def continuation_point(task: tuple[AttractorsConfig, float]):
     """One value of the continuation (a worker's task): the attractors ``find_attractors``
     finds on ``continuation.grid`` at it (discovery on the sample ``measures.seed`` draws,
@@ -294,7 +326,11 @@ def run(config: AttractorsConfig, options: RunOptions) -> ExperimentResult:
     if config.continuation.num:
         frames["continuation.csv"] = continue_fractions(config, options)
     figures = draw(frames, config)
+    continued = figures.pop("attractors_continuation.png", None)
     caption_figures(figures, params, f"{th.shape[1]} x {th.shape[0]} starts")
+    if continued is not None:  # its own grid, and the parameter it varies
+        caption_figures({"continued": continued}, None, continuation_caption(config))
+        figures["attractors_continuation.png"] = continued
     return ExperimentResult(frames=frames, figures=figures,
                             summary=summary_lines(attractors, shares, labels.size,
                                                   rediscovered))

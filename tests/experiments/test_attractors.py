@@ -56,6 +56,13 @@ def test_attractors_writes_every_table_and_section_3_s_classes_agree(tmp_path):
     # every start accounted for in the summary, nothing undecided
     assert result.summary[0].startswith("1 attractor in 3,600 starts: period-1 ")
     assert "undecided" not in result.summary[0]
+    # each figure's caption names its own grid: the continuation's is not the main one
+    from bounce_cli.runtime.figure_files import drawn, figure_caption
+
+    assert "60 x 60 starts" in figure_caption(drawn(result.figures["attractors.png"]))
+    continued = figure_caption(drawn(result.figures["attractors_continuation.png"]))
+    assert continued.endswith("gamma from 1.45 to 1.6 (3 values, a_r = gamma g / w_r^2); "
+                              "30 x 30 starts at each value")
 
 
 def test_summary_accounts_for_every_start():
@@ -107,6 +114,30 @@ def test_the_continuation_does_not_depend_on_its_workers():
     # across eq. 14's flip (Gamma 1.5268) the period-1 branch hands over to period 2
     assert {"period-1", "period-2"} <= set(one["name"])
     assert one.groupby("gamma")["fraction"].sum().to_numpy() == pytest.approx(1.0)
+
+
+def test_the_continuation_figure_s_caption_names_its_own_grid_and_parameter():
+    # it named the main grid's size and the main a_r, which the continuation over gamma
+    # changes at every value (the run's wiring: the slow test above)
+    from bounce_cli.experiments import runner
+    from bounce_cli.experiments.attractors import continuation_caption
+
+    def caption(*sets):
+        _, _, config = runner.load_run_config(runner.find_entry("attractors"), None,
+                                              list(sets))
+        return continuation_caption(config)
+
+    assert caption("continuation.start=1.45", "continuation.stop=1.6", "continuation.num=3",
+                   "continuation.grid.theta0_deg.num=30", "continuation.grid.v0_m_s.num=20") \
+        == ("alpha = 0.5, g = 9.81 m/s^2, tau = 0.92 s; gamma from 1.45 to 1.6 "
+            "(3 values, a_r = gamma g / w_r^2); 30 x 20 starts at each value")
+    assert caption("continuation.parameter=racket_period", "continuation.num=1",
+                   "continuation.start=0.9", "model.alpha=0.7") == (
+        "alpha = 0.7, g = 9.81 m/s^2, a_r = 0.3 m; racket_period = 0.9; "
+        "90 x 90 starts at each value")
+    assert "tau = 0.92 s; racket_amplitude from" in caption(
+        "continuation.parameter=racket_amplitude", "continuation.start=0.2",
+        "continuation.stop=0.4")
 
 
 def test_orbits_above_the_cells_are_found():
