@@ -486,13 +486,20 @@ def _iterations_figure(grid: _Grid, codes, basin: pd.DataFrame, markers: pd.Data
     shaded = np.ma.masked_array(iters.astype(float), mask=below.astype(bool))
     # as bytes, as above: the colour bar's mappable (of the same colormap and range) stands
     # for the image; masked cells (below the racket) transparent, the axes' black behind
-    scale = ScalarMappable(Normalize(shaded.min(), shaded.max()), colormaps["viridis"])
+    counts = shaded.compressed()
+    low, high = (float(counts.min()), float(counts.max())) if counts.size else (0.0, 0.0)
+    # one count everywhere (or none: every start below the racket): the bar spans that
+    # count +- 1/2, its middle colour (as imshow draws a constant image), one tick
+    one = low == high
+    scale = ScalarMappable(Normalize(low - 0.5 * one, high + 0.5 * one), colormaps["viridis"])
     cells = scale.to_rgba(shaded, bytes=True)
-    if scale.norm.vmin == scale.norm.vmax:  # one count everywhere: imshow's middle colour
-        cells[~np.ma.getmaskarray(shaded)] = scale.cmap(0.5, bytes=True)
     ax2.imshow(cells, origin="lower", extent=extent, aspect="auto", interpolation="nearest")
     ax2.set_facecolor("black")
-    integer_axis(fig2.colorbar(scale, ax=ax2, label="impacts until classified").ax, which="y")
+    bar = fig2.colorbar(scale, ax=ax2, label="impacts until classified")
+    if one:
+        bar.set_ticks([low])
+    else:
+        integer_axis(bar.ax, which="y")
     _draw_markers(ax2, markers, extent)
     fig2.legend(
         handles=[Patch(facecolor="black", label="below the racket")]

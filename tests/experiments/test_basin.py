@@ -315,3 +315,13 @@ def test_figures_colour_each_cell_by_its_outcome_and_impact_count():
         "basin_iterations.png"].axes[0].images[0].get_array()
     np.testing.assert_array_equal(shaded[1:], np.broadcast_to(
         colormaps["viridis"](0.5, bytes=True), shaded[1:].shape))
+    # and the colour bar says that one count, no fractions (a 1 x 1 grid had -0.1 ... 0.1);
+    # nothing counted (every start below the racket): the bar says 0
+    for everywhere, only, expected in ((1, "period1", 1.0), (0, "below_racket", 0.0)):
+        one = df.assign(iterations=everywhere, outcome=only)
+        fig = basin.draw({"basin.csv": one, "markers.csv": markers})["basin_iterations.png"]
+        fig.canvas.draw()
+        bar = fig.axes[1]
+        assert bar.get_ylim() == (expected - 0.5, expected + 0.5)
+        ticks = [t for t in bar.get_yticks() if bar.get_ylim()[0] <= t <= bar.get_ylim()[1]]
+        assert ticks == [expected]
