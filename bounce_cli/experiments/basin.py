@@ -204,8 +204,10 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
         {"outcome": list(outcomes), "count": counts, "fraction": counts / n_points}
     )
     if outcomes is EXACT_OUTCOMES:  # exact sticking: the locked orbit's period
-        fractions["period_cycles"] = np.where(fractions.outcome == "locked",
-                                              result.locked_cycles, 0)
+        # empty where it does not apply: the other outcomes, or no orbit locked (resting)
+        fractions["period_cycles"] = pd.array(
+            [result.locked_cycles if o == "locked" and result.locked_cycles else None
+             for o in outcomes], dtype="Int64")
     at_paper = is_passive(controller) and at_paper_parameters(params, settings)
     # Fig. 3's starts also on the exact-sticking basin at the paper's model
     fig3 = at_paper or (outcomes is EXACT_OUTCOMES and is_passive(controller)
@@ -426,8 +428,10 @@ def draw(frames: dict[str, pd.DataFrame], only: Collection[str] = FIGURES) -> di
     shown = [o for i, o in enumerate(EXACT_OUTCOMES) if o in OUTCOMES or (codes == i).any()]
     labels = dict(OUTCOME_LABELS)
     if exact and fractions is not None:
-        cycles = int(fractions.period_cycles.max())
-        labels["locked"] += f", period {cycles} racket cycle{'s' if cycles != 1 else ''}"
+        cycles = fractions.period_cycles.max()  # NaN (or NA): no orbit locked
+        if pd.notna(cycles):
+            cycles = int(cycles)
+            labels["locked"] += f", period {cycles} racket cycle{'s' if cycles != 1 else ''}"
         labels["undecided"] = "undecided in max impacts (chaotic or a long transient)"
     grid = _Grid(basin)
     figures = {}

@@ -6,6 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+import bounce_cli
 from bounce_cli.experiments import basin
 
 SMALL = ["--set", "grid.theta0_deg.num=40", "--set", "grid.v0_m_s.num=40"]
@@ -235,6 +236,22 @@ def test_canonical_axes_found_without_sorting_or_refused():
     assert basin._canonical_axes(np.array([0.0, 1.0, 0.0]), np.array([1.0, 1.0, 2.0])) is None
 
 
+def test_exact_sticking_without_a_locked_orbit_leaves_its_period_empty(tmp_path):
+    # Gamma <= 1: a ball that sticks rides the racket for ever (resting), no orbit locks;
+    # period_cycles was 0 in every row and the legend said "period 0 racket cycles"
+    result = bounce_cli.run("basin", out=tmp_path / "r", set={
+        "grid.theta0_deg.num": 6, "grid.v0_m_s.num": 5, "classify.min_hop_s": 0,
+        "model.racket_amplitude": 0.15, "model.alpha": 0.9})
+    fractions = pd.read_csv(tmp_path / "r" / "fractions.csv")
+    assert fractions.set_index("outcome").loc["resting", "count"] > 0
+    assert fractions.period_cycles.isna().all()
+    redrawn = basin.draw({name: pd.read_csv(tmp_path / "r" / name)
+                          for name in ("basin.csv", "markers.csv", "fractions.csv")})
+    for figures in (redrawn, result.figures):
+        texts = [t.get_text() for t in figures["basin.png"].legends[0].get_texts()]
+        assert not any("period 0" in t for t in texts), texts
+
+
 @pytest.mark.slow
 def test_exact_sticking_basin_separates_locked_orbits_with_their_period(tmp_path, cli):
     """classify.min_hop_s=0: the grey of Fig. 4 becomes the locked sticking solution (period
@@ -248,6 +265,9 @@ def test_exact_sticking_basin_separates_locked_orbits_with_their_period(tmp_path
     assert list(fractions.outcome) == list(basin.EXACT_OUTCOMES)
     locked = fractions.set_index("outcome").loc["locked"]
     assert locked["count"] > 0 and locked.period_cycles == 1
+    # the other outcomes have no period: empty cells, not 0
+    assert fractions.drop(columns="count").set_index("outcome").drop(
+        index="locked").period_cycles.isna().all()
     assert fractions.set_index("outcome").loc["sticking", "count"] == 0
     frames = {name: pd.read_csv(out / name) for name in ("basin.csv", "markers.csv",
                                                           "fractions.csv")}
