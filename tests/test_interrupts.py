@@ -291,3 +291,38 @@ def test_interrupt_while_threads_classify(tmp_path, previous_run, signum):
             and not line.startswith("basin: classifying: ")] == ["bounce: interrupted"], err
     assert snapshot(existing) == before, "the previous results changed"
     assert not [p for p in tmp_path.rglob("*") if p.name.endswith(".tmp")], "temporary files"
+
+
+#: a signal the moment bounce's handlers are in place (what the "imports" moment above hits
+#: now and then on a busy machine): at the end of ``install`` itself, at the garbage
+#: collector's settings, at the watched standard output
+FIRST_STEPS = {
+    "install": "import bounce_cli.runtime.interrupts as m; m.signal.signal = "
+               "(lambda real: lambda s, h: (real(s, h), s == m.SIGNALS[-1] and "
+               "os.kill(os.getpid(), signal.SIGTERM)))(m.signal.signal)",
+    "gc": "import gc; gc.set_threshold = lambda *a: os.kill(os.getpid(), signal.SIGTERM)",
+    "stdout": "import bounce_cli.cli.console as c; c.WatchedStdout = lambda s: "
+              "(os.kill(os.getpid(), signal.SIGTERM), s)[1]",
+}
+
+
+@pytest.mark.parametrize("step", list(FIRST_STEPS))
+def test_a_signal_right_after_the_handlers_are_installed_is_one_line(step):
+    code = (f"import os, signal; {FIRST_STEPS[step]}\n"
+            "from bounce_cli.cli.console import main\nmain()")
+    done = subprocess.run([sys.executable, "-c", code, "--help"], capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == 128 + signal.SIGTERM, done.stderr
+    assert done.stderr.strip() == "bounce: interrupted", done.stderr
+
+
+def test_a_signal_after_the_command_ends_the_process_without_a_traceback():
+    # the command's work is done (its files written): a signal during the interpreter's exit
+    # raised where nothing caught it, a traceback after a finished run
+    code = ("import atexit, os, signal, time\n"
+            "atexit.register(lambda: (os.kill(os.getpid(), signal.SIGINT), time.sleep(0.5)))\n"
+            "from bounce_cli.cli.console import main\nmain()")
+    done = subprocess.run([sys.executable, "-c", code, "--version"], capture_output=True,
+                          text=True, timeout=60)
+    assert done.returncode == -signal.SIGINT, done.stderr
+    assert "Traceback" not in done.stderr and "Interrupted" not in done.stderr, done.stderr

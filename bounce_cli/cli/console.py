@@ -10,7 +10,7 @@ import gc
 import os
 import sys
 
-from ..runtime.interrupts import GC_THRESHOLDS, Interrupted, install, report
+from ..runtime.interrupts import GC_THRESHOLDS, Interrupted, install, report, uninstall
 from .stdout import WatchedStdout
 
 
@@ -33,11 +33,13 @@ def _report_stdout_failure(failure: OSError) -> int:
 
 
 def main() -> None:
-    """The ``bounce`` console script: handlers first, then the CLI's imports and run."""
-    install()
-    gc.set_threshold(*GC_THRESHOLDS)
-    watched = sys.stdout = WatchedStdout(sys.stdout)
+    """The ``bounce`` console script: handlers first, then the CLI's imports and run. A signal
+    may come the moment a handler is in place: everything from there on is in the ``try``."""
+    watched: WatchedStdout | None = None
     try:
+        install()
+        gc.set_threshold(*GC_THRESHOLDS)
+        watched = sys.stdout = WatchedStdout(sys.stdout)
         from .commands import app
 
         try:
@@ -48,7 +50,7 @@ def main() -> None:
             sys.stdout.flush()
             raise
     except OSError:
-        if watched.failure is None:
+        if watched is None or watched.failure is None:
             raise
         sys.exit(_report_stdout_failure(watched.failure))
     except Interrupted as exc:
@@ -65,6 +67,7 @@ def main() -> None:
                 pass
         os._exit(code)
     finally:
+        uninstall()  # the command is over: a signal now ends the process as any program's
         # the interpreter's last garbage collections at exit traverse every object numba,
         # pandas and matplotlib made: 0.36 s of a basin run; frozen, they are skipped (the
         # exit itself, atexit handlers and finalizers included, is unchanged): 0.04 s

@@ -56,10 +56,21 @@ def _handler(signum: int, frame) -> None:
 
 
 def install() -> None:
-    """Route SIGINT, SIGTERM and SIGHUP to :class:`Interrupted` (main thread only)."""
+    """Route SIGINT, SIGTERM and SIGHUP to :class:`Interrupted` (main thread only). The state
+    is reset first: a signal may arrive the moment a handler is in place (the caller's
+    ``try`` around this call then takes it)."""
+    _state.update(deferring=0, pending=None, raised=False)
     for signum in SIGNALS:
         signal.signal(signum, _handler)
-    _state.update(deferring=0, pending=None, raised=False)
+
+
+def uninstall() -> None:
+    """The operating system's default action for the signals again: once a command is over, a
+    signal during the interpreter's exit ends the process at once (status 128 + signal, as
+    any program) instead of raising :class:`Interrupted` where nothing catches it (a
+    traceback after the run's files were written)."""
+    for signum in SIGNALS:
+        signal.signal(signum, signal.SIG_DFL)
 
 
 def installed() -> bool:
