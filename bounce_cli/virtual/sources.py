@@ -59,6 +59,51 @@ class SineSource:
             yield t, self.amplitude_m * math.sin(w * t)
 
 
+#: a racket sample closer to the one before than this fraction of the stream's sample interval
+#: carries a timestamp taken when it was sent, not when it was measured (a burst of samples
+#: stamped microseconds apart, as ``push_sample`` without a timestamp gives): its position
+#: belongs to a later time, and the racket's cubic through it moves at hundreds of m/s, the
+#: ball then flying kilometres. Such samples are left out, and counted in a warning.
+MIN_SPACING_FRACTION = 0.25
+
+#: the sample interval a stream is judged by: the median of this many latest spacings
+SPACING_WINDOW = 15
+
+
+class SpacingGuard:
+    """Leaves out samples much closer to the one before than the stream's sample interval
+    (``MIN_SPACING_FRACTION``): the nominal interval where the stream declares one, else the
+    median of the latest accepted spacings (no sample is judged before three spacings are
+    seen)."""
+
+    def __init__(self, interval_s: float | None = None) -> None:
+        self.interval_s = interval_s if interval_s and math.isfinite(interval_s) else None
+        self.spacings: deque[float] = deque(maxlen=SPACING_WINDOW)
+        self.last = -math.inf
+        self.dropped = 0
+
+    def accept(self, t: float) -> bool:
+        """Whether the sample at time t is kept (t after the last kept sample)."""
+        spacing = t - self.last
+        reference = self.interval_s
+        if reference is None and len(self.spacings) >= 3:
+            reference = float(np.median(self.spacings))
+        if reference is not None and spacing < MIN_SPACING_FRACTION * reference:
+            self.dropped += 1
+            return False
+        if math.isfinite(spacing):
+            self.spacings.append(spacing)
+        self.last = t
+        return True
+
+    def report(self, warn: Callable[[str], None], where: str) -> None:
+        if self.dropped:
+            warn(f"{where}: {self.dropped} racket sample(s) stamped less than "
+                 f"{MIN_SPACING_FRACTION:g} of a sample interval after the one before were "
+                 "left out (timestamps of when samples were sent, not measured? an LSL "
+                 "outlet should pass each sample's own time to push_sample)")
+
+
 @dataclass(frozen=True)
 class ReplaySource:
     """The racket of a recording's trials (SI units, as ``bounce extract`` reads it); samples
@@ -66,6 +111,7 @@ class ReplaySource:
 
     path: Path
     trials: tuple  # of (t, racket) arrays
+    warn: Callable[[str], None] = lambda message: None
 
     @property
     def description(self) -> str:
@@ -78,8 +124,12 @@ class ReplaySource:
         if t.size == 0:
             return
         t = t - t[0]
+        spacing = np.diff(t)
+        guard = SpacingGuard(float(np.median(spacing)) if spacing.size else None)
         for ti, xi in zip(t[t <= duration_s], racket[t <= duration_s]):
-            yield float(ti), float(xi)
+            if guard.accept(float(ti)):
+                yield float(ti), float(xi)
+        guard.report(self.warn, f"replay:{self.path}: trial {trial}")
 
 
 @dataclass(frozen=True)
@@ -178,6 +228,7 @@ class LslSource:
     def samples(self, trial: int, duration_s: float) -> Iterator[tuple[float, float]]:
         t_first: float | None = None
         last, dropped, silent_since = -math.inf, 0, time.monotonic()
+        guard = SpacingGuard(1.0 / self.rate_hz if self.rate_hz > 0 else None)
         for sample in self._pulled():
             if sample is None:
                 if time.monotonic() - silent_since > self.settings.give_up_s:
@@ -197,6 +248,8 @@ class LslSource:
             if stamp <= last or not math.isfinite(x):
                 dropped += 1
                 continue
+            if not guard.accept(stamp):
+                continue
             last = stamp
             yield stamp - t_first, x
         if t_first is not None:
@@ -204,6 +257,7 @@ class LslSource:
         if dropped:
             self.warn(f"lsl:{self.name}: trial {trial}: {dropped} sample(s) out of order or "
                       "not finite were dropped")
+        guard.report(self.warn, f"lsl:{self.name}: trial {trial}")
 
 
 def open_source(spec: str, amplitude_m: float, period_s: float, rate_hz: float,
@@ -229,7 +283,7 @@ def open_source(spec: str, amplitude_m: float, period_s: float, rate_hz: float,
             raise ConfigError(f"racket: replay:{path}: a folder, not a recording")
         if not path.is_file():
             raise ConfigError(f"racket: replay:{path}: no such file")
-        return ReplaySource(path, tuple(read_racket(path)))
+        return ReplaySource(path, tuple(read_racket(path)), warn)
     if spec.startswith("lsl:") and spec[len("lsl:"):]:
         return LslSource(spec[len("lsl:"):], lsl, rest_s, warn)
     raise ConfigError(f"racket: unknown source {spec!r} (one of {', '.join(SOURCE_KINDS)})")

@@ -78,6 +78,41 @@ def test_replay_of_a_sine_recording_gives_the_sine_source_s_impacts(tmp_path):
     assert np.allclose(a["v_m_s"], b["v_m_s"], atol=1e-9)
 
 
+def test_samples_stamped_when_sent_are_left_out_not_flown_through(tmp_path):
+    # every third sample of a 500 Hz racket stamped 10 us after the one before (a sender's
+    # clock at sending, in bursts): the cubic through it moved at hundreds of m/s and threw
+    # the ball kilometres up, without a word
+    sine = bounce_cli.run("virtual", set={**HEADLESS, "trials": 1, "trial_s": 8.0})
+    recording = sine.frames["recordings/s1_virtual_t1.csv"].copy()
+    t = recording["t_s"].to_numpy().copy()
+    burst = np.arange(len(t)) % 3 == 2
+    t[burst] = t[np.flatnonzero(burst) - 1] + 1e-5
+    recording["t_s"] = t
+    path = tmp_path / "racket.csv"
+    recording.to_csv(path, index=False)
+    with pytest.warns(UserWarning, match=r"racket sample\(s\) stamped less than 0.25 of a "
+                                         r"sample interval .* left out"):
+        replay = bounce_cli.run("virtual", set={**HEADLESS, "trials": 1, "trial_s": 8.0,
+                                                "racket": f"replay:{path}"})
+    a, b = sine.frames["impacts.csv"], replay.frames["impacts.csv"]
+    ball = replay.frames["recordings/s1_virtual_t1.csv"]["ball_x_m"]
+    assert ball.max() < 2.0 and b["v_m_s"].abs().max() < 10.0
+    # the racket sampled at 500 Hz with every third sample missing: the same bounces
+    assert len(b) == len(a) and np.allclose(a["t_s"], b["t_s"], atol=1e-4)
+    assert np.allclose(a["v_m_s"], b["v_m_s"], atol=1e-2)
+
+
+def test_the_spacing_guard_judges_by_the_nominal_interval_or_the_recent_median():
+    from bounce_cli.virtual.sources import SpacingGuard
+
+    nominal = SpacingGuard(0.002)
+    assert [nominal.accept(t) for t in (0.0, 0.002, 0.0021, 0.0026, 0.004)] == \
+        [True, True, False, True, True]
+    learned = SpacingGuard()  # no nominal rate: three spacings seen first
+    kept = [learned.accept(t) for t in (0.0, 1e-5, 0.01, 0.02, 0.03, 0.03001, 0.04)]
+    assert kept == [True, True, True, True, True, False, True] and learned.dropped == 1
+
+
 def test_a_drop_from_below_the_racket_is_one_line(cli, user_error, tmp_path):
     user_error(cli("virtual", "--headless", "--set", "launch.mode=drop", "--set",
                    "launch.height_m=-1", "--out", tmp_path / "x"),
