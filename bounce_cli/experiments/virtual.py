@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 from pydantic import Field, field_validator, model_validator
 
-from ..data.extraction import ExtractionSettings, racket_cycles
+from ..data.extraction import ExtractionSettings, racket_cycles, widened_windows
 from ..data.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS, ball_apex
 from ..data.setup_table import SETUP_FILE, SetupQuantity, setup_frame
 from ..data.simulated_lab import LAB_MIN_HOP_S
@@ -239,9 +239,15 @@ def impacts_frame(record: TrialRecord, trial: int, g: float, duration_s: float) 
                        columns=[f.name for f in fields(Impact)])
     t, v = imp["t_s"].to_numpy(float), imp["v_m_s"].to_numpy(float)
     columns = [*REQUIRED_COLUMNS, *EVENT_COLUMNS, *MEASURED_COLUMNS, "stuck"]
+    # the local fits' windows widened to the racket's sampling, as ``bounce extract`` does
+    # (a 60 Hz mouse or a slow stream: with the default windows no cycle, so no impact, had
+    # a phase)
+    spacing = np.diff(np.asarray(record.t, dtype=float))
+    settings = ExtractionSettings(g=g)
+    if spacing.size:
+        settings = widened_windows(settings, float(np.median(spacing)))
     try:
-        cycles = racket_cycles(record.t, record.racket, np.isfinite(record.racket),
-                               ExtractionSettings(g=g))
+        cycles = racket_cycles(record.t, record.racket, np.isfinite(record.racket), settings)
     except ModelError:  # a racket that never moved: no cycle, so no impact has a phase
         return pd.DataFrame(columns=columns)
     cycle, theta = cycles.locate(t)
