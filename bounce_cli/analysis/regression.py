@@ -12,7 +12,7 @@ import numpy as np
 from scipy.special import stdtrit
 
 from ..errors import TooFewObservationsError
-from ..model.params import ModelError, ModelParams, wrap_phase
+from ..model.params import ModelParams, wrap_phase
 from .stochastic import simulate_stochastic_map
 
 
@@ -71,7 +71,8 @@ def ols_line(x, y, confidence: float = 0.95) -> LineFit:
     sxx = np.sum((x - xm) ** 2, axis=-1)
     # x values equal to within rounding (means of the same numbers summed in another order)
     if np.any(sxx <= n * (1e-12 * np.max(np.abs(x), axis=-1)) ** 2):
-        raise ModelError("a line fit needs at least two different x values")
+        # the design cannot answer it (every trial at the same racket period: a sine racket)
+        raise TooFewObservationsError("a line fit needs at least two different x values")
     sxy = np.sum((x - xm) * (y - ym), axis=-1)
     syy = np.sum((y - ym) ** 2, axis=-1)
     slope = sxy / sxx

@@ -327,6 +327,23 @@ def test_a_steady_session_s_study_skips_what_two_trials_cannot_answer(tmp_path, 
     assert (study_dir / "s1" / "virtual" / "acf" / "stability_data.csv").is_file()
 
 
+@pytest.mark.slow
+def test_a_sine_racket_s_study_skips_the_line_through_equal_periods(tmp_path, cli):
+    # three trials of the perturbation protocol with the sine racket: every trial at the
+    # same racket period, so Fig. 7's line has one x; the study exited 1 with a failure row
+    # where the docs promise "not run, with a warning" (as with two trials)
+    out = tmp_path / "sine"
+    made = cli("virtual", "--headless", "--config", PROTOCOL, "--set", "trials=3",
+               "--set", "trial_s=15", "--out", out)
+    assert made.exit_code == 0, made.output
+    result = cli("study", "--manifest", out / "study.csv", "--out", tmp_path / "st",
+                 "--quiet")
+    assert result.exit_code == 0, result.output
+    said = " ".join(result.stderr.split())
+    assert "regression: not run: " in said and "at least two different x values" in said
+    assert pd.read_csv(tmp_path / "st" / "failures.csv").empty
+
+
 def test_a_lab_s_recording_is_replayed_by_its_own_column_names_and_units(tmp_path, cli,
                                                                           user_error):
     # replay.columns / replay.units, as bounce extract reads the file; a missing column names
