@@ -756,3 +756,30 @@ def test_the_model_bias_intervals_cover_the_truth_over_simulated_units():
     assert len(hits) == 10
     assert min(hits.values()) >= 34, hits
     assert abs(np.mean(errors)) < 0.02
+
+
+def test_a_trusted_small_size_interval_reaching_past_1_5_is_withheld():
+    # a review's 30-pair VARX: the trust study trusted the delta method at that size, and
+    # the table said spectral radius 0.309 [0.000, 633.380]; a group took it as a unit's
+    import pandas as pd
+
+    from bounce_cli.analysis.var_fit import MAX_PLAUSIBLE_RADIUS, Var1Fit
+    from bounce_cli.experiments.data_side import calibrated
+
+    trust = pd.DataFrame([{"method": "ols", "data_size": True, "coverage": 0.93,
+                           "trusted": True, "repetitions": 200, "median_bias": 0.0,
+                           "spread_16_84": 0.1}])
+
+    def fit(se: float) -> Var1Fit:
+        return Var1Fit(method="ols", jacobian=np.array([[0.2, 0.1], [-0.1, 0.25]]),
+                       cov_vec=np.eye(4) * se ** 2, noise_cov=np.eye(2), n_pairs=30,
+                       n_trials=1)
+
+    narrow, wide = calibrated(fit(0.02), trust, 0.95, 0.03), calibrated(fit(0.5), trust,
+                                                                          0.95, 0.03)
+    assert narrow.has_interval
+    assert narrow.eigen_summary()["spectral_radius"][3] <= MAX_PLAUSIBLE_RADIUS
+    assert not wide.has_interval
+    value, se, low, high = wide.eigen_summary()["spectral_radius"]
+    assert np.isnan(low) and np.isnan(high) and np.isfinite(value)
+    assert "would reach" in wide.calibration_note and "not informative" in wide.calibration_note

@@ -35,7 +35,8 @@ from ..analysis.data_stats import (
     trial_correlations,
 )
 from ..analysis.racket_inputs import INPUT_COEFFICIENTS, racket_input_jacobian
-from ..analysis.var_fit import EIGEN_QUANTITIES, J_ENTRIES, Var1Fit, fit_var1
+from ..analysis.var_fit import (EIGEN_QUANTITIES, J_ENTRIES, MAX_PLAUSIBLE_RADIUS, Var1Fit,
+                                 fit_var1)
 from ..data.data_parameters import DataModel, model_at_data, model_for_data
 from ..data.impacts import Impacts, ImpactsSource, read_impacts
 from .base import ExperimentResult, RunOptions
@@ -915,8 +916,20 @@ def calibrated(fit: Var1Fit, trust: pd.DataFrame, confidence: float, slack: floa
     else:
         note = (f"the estimate's median bias {row['median_bias']:+.3f} is more than a quarter "
                 f"of its 16-84 % spread {row['spread_16_84']:.3f}")
-    return dataclasses.replace(fit, calibrated_coverage=coverage,
-                               calibration_trusted=bool(row["trusted"]), calibration_note=note)
+    checked = dataclasses.replace(fit, calibrated_coverage=coverage,
+                                  calibration_trusted=bool(row["trusted"]),
+                                  calibration_note=note)
+    if checked.calibration_trusted:
+        # a trusted coverage does not make an interval informative: one that reaches above
+        # MAX_PLAUSIBLE_RADIUS (30 pairs of a VARX: [0.000, 633]) says nothing a reader can
+        # use, and a group's statistics would take it as a unit's estimate
+        high = checked.eigen_summary(confidence)["spectral_radius"][3]
+        if not high <= MAX_PLAUSIBLE_RADIUS:
+            checked = dataclasses.replace(checked, calibration_trusted=False, calibration_note=(
+                f"trusted, but this fit's {confidence:.0%} interval would reach {high:.3g}, "
+                f"above {MAX_PLAUSIBLE_RADIUS:g}, which a ball that kept bouncing cannot have: "
+                "not informative at this size"))
+    return checked
 
 
 def acf_data_draw(frames: dict[str, pd.DataFrame]) -> dict:
