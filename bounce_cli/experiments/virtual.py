@@ -457,6 +457,8 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
     # row while the table is built from the list (CI once: 467 values for 468 rows)
     latency = pd.DataFrame(list(display.latency) if display is not None else [],
                            columns=LATENCY_COLUMNS)
+    # the frames of the kept trials only: an interrupted trial is left out of every table
+    latency = latency[latency["trial"].isin(list(kept))].reset_index(drop=True)
     frames.update({
         "impacts.csv": impacts_table,
         "gaps.csv": pd.DataFrame(gaps, columns=["trial", "t_start_s", "t_end_s"]),
