@@ -383,6 +383,7 @@ def analyse_unit(task: UnitTask) -> dict[str, Any]:
     failures: list[dict] = []
     summary: list[str] = []
     warnings: list[str] = []
+    not_run: dict[str, str] = {}  # analysis -> why it did not run for this unit
     row: dict[str, Any] = {**unit.factors(), "recordings": len(unit.rows)}
     pooled, measured = read_unit_impacts(task, frames, failures, summary)
     if pooled is not None:
@@ -411,21 +412,28 @@ def analyse_unit(task: UnitTask) -> dict[str, Any]:
                     crowded = perturbations_leave_no_run(pooled, cfg, alpha, g, seed)
                     if crowded:  # a perturbation session: the stationary analysis needs
                         warnings.append(f"{unit.label}: acf: not run: {crowded}")  # others
+                        not_run[name] = crowded
                         continue
                 try:
                     result = run_analysis(name, cfg, alpha, g, seed, unit, pooled, warnings)
                 except TooFewObservationsError as exc:  # the design cannot answer it (two
                     # trials for a trend: the virtual set-up's steady protocol): not a failure
                     warnings.append(f"{unit.label}: {name}: not run: {one_line(exc)}")
+                    not_run[name] = one_line(exc)
                     continue
                 except RECORDED_ERRORS as exc:
                     failures.append({"unit": unit.folder, "file": "", "stage": name,
                                      "error": one_line(exc)})
+                    not_run[name] = f"failed (failures.csv): {one_line(exc)}"
                     continue
                 for file_name, frame in result.frames.items():
                     frames[f"{unit.folder}/{name}/{file_name}"] = frame
                 summary += [f"{unit.label}: {name}: {line}" for line in result.summary]
-        row.update(unit_row(pooled, frames, unit, found))
+        if found is None:
+            not_run.setdefault("acf", "the unit's model parameters failed (failures.csv)")
+        elif "acf" not in cfg["analyses"]:
+            not_run.setdefault("acf", "acf is not among the study's analyses")
+        row.update(unit_row(pooled, frames, unit, found, not_run))
     row["failures"] = len(failures)
     pngs = {}
     if ReportBlock(**cfg["report"]).drawn() == "all":
@@ -479,10 +487,12 @@ def run_analysis(name: str, cfg: dict[str, Any], alpha: float, g: float, seed: i
 
 
 def unit_row(pooled: pd.DataFrame, frames: dict[str, pd.DataFrame], unit: Unit,
-             found: DataModel | None) -> dict[str, Any]:
+             found: DataModel | None, not_run: dict[str, str] | None = None
+             ) -> dict[str, Any]:
     """group.csv's numbers of one unit: its bounces, the state's means and SDs, the racket,
     the measured set-up, the data's VAR(1) radius beside the model's eq. 10 radius, the
-    impacts to relax, the control fit."""
+    impacts to relax, the control fit. ``not_run``: analysis -> why it did not run for the
+    unit (the radii's notes say it where acf gave no table)."""
     theta = pooled["theta_rad"].to_numpy(float) if "theta_rad" in pooled.columns else \
         np.radians(pooled["theta_deg"].to_numpy(float))
     mean_theta = circular_mean(theta)
@@ -512,7 +522,9 @@ def unit_row(pooled: pd.DataFrame, frames: dict[str, pd.DataFrame], unit: Unit,
     for method in RADIUS_ESTIMATORS:
         for field in ("estimate", "ci_low", "ci_high"):
             out[f"radius_{method}" + ("" if field == "estimate" else f"_{field}")] = math.nan
-        out[f"radius_{method}_note"] = ""
+        out[f"radius_{method}_note"] = ("" if stab is not None else
+                                        f"acf --data not run: {(not_run or {}).get('acf', '')}"
+                                        .rstrip(": "))
         if stab is not None:
             rows = stab[(stab["quantity"] == "spectral_radius")
                         & stab["source"].astype(str).str.startswith(method)]

@@ -342,6 +342,13 @@ def test_a_sine_racket_s_study_skips_the_line_through_equal_periods(tmp_path, cl
     said = " ".join(result.stderr.split())
     assert "regression: not run: " in said and "at least two different x values" in said
     assert pd.read_csv(tmp_path / "st" / "failures.csv").empty
+    # group.csv's radii are NaN (acf did not run: perturbations every fifth impact), and
+    # their notes say why (they were empty, the reason only in the warnings)
+    group = pd.read_csv(tmp_path / "st" / "group.csv")
+    for method in ("ols", "lag2", "varx_ols", "varx_lag2"):
+        assert group[f"radius_{method}"].isna().all()
+        assert group[f"radius_{method}_note"].str.startswith(
+            "acf --data not run: the perturbations leave no run").all()
 
 
 def test_a_lab_s_recording_is_replayed_by_its_own_column_names_and_units(tmp_path, cli,
