@@ -783,3 +783,21 @@ def test_a_trusted_small_size_interval_reaching_past_1_5_is_withheld():
     value, se, low, high = wide.eigen_summary()["spectral_radius"]
     assert np.isnan(low) and np.isnan(high) and np.isfinite(value)
     assert "would reach" in wide.calibration_note and "not informative" in wide.calibration_note
+
+
+def test_the_racket_warning_needs_two_ses_and_an_interval():
+    # a steady racket's 43 impacts warned "the racket varies ... enough to matter" (one SE of
+    # a VARX without an interval apart: chance)
+    from bounce_cli.analysis.var_fit import Var1Fit
+    from bounce_cli.experiments.data_side import racket_warning
+
+    def fit(radius: float, n_pairs: int, method: str = "ols") -> Var1Fit:
+        return Var1Fit(method=method, jacobian=np.diag([radius, 0.1]),
+                       cov_vec=np.eye(4) * 0.01 ** 2, noise_cov=np.eye(2), n_pairs=n_pairs,
+                       n_trials=1)
+
+    sd = np.array([0.0002, 0.0001])
+    assert racket_warning({"ols": fit(0.5, 400), "varx_ols": fit(0.515, 400)}, sd) == ""
+    assert "enough to matter" in racket_warning(
+        {"ols": fit(0.5, 400), "varx_ols": fit(0.53, 400)}, sd)
+    assert racket_warning({"ols": fit(0.5, 40), "varx_ols": fit(0.6, 40)}, sd) == ""
