@@ -71,6 +71,12 @@ def test_the_page_draws_ball_and_racket_logs_latency_and_survives_a_reload(brows
         process.kill()
     assert process.returncode == 0, "".join(lines)
     assert colour_share(shot, BALL_RGB) > 1e-4 and colour_share(shot, RACKET_RGB) > 1e-3
+    # the session over and its server gone, the page says so (it said "connection lost:
+    # reconnecting" for ever)
+    time.sleep(1.0)
+    assert page.evaluate("document.getElementById('status').textContent") == "session over"
+    assert page.evaluate("document.getElementById('message').textContent") == \
+        "done: thank you"
     latency = pd.read_csv(out / "latency.csv")
     assert list(latency.columns) == ["trial", "sample", "t_s", "connection", "delay_ms",
                                      "round_trip_ms"]
