@@ -801,3 +801,16 @@ def test_the_racket_warning_needs_two_ses_and_an_interval():
     assert "enough to matter" in racket_warning(
         {"ols": fit(0.5, 400), "varx_ols": fit(0.53, 400)}, sd)
     assert racket_warning({"ols": fit(0.5, 40), "varx_ols": fit(0.6, 40)}, sd) == ""
+
+
+def test_the_trust_line_at_the_data_own_size_says_why_there_is_no_coverage():
+    """Four impacts: no simulated data set of that size can be fitted (the lag-2 fit needs
+    more triples), so the trust study has no coverage there. The summary said "coverage
+    nan%"; it says so in words, and a size with repetitions keeps its percentage."""
+    from bounce_cli.experiments.data_side import own_size_words
+
+    empty = pd.Series({"repetitions": 0, "coverage": math.nan, "trusted": False})
+    words = own_size_words(empty)
+    assert "nan" not in words and "no coverage" in words and "not trusted" in words
+    fitted = pd.Series({"repetitions": 200, "coverage": 0.935, "trusted": True})
+    assert own_size_words(fitted) == "at their own run lengths: coverage 93.5%, trusted"

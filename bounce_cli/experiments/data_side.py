@@ -465,15 +465,25 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
         ok = sized[(sized.method == method) & sized.trusted.astype(bool)]
         need = f"from {int(ok.bounces.min())} bounces" if len(ok) else "at none of the sizes tried"
         own = trust[(trust.method == method) & trust.data_size.astype(bool)]
-        at_own = (f" (at their own run lengths: coverage {own.coverage.iloc[0]:.1%}, "
-                  f"{'trusted' if bool(own.trusted.iloc[0]) else 'not trusted'})"
-                  if len(own) else "")
+        at_own = f" ({own_size_words(own.iloc[0])})" if len(own) else ""
         lines.append(f"trust study ({noise.sd_v_m_s:.3g} m/s, "
                      f"{math.degrees(noise.sd_theta_rad):.3g} deg measurement noise, "
                      f"{noise_words}; sizes in whole "
                      f"runs of the data's mean length, {run_length}): {method} trusted "
                      f"{need}; these data have {n_data}{at_own}")
     return frames, lines
+
+
+def own_size_words(row) -> str:
+    """The trust study's verdict at the data's own size (a row of :func:`trust_frame` with
+    ``data_size`` true), in words: its coverage and whether it is trusted, or, where no
+    simulated data set of that size could be fitted (too few bounces for the estimator), that
+    it has no coverage."""
+    if not int(row["repetitions"]):
+        return ("at their own run lengths: no simulated data set of that size could be "
+                "fitted, so no coverage; not trusted")
+    return (f"at their own run lengths: coverage {float(row['coverage']):.1%}, "
+            f"{'trusted' if bool(row['trusted']) else 'not trusted'}")
 
 
 #: how the note of a spectral radius that is no estimate begins (``plausible_fit``)
