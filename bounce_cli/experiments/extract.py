@@ -83,11 +83,14 @@ CSV_MARKS = {"comma": ",", "semicolon": ";", "tab": "\t", "\\t": "\t", "space": 
 
 class CsvBlock(StrictModel):
     """How the CSV files are written: field separator, decimal mark, rows to skip after the
-    header (a row of units). Marks by character or by name (``CSV_MARKS``)."""
+    header (a row of units), and the values a height column writes for a marker it did not
+    see (``missing_heights``: e.g. [0], read as gaps like empty cells). Marks by character or
+    by name (``CSV_MARKS``)."""
 
     separator: str = Field(",", min_length=1)
     decimal: Literal[".", ","] = "."
     skip_rows: int = Field(0, ge=0)
+    missing_heights: list[float] = Field(default_factory=list)
 
     @field_validator("separator", "decimal", mode="before")
     @classmethod

@@ -619,6 +619,68 @@ def test_other_csv_dialects_give_the_same_impacts(simulated, tmp_path, write, se
     one_line_error(bare, "csv.")
 
 
+def test_a_dropout_written_as_zero_is_warned_of_and_read_as_a_gap_where_declared(
+        simulated, tmp_path):
+    """Some systems write a marker they did not see as 0. Read as heights, three 60 ms
+    zeros in the ball column made phantom contacts (a ball at height 0: six "sticking" and
+    "contact not located" rows in excluded.csv) and hop_s errors of 0.7 s against the
+    truth, without a word. Now a run of zeros is warned of, naming the key; with
+    csv.missing_heights=[0] the zeros are gaps, and the impacts are those of the file with
+    empty cells there."""
+    rec = pd.read_csv(simulated / "recording.csv")
+    holes = np.zeros(len(rec), dtype=bool)
+    for start in (3.3, 6.1, 9.4):
+        holes |= ((rec.trial == 1) & (rec.t_s > start) & (rec.t_s < start + 0.06)).to_numpy()
+    zeros, empty = rec.copy(), rec.copy()
+    zeros.loc[holes, "ball_x_m"] = 0.0
+    empty.loc[holes, "ball_x_m"] = np.nan
+    zeros.to_csv(tmp_path / "zeros.csv", index=False)
+    empty.to_csv(tmp_path / "empty.csv", index=False)
+    as_heights, heights_out = extract_cli(tmp_path / "h", "--data", str(tmp_path / "zeros.csv"))
+    assert as_heights.exit_code == 0, as_heights.output
+    assert "column 'ball_x_m' is exactly 0 in 3 run(s)" in as_heights.output
+    assert "csv.missing_heights=[0]" in as_heights.output
+    phantom = pd.read_csv(heights_out / "excluded.csv")
+    assert phantom.reason.str.startswith("sticking").sum() == 3  # what a reader would meet
+    as_gaps, gaps_out = extract_cli(tmp_path / "g", "--data", str(tmp_path / "zeros.csv"),
+                                    "--set", "csv.missing_heights=[0]")
+    with_empty, empty_out = extract_cli(tmp_path / "e", "--data", str(tmp_path / "empty.csv"))
+    assert as_gaps.exit_code == 0 and with_empty.exit_code == 0, as_gaps.output
+    assert "exactly 0" not in as_gaps.output
+    pd.testing.assert_frame_equal(pd.read_csv(gaps_out / "impacts.csv"),
+                                  pd.read_csv(empty_out / "impacts.csv"))
+    assert not pd.read_csv(gaps_out / "excluded.csv").reason.str.startswith("sticking").any()
+
+
+def test_two_zeros_in_a_row_are_heights_without_a_warning(tmp_path):
+    """A racket whose origin is its mid-position passes through 0: two samples written as 0
+    in a row are heights, and nothing is said; three are a run (``ZERO_RUN_SAMPLES``)."""
+    from types import SimpleNamespace
+
+    from bounce_cli.data.recordings import read_csv_recording
+
+    t = np.arange(60) * 0.005
+    racket = 0.3 * np.sin(2 * np.pi * t / 0.92)
+    racket[10:12] = 0.0
+    ball = 0.5 + 0.0 * t
+    pd.DataFrame({"t_s": t, "racket_x_m": racket, "ball_x_m": ball}).to_csv(
+        tmp_path / "r.csv", index=False)
+    columns = SimpleNamespace(time="t_s", racket="racket_x_m", ball="ball_x_m", trial=None)
+    units = SimpleNamespace(length="m", time="s")
+    heard: list[str] = []
+    (trial,) = read_csv_recording(tmp_path / "r.csv", columns, units, None, heard.append)
+    assert heard == [] and np.all(trial.racket[10:12] == 0.0)
+    racket[30:33] = 0.0
+    pd.DataFrame({"t_s": t, "racket_x_m": racket, "ball_x_m": ball}).to_csv(
+        tmp_path / "r.csv", index=False)
+    (trial,) = read_csv_recording(tmp_path / "r.csv", columns, units, None, heard.append)
+    assert len(heard) == 1 and "'racket_x_m' is exactly 0 in 1 run(s)" in heard[0]
+    assert "t_s = 0.15" in heard[0]
+    missing = SimpleNamespace(separator=",", decimal=".", skip_rows=0, missing_heights=[0.0])
+    (trial,) = read_csv_recording(tmp_path / "r.csv", columns, units, missing, heard.append)
+    assert len(heard) == 1 and np.isnan(trial.racket[[10, 11, 30, 31, 32]]).all()
+
+
 # -- extraction faults (issue 24) ------------------------------------------------------------
 FAULT_SESSION = SessionSettings(n_trials=1, duration_s=20.0, sample_rate_hz=200.0,
                                 position_noise_m=0.0005, velocity_noise_m_s=0.04, seed=3)

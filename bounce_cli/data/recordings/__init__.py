@@ -143,18 +143,47 @@ def check_trial(path: Path, label, t: np.ndarray, time_column: str) -> None:
                           f"{i + 2} ({t[i]:g} -> {t[i + 1]:g})")
 
 
-def read_csv_recording(path: Path, columns, units, csv_format=None) -> list[Trial]:
+#: consecutive samples of a height column exactly 0 that read as a dropout written as 0
+ZERO_RUN_SAMPLES = 3
+
+
+def _heights(frame: pd.DataFrame, path: Path, name: str, key: str, missing: list[float],
+             time_name: str, warn: Callable[[str], None]) -> np.ndarray:
+    """A height column as written, the values of ``missing`` (``csv.missing_heights``) as
+    gaps; runs of ``ZERO_RUN_SAMPLES`` exact zeros or more, where 0 is not declared missing,
+    are read as heights and warned of (a system that writes a dropout as 0 makes phantom
+    contacts of them: a ball or racket at height 0)."""
+    values = _column(frame, path, name, key)
+    if missing:
+        values = np.where(np.isin(values, missing), np.nan, values)
+    if 0.0 not in missing:
+        zero = np.concatenate(([False], values == 0.0, [False]))
+        edges = np.flatnonzero(np.diff(zero.astype(np.int8)))
+        starts, ends = edges[::2], edges[1::2]
+        runs = starts[ends - starts >= ZERO_RUN_SAMPLES]
+        if runs.size:
+            warn(f"{path}: column {name!r} is exactly 0 in {runs.size} run(s) of "
+                 f"{ZERO_RUN_SAMPLES} samples or more (the first at {time_name} = "
+                 f"{frame[time_name].iloc[runs[0]]}): a marker dropout written as 0? They are "
+                 "read as heights; --set 'csv.missing_heights=[0]' reads them as gaps")
+    return values
+
+
+def read_csv_recording(path: Path, columns, units, csv_format=None,
+                       warn: Callable[[str], None] = lambda message: None) -> list[Trial]:
     """Trials of a CSV recording (``columns``: trial, time, racket (one name or several:
-    their mean), ball names; ``units``: length and time units; ``csv_format``: see
-    ``read_table``)."""
+    their mean, a gap where one is missing), ball names; ``units``: length and time units;
+    ``csv_format``: see ``read_table``, and its ``missing_heights``: the values of a height
+    column that are gaps; ``warn`` hears of runs of exact zeros, :func:`_heights`)."""
     frame = read_table(path, csv_format)
     length, time = LENGTH_UNITS[units.length], TIME_UNITS[units.time]
     t_all = _column(frame, path, columns.time, "columns.time") * time
+    missing = list(getattr(csv_format, "missing_heights", None) or [])
     racket_names = [columns.racket] if isinstance(columns.racket, str) else columns.racket
-    racket_all = np.mean([_column(frame, path, name, "columns.racket")
-                          for name in racket_names], axis=0) * length
-    ball_all = (_column(frame, path, columns.ball, "columns.ball") * length
-                if columns.ball is not None else None)
+    racket_all = np.mean([_heights(frame, path, name, "columns.racket", missing,
+                                   columns.time, warn) for name in racket_names], axis=0) * length
+    ball_all = (_heights(frame, path, columns.ball, "columns.ball", missing, columns.time,
+                         warn) * length if columns.ball is not None else None)
     trials = []
     for label, rows in _groups(frame, path, columns.trial, "columns.trial"):
         t = t_all[rows]
@@ -193,7 +222,7 @@ def read_recording(path: Path, columns, units, markers, csv_format=None, file_fo
     if file_format == "auto":
         file_format = detect_format(path)
     if file_format == "csv":
-        trials = read_csv_recording(path, columns, units, csv_format)
+        trials = read_csv_recording(path, columns, units, csv_format, warn)
     else:
         trials = read_marker_recording(path, file_format, markers, warn)
     if not trials:
