@@ -776,7 +776,10 @@ def group_tables(frames: dict[str, pd.DataFrame], units: list[Unit],
                              "trend": ("decreasing" if trend.ci_high < 0 else "increasing"
                                        if trend.ci_low > 0 else "none detected")})
         out["group_learning_trials.csv"] = learning
-        out["group_learning.csv"] = pd.DataFrame(rows)
+        trends = pd.DataFrame(rows)
+        if "df" in trends.columns:  # a count: empty where no trend was estimable
+            trends["df"] = trends["df"].astype("Int64")
+        out["group_learning.csv"] = trends
     # stability across units: the data's radius beside the model's
     if "radius_ols" in group.columns and group["radius_ols"].notna().any():
         rows = []

@@ -118,6 +118,9 @@ def test_the_group_recovers_the_learning_trend_and_eq15(studied, simulated):
         row = learning.loc[(condition, "ac_mean_g")]
         assert row["ci_low"] <= -0.05 <= row["ci_high"], row.to_dict()
         assert row["subjects"] == 4
+    # the interval is t on the containment df, written as a whole number
+    assert learning["df"].dtype.kind == "i"
+    assert set(learning.loc[learning.method.str.contains("slope"), "df"]) <= {3}
     regression = pd.read_csv(out / "group_regression.csv")
     assert len(regression) == 2
     assert regression["intercept_ci_covers_zero"].all()
