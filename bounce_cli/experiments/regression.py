@@ -249,6 +249,11 @@ def _constant(group: pd.DataFrame, column: str, default: float, condition) -> fl
     return float(values[0])
 
 
+def with_squared_period(trials: pd.DataFrame) -> pd.DataFrame:
+    """trials.csv's rows with eq. 15's abscissa, the squared racket period ``tau2_s2``."""
+    return trials.assign(tau2_s2=trials["tau_s"] ** 2)
+
+
 def run(config: RegressionConfig, options: RunOptions, source=None) -> ExperimentResult:
     """``source``: an impacts table in memory, ``(label, frame)`` (default:
     ``options.impacts``, else ``config.data``)."""
@@ -280,7 +285,7 @@ def run(config: RegressionConfig, options: RunOptions, source=None) -> Experimen
         trials = simulate_trials(config, options)
         described = (f"{len(trials)} simulated trials ({int(trials['lost'].sum())} lost the "
                      "ball and are not fitted)")
-    trials = trials.assign(tau2_s2=trials["tau_s"] ** 2)
+    trials = with_squared_period(trials)
     fit = fit_frame(trials, config, model)
     fitted = trials[~trials["lost"].astype(bool)] if "lost" in trials.columns else trials
     groups = (fitted.groupby("condition") if "condition" in fitted.columns

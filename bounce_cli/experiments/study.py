@@ -420,6 +420,10 @@ def analyse_unit(task: UnitTask) -> dict[str, Any]:
                     # trials for a trend: the virtual set-up's steady protocol): not a failure
                     warnings.append(f"{unit.label}: {name}: not run: {one_line(exc)}")
                     not_run[name] = one_line(exc)
+                    if name == "regression":  # its trials still count in the pooled Fig. 7
+                        trials = regression_trials(cfg, alpha, g, seed, unit, pooled)
+                        if trials is not None:
+                            frames[f"{unit.folder}/regression/trials.csv"] = trials
                     continue
                 except RECORDED_ERRORS as exc:
                     failures.append({"unit": unit.folder, "file": "", "stage": name,
@@ -484,6 +488,26 @@ def run_analysis(name: str, cfg: dict[str, Any], alpha: float, g: float, seed: i
     return execute(name, config, write=False, impacts=(f"{unit.label}", pooled), figures=False,
                    warn=lambda message: warnings.append(f"{unit.label}: {name}: {message}")
                    ).result
+
+
+def regression_trials(cfg: dict[str, Any], alpha: float, g: float, seed: int, unit: Unit,
+                      pooled: pd.DataFrame) -> pd.DataFrame | None:
+    """Fig. 7's trial means of a unit whose own fit cannot be made (fewer than 3 trials, or
+    one racket period for all), as ``run_analysis`` would have written them: they still
+    count in the fit pooled over the study (``group_tables``). None where the trials cannot
+    be averaged either (the error is then the regression's own, already recorded)."""
+    from .base import RunOptions
+    from .data_side import trial_means_from_impacts
+    from .regression import with_squared_period
+
+    config = analysis_config("regression", cfg["settings"].get("regression", {}), alpha, g,
+                             seed, None)
+    options = RunOptions()  # its warnings were given by the analysis that stopped
+    try:
+        trials, _ = trial_means_from_impacts((unit.label, pooled), config, options)
+    except RECORDED_ERRORS:
+        return None
+    return with_squared_period(trials)
 
 
 def unit_row(pooled: pd.DataFrame, frames: dict[str, pd.DataFrame], unit: Unit,

@@ -206,6 +206,27 @@ def test_one_short_recording_is_left_out_of_the_analyses_that_need_more(tmp_path
     assert pd.read_csv(out / "failures.csv").empty
 
 
+def test_a_unit_too_small_for_its_own_fig7_still_counts_in_the_pooled_one(tiny, tmp_path,
+                                                                        cli_module):
+    """A subject with 2 trials: its own Fig. 7 fit needs 3 and is not run (a warning); its
+    trial means still enter the fit pooled over the study (they were left out: the pooled fit
+    had 3 trials of 5)."""
+    manifest_frame = pd.read_csv(tiny / "study.csv")
+    last = manifest_frame[manifest_frame.subject.astype(str) == "s2"].index[-1]
+    manifest_frame = manifest_frame.drop(index=last)
+    manifest_frame["file"] = [str(tiny / f) for f in manifest_frame["file"]]
+    manifest_frame.to_csv(tmp_path / "study.csv", index=False)
+    out = tmp_path / "out"
+    result = cli_module("study", "--manifest", tmp_path / "study.csv", "--out", out,
+                        "--set", "analyses=[regression]", "--figures", "none", *FAST)
+    assert result.exit_code == 0, result.output
+    assert "regression: not run" in " ".join(result.stderr.split())
+    own = pd.read_csv(out / "s2" / "a" / "regression" / "trials.csv")
+    assert len(own) == 2 and {"a_r_m", "tau_s", "tau2_s2", "theta_deg"} <= set(own.columns)
+    pooled = pd.read_csv(out / "group_regression.csv")
+    assert pooled["n"].tolist() == [5] and pooled["subjects"].tolist() == [2]
+
+
 def test_two_recordings_with_one_stem_in_a_unit_keep_their_own_outputs(tiny, tmp_path,
                                                                         cli_module):
     """``A/t.csv`` and ``B/t.csv`` of one subject and condition (issue 36: one's files were
