@@ -171,6 +171,19 @@ def interrupt(proc: subprocess.Popen, signum: int, moment: str) -> tuple[str, fl
     return err, time.monotonic() - sent
 
 
+#: a worker's CPU time (s) past which it is classifying: its imports take 0.1-0.2 s; its share
+#: of BIG_GRID 1-3.5 s on the machines seen
+WORKING_CPU_S = 0.3
+
+
+def cpu_seconds(pid: int) -> float:
+    """The process's user + system CPU time so far (s); 0 when it has gone."""
+    fields = stat_fields(pid)
+    if fields is None:
+        return 0.0
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def catches_sigterm(pid: int) -> bool:
     """Whether the process has installed bounce's handlers (its first act; Python alone
     leaves SIGTERM at the default action)."""
@@ -188,9 +201,13 @@ MOMENTS = {
                                                  "the signal handlers"),
     # the first worker process exists: the pool is starting
     "pool start": lambda proc, watch, out: wait_for(watch.workers, 20, "a worker process"),
-    # the workers have been classifying for a while
+    # both workers have been classifying for a while: each has used WORKING_CPU_S of CPU
+    # time (a fixed sleep after they appeared missed the moment on a fast machine: the run
+    # had finished, and the signal reached a zombie)
     "computing": lambda proc, watch, out: (
-        wait_for(lambda: len(watch.workers()) == 2, 20, "two workers"), time.sleep(1.2)),
+        wait_for(lambda: len(watch.workers()) == 2, 20, "two workers"),
+        wait_for(lambda: all(cpu_seconds(pid) >= WORKING_CPU_S for pid in watch.workers()),
+                 20, "the workers' classifying")),
     # the first results file is being written under its temporary name
     "writing": lambda proc, watch, out: wait_for(writing_started(out), 40, "writing"),
 }
@@ -215,8 +232,10 @@ def test_interrupt_stops_cleanly(tmp_path, previous_run, moment, signum):
     watch = ProcessWatch(proc.pid)
     try:
         MOMENTS[moment](proc, watch, out)
+        assert proc.poll() is None, f"finished before the interrupt: {moment} was missed"
     except AssertionError:
-        os.killpg(proc.pid, signal.SIGKILL)
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
         raise
     err, took = interrupt(proc, signum, moment)
     time.sleep(0.05)
