@@ -77,6 +77,11 @@ def test_the_page_draws_ball_and_racket_logs_latency_and_survives_a_reload(brows
     assert page.evaluate("document.getElementById('status').textContent") == "session over"
     assert page.evaluate("document.getElementById('message').textContent") == \
         "done: thank you"
+    # a countdown's or rest's last frame drawn after its end says 1 second to go, not 0
+    for phase, message in (("countdown", "get ready: 1"), ("rest", "rest: next trial in 1 s")):
+        assert page.evaluate(
+            f"frame = {{...frame, phase: '{phase}', remaining: 0}}; draw(); "
+            "document.getElementById('message').textContent") == message
     latency = pd.read_csv(out / "latency.csv")
     assert list(latency.columns) == ["trial", "sample", "t_s", "connection", "delay_ms",
                                      "round_trip_ms"]
