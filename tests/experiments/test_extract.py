@@ -681,6 +681,33 @@ def test_two_zeros_in_a_row_are_heights_without_a_warning(tmp_path):
     assert len(heard) == 1 and np.isnan(trial.racket[[10, 11, 30, 31, 32]]).all()
 
 
+def test_a_racket_resting_at_0_is_no_dropout(tmp_path):
+    """The virtual set-up's mouse racket rests at exactly 0 until the subject moves the
+    pointer, and then moves in the pointer's steps: no warning (it said "a marker dropout
+    written as 0?"). A dropout in the same column, a jump to 0 and back, still is one."""
+    from types import SimpleNamespace
+
+    from bounce_cli.data.recordings import read_csv_recording
+
+    t = np.arange(1000) * 0.001
+    pointer = np.floor(t * 60.0) / 60.0  # the page's 60 Hz pointer updates, held
+    racket = np.where(t < 0.2, 0.0, 0.05 * np.sin(2 * np.pi * (pointer - 0.2) / 0.5))
+    ball = 0.5 + 0.0 * t
+    columns = SimpleNamespace(time="t_s", racket="racket_x_m", ball="ball_x_m", trial=None)
+    units = SimpleNamespace(length="m", time="s")
+    heard: list[str] = []
+    pd.DataFrame({"t_s": t, "racket_x_m": racket, "ball_x_m": ball}).to_csv(
+        tmp_path / "r.csv", index=False)
+    read_csv_recording(tmp_path / "r.csv", columns, units, None, heard.append)
+    assert heard == []
+    racket[600:610] = 0.0  # the racket near its top, lost for 10 ms
+    pd.DataFrame({"t_s": t, "racket_x_m": racket, "ball_x_m": ball}).to_csv(
+        tmp_path / "r.csv", index=False)
+    read_csv_recording(tmp_path / "r.csv", columns, units, None, heard.append)
+    assert len(heard) == 1 and "'racket_x_m' is exactly 0 in 1 run(s)" in heard[0]
+    assert "t_s = 0.6" in heard[0]
+
+
 # -- extraction faults (issue 24) ------------------------------------------------------------
 FAULT_SESSION = SessionSettings(n_trials=1, duration_s=20.0, sample_rate_hz=200.0,
                                 position_noise_m=0.0005, velocity_noise_m_s=0.04, seed=3)

@@ -145,22 +145,45 @@ def check_trial(path: Path, label, t: np.ndarray, time_column: str) -> None:
 
 #: consecutive samples of a height column exactly 0 that read as a dropout written as 0
 ZERO_RUN_SAMPLES = 3
+#: a run of zeros is a dropout where the height beside it is this many of the column's typical
+#: sample-to-sample steps from 0: a jump (a marker lost); a racket resting at 0 (a mouse not
+#: yet moved in the virtual set-up) leaves and enters its rest in steps of the usual size
+ZERO_RUN_JUMP_STEPS = 5.0
+
+
+def _dropout_runs(values: np.ndarray) -> np.ndarray:
+    """Start indices of the runs of ``ZERO_RUN_SAMPLES`` exact zeros or more that the
+    column jumps into or out of (``ZERO_RUN_JUMP_STEPS``), or that have no height beside
+    them at all."""
+    zero = np.concatenate(([False], values == 0.0, [False]))
+    edges = np.flatnonzero(np.diff(zero.astype(np.int8)))
+    starts, ends = edges[::2], edges[1::2]
+    long = ends - starts >= ZERO_RUN_SAMPLES
+    starts, ends = starts[long], ends[long]
+    if not starts.size:
+        return starts
+    steps = np.abs(np.diff(values))
+    steps = steps[np.isfinite(steps) & (steps > 0.0)]
+    typical = float(np.median(steps)) if steps.size else 0.0
+    padded = np.concatenate(([np.nan], values, [np.nan]))
+    beside = np.abs(np.stack([padded[starts], padded[ends + 1]]))  # before and after a run
+    jump = np.any(beside > ZERO_RUN_JUMP_STEPS * typical, axis=0)
+    alone = np.all(~np.isfinite(beside), axis=0)
+    return starts[jump | alone]
 
 
 def _heights(frame: pd.DataFrame, path: Path, name: str, key: str, missing: list[float],
              time_name: str, warn: Callable[[str], None]) -> np.ndarray:
     """A height column as written, the values of ``missing`` (``csv.missing_heights``) as
-    gaps; runs of ``ZERO_RUN_SAMPLES`` exact zeros or more, where 0 is not declared missing,
-    are read as heights and warned of (a system that writes a dropout as 0 makes phantom
-    contacts of them: a ball or racket at height 0)."""
+    gaps; runs of ``ZERO_RUN_SAMPLES`` exact zeros or more that the column jumps into or out
+    of (:func:`_dropout_runs`), where 0 is not declared missing, are read as heights and
+    warned of (a system that writes a dropout as 0 makes phantom contacts of them: a ball or
+    racket at height 0)."""
     values = _column(frame, path, name, key)
     if missing:
         values = np.where(np.isin(values, missing), np.nan, values)
     if 0.0 not in missing:
-        zero = np.concatenate(([False], values == 0.0, [False]))
-        edges = np.flatnonzero(np.diff(zero.astype(np.int8)))
-        starts, ends = edges[::2], edges[1::2]
-        runs = starts[ends - starts >= ZERO_RUN_SAMPLES]
+        runs = _dropout_runs(values)
         if runs.size:
             warn(f"{path}: column {name!r} is exactly 0 in {runs.size} run(s) of "
                  f"{ZERO_RUN_SAMPLES} samples or more (the first at {time_name} = "
