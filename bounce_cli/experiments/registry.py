@@ -141,11 +141,14 @@ EXPERIMENTS: tuple[Entry, ...] = (
     ),
     Entry(
         "extract",
-        "Recording (CSV or C3D) -> impacts table: theta_k, v_k, AC per bounce (paper Fig. 2).",
+        "Recording (CSV, C3D, Vicon, QTM or Motive export) -> impacts table: theta_k, v_k, "
+        "AC per bounce (paper Fig. 2).",
         (("fig2.png", "Fig. 2 (section 2): continuous ball and racket trajectories and the "
           "extracted v_k and theta_k per bounce, sample means dashed."),),
-        data_help="Recording to extract: CSV (columns: trial, t_s, racket_x_m, ball_x_m) or "
-        ".c3d (sets the config key `data`; default: the bundled simulated session).",
+        data_help="Recording to extract: CSV (columns: trial, t_s, racket_x_m, ball_x_m), "
+        ".c3d, or a Vicon Nexus CSV, Qualisys TSV or OptiTrack Motive CSV export (detected, or "
+        "--set format=vicon|qtm|motive; the markers block names the racket and ball) (sets "
+        "the config key `data`; default: the bundled simulated session).",
         events_help="Events CSV (trial, t_s[, alpha]): the impact times of a virtual set-up "
         "(sets the config key `events`).",
         needs_fixed_point=False,
