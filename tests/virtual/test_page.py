@@ -77,6 +77,13 @@ def test_the_page_draws_ball_and_racket_logs_latency_and_survives_a_reload(brows
     assert page.evaluate("document.getElementById('status').textContent") == "session over"
     assert page.evaluate("document.getElementById('message').textContent") == \
         "done: thank you"
+    # ball and racket are drawn in a trial, not frozen on the screen between trials
+    for phase, shown in (("trial", True), ("rest", False), ("countdown", False)):
+        page.evaluate(f"frame = {{...frame, phase: '{phase}', ball: 0.5, racket: 0.0}}; "
+                      "draw(); 0")
+        between = page.screenshot(tmp_path / f"{phase}.png")
+        assert (colour_share(between, BALL_RGB) > 1e-4) == shown, phase
+        assert (colour_share(between, RACKET_RGB) > 1e-3) == shown, phase
     # a countdown's or rest's last frame drawn after its end says 1 second to go, not 0
     for phase, message in (("countdown", "get ready: 1"), ("rest", "rest: next trial in 1 s")):
         assert page.evaluate(
