@@ -40,6 +40,7 @@ from pydantic import Field, field_validator, model_validator
 
 from ..errors import TooFewObservationsError
 from ..runtime import parallel
+from ..runtime.artifacts import sha256_of
 from ..runtime.config import (
     DATA_MODEL_KEYS,
     ConfigError,
@@ -64,7 +65,7 @@ from ..data.recordings import keys_in_block
 from ..data.setup_table import SETUP_FILE, SetupQuantity, setup_frame
 from .plotting import publication_style
 from .report import Section, embed_png, html_table, page
-from ..data.study_manifest import ManifestRow, Unit, read_manifest
+from ..data.study_manifest import Manifest, ManifestRow, Unit, read_manifest
 from .base import Experiment, ExperimentResult, RunOptions
 
 #: the analyses a study can run, in the paper's order
@@ -200,15 +201,36 @@ class UnitTask:
     key: str
 
 
-def unit_key(unit: Unit, config: dict[str, Any]) -> str:
-    """SHA-256 over the study's config, the unit's manifest rows and its files' bytes."""
+def input_digests(manifest: Manifest) -> dict[Path, str]:
+    """SHA-256 (hex) of the manifest and of every recording and events file it lists, each
+    file once, in the manifest's order: what the study is made from."""
+    digests = {manifest.path: sha256_of(manifest.path)}
+    for row in manifest.rows:
+        for path in (row.file, row.events):
+            if path is not None and path not in digests:
+                digests[path] = sha256_of(path)
+    return digests
+
+
+def inputs_record(manifest: Manifest, digests: dict[Path, str]) -> dict[str, Any]:
+    """run.json's ``inputs``: the manifest and each file it lists, by path and SHA-256 (a
+    reader can tell whether the recordings on disk are those the results were made from)."""
+    return {"manifest": {"path": str(Path(manifest.path).resolve()),
+                         "sha256": digests[manifest.path]},
+            "files": [{"path": str(path), "sha256": digest}
+                      for path, digest in digests.items() if path != manifest.path]}
+
+
+def unit_key(unit: Unit, config: dict[str, Any], digests: dict[Path, str]) -> str:
+    """SHA-256 over the study's config, the unit's manifest rows and its files' bytes (their
+    ``digests``, :func:`input_digests`)."""
     h = hashlib.sha256(json.dumps(config, sort_keys=True).encode())
     for row in unit.rows:
         h.update(json.dumps([str(row.file), str(row.events), sorted(row.factors.items()),
                              list(row.overrides)]).encode())
         for path in (row.file, row.events):
             if path is not None:
-                h.update(hashlib.sha256(Path(path).read_bytes()).digest())
+                h.update(bytes.fromhex(digests[path]))
     return h.hexdigest()
 
 
@@ -628,7 +650,10 @@ def run(config: StudyConfig, options: RunOptions) -> ExperimentResult:
         for message in manifest.trial_order_notes(unit):
             options.warn(message)
     dumped = config.model_dump(mode="json")
-    tasks = [UnitTask(i, unit, dumped, unit_key(unit, dumped)) for i, unit in enumerate(units)]
+    digests = input_digests(manifest)
+    options.record["inputs"] = inputs_record(manifest, digests)
+    tasks = [UnitTask(i, unit, dumped, unit_key(unit, dumped, digests))
+             for i, unit in enumerate(units)]
     done = {i: r for i, r in options.checkpoints.load().items()
             if 0 <= i < len(tasks) and r.get("key") == tasks[i].key}
     todo = [t for t in tasks if t.index not in done]

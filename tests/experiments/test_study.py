@@ -159,6 +159,28 @@ def test_the_report_is_self_contained(tiny_study):
 
 
 @pytest.mark.slow
+def test_run_json_names_the_manifest_and_every_file_with_its_sha256(tiny, tiny_study):
+    """Provenance: which recordings, with which bytes, the results were made from (run.json
+    had the manifest's path among the overrides and nothing of the files)."""
+    import hashlib
+    import json
+
+    def sha256(path):
+        return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+    inputs = json.loads((tiny_study / "run.json").read_text())["inputs"]
+    manifest = (tiny / "study.csv").resolve()
+    assert inputs["manifest"] == {"path": str(manifest), "sha256": sha256(manifest)}
+    rows = pd.read_csv(manifest)
+    listed = [tiny / name for column in ("file", "events") if column in rows
+              for name in rows[column].dropna()]
+    assert len(listed) == 6  # three trials of two subjects, no events: the tiny study
+    assert sorted(f["path"] for f in inputs["files"]) == sorted(str(p.resolve())
+                                                              for p in listed)
+    assert all(f["sha256"] == sha256(f["path"]) for f in inputs["files"])
+
+
+@pytest.mark.slow
 def test_a_damaged_file_is_one_failure_row_and_exit_1(tmp_path, cli_module):
     """One unreadable recording: one failures.csv row, every other file and unit analysed,
     exit 1 after writing."""
