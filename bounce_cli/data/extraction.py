@@ -424,6 +424,45 @@ def _motion_onset(t, x, t0: float, half_window: float, t_peak: float,
     return onset if moving.size >= 2 and np.ptp(moving) > 4.0 * np.ptp(before) else None
 
 
+#: measured samples a crossing's local fit needs on each side of the crossing: fewer, and the
+#: polynomial extrapolates from one side (a logger's dropout just after a crossing: crossing
+#: times 5 ms off, cycles 6 ms long or short)
+SAMPLES_EACH_SIDE = 2
+
+
+def _upward_crossing(t, raw, measured_t, t_a: float, t_b: float, h: float, mid: float,
+                     s: ExtractionSettings) -> float:
+    """The time the racket crosses ``mid`` upwards between samples ``t_a`` and ``t_b`` of
+    the bridged racket: the root of a local polynomial over +-h about ``t_a`` (measured
+    samples ``raw``, whose times are ``measured_t``).
+
+    Where samples are missing near the crossing (cells, or rows: a logger's dropout), so that
+    the window holds fewer than SAMPLES_EACH_SIDE measured samples on a side of it (inside
+    the recording: at its ends the fit is as it is), the window is widened by ``max_gap_s``
+    about the gap of the measured samples around the crossing, if that gap is one
+    ``max_gap_s`` bridges, and the root is taken within h of its ends; NaN where neither
+    finds the crossing."""
+    centre = 0.5 * (t_a + t_b)
+    k = int(np.searchsorted(measured_t, centre))
+    inside = measured_t.size > 0 and measured_t[0] <= t_a - h and t_a + h <= measured_t[-1]
+    left = k - int(np.searchsorted(measured_t, t_a - h))
+    right = int(np.searchsorted(measured_t, t_a + h, side="right")) - k
+    if not inside or (left >= SAMPLES_EACH_SIDE and right >= SAMPLES_EACH_SIDE):
+        coef = local_polynomial(t, raw, t_a, h, s.position_degree)
+        return math.nan if coef is None else _poly_root_near(coef, h, t_a, mid)
+    before, after = float(measured_t[k - 1]), float(measured_t[k])  # inside: both exist
+    if after - before > s.max_gap_s:
+        return math.nan  # a gap too long to bridge
+    centre, wide = 0.5 * (before + after), h + s.max_gap_s
+    left = k - int(np.searchsorted(measured_t, centre - wide))
+    right = int(np.searchsorted(measured_t, centre + wide, side="right")) - k
+    if left < SAMPLES_EACH_SIDE or right < SAMPLES_EACH_SIDE:
+        return math.nan
+    coef = local_polynomial(t, raw, centre, wide, s.position_degree)
+    reach = (0.5 * (after - before) + h) / wide
+    return math.nan if coef is None else _poly_root_near(coef, wide, centre, mid, reach=reach)
+
+
 def racket_cycles(t, racket, measured, s: ExtractionSettings) -> RacketCycles:
     """The racket's cycles (see the module docstring). ``racket``: gap-bridged positions;
     ``measured``: which samples were measured (local fits use only those)."""
@@ -439,6 +478,7 @@ def racket_cycles(t, racket, measured, s: ExtractionSettings) -> RacketCycles:
     peaks = peaks_by_prominence(work, prominence)  # scipy.signal.find_peaks' own
     troughs = peaks_by_prominence(-work, prominence)
     raw = np.where(measured, racket, np.nan)
+    measured_t = t[np.isfinite(raw)]
     extrema = sorted(_refined_extrema(t, raw, measured, peaks, 1, s)
                      + _refined_extrema(t, raw, measured, troughs, -1, s))
     alternating: list[tuple[float, float, int]] = []
@@ -489,8 +529,7 @@ def racket_cycles(t, racket, measured, s: ExtractionSettings) -> RacketCycles:
         peak_x = float(ex[j + 1]) if j + 1 < len(et) else float(np.max(work[a:b + 1]))
         onset = _motion_onset(t, raw, t[i], h, t_peak, peak_x - mid)
         if onset is None:
-            coef = local_polynomial(t, raw, t[i], h, s.position_degree)
-            tc = math.nan if coef is None else _poly_root_near(coef, h, t[i], mid)
+            tc = _upward_crossing(t, raw, measured_t, t[i], t[i + 1], h, mid, s)
         else:
             # a racket that stood still until it started moving (a resting start): a fit
             # across that kink is biased (a cubic over +-20 ms: 5 ms early); fit the moving
@@ -1098,10 +1137,13 @@ def _racket_at_impacts(t, racket: _Racket, imp: _Impacts, s: ExtractionSettings)
         if reason[j]:
             continue
         if cycle[j] < 0:
-            # a cycle with a long racket gap is not a cycle: say so when that is why
+            # a cycle with a long racket gap is not a cycle: say so when that is why (a gap of
+            # missing cells, or of missing rows: samples further apart than max_gap_s)
             lo, hi = np.searchsorted(t, [t_k[j] - period, t_k[j] + period])
-            reason[j] = ("gap: racket data missing in the impact's racket cycle"
-                         if np.any(racket.long_gap[lo:hi]) else "outside a complete racket cycle")
+            gap = (np.any(racket.long_gap[lo:hi])
+                   or np.any(np.diff(t[max(lo - 1, 0):hi + 1]) > s.max_gap_s))
+            reason[j] = ("gap: racket data missing in the impact's racket cycle" if gap
+                         else "outside a complete racket cycle")
             continue
         here = racket.local(t, t_k[j], s.acc_half_window_s, s.acc_degree)[1]
         acc[j] = math.nan if here is None else here.acc / g
