@@ -424,6 +424,10 @@ def _motion_onset(t, x, t0: float, half_window: float, t_peak: float,
     return onset if moving.size >= 2 and np.ptp(moving) > 4.0 * np.ptp(before) else None
 
 
+#: the largest difference between an event's time and where the ball's flights either side
+#: meet that is taken as the event log's lag (s); beyond it the two are not the same contact
+EVENT_LAG_MAX_S = 0.05
+
 #: measured samples a crossing's local fit needs on each side of the crossing: fewer, and the
 #: polynomial extrapolates from one side (a logger's dropout just after a crossing: crossing
 #: times 5 ms off, cycles 6 ms long or short)
@@ -773,6 +777,9 @@ class TrialExtraction:
     #: ``contact_duration`` pools them)
     contact_area: np.ndarray = field(default_factory=lambda: np.array([]))
     contact_weight: np.ndarray = field(default_factory=lambda: np.array([]))
+    #: per reported impact given by an event: its time less the ball's own contact time,
+    #: where the flights either side meet (s; NaN: no flight before it)
+    event_lags_s: np.ndarray = field(default_factory=lambda: np.array([]))
 
 
 def _segment_fits(t, ball, long_gap, racket, lo: int, hi: int, t_after: float,
@@ -898,6 +905,7 @@ class _Impacts:
     area: np.ndarray
     weight: np.ndarray
     offset_k: np.ndarray
+    event_lag: np.ndarray
     var_t: np.ndarray
     se_v: np.ndarray
     met: np.ndarray
@@ -917,6 +925,7 @@ class _Impacts:
             area=np.full(n, np.nan),  # of the ball above its two flights, around it (m s)
             weight=np.full(n, np.nan),  # |closing velocity| K(alpha): area / weight = contact^2
             offset_k=np.full(n, np.nan),
+            event_lag=np.full(n, np.nan),  # an event's time less where the flights meet
             var_t=np.zeros(n),  # variance of t_k from the flight fits (0: an event's time)
             se_v=np.full(n, np.nan),
             met=contacts.exact.copy(),  # timed where the flights meet (or logged)
@@ -1021,6 +1030,12 @@ def _impacts_from_flights(t, racket: _Racket, ball: _Ball, contacts: _Contacts,
                              if near_gap or imp.next_unknown[j]
                              else "no free flight after the impact")
             continue
+        if exact[j] and before is not None and abs(after.v0 - before.v0) > 0.0:
+            # the event's time against the ball's own contact: where its flights meet (the
+            # event log's clock against the recording's)
+            lag = (after.x0 - before.x0) / (after.v0 - before.v0)
+            if abs(lag) <= EVENT_LAG_MAX_S:
+                imp.event_lag[j] = lag
         if not exact[j]:
             if before is not None and abs(after.v0 - before.v0) > 0.0:
                 # both parabolas have the same g: their difference is linear in t
@@ -1236,7 +1251,7 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
     se_theta = _phase_se(t, racket_, t_k, imp.var_t, s)
     return TrialExtraction(impacts, excluded, cycles, offset, imp.flights, imp.offset_k[keep],
                            imp.se_v[keep], se_theta[keep], racket_rss, racket_dof,
-                           imp.area[keep], imp.weight[keep])
+                           imp.area[keep], imp.weight[keep], imp.event_lag[keep])
 
 
 def _contact_area(t, ball, before: FlightFit, after: FlightFit, g: float) -> float:

@@ -14,6 +14,7 @@ One row per measured quantity, columns ``quantity, estimate, se, n, note``:
 ``racket_noise_m``              residual SD of the racket's local fits, m
 ``measurement_sd_v_m_s``        typical standard error of an extracted v_k, m/s
 ``measurement_sd_theta_rad``    typical standard error of an extracted theta_k, rad
+``event_lag_s``                 with events: their times less the ball's contacts, median, s
 ==============================  ===============================================================
 
 A lab may write the table itself; every row is optional, and a missing file is an empty set-up.

@@ -681,6 +681,50 @@ def test_two_zeros_in_a_row_are_heights_without_a_warning(tmp_path):
     assert len(heard) == 1 and np.isnan(trial.racket[[10, 11, 30, 31, 32]]).all()
 
 
+@pytest.fixture(scope="module")
+def finite_contacts(tmp_path_factory):
+    """A simulated session whose contacts last 6 ms, its events at the equivalent impacts."""
+    out = tmp_path_factory.mktemp("contacts") / "sim"
+    result = runner.invoke(app, ["simulate-recording", "--out", str(out), "--quiet",
+                                 "--set", "trials=1", "--set", "duration_s=12",
+                                 "--set", "sample_rate_hz=500",
+                                 "--set", "contact.duration_s=0.006"])
+    assert result.exit_code == 0, result.output
+    return out
+
+
+@pytest.mark.parametrize("shift_ms, warned", [(0.0, False), (-3.0, False), (5.0, True),
+                                               (-5.0, True)])
+def test_events_off_the_recording_s_clock_are_measured_and_warned_of(
+        finite_contacts, tmp_path, shift_ms, warned):
+    """Events 5 ms late or early against the recording (a logger on its own clock) gave every
+    phase 2 deg off and v_k 0.05 m/s off without a word. setup.csv's event_lag_s measures the
+    lag where the ball's flights meet (to 0.2 ms here), and a lag beyond half the contact's
+    duration and 1 ms (6 ms contacts: 4 ms; an onset log is early by about half) is warned
+    of."""
+    events = pd.read_csv(finite_contacts / "events.csv")
+    events["t_s"] += shift_ms / 1000.0
+    events.to_csv(tmp_path / "events.csv", index=False)
+    result, out = extract_cli(tmp_path, "--data", str(finite_contacts / "recording.csv"),
+                              "--events", str(tmp_path / "events.csv"))
+    assert result.exit_code == 0, result.output
+    setup = pd.read_csv(out / "setup.csv").set_index("quantity")
+    assert setup.loc["event_lag_s", "estimate"] == pytest.approx(shift_ms / 1000.0, abs=2e-4)
+    assert ("on the recording's clock" in result.output) == warned, result.output
+
+
+def test_events_far_off_the_clock_say_so_where_no_bounce_is_found(finite_contacts, tmp_path):
+    """Events 10 ms late cut every flight in the wrong place: the one-line error names the
+    events' clock beside the units and axes it asked about."""
+    events = pd.read_csv(finite_contacts / "events.csv")
+    events["t_s"] += 0.010
+    events.to_csv(tmp_path / "events.csv", index=False)
+    result, _ = extract_cli(tmp_path, "--data", str(finite_contacts / "recording.csv"),
+                            "--events", str(tmp_path / "events.csv"))
+    assert result.exit_code == 2, result.output
+    assert "events' times are on the recording's clock" in result.output
+
+
 def _upward_crossings(racket):
     """Indices i where the racket passes its mean upwards between samples i and i + 1."""
     mid = np.nanmean(racket)
