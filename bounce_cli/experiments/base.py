@@ -45,6 +45,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, Callable, Protocol
 
 from ..runtime.config import ExperimentConfig
+from ..runtime.figure_files import FIGURE_DPI
 
 if TYPE_CHECKING:  # annotations only: ``bounce --help`` does not import pandas
     import pandas as pd
@@ -112,7 +113,9 @@ class RunOptions:
     the virtual set-up's page; the CLI prints ``bounce: <message>``). ``impacts``: a
     ``--data`` analysis's impacts table held in memory, ``(label, frame)``, read instead of
     the config's ``data`` file (the study's units). ``figures``: draw the figures (False:
-    the tables alone, for a caller that draws its own or none)."""
+    the tables alone, for a caller that draws its own or none). ``figure_formats`` and
+    ``dpi``: the formats and resolution of the figures an experiment renders itself (the
+    study's, embedded in its report; the others' are written by the run directory)."""
 
     jobs: int = 1
     progress: Progress = field(default_factory=NullProgress)
@@ -124,6 +127,8 @@ class RunOptions:
     record: dict[str, Any] = field(default_factory=dict)
     impacts: ImpactsSource | None = None
     figures: bool = True
+    figure_formats: tuple[str, ...] = ("png",)
+    dpi: float = FIGURE_DPI
 
 
 #: where a summary line names the run directory, which ``run`` does not know (it writes

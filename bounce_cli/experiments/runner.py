@@ -427,6 +427,7 @@ def execute(entry: Entry | str, config: Path | str | ExperimentConfig | None = N
             options = run_options(entry, cfg, config, overrides, jobs=jobs, warn=warn,
                                   inform=inform, scheduler=scheduler)
         options.impacts, options.figures = impacts, figures
+        options.figure_formats, options.dpi = tuple(figure_formats), dpi
         if progress is not None:
             options.progress = progress
         if run_dir is not None:

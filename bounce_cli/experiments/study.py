@@ -41,6 +41,7 @@ from pydantic import Field, field_validator, model_validator
 from ..errors import TooFewObservationsError
 from ..runtime import parallel
 from ..runtime.artifacts import sha256_of
+from ..runtime.figure_files import FIGURE_DPI
 from ..runtime.config import (
     DATA_MODEL_KEYS,
     ConfigError,
@@ -199,6 +200,9 @@ class UnitTask:
     unit: Unit
     config: dict[str, Any]
     key: str
+    #: the formats (PNG always: the reports embed it) and resolution of its figures
+    figure_formats: tuple[str, ...] = ("png",)
+    dpi: float = FIGURE_DPI
 
 
 def input_digests(manifest: Manifest) -> dict[Path, str]:
@@ -221,10 +225,14 @@ def inputs_record(manifest: Manifest, digests: dict[Path, str]) -> dict[str, Any
                       for path, digest in digests.items() if path != manifest.path]}
 
 
-def unit_key(unit: Unit, config: dict[str, Any], digests: dict[Path, str]) -> str:
+def unit_key(unit: Unit, config: dict[str, Any], digests: dict[Path, str],
+             figure_formats: tuple[str, ...] = ("png",), dpi: float = FIGURE_DPI) -> str:
     """SHA-256 over the study's config, the unit's manifest rows and its files' bytes (their
-    ``digests``, :func:`input_digests`)."""
+    ``digests``, :func:`input_digests`), and its figures' formats and resolution where they
+    are not the default (PNG at FIGURE_DPI: the keys of runs before they counted)."""
     h = hashlib.sha256(json.dumps(config, sort_keys=True).encode())
+    if (tuple(figure_formats), dpi) != (("png",), FIGURE_DPI):
+        h.update(json.dumps([list(figure_formats), dpi]).encode())
     for row in unit.rows:
         h.update(json.dumps([str(row.file), str(row.events), sorted(row.factors.items()),
                              list(row.overrides)]).encode())
@@ -467,7 +475,9 @@ def analyse_unit(task: UnitTask) -> dict[str, Any]:
 
         matplotlib.use("Agg")
         for name, fig in draw_units(frames, [unit]).items():
-            pngs[name] = base64.b64encode(png_bytes(fig)).decode("ascii")
+            for file_name, data in figure_files(name, fig, task.figure_formats,
+                                                task.dpi).items():
+                pngs[file_name] = base64.b64encode(data).decode("ascii")
     return {"index": task.index, "key": task.key,
             "frames": {name: frame_to_json(f) for name, f in frames.items()}, "pngs": pngs,
             "row": row, "summary": summary, "warnings": warnings, "failures": failures}
@@ -652,7 +662,9 @@ def run(config: StudyConfig, options: RunOptions) -> ExperimentResult:
     dumped = config.model_dump(mode="json")
     digests = input_digests(manifest)
     options.record["inputs"] = inputs_record(manifest, digests)
-    tasks = [UnitTask(i, unit, dumped, unit_key(unit, dumped, digests))
+    formats = figure_kinds(options.figure_formats)
+    tasks = [UnitTask(i, unit, dumped, unit_key(unit, dumped, digests, formats, options.dpi),
+                      formats, options.dpi)
              for i, unit in enumerate(units)]
     done = {i: r for i, r in options.checkpoints.load().items()
             if 0 <= i < len(tasks) and r.get("key") == tasks[i].key}
@@ -685,10 +697,12 @@ def run(config: StudyConfig, options: RunOptions) -> ExperimentResult:
     # each figure rendered once, to PNG: written as it is and embedded in the reports (the
     # units' own in their workers)
     drawn = config.report.drawn()
-    pngs = group_pngs(frames) if drawn != "none" else {}
+    pngs = group_figures(frames, formats, options.dpi) if drawn != "none" else {}
     for result in results:
         pngs.update({name: base64.b64decode(data) for name, data in result["pngs"].items()})
-    files = report_files(frames, pngs, units, manifest.path, config, warnings)
+    files = report_files(frames, {name: data for name, data in pngs.items()
+                                  if name.endswith(".png")},
+                         units, manifest.path, config, warnings)
     summary = [f"study: {len(units)} unit(s) ({' x '.join(config.grouping)}) of "
                f"{len(manifest.rows)} recording(s)"
                + (f"; {len(tasks) - len(todo)} resumed" if len(todo) < len(tasks) else "")]
@@ -952,14 +966,17 @@ def draw(frames: dict[str, pd.DataFrame], names: Iterable[str] | None = None) ->
     return draw_group(frames, names)
 
 
-def group_pngs(frames: dict[str, pd.DataFrame]) -> dict[str, bytes]:
-    """Every group figure rendered as PNG bytes: the later half of them drawn and rendered
-    by a forked child while this process does the first half (``runtime.forked``)."""
+def group_figures(frames: dict[str, pd.DataFrame], figure_formats: tuple[str, ...],
+                  dpi: float) -> dict[str, bytes]:
+    """Every group figure rendered in each of ``figure_formats`` (:func:`figure_files`):
+    the later half of them drawn and rendered by a forked child while this process does the
+    first half (``runtime.forked``)."""
     from ..runtime.forked import split_work
     from .study_figures import group_figure_builders
 
     def render(names: list[str]) -> dict[str, bytes]:
-        return {name: png_bytes(fig) for name, fig in draw(frames, names).items()}
+        return {file_name: data for name, fig in draw(frames, names).items()
+                for file_name, data in figure_files(name, fig, figure_formats, dpi).items()}
 
     return split_work(list(group_figure_builders(frames)), render)
 
@@ -1001,18 +1018,30 @@ def _first_extract(frames: dict[str, pd.DataFrame], unit: Unit) -> str | None:
 
 
 # -- the report ----------------------------------------------------------------------------------
-def png_bytes(fig) -> bytes:
-    """``fig`` as a PNG file's bytes, as every run writes its figures (``save_figure``: the
-    title and caption in its metadata, zlib level 1 as ``artifacts.PNG_OPTIONS``: the
-    encoding was a tenth of a study's figure time at the default level; the files are about
-    a quarter larger)."""
-    from ..runtime.artifacts import PNG_OPTIONS
-    from ..runtime.figure_files import FIGURE_DPI, save_figure
+def figure_kinds(figure_formats: tuple[str, ...]) -> tuple[str, ...]:
+    """The formats a study writes its figures in: PNG first (the reports embed it), then the
+    others asked for (``--figure-format``), each once."""
+    return tuple(dict.fromkeys(("png", *figure_formats)))
 
-    buffer = io.BytesIO()
-    save_figure(fig, buffer, "png", dpi=FIGURE_DPI, source="bounce study",
-                png_options=PNG_OPTIONS)
-    return buffer.getvalue()
+
+def figure_files(name: str, fig, figure_formats: tuple[str, ...], dpi: float
+                 ) -> dict[str, bytes]:
+    """``fig`` (``name``: its PNG's file name) as a file's bytes in each of
+    ``figure_formats`` at ``dpi``, as every run writes its figures (``save_figure``: the
+    title and caption in the metadata; PNGs at zlib level 1 as ``artifacts.PNG_OPTIONS``:
+    the encoding was a tenth of a study's figure time at the default level; the files are
+    about a quarter larger): ``{"<stem>.png": ..., "<stem>.pdf": ...}``."""
+    from ..runtime.artifacts import PNG_OPTIONS
+    from ..runtime.figure_files import save_figure
+
+    stem = name[:-len(".png")] if name.endswith(".png") else name
+    out = {}
+    for kind in figure_formats:
+        buffer = io.BytesIO()
+        save_figure(fig, buffer, kind, dpi=dpi, source="bounce study",
+                    png_options=PNG_OPTIONS if kind == "png" else None)
+        out[f"{stem}.{kind}"] = buffer.getvalue()
+    return out
 
 
 def report_files(frames, rendered: dict[str, bytes], units: list[Unit], manifest_path: Path,

@@ -181,6 +181,25 @@ def test_run_json_names_the_manifest_and_every_file_with_its_sha256(tiny, tiny_s
 
 
 @pytest.mark.slow
+def test_figure_format_and_dpi_reach_the_study_s_figures(tiny, tmp_path, cli_module):
+    """--figure-format pdf --dpi 100 were accepted and ignored (PNGs at 150 dpi, no PDF).
+    Now each figure is written in the formats asked for and as the PNG the report embeds,
+    at the resolution asked for."""
+    from PIL import Image
+
+    out = tmp_path / "study"
+    result = cli_module("study", "--manifest", tiny / "study.csv", "--out", out, "--jobs", "1",
+                        "--set", "analyses=[regression, learning]", "--figures", "all",
+                        "--figure-format", "pdf", "--dpi", "100", *FAST)
+    assert result.exit_code == 0, result.output
+    pngs = sorted(p.relative_to(out).with_suffix("") for p in out.rglob("*.png"))
+    pdfs = sorted(p.relative_to(out).with_suffix("") for p in out.rglob("*.pdf"))
+    assert pngs == pdfs and len(pngs) > 4  # the group's and every unit's
+    assert (out / "group_regression.pdf").read_bytes().startswith(b"%PDF")
+    assert Image.open(out / "group_regression.png").info["dpi"][0] == pytest.approx(100, abs=0.1)
+
+
+@pytest.mark.slow
 def test_a_damaged_file_is_one_failure_row_and_exit_1(tmp_path, cli_module):
     """One unreadable recording: one failures.csv row, every other file and unit analysed,
     exit 1 after writing."""
