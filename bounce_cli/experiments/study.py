@@ -62,7 +62,7 @@ from ..data.data_parameters import (
     model_at_data,
 )
 from ..data.impacts import Impacts
-from ..data.recordings import keys_in_block
+from ..data.recordings import keys_in_block, reading_keys_in_block
 from ..data.setup_table import SETUP_FILE, SetupQuantity, setup_frame
 from .plotting import publication_style
 from .report import Section, embed_png, html_table, page
@@ -318,9 +318,12 @@ def row_label(row: ManifestRow, name: str) -> str:
 
 
 def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures: list[dict],
-                      summary: list[str]) -> tuple[pd.DataFrame | None, dict[str, float]]:
+                      summary: list[str], warnings: list[str]
+                      ) -> tuple[pd.DataFrame | None, dict[str, float]]:
     """Extract (or read) every recording of the unit; its pooled impacts table and what the
-    extraction measured of the set-up (``setup.csv`` quantities, pooled over files)."""
+    extraction measured of the set-up (``setup.csv`` quantities, pooled over files). The
+    extraction's warnings (a dropout written as 0, events off the recording's clock, ...)
+    go to ``warnings``, each naming the unit and the recording."""
     from ..data.impacts import read_impacts
     from ..data.setup_table import read_setup
     from .data_side import is_impacts_table
@@ -338,7 +341,9 @@ def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures:
                 setup = {q.quantity: q.estimate for q in read_setup(row.file).values()}
             else:
                 ex_cfg = extraction_config(cfg, row.overrides, row.file, row.events, user_g)
-                result = execute("extract", ex_cfg, write=False, figures=False).result
+                result = execute("extract", ex_cfg, write=False, figures=False,
+                                 warn=extraction_warning(warnings, f"{unit.label}: {name}")
+                                 ).result
                 stem = f"{unit.folder}/extract/{name}"
                 for file_name, frame in result.frames.items():
                     frames[f"{stem}/{file_name}"] = frame
@@ -369,6 +374,16 @@ def read_unit_impacts(task: UnitTask, frames: dict[str, pd.DataFrame], failures:
     summary.append(f"{unit.label}: {len(tables)} of {len(unit.rows)} recording(s), "
                    f"{pooled['trial'].nunique()} trial(s), {len(pooled)} impacts")
     return pooled, measured
+
+
+def extraction_warning(warnings: list[str], where: str) -> Callable[[str], None]:
+    """A ``warn`` for a recording's extraction in a unit: its message to ``warnings``,
+    prefixed with ``where`` (unit and recording), with the reading keys it names as the study
+    takes them (``extract.csv.missing_heights``)."""
+    def warn(message: str) -> None:
+        warnings.append(f"{where}: extract: {reading_keys_in_block(message, 'extract')}")
+
+    return warn
 
 
 #: what the unit's recordings measured of the set-up (their setup.csv), pooled weighted by
@@ -415,7 +430,7 @@ def analyse_unit(task: UnitTask) -> dict[str, Any]:
     warnings: list[str] = []
     not_run: dict[str, str] = {}  # analysis -> why it did not run for this unit
     row: dict[str, Any] = {**unit.factors(), "recordings": len(unit.rows)}
-    pooled, measured = read_unit_impacts(task, frames, failures, summary)
+    pooled, measured = read_unit_impacts(task, frames, failures, summary, warnings)
     if pooled is not None:
         frames[f"{unit.folder}/impacts.csv"] = pooled
         if measured:  # beside it, so that `bounce <analysis> --data` on it runs the same model

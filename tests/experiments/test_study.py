@@ -200,6 +200,28 @@ def test_figure_format_and_dpi_reach_the_study_s_figures(tiny, tmp_path, cli_mod
 
 
 @pytest.mark.slow
+def test_a_recording_s_extraction_warning_reaches_the_study_and_its_report(tiny, tmp_path,
+                                                                           cli_module):
+    """A ball dropout written as 0 in one recording: bounce extract warns of it, but the
+    study said nothing (a review found it). Now the warning names the unit, the recording and
+    the key as the study takes it, on stderr and in the report."""
+    sim = tmp_path / "sim"
+    shutil.copytree(tiny, sim)
+    target = sim / "recordings" / "s2_a_t2.csv"
+    frame = pd.read_csv(target)
+    frame.loc[frame["t_s"].between(2.0, 2.05), "ball_x_m"] = 0.0
+    frame.to_csv(target, index=False)
+    out = tmp_path / "study"
+    result = cli_module("study", "--manifest", sim / "study.csv", "--out", out, "--jobs", "1",
+                        "--set", "analyses=[regression]", *FAST)
+    assert result.exit_code == 0, result.output
+    said = [line for line in result.output.splitlines() if "exactly 0" in line]
+    assert len(said) == 1 and "s2_a_t2: extract:" in said[0], result.output
+    assert "--set 'extract.csv.missing_heights=[0]'" in said[0]
+    assert "exactly 0" in (out / "report.html").read_text()
+
+
+@pytest.mark.slow
 def test_a_damaged_file_is_one_failure_row_and_exit_1(tmp_path, cli_module):
     """One unreadable recording: one failures.csv row, every other file and unit analysed,
     exit 1 after writing."""

@@ -255,15 +255,21 @@ def read_recording(path: Path, columns, units, markers, csv_format=None, file_fo
 
 #: the extraction's config keys that its errors name ("set columns.racket", "set csv.separator")
 _READING_KEY = re.compile(
-    r"\bset (?=(?:columns|event_columns|csv|units|markers|format|extraction)\b)")
+    r"\bset (['\"]?)(?=(?:columns|event_columns|csv|units|markers|format|extraction)\b)")
+
+
+def reading_keys_in_block(text: str, block: str) -> str:
+    """``text`` (a reading error's or warning's) with the keys it names as a command whose
+    reading settings sit in ``block`` takes them: "set columns.racket" is "set
+    extract.columns.racket" in ``bounce study`` (its ``extract:`` block) and "set
+    replay.columns.racket" in ``bounce virtual --racket replay:FILE``; "--set
+    'csv.missing_heights=[0]'" is "--set 'extract.csv.missing_heights=[0]'"."""
+    return _READING_KEY.sub(rf"set \g<1>{block}.", text)
 
 
 def keys_in_block(exc: ConfigError, block: str) -> ConfigError:
-    """``exc`` (a reading error) with the keys it names as a command whose reading settings
-    sit in ``block`` takes them: "set columns.racket" is "set extract.columns.racket" in
-    ``bounce study`` (its ``extract:`` block) and "set replay.columns.racket" in ``bounce
-    virtual --racket replay:FILE``."""
-    return ConfigError(_READING_KEY.sub(f"set {block}.", str(exc)))
+    """``exc`` (a reading error) with its keys as :func:`reading_keys_in_block` names them."""
+    return ConfigError(reading_keys_in_block(str(exc), block))
 
 
 def read_events(path: Path, event_columns, units, trials: list[Trial],
