@@ -98,7 +98,9 @@ def mixed_trend(frame: pd.DataFrame, y: str, x: str = "trial_number", group: str
                     fit = model.fit(reml=True, method=["lbfgs", "powell"])
                 except (np.linalg.LinAlgError, ValueError):
                     continue
-            slope, se = float(fit.fe_params[x]), float(fit.bse_fe[x])
+                # inside: a covariance with a negative diagonal warns in its sqrt (the SE is
+                # NaN and the next model is tried; the warning is no user's business)
+                slope, se = float(fit.fe_params[x]), float(fit.bse_fe[x])
             if not (bool(getattr(fit, "converged", True)) and math.isfinite(slope)
                     and math.isfinite(se) and se > 0.0):
                 continue
