@@ -780,6 +780,9 @@ class TrialExtraction:
     #: per reported impact given by an event: its time less the ball's own contact time,
     #: where the flights either side meet (s; NaN: no flight before it)
     event_lags_s: np.ndarray = field(default_factory=lambda: np.array([]))
+    #: per event inside the recording, reported or not: its time less the nearest contact
+    #: detected in the ball's samples (s, to about a sample; NaN: none near)
+    event_lags_coarse_s: np.ndarray = field(default_factory=lambda: np.array([]))
 
 
 def _segment_fits(t, ball, long_gap, racket, lo: int, hi: int, t_after: float,
@@ -888,6 +891,9 @@ class _Contacts:
     exact: np.ndarray
     k: np.ndarray
     alpha: np.ndarray
+    #: per event: its time less the nearest contact detected in the ball's samples (s; to
+    #: about a sample; NaN: none within EVENT_LAG_MAX_S, or no ball data)
+    coarse_lag: np.ndarray
 
 
 @dataclass
@@ -966,6 +972,16 @@ def _contacts_of(t, racket: _Racket, ball: _Ball | None, event_t, event_alpha,
             event_alpha = np.asarray(event_alpha, dtype=float)[inside]
         ci = np.clip(np.searchsorted(t, ct), 1, len(t) - 2)
         exact = np.ones(ct.shape, dtype=bool)
+        coarse_lag = np.full(ct.shape, np.nan)
+        if ball is not None:  # the events against the contacts the ball's own samples show
+            found = t[detect_contacts(t, ball.bridged, racket.bridged, s,
+                                      ~ball.measured & ~ball.long_gap)]
+            if found.size:
+                j = np.searchsorted(found, ct)
+                before = found[np.clip(j - 1, 0, found.size - 1)]
+                after = found[np.clip(j, 0, found.size - 1)]
+                lag = ct - np.where(np.abs(ct - before) <= np.abs(after - ct), before, after)
+                coarse_lag = np.where(np.abs(lag) <= EVENT_LAG_MAX_S, lag, np.nan)
     else:
         if ball is None:
             raise ModelError("neither ball positions nor events: no impacts to find")
@@ -973,9 +989,10 @@ def _contacts_of(t, racket: _Racket, ball: _Ball | None, event_t, event_alpha,
         ct = t[ci]
         exact = np.zeros(ct.shape, dtype=bool)
         k_index = np.arange(len(ct))
+        coarse_lag = np.full(ct.shape, np.nan)
     alpha = (np.asarray(event_alpha, dtype=float) if event_alpha is not None
              else np.full(len(ct), np.nan))
-    return _Contacts(ct, ci, exact, k_index, alpha)
+    return _Contacts(ct, ci, exact, k_index, alpha, coarse_lag)
 
 
 def _flights_around(t, racket: _Racket, ball: _Ball, contacts: _Contacts,
@@ -1251,7 +1268,8 @@ def extract_trial(t, racket, ball=None, event_t=None, event_alpha=None,
     se_theta = _phase_se(t, racket_, t_k, imp.var_t, s)
     return TrialExtraction(impacts, excluded, cycles, offset, imp.flights, imp.offset_k[keep],
                            imp.se_v[keep], se_theta[keep], racket_rss, racket_dof,
-                           imp.area[keep], imp.weight[keep], imp.event_lag[keep])
+                           imp.area[keep], imp.weight[keep], imp.event_lag[keep],
+                           contacts.coarse_lag)
 
 
 def _contact_area(t, ball, before: FlightFit, after: FlightFit, g: float) -> float:

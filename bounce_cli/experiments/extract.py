@@ -364,7 +364,9 @@ def extract_all(trials: list[Trial], events, settings: ExtractionSettings, sourc
     impacts_frame = pd.concat(impacts, ignore_index=True)
     setup = setup_quantities(impacts_frame, [r for _, _, r in results], gravity, used,
                              measure_g, measure_offset)
-    warnings += event_clock_warnings(setup, impacts_frame, source)
+    warnings += event_clock_warnings(setup, impacts_frame, source, [r for _, _, r in results],
+                                     float(np.median([np.median(np.diff(trial.t))
+                                                      for trial in trials])))
     return SessionExtraction(impacts_frame, excluded_frame, pd.concat(cycles, ignore_index=True),
                              setup, used, warnings)
 
@@ -375,30 +377,43 @@ def extract_all(trials: list[Trial], events, settings: ExtractionSettings, sourc
 EVENT_LAG_TOLERANCE_S = 0.001
 
 
-def event_clock_warnings(setup: list[SetupQuantity], impacts: pd.DataFrame,
-                         source: str) -> list[str]:
-    """A warning where the events' times lag or lead the ball's contacts in the recording
-    (``event_lag_s``) by more than half the contact's duration (a log of the contacts'
-    onsets or releases: the flights meet about mid-contact) plus EVENT_LAG_TOLERANCE_S and 3
-    SE: the event log's clock is not the recording's, and every phase is off by the lag (an
-    impact's phase is the racket's phase at the event's time)."""
+def event_clock_warnings(setup: list[SetupQuantity], impacts: pd.DataFrame, source: str,
+                         results: list | None = None, sample_s: float = 0.0) -> list[str]:
+    """A warning where the events' times lag or lead the ball's contacts in the recording by
+    more than half the contact's duration (a log of the contacts' onsets or releases: the
+    flights meet about mid-contact) plus EVENT_LAG_TOLERANCE_S: the event log's clock is not
+    the recording's, and every phase is off by the lag (an impact's phase is the racket's
+    phase at the event's time).
+
+    The lag is ``event_lag_s`` (where the flights meet; beyond 3 SE), or, where events far
+    off have cut the flights in the wrong place and few impacts measure it, the median over
+    every event of its time less the nearest contact detected in the ball's samples
+    (``results``' ``event_lags_coarse_s``, to about a sample: beyond 1.5 ``sample_s`` more)."""
     q = {item.quantity: item for item in setup}
-    if "event_lag_s" not in q:
-        return []
-    lag = q["event_lag_s"]
     contact = q["contact_s"].estimate if "contact_s" in q else 0.0
     allowed = 0.5 * (contact if math.isfinite(contact) else 0.0) + EVENT_LAG_TOLERANCE_S
-    se = lag.se if math.isfinite(lag.se) else 0.0
-    if abs(lag.estimate) <= allowed + 3.0 * se:
+    lag = None
+    if "event_lag_s" in q:
+        fine = q["event_lag_s"]
+        se = fine.se if math.isfinite(fine.se) else 0.0
+        if abs(fine.estimate) > allowed + 3.0 * se:
+            lag, n, how = fine.estimate, fine.n, "where its flights meet"
+    coarse = np.concatenate([r.event_lags_coarse_s for r in results or []] or [np.array([])])
+    coarse = coarse[np.isfinite(coarse)]
+    if lag is None and coarse.size >= 3 and (
+            abs(float(np.median(coarse))) > allowed + 1.5 * sample_s):
+        lag, n = float(np.median(coarse)), int(coarse.size)
+        how = f"contacts detected in its samples, to about a sample: {1000 * sample_s:.2g} ms"
+    if lag is None:
         return []
     period = float(impacts["racket_period_s"].median()) if len(impacts) else math.nan
-    phase = (f", so every phase is off by about {360.0 * abs(lag.estimate) / period:.2g} deg"
+    phase = (f", so every phase is off by about {360.0 * abs(lag) / period:.2g} deg"
              if math.isfinite(period) and period > 0 else "")
-    return [f"{source}: the events are {1000 * abs(lag.estimate):.3g} ms "
-            f"{'later' if lag.estimate > 0 else 'earlier'} than the ball's contacts in the "
-            f"recording (median of {lag.n}, where its flights meet; contact "
-            f"{1000 * contact:.2g} ms){phase}: is the event log on the recording's clock? "
-            "(shift the events' times by the lag, or extract without --events)"]
+    return [f"{source}: the events are {1000 * abs(lag):.3g} ms "
+            f"{'later' if lag > 0 else 'earlier'} than the ball's contacts in the recording "
+            f"(median of {n}, {how}; contact {1000 * contact:.2g} ms){phase}: is the event "
+            "log on the recording's clock? (shift the events' times by the lag, or extract "
+            "without --events)"]
 
 
 def _median_quantity(name: str, per_trial: list[np.ndarray], note: str
