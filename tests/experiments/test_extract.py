@@ -693,6 +693,16 @@ def finite_contacts(tmp_path_factory):
     return out
 
 
+def extract_with_events_shifted(session_dir, tmp_path, shift_s):
+    """``bounce extract`` of a simulated session's recording with its events shifted by
+    ``shift_s`` (an event log on a clock of its own): (result, out)."""
+    events = pd.read_csv(session_dir / "events.csv")
+    events["t_s"] += shift_s
+    events.to_csv(tmp_path / "shifted_events.csv", index=False)
+    return extract_cli(tmp_path, "--data", str(session_dir / "recording.csv"),
+                       "--events", str(tmp_path / "shifted_events.csv"))
+
+
 @pytest.mark.parametrize("shift_ms, warned", [(0.0, False), (-3.0, False), (5.0, True),
                                                (-5.0, True)])
 def test_events_off_the_recording_s_clock_are_measured_and_warned_of(
@@ -702,11 +712,7 @@ def test_events_off_the_recording_s_clock_are_measured_and_warned_of(
     lag where the ball's flights meet (to 0.2 ms here), and a lag beyond half the contact's
     duration and 1 ms (6 ms contacts: 4 ms; an onset log is early by about half) is warned
     of."""
-    events = pd.read_csv(finite_contacts / "events.csv")
-    events["t_s"] += shift_ms / 1000.0
-    events.to_csv(tmp_path / "events.csv", index=False)
-    result, out = extract_cli(tmp_path, "--data", str(finite_contacts / "recording.csv"),
-                              "--events", str(tmp_path / "events.csv"))
+    result, out = extract_with_events_shifted(finite_contacts, tmp_path, shift_ms / 1000.0)
     assert result.exit_code == 0, result.output
     setup = pd.read_csv(out / "setup.csv").set_index("quantity")
     assert setup.loc["event_lag_s", "estimate"] == pytest.approx(shift_ms / 1000.0, abs=2e-4)
@@ -723,11 +729,7 @@ def test_events_that_cut_the_flights_are_still_warned_of(tmp_path):
                                "--set", "trials=1", "--set", "duration_s=15",
                                "--set", "sample_rate_hz=200"])
     assert made.exit_code == 0, made.output
-    events = pd.read_csv(sim / "events.csv")
-    events["t_s"] += 0.011
-    events.to_csv(tmp_path / "late.csv", index=False)
-    result, _ = extract_cli(tmp_path, "--data", str(sim / "recording.csv"),
-                            "--events", str(tmp_path / "late.csv"))
+    result, _ = extract_with_events_shifted(sim, tmp_path, 0.011)
     assert result.exit_code == 0, result.output
     warned = [line for line in result.output.splitlines() if "recording's clock" in line]
     assert len(warned) == 1 and "contacts detected in its samples" in warned[0], result.output
@@ -738,11 +740,7 @@ def test_events_that_cut_the_flights_are_still_warned_of(tmp_path):
 def test_events_far_off_the_clock_say_so_where_no_bounce_is_found(finite_contacts, tmp_path):
     """Events 10 ms late cut every flight in the wrong place: the one-line error names the
     events' clock beside the units and axes it asked about."""
-    events = pd.read_csv(finite_contacts / "events.csv")
-    events["t_s"] += 0.010
-    events.to_csv(tmp_path / "events.csv", index=False)
-    result, _ = extract_cli(tmp_path, "--data", str(finite_contacts / "recording.csv"),
-                            "--events", str(tmp_path / "events.csv"))
+    result, _ = extract_with_events_shifted(finite_contacts, tmp_path, 0.010)
     assert result.exit_code == 2, result.output
     assert "events' times are on the recording's clock" in result.output
 
