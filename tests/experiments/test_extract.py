@@ -797,6 +797,32 @@ def test_a_long_dropout_of_rows_at_a_crossing_is_named_as_a_gap():
     assert all(reason != "outside a complete racket cycle" for _, reason in inside), inside
 
 
+def test_a_dropout_written_as_minus_9999_is_warned_of_with_its_value(tmp_path):
+    """Some systems write a lost marker as -9999 (or another code), not 0: 8 samples of it in
+    the ball column were read as heights without a word (a review found the two phantom
+    contacts shift every later impact's k by 2). The warning names the value and the setting
+    that reads it as a gap; with it, the samples are gaps."""
+    from types import SimpleNamespace
+
+    from bounce_cli.data.recordings import read_csv_recording
+
+    t = np.arange(400) * 0.005
+    ball = 0.4 + 2.0 * t - 4.905 * t**2 % 0.3  # any moving height
+    ball[100:108] = -9999.0
+    pd.DataFrame({"t_s": t, "racket_x_m": 0.1 * np.sin(2 * np.pi * t / 0.92),
+                  "ball_x_m": ball}).to_csv(tmp_path / "r.csv", index=False)
+    columns = SimpleNamespace(time="t_s", racket="racket_x_m", ball="ball_x_m", trial=None)
+    units = SimpleNamespace(length="m", time="s")
+    heard: list[str] = []
+    read_csv_recording(tmp_path / "r.csv", columns, units, None, heard.append)
+    assert len(heard) == 1 and "'ball_x_m' is exactly -9999 in 1 run(s)" in heard[0]
+    assert "--set 'csv.missing_heights=[-9999]'" in heard[0]
+    coded = SimpleNamespace(separator=",", decimal=".", skip_rows=0, missing_heights=[-9999])
+    (trial,) = read_csv_recording(tmp_path / "r.csv", columns, units, coded, heard.append)
+    assert len(heard) == 1 and np.isnan(trial.ball[100:108]).all()
+    assert np.isfinite(np.delete(trial.ball, np.arange(100, 108))).all()
+
+
 def test_a_racket_resting_at_0_is_no_dropout(tmp_path):
     """The virtual set-up's mouse racket rests at exactly 0 until the subject moves the
     pointer, and then moves in the pointer's steps: no warning (it said "a marker dropout

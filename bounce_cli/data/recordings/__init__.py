@@ -143,21 +143,26 @@ def check_trial(path: Path, label, t: np.ndarray, time_column: str) -> None:
                           f"{i + 2} ({t[i]:g} -> {t[i + 1]:g})")
 
 
-#: consecutive samples of a height column exactly 0 that read as a dropout written as 0
+#: consecutive samples of a height column with one exact value (0, -9999, ...) that read as a
+#: dropout written as that value
 ZERO_RUN_SAMPLES = 3
-#: a run of zeros is a dropout where the height beside it is this many of the column's typical
-#: sample-to-sample steps from 0: a jump (a marker lost); a racket resting at 0 (a mouse not
-#: yet moved in the virtual set-up) leaves and enters its rest in steps of the usual size
+#: a run of one value is a dropout where the height beside it is this many of the column's
+#: typical sample-to-sample steps from it: a jump (a marker lost); a racket resting (at 0: a
+#: mouse not yet moved in the virtual set-up) leaves and enters its rest in steps of the usual
+#: size
 ZERO_RUN_JUMP_STEPS = 5.0
 
 
 def _dropout_runs(values: np.ndarray) -> np.ndarray:
-    """Start indices of the runs of ``ZERO_RUN_SAMPLES`` exact zeros or more that the
-    column jumps into or out of (``ZERO_RUN_JUMP_STEPS``), or that have no height beside
-    them at all."""
-    zero = np.concatenate(([False], values == 0.0, [False]))
-    edges = np.flatnonzero(np.diff(zero.astype(np.int8)))
-    starts, ends = edges[::2], edges[1::2]
+    """Start indices of the runs of ``ZERO_RUN_SAMPLES`` samples or more of one exact value
+    that the column jumps into and out of (``ZERO_RUN_JUMP_STEPS``; at the column's ends, into
+    or out of), or of zeros with no height beside them at all."""
+    if values.size < ZERO_RUN_SAMPLES:
+        return np.zeros(0, dtype=int)
+    same = np.concatenate(([False], values[1:] == values[:-1], [False]))  # NaN: never
+    edges = np.flatnonzero(np.diff(same.astype(np.int8)))
+    # a run of samples a..b (each equal to the one before from a + 1 on) rises at a, falls at b
+    starts, ends = edges[::2], edges[1::2] + 1  # ends: one past the run
     long = ends - starts >= ZERO_RUN_SAMPLES
     starts, ends = starts[long], ends[long]
     if not starts.size:
@@ -166,29 +171,36 @@ def _dropout_runs(values: np.ndarray) -> np.ndarray:
     steps = steps[np.isfinite(steps) & (steps > 0.0)]
     typical = float(np.median(steps)) if steps.size else 0.0
     padded = np.concatenate(([np.nan], values, [np.nan]))
-    beside = np.abs(np.stack([padded[starts], padded[ends + 1]]))  # before and after a run
-    jump = np.any(beside > ZERO_RUN_JUMP_STEPS * typical, axis=0)
-    alone = np.all(~np.isfinite(beside), axis=0)
+    level = values[starts]
+    beside = np.abs(np.stack([padded[starts], padded[ends + 1]]) - level)  # before, after
+    # a dropout jumps away and back: a jump on every side that has a height (a plateau of a
+    # held signal beside a dropout jumps on one side only, towards the dropout)
+    known = np.isfinite(beside)
+    jump = np.all(~known | (beside > ZERO_RUN_JUMP_STEPS * typical), axis=0) & known.any(axis=0)
+    alone = ~known.any(axis=0) & (level == 0.0)  # a column of zeros
     return starts[jump | alone]
 
 
 def _heights(frame: pd.DataFrame, path: Path, name: str, key: str, missing: list[float],
              time_name: str, warn: Callable[[str], None]) -> np.ndarray:
     """A height column as written, the values of ``missing`` (``csv.missing_heights``) as
-    gaps; runs of ``ZERO_RUN_SAMPLES`` exact zeros or more that the column jumps into or out
-    of (:func:`_dropout_runs`), where 0 is not declared missing, are read as heights and
-    warned of (a system that writes a dropout as 0 makes phantom contacts of them: a ball or
-    racket at height 0)."""
+    gaps; runs of ``ZERO_RUN_SAMPLES`` samples or more of one value (0, -9999, ...) that the
+    column jumps into and out of (:func:`_dropout_runs`) are read as heights and warned of (a
+    system that writes a dropout as such a value makes phantom contacts of it, and k counts
+    them: a ball or racket at that height)."""
     values = _column(frame, path, name, key)
     if missing:
         values = np.where(np.isin(values, missing), np.nan, values)
-    if 0.0 not in missing:
-        runs = _dropout_runs(values)
-        if runs.size:
-            warn(f"{path}: column {name!r} is exactly 0 in {runs.size} run(s) of "
-                 f"{ZERO_RUN_SAMPLES} samples or more (the first at {time_name} = "
-                 f"{frame[time_name].iloc[runs[0]]}): a marker dropout written as 0? They are "
-                 "read as heights; --set 'csv.missing_heights=[0]' reads them as gaps")
+    runs = _dropout_runs(values)
+    if runs.size:
+        value = float(values[runs[0]])
+        same = runs[values[runs] == value]
+        written = f"{value:g}"
+        warn(f"{path}: column {name!r} is exactly {written} in {same.size} run(s) of "
+             f"{ZERO_RUN_SAMPLES} samples or more (the first at {time_name} = "
+             f"{frame[time_name].iloc[runs[0]]}): a marker dropout written as {written}? "
+             f"They are read as heights; --set 'csv.missing_heights=[{written}]' reads them "
+             "as gaps")
     return values
 
 
