@@ -329,15 +329,19 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     xs = np.linspace(0.0, x_max, 50)
     has_condition = "condition" in trials.columns
     colors = ["k", "tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange"]
+    # a marker of its own per condition, each larger than the one before: conditions whose
+    # trial means coincide (one racket design for both) stay visible, one around the other
+    markers = [("o", 5), ("s", 7.5), ("^", 9), ("D", 8), ("v", 10), ("P", 10)]
     for i, row in enumerate(fit.itertuples()):
         color = colors[i % len(colors)]
+        marker, size = markers[i % len(markers)]
         group = trials[trials["condition"].astype(str) == str(row.condition)] if has_condition \
             else trials
         tag = f"{row.condition}: " if has_condition else ""
         if "lost" in group.columns:
             group = group[~group["lost"].astype(bool)]
-        ax.plot(group["tau_s"] ** 2, group["a_r_m"] * 100, "o", mfc="none", mec=color, ms=5,
-                label=f"{tag}trial means ($n$ = {row.n})")
+        ax.plot(group["tau_s"] ** 2, group["a_r_m"] * 100, marker, mfc="none", mec=color,
+                ms=size, ls="none", label=f"{tag}trial means ($n$ = {row.n})")
         ax.plot(xs, (row.intercept + row.slope * xs) * 100, "-", color=color, lw=1.5,
                 label=f"{tag}OLS fit: slope {row.slope:.3f} m/s$^2$, intercept "
                       f"{row.intercept * 100:.2f} cm, $R^2$ = {row.r2:.3f}")

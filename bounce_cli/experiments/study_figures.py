@@ -162,16 +162,28 @@ def stability_figure(group: pd.DataFrame, table: pd.DataFrame | None):
     if table is not None and len(table):
         ols = table[table["estimate"] == "ols"]
         # a line per condition: on one line, two conditions ran off the figure's edge
-        title += "".join(
-            f"\n{r.condition}: data - model (OLS) {r.difference_mean:+.3f} "
-            f"[{r.ci_low:.3f}, {r.ci_high:.3f}]" for r in ols.itertuples())
+        title += "".join(f"\n{r.condition}: {_difference_words(r)}" for r in ols.itertuples())
     ax.set_title(title, fontsize=9)
     # below the axes: inside, it covered a unit's estimate
     entries = sorted(zip(*ax.get_legend_handles_labels()),  # OLS, lag-2, then the model
                      key=lambda e: (e[1].startswith("model"), "lag-2" in e[1],
                                     "no interval" in e[1]))
-    fig.legend(*zip(*entries), loc="outside lower center", ncol=2, fontsize=7, frameon=False)
+    # two columns of these labels need about 8 inches: narrower, one (two ran off both sides)
+    fig.legend(*zip(*entries), loc="outside lower center", ncol=2 if fig.get_figwidth() >= 8.0
+               else 1, fontsize=7, frameon=False)
     return fig
+
+
+def _difference_words(row) -> str:
+    """A condition's line of the stability title: the data's radius less the model's, mean
+    over units with its interval, or why there is none (``verdict``: too few units)."""
+    if not np.isfinite(row.difference_mean):
+        return f"data - model (OLS): {row.verdict}"
+    if not (np.isfinite(row.ci_low) and np.isfinite(row.ci_high)):
+        return (f"data - model (OLS) {row.difference_mean:+.3f} ({row.units} unit"
+                f"{'s' if row.units != 1 else ''}, no interval)")
+    return (f"data - model (OLS) {row.difference_mean:+.3f} "
+            f"[{row.ci_low:.3f}, {row.ci_high:.3f}]")
 
 
 def acf_figure(table: pd.DataFrame):
