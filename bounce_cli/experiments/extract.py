@@ -106,9 +106,10 @@ class CsvBlock(StrictModel):
 
 #: what a "no bounce found" asks the user to check: a recording read in the wrong unit or axis
 #: shows no bounce at all
-NO_BOUNCE_HINT = ("; check units.length (positions in mm read as m, or cm as mm), the vertical "
-                  "axis (markers.vertical_axis; a CSV's columns must be heights) and that "
-                  "columns.ball and columns.racket name the ball and the racket")
+NO_BOUNCE_HINT = ("; check units.length (positions in mm read as m, or cm as mm), units.time "
+                  "(times in ms read as s), the vertical axis (markers.vertical_axis; a CSV's "
+                  "columns must be heights) and that columns.ball and columns.racket name the "
+                  "ball and the racket")
 
 
 class UnitsBlock(StrictModel):

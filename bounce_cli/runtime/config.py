@@ -296,7 +296,11 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     try:
         value = yaml.safe_load(raw) if raw.strip() else None
     except yaml.YAMLError:
-        raise ConfigError(f"--set {key}: cannot parse value {raw!r} as YAML") from None
+        # a lone mark (, ; |) is YAML's syntax: the marks' names say it without quotes
+        mark = raw.strip()
+        hint = (f"; quote it (--set \"{key}='{mark}'\") or give a mark's name (comma, "
+                "semicolon, tab, space)" if len(mark) == 1 else "")
+        raise ConfigError(f"--set {key}: cannot parse value {raw!r} as YAML{hint}") from None
     return key.split("."), value
 
 

@@ -619,6 +619,20 @@ def test_other_csv_dialects_give_the_same_impacts(simulated, tmp_path, write, se
     one_line_error(bare, "csv.")
 
 
+def test_the_errors_of_a_decimal_comma_and_a_lone_mark_say_what_to_set(tmp_path):
+    """A decimal-comma export read with only its separator set said "a row of units? set
+    csv.skip_rows"; --set csv.decimal=, said only that ',' is no YAML (a review met both)."""
+    t = np.arange(50) * 0.005
+    frame = pd.DataFrame({"t_s": t, "racket_x_m": 0.1 * np.sin(t), "ball_x_m": 0.5 + t})
+    frame.to_csv(tmp_path / "eu.csv", sep=";", decimal=",", index=False)
+    comma, _ = extract_cli(tmp_path / "a", "--data", str(tmp_path / "eu.csv"),
+                           "--set", "csv.separator=semicolon")
+    one_line_error(comma, "a decimal comma? set csv.decimal=comma")
+    mark, _ = extract_cli(tmp_path / "b", "--data", str(tmp_path / "eu.csv"),
+                          "--set", "csv.decimal=,")
+    one_line_error(mark, "--set \"csv.decimal=','\") or give a mark's name (comma")
+
+
 def test_a_dropout_written_as_zero_is_warned_of_and_read_as_a_gap_where_declared(
         simulated, tmp_path):
     """Some systems write a marker they did not see as 0. Read as heights, three 60 ms

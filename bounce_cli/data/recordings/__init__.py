@@ -94,6 +94,10 @@ def read_table(path: Path, csv_format: Any = None) -> pd.DataFrame:
         raise ConfigError(f"{path}: cannot read: {exc.strerror}") from None
 
 
+#: a number written with a decimal comma (a spreadsheet's export in many locales)
+_DECIMAL_COMMA = re.compile(r"[-+]?\d+,\d+(?:[eE][-+]?\d+)?")
+
+
 def _column(frame: pd.DataFrame, path: Path, name: str, key: str) -> np.ndarray:
     if name not in frame.columns:
         have = ", ".join(map(str, frame.columns[:12]))
@@ -106,7 +110,13 @@ def _column(frame: pd.DataFrame, path: Path, name: str, key: str) -> np.ndarray:
     bad = values.isna() & frame[name].notna()
     if bad.any():
         row = int(np.flatnonzero(bad.to_numpy())[0])
-        hint = " (a row of units? set csv.skip_rows)" if row == 0 else ""
+        cell = str(frame[name].iloc[row]).strip()
+        if _DECIMAL_COMMA.fullmatch(cell):
+            hint = " (a decimal comma? set csv.decimal=comma)"
+        elif row == 0:
+            hint = " (a row of units? set csv.skip_rows)"
+        else:
+            hint = ""
         raise ConfigError(f"{path}: column {name!r}, row {row + frame.attrs.get('first_row', 2)}"
                           f": not a number ({frame[name].iloc[row]!r}){hint}")
     return values.to_numpy(float)
