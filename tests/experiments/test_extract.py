@@ -798,6 +798,27 @@ def test_a_gap_at_the_racket_s_crossing_keeps_its_cycles(offset_s, rows):
     assert np.max(np.abs(errors["racket_period_s"])) < 0.002
 
 
+def test_rows_missing_are_said(tmp_path):
+    """35 ms of rows missing at every other racket crossing (no empty cell shows them): the
+    extraction copes (above) but the impacts near such stretches rest on fewer samples, and
+    nothing said so (a review). A warning counts them and names the longest; the same
+    recording with every row says nothing."""
+    (truth, (t, racket, ball)), *_ = session(CASE_B)
+    for name, (tt, rr, bb) in (("whole", (t, racket, ball)),
+                               ("holes", _holes_at_crossings(-0.0175, 0.035, rows=True)(
+                                   t, racket, ball))):
+        pd.DataFrame({"trial": 1, "t_s": tt, "racket_x_m": rr, "ball_x_m": bb}).to_csv(
+            tmp_path / f"{name}.csv", index=False)
+    whole, _ = extract_cli(tmp_path / "w", "--data", str(tmp_path / "whole.csv"))
+    holes, _ = extract_cli(tmp_path / "h", "--data", str(tmp_path / "holes.csv"))
+    assert whole.exit_code == 0 and holes.exit_code == 0, holes.output
+    assert "without samples" not in whole.output
+    said = [line for line in holes.output.splitlines() if "without samples" in line]
+    expected = _upward_crossings(racket)[::2].size
+    assert len(said) == 1 and f"{expected} stretch(es) without samples" in said[0], said
+    assert "the longest 40 ms" in said[0]  # 35 ms of rows less one 5 ms sample interval: 40
+
+
 def test_a_long_dropout_of_rows_at_a_crossing_is_named_as_a_gap():
     """Rows missing for 80 ms about a crossing (longer than max_gap_s): the cycles it bounds
     are lost, and their impacts say it is a gap of the racket's data (they said "outside a
