@@ -189,6 +189,9 @@ class ExtractConfig(ExperimentConfig):
     data: Optional[str] = Field(None, description="recording (CSV or .c3d); null: the "
                                 "simulated session of configs/recording.yaml")
     events: Optional[str] = Field(None, description="events CSV: the impact times (and alpha)")
+    events_shift_s: float = Field(0.0, description="added to every event's time, s: an event "
+                                  "log on a clock of its own (setup.csv's event_lag_s measures "
+                                  "its lag; a shift of minus that puts it on the recording's)")
     truth: Optional[str] = Field(None, description="truth.csv of a simulated session: "
                                  "writes accuracy.csv")
     columns: ColumnsBlock = ColumnsBlock()
@@ -443,8 +446,8 @@ def event_clock_warnings(setup: list[SetupQuantity], impacts: pd.DataFrame, sour
     return [f"{source}: the events are {1000 * abs(lag):.3g} ms "
             f"{'later' if lag > 0 else 'earlier'} than the ball's contacts in the recording "
             f"(median of {n}, {how}; contact {1000 * contact:.2g} ms){phase}: is the event "
-            "log on the recording's clock? (shift the events' times by the lag, or extract "
-            "without --events)"]
+            f"log on the recording's clock? (--set events_shift_s={-lag:.4g} shifts them back, "
+            "or extract without --events)"]
 
 
 def _median_quantity(name: str, per_trial: list[np.ndarray], note: str
@@ -637,7 +640,7 @@ def run(config: ExtractConfig, options: RunOptions) -> ExperimentResult:
     events = None
     if config.events is not None:
         events = read_events(Path(config.events), config.event_columns, config.units, trials,
-                             config.csv)
+                             config.csv, shift_s=config.events_shift_s)
     options.progress.start(len(trials), "extract")
     session = extract_all(trials, events, settings, source, measure_g=g_set is None,
                           measure_offset=config.extraction.ball_offset_m is None)

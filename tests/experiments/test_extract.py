@@ -733,6 +733,22 @@ def test_events_off_the_recording_s_clock_are_measured_and_warned_of(
     assert ("on the recording's clock" in result.output) == warned, result.output
 
 
+def test_the_shift_the_warning_names_puts_the_events_on_the_recording_s_clock(
+        finite_contacts, tmp_path):
+    """The warning names the setting that undoes the lag (events_shift_s, recorded in
+    run.json); with it the lag is gone and nothing is said."""
+    late, _ = extract_with_events_shifted(finite_contacts, tmp_path, 0.005)
+    warned = next(line for line in late.output.splitlines() if "recording's clock" in line)
+    setting = warned.split("--set ")[1].split(" ")[0]
+    assert setting.startswith("events_shift_s=-0.00")
+    fixed, out = extract_cli(tmp_path / "fixed", "--data",
+                             str(finite_contacts / "recording.csv"), "--events",
+                             str(tmp_path / "shifted_events.csv"), "--set", setting)
+    assert fixed.exit_code == 0 and "recording's clock" not in fixed.output, fixed.output
+    lag = pd.read_csv(out / "setup.csv").set_index("quantity").loc["event_lag_s", "estimate"]
+    assert abs(lag) < 2e-4
+
+
 def test_events_that_cut_the_flights_are_still_warned_of(tmp_path):
     """Events 11 ms late at 200 Hz cut most flights in the wrong place: a third of the
     impacts lost and the rest biased, and the lag where the flights meet rests on a few

@@ -277,7 +277,8 @@ def read_recording(path: Path, columns, units, markers, csv_format=None, file_fo
 
 #: the extraction's config keys that its errors name ("set columns.racket", "set csv.separator")
 _READING_KEY = re.compile(
-    r"\bset (['\"]?)(?=(?:columns|event_columns|csv|units|markers|format|extraction)\b)")
+    r"\bset (['\"]?)(?=(?:columns|event_columns|events_shift_s|csv|units|markers|format|"
+    r"extraction)\b)")
 
 
 def reading_keys_in_block(text: str, block: str) -> str:
@@ -295,12 +296,13 @@ def keys_in_block(exc: ConfigError, block: str) -> ConfigError:
 
 
 def read_events(path: Path, event_columns, units, trials: list[Trial],
-                csv_format=None) -> dict[str, Events]:
-    """Logged impacts per trial label (every trial of the recording gets an entry)."""
+                csv_format=None, shift_s: float = 0.0) -> dict[str, Events]:
+    """Logged impacts per trial label (every trial of the recording gets an entry), each
+    time plus ``shift_s`` (s: ``events_shift_s``, a log on a clock of its own)."""
     path = Path(path)
     frame = read_table(path, csv_format)
     time = TIME_UNITS[units.time]
-    t_all = _column(frame, path, event_columns.time, "event_columns.time") * time
+    t_all = _column(frame, path, event_columns.time, "event_columns.time") * time + shift_s
     alpha_all = None
     if event_columns.alpha is not None and event_columns.alpha in frame.columns:
         alpha_all = _column(frame, path, event_columns.alpha, "event_columns.alpha")
