@@ -67,6 +67,25 @@ def test_different_config_refused_same_config_replaced(tmp_path):
     assert json.loads((out / "run.json").read_text())["config"] == {"a": 2}
 
 
+def test_a_replaced_run_s_folders_go_with_its_files(tmp_path):
+    """A run that no longer writes a subfolder's files (a study's subject left out of its
+    manifest) removed the files and left the empty folders (a review); a folder that still
+    holds something (another file) stays."""
+    out = tmp_path / "r"
+    first = make_run(out, {"a": 1})
+    first.add_csv("s1/a/data.csv", pd.DataFrame({"x": [1]}))
+    first.add_csv("s3/a/deep/data.csv", pd.DataFrame({"x": [1]}))
+    first.add_csv("s4/data.csv", pd.DataFrame({"x": [1]}))
+    first.commit()
+    (out / "s4" / "mine.txt").write_text("a file of the user's")
+    second = make_run(out, {"a": 1})
+    second.add_csv("s1/a/data.csv", pd.DataFrame({"x": [2]}))
+    second.commit()
+    assert not (out / "s3").exists()
+    assert (out / "s4" / "mine.txt").is_file() and not (out / "s4" / "data.csv").exists()
+    assert (out / "s1" / "a" / "data.csv").is_file()
+
+
 def test_failure_while_writing_leaves_previous_files_untouched(tmp_path):
     out = tmp_path / "r"
     first = make_run(out, {"a": 1})

@@ -198,6 +198,19 @@ def versions() -> dict[str, str]:
     return found
 
 
+def remove_empty_folders(folder: Path, root: Path) -> None:
+    """``folder`` and its parents up to (not including) ``root``, each removed while it is
+    empty: the folders of a replaced run's files this run did not write (a study's subject
+    left out of the manifest) go with them."""
+    folder, root = Path(folder), Path(root)
+    while folder != root and root in folder.parents:
+        try:
+            folder.rmdir()  # only an empty folder
+        except OSError:
+            return
+        folder = folder.parent
+
+
 def sha256_of(path: Path) -> str:
     digest = hashlib.sha256()
     with open(path, "rb") as handle:
@@ -630,6 +643,7 @@ class RunDirectory:
                     stale = self.out_dir / name
                     if stale.is_file() and stale.resolve() not in inputs:
                         stale.unlink()
+                        remove_empty_folders(stale.parent, self.out_dir)
         finally:
             for child in children:
                 child.kill()
