@@ -1096,9 +1096,11 @@ def report_files(frames, rendered: dict[str, bytes], units: list[Unit], manifest
             if tables.get(name) in frames:
                 parts.append(html_table(frames[tables[name]], digits=4))
             sections.append(Section(title, parts))
+    # a page per value of the first grouping factor (the subject, by default), in its folder
     subjects: dict[str, list[Unit]] = {}
     for unit in units:
-        subjects.setdefault(unit.key[0], []).append(unit)
+        subjects.setdefault(unit.folder.split("/")[0], []).append(unit)
+    factor = units[0].grouping[0] if units else "subject"
     files: dict[str, bytes] = {}
     subject_sections = []
     for subject, subject_units in subjects.items():
@@ -1117,9 +1119,9 @@ def report_files(frames, rendered: dict[str, bytes], units: list[Unit], manifest
                              f"all</code>, or <code>bounce &lt;analysis&gt; --data "
                              f"{html_escape(unit.folder)}/impacts.csv</code>; its tables are "
                              f"in <code>{html_escape(unit.folder)}/</code>.</p>")
-        section = Section(f"Subject {subject}", parts)
+        section = Section(f"{factor.capitalize()} {subject}", parts)
         subject_sections.append(section)
-        files[f"{subject}/report.html"] = page(f"bounce study: subject {subject}",
+        files[f"{subject}/report.html"] = page(f"bounce study: {factor} {subject}",
                                                [section]).encode()
     files["report.html"] = page("bounce study", sections + subject_sections).encode()
     return files

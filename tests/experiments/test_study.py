@@ -222,6 +222,27 @@ def test_a_recording_s_extraction_warning_reaches_the_study_and_its_report(tiny,
 
 
 @pytest.mark.slow
+def test_pages_are_per_value_of_the_first_grouping_factor_named_by_it(tiny, tmp_path,
+                                                                       cli_module):
+    """With grouping [condition, subject] the pages are per condition: they were titled
+    "Subject a", and a recording without a condition made its page's path "/report.html" (a
+    path outside the run directory: the study stopped)."""
+    sim = tmp_path / "sim"
+    shutil.copytree(tiny, sim)
+    manifest = pd.read_csv(sim / "study.csv", dtype=str, keep_default_na=False)
+    manifest.loc[manifest["subject"] == "s2", "condition"] = ""
+    manifest.to_csv(sim / "study.csv", index=False)
+    out = tmp_path / "study"
+    result = cli_module("study", "--manifest", sim / "study.csv", "--out", out, "--jobs", "1",
+                        "--set", "analyses=[regression]", "--set",
+                        "grouping=[condition, subject]", *FAST)
+    assert result.exit_code == 0, result.output
+    assert "Condition a" in (out / "a" / "report.html").read_text()
+    assert "Condition -" in (out / "-" / "report.html").read_text()
+    assert "Subject a" not in (out / "report.html").read_text()
+
+
+@pytest.mark.slow
 def test_a_damaged_file_is_one_failure_row_and_exit_1(tmp_path, cli_module):
     """One unreadable recording: one failures.csv row, every other file and unit analysed,
     exit 1 after writing."""
