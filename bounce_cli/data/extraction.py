@@ -976,12 +976,8 @@ def _contacts_of(t, racket: _Racket, ball: _Ball | None, event_t, event_alpha,
         if ball is not None:  # the events against the contacts the ball's own samples show
             found = t[detect_contacts(t, ball.bridged, racket.bridged, s,
                                       ~ball.measured & ~ball.long_gap)]
-            if found.size:
-                j = np.searchsorted(found, ct)
-                before = found[np.clip(j - 1, 0, found.size - 1)]
-                after = found[np.clip(j, 0, found.size - 1)]
-                lag = ct - np.where(np.abs(ct - before) <= np.abs(after - ct), before, after)
-                coarse_lag = np.where(np.abs(lag) <= EVENT_LAG_MAX_S, lag, np.nan)
+            nearest = match_impacts(found, ct, EVENT_LAG_MAX_S)
+            coarse_lag = np.where(nearest >= 0, ct - found[np.maximum(nearest, 0)], np.nan)
     else:
         if ball is None:
             raise ModelError("neither ball positions nor events: no impacts to find")
@@ -1047,16 +1043,17 @@ def _impacts_from_flights(t, racket: _Racket, ball: _Ball, contacts: _Contacts,
                              if near_gap or imp.next_unknown[j]
                              else "no free flight after the impact")
             continue
-        if exact[j] and before is not None and abs(after.v0 - before.v0) > 0.0:
-            # the event's time against the ball's own contact: where its flights meet (the
-            # event log's clock against the recording's)
-            lag = (after.x0 - before.x0) / (after.v0 - before.v0)
-            if abs(lag) <= EVENT_LAG_MAX_S:
-                imp.event_lag[j] = lag
+        # where the two flights meet, as ct[j] less this (both parabolas have the same g: their
+        # difference is linear in t); NaN without a flight before or with parallel ones
+        meet = ((after.x0 - before.x0) / (after.v0 - before.v0)
+                if before is not None and abs(after.v0 - before.v0) > 0.0 else math.nan)
+        if exact[j] and abs(meet) <= EVENT_LAG_MAX_S:
+            # the event's time against the ball's own contact (the event log's clock against
+            # the recording's)
+            imp.event_lag[j] = meet
         if not exact[j]:
-            if before is not None and abs(after.v0 - before.v0) > 0.0:
-                # both parabolas have the same g: their difference is linear in t
-                tj = ct[j] - (after.x0 - before.x0) / (after.v0 - before.v0)
+            if math.isfinite(meet):
+                tj = ct[j] - meet
                 if abs(tj - ct[j]) <= 3.0 * _spacing(t, ci[j]) + gap_width[j]:
                     imp.t_k[j] = tj
                     imp.met[j] = True
