@@ -30,6 +30,7 @@ from ..model.params import ModelError
 from ..data.extraction import (
     PLAUSIBLE_G_M_S2,
     ExtractionSettings,
+    TrialExtraction,
     contact_duration,
     extract_trial,
     match_impacts,
@@ -412,7 +413,7 @@ EVENT_LAG_TOLERANCE_S = 0.001
 
 
 def event_clock_warnings(setup: list[SetupQuantity], impacts: pd.DataFrame, source: str,
-                         results: list | None = None, sample_s: float = 0.0) -> list[str]:
+                         results: list[TrialExtraction], sample_s: float) -> list[str]:
     """A warning where the events' times lag or lead the ball's contacts in the recording by
     more than half the contact's duration (a log of the contacts' onsets or releases: the
     flights meet about mid-contact) plus EVENT_LAG_TOLERANCE_S: the event log's clock is not
@@ -432,7 +433,7 @@ def event_clock_warnings(setup: list[SetupQuantity], impacts: pd.DataFrame, sour
         se = fine.se if math.isfinite(fine.se) else 0.0
         if abs(fine.estimate) > allowed + 3.0 * se:
             lag, n, how = fine.estimate, fine.n, "where its flights meet"
-    coarse = np.concatenate([r.event_lags_coarse_s for r in results or []] or [np.array([])])
+    coarse = np.concatenate([np.array([]), *(r.event_lags_coarse_s for r in results)])
     coarse = coarse[np.isfinite(coarse)]
     if lag is None and coarse.size >= 3 and (
             abs(float(np.median(coarse))) > allowed + 1.5 * sample_s):
