@@ -2,6 +2,8 @@
 sets, as fixtures (test modules never import from one another)."""
 
 import os
+import signal
+import subprocess
 
 import matplotlib
 import pytest
@@ -68,3 +70,39 @@ def _no_color(monkeypatch):
 
 def pytest_configure(config):
     os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+#: the environment of a bounce process a test may find hung: faulthandler dumps every thread's
+#: stack on SIGABRT (``ended_or_stacks``)
+DUMPABLE = {**os.environ, "PYTHONFAULTHANDLER": "1"}
+
+
+def ended_or_stacks(process: subprocess.Popen, timeout: float, what: str) -> tuple[str, str]:
+    """``process.communicate(timeout)``; a process still running then (started with
+    ``env=DUMPABLE``, in a session of its own) fails the test with where each of its threads
+    was: SIGABRT (faulthandler's dump on stderr), and SIGKILL to its group after 10 s more
+    (a child holding the pipe open)."""
+    try:
+        return process.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        pass
+    process.send_signal(signal.SIGABRT)
+    try:
+        _, err = process.communicate(timeout=10)
+    except subprocess.TimeoutExpired:
+        os.killpg(process.pid, signal.SIGKILL)
+        _, err = process.communicate()
+    pytest.fail(f"{what}: still running after {timeout:g} s; its threads were at:\n{err}")
+
+
+@pytest.fixture(scope="session")
+def ended():
+    """``ended(process, timeout, what)`` -> (stdout, stderr) of a process that ended within
+    ``timeout`` s; else the test fails with its threads' stacks (``ended_or_stacks``)."""
+    return ended_or_stacks
+
+
+@pytest.fixture(scope="session")
+def dumpable_env():
+    """The environment for a process ``ended`` may have to dump."""
+    return DUMPABLE

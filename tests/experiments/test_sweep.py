@@ -300,7 +300,7 @@ def test_the_bundled_sweep_runs_in_the_library_without_files(paper_params):
 @pytest.mark.slow  # about 10 s: three sweeps, two of them in their own processes
 @pytest.mark.skipif(not hasattr(signal, "SIGINT") or sys.platform == "win32",
                     reason="POSIX signals")
-def test_a_real_ctrl_c_mid_sweep_then_resume(cli, tmp_path):
+def test_a_real_ctrl_c_mid_sweep_then_resume(cli, tmp_path, ended, dumpable_env):
     """``bounce sweep --jobs 2`` in its own process, SIGINT to its process group (a terminal's
     Ctrl-C) once a point is on disk: exit 130, the finished points kept; ``--resume`` then
     writes the sweep.csv of an uninterrupted run."""
@@ -310,13 +310,13 @@ def test_a_real_ctrl_c_mid_sweep_then_resume(cli, tmp_path):
     command = [sys.executable, "-m", "bounce_cli", "sweep", "--quiet", "--jobs", "2",
                "--out", str(out), *grid]
     process = subprocess.Popen(command, stderr=subprocess.PIPE, text=True,
-                               start_new_session=True)
+                               start_new_session=True, env=dumpable_env)
     deadline = time.monotonic() + 60
     while not list((out / "points").glob("point-*.json")) and process.poll() is None:
         assert time.monotonic() < deadline, "no point finished within a minute"
         time.sleep(0.01)
     os.killpg(process.pid, signal.SIGINT)
-    _, stderr = process.communicate(timeout=30)
+    _, stderr = ended(process, 30, "bounce sweep after SIGINT")
     assert process.returncode == 130, stderr
     kept = len(list((out / "points").glob("point-*.json")))
     # one line, saying where the finished points are and how to go on
