@@ -108,10 +108,31 @@ def _launch(i, slope, curvature, idx, m, outcome, iterations):
     return m
 
 
+@_inline
+def _wrap_near(x):
+    """np.mod(x, 2 pi) for x in (-2 pi, 8 pi) without fmod's call, the same bits: on
+    [2 pi, 8 pi) (with 2 pi the double TWO_PI) fmod's x - n TWO_PI, n = 1, ..., 3, is exact, and
+    so is each subtraction here (Sterbenz: each takes a multiple of TWO_PI from a number
+    within a factor 2 of it), and on (-2 pi, 0) np.mod's fmod is x itself and the result its
+    rounded sum with TWO_PI, as here; -0.0 becomes +0.0 as in np.mod. Selects only (the loop
+    around it vectorises); elsewhere (NaN, far outside) the value is not used (``_wrap``)."""
+    reduced = x - 2.0 * TWO_PI  # exact for x in [2 TWO_PI, 8 TWO_PI)
+    reduced = reduced - TWO_PI if reduced >= TWO_PI else reduced  # exact: in [TWO_PI, 2 TWO_PI)
+    once = x - TWO_PI  # exact for x in [TWO_PI, 2 TWO_PI)
+    near = x + TWO_PI if x < 0.0 else x + 0.0
+    return reduced if x >= 2.0 * TWO_PI else (once if x >= TWO_PI else near)
+
+
+@_inline
+def _wraps_near(x):
+    """True where ``_wrap_near(x)`` is np.mod(x, 2 pi)."""
+    return (x > -TWO_PI) & (x < 4.0 * TWO_PI)
+
+
 @_jit
 def _wrap(x):
-    """np.mod(x, 2 pi) (the identity on (0, 2 pi), where fmod is exact: no call)."""
-    return x if 0.0 < x < TWO_PI else x % TWO_PI
+    """np.mod(x, 2 pi), the same bits (without fmod's call where x lies in (-2 pi, 8 pi))."""
+    return _wrap_near(x) if _wraps_near(x) else x % TWO_PI
 
 
 @_inline
@@ -189,8 +210,16 @@ def _impact(th, vv, cos_th, sin_th, m, c, max_steps, hop, pos, S, D0, C, SN, V, 
     S (wrapped: fmod, a call, in its own loop), its sine SN and cosine C and eq. 5's
     velocity V (a loop that vectorises)."""
     _first_impact(vv, cos_th, sin_th, m, c, max_steps, hop, pos, S, D0, C, SN, V, SH, CH)
-    for j in range(m):
-        S[j] = _wrap(th[j] + hop[j])
+    far = 0
+    for j in range(m):  # np.mod near [0, 2 pi) (vectorised) ...
+        phase = th[j] + hop[j]
+        S[j] = _wrap_near(phase)
+        far += not _wraps_near(phase)
+    if far:  # ... and elsewhere (NaN: a flight that did not converge), fmod
+        for j in range(m):
+            phase = th[j] + hop[j]
+            if not _wraps_near(phase):
+                S[j] = phase % TWO_PI
     for j in range(m):
         SN[j], C[j] = _sincos(S[j])
         V[j] = c[_V_COEF] * C[j] - c[_ALPHA] * vv[j] + c[_G_ALPHA_W] * hop[j]

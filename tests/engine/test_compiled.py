@@ -105,6 +105,42 @@ def test_undecided_points_after_max_iterations_match():
                                kernel="compiled"), numpy_result)
 
 
+def test_the_kernel_s_phase_wrap_is_np_mod_to_the_last_bit():
+    """``_wrap`` takes multiples of 2 pi away without fmod's call where that is exact: its
+    result must be np.mod's, bit for bit, at the multiples' edges, at -0.0, NaN and inf, and
+    on random phases in every branch (a hurried x - 3 * TWO_PI would be off by an ulp)."""
+    two_pi = compiled.TWO_PI
+    edges = [k * two_pi for k in (-2, -1, 1, 2, 3, 4, 5)]
+    special = [0.0, -0.0, 5e-324, -5e-324, 1e-300, -1e-300, np.nan, np.inf, -np.inf,
+               *edges, *np.nextafter(edges, np.inf), *np.nextafter(edges, -np.inf)]
+    rng = np.random.default_rng(5)
+    phases = np.concatenate([special, rng.uniform(-3.0 * two_pi, 9.0 * two_pi, 20_000),
+                             rng.uniform(-1e3, 1e3, 2_000)])
+    expected = np.mod(phases, two_pi)
+    got = np.array([compiled._wrap(x) for x in phases])
+    np.testing.assert_array_equal(got.view(np.int64), expected.view(np.int64))
+
+
+@pytest.mark.parametrize("params", PARAMETERS[:2])
+def test_an_impact_s_new_phase_is_np_mod_of_theta_plus_hop(params):
+    """``_impact``'s phases after impact (its wrap without fmod, vectorised, and fmod where
+    the flight was long or did not converge) against np.mod of the same theta + hop."""
+    rng = np.random.default_rng(3)
+    m = 3000
+    theta = rng.uniform(0.0, 2.0 * np.pi, m)
+    racket_v = params.racket_amplitude * params.omega
+    v = rng.uniform(-racket_v, 6.0 * params.g * params.racket_period, m)  # hops up to 12 pi
+    sin_th, cos_th = sincos(theta)
+    c = compiled._constants(params, params.fixed_point(), 1e-3, 1e-3)
+    hop, S, D0, C, SN, V, SH, CH = (np.empty(m) for _ in range(8))
+    compiled._impact(theta, v, cos_th, sin_th, m, c, 2000, hop, np.empty(m, np.int64),
+                     S, D0, C, SN, V, SH, CH)
+    long_flight = theta + hop >= 4.0 * compiled.TWO_PI
+    assert np.isnan(hop).any() and long_flight.any() and (~long_flight).any()
+    np.testing.assert_array_equal(S.view(np.int64),
+                                  np.mod(theta + hop, compiled.TWO_PI).view(np.int64))
+
+
 def test_auto_uses_the_compiled_kernel_unless_turned_off(monkeypatch):
     calls = []
     original = compiled.classify_arrays
