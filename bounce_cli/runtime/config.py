@@ -475,7 +475,8 @@ def format_validation_error(
     elif not err["loc"] and any(named in str(err.get("msg", ""))
                                 for key in overridden for named in _as_named(key)):
         # a rule between keys (a model validator) names a key set by --set, or a block's
-        # validator names its key after the block: 'extract: units.lenght'
+        # validator names its key after the block: 'extract: units.lenght', or the block
+        # it is in: 'extract: unitz: unknown key' of extract.unitz.length
         source = "--set"
     if err["type"] == "extra_forbidden":
         reason = "unknown key"
@@ -496,10 +497,13 @@ def format_validation_error(
 
 def _as_named(key: str) -> tuple[str, ...]:
     """How a message may name a dotted key: ``a.b.c``, ``a: b.c`` or ``a.b: c`` (a block's
-    validator naming a key inside it)."""
+    validator naming a key inside it), or a block on its way named as unknown: ``a: b:``
+    (``a.b`` misspelt, so that nothing below it was looked at)."""
     parts = key.split(".")
+    blocks = tuple(".".join(parts[:i]) + ": " + ".".join(parts[i:j]) + ":"
+                   for j in range(2, len(parts)) for i in range(1, j))
     return (key, *(".".join(parts[:i]) + ": " + ".".join(parts[i:])
-                   for i in range(1, len(parts))))
+                   for i in range(1, len(parts))), *blocks)
 
 
 def show_value(value: Any) -> str:

@@ -463,6 +463,11 @@ def test_an_unknown_setting_fails_before_anything_runs(tmp_path, cli, user_error
     result = cli("study", "--manifest", manifest(tmp_path, "file,subject\na.csv,s1\n"),
                  "--set", "extract.units.lenght=mm", "--out", tmp_path / "out")
     user_error(result, "--set: extract: units.lenght: unknown key (did you mean units.length?)")
+    # a misspelt block of the extract settings: the message names the block, not the key
+    result = cli("study", "--manifest", manifest(tmp_path, "file,subject\na.csv,s1\n"),
+                 "--set", "extract.unitz.length=mm", "--out", tmp_path / "out")
+    user_error(result, "--set: extract: unitz: unknown key (did you mean units?)")
+    assert "study.yaml" not in result.output
 
 
 @pytest.mark.slow
