@@ -18,8 +18,11 @@ selects), which LLVM vectorises (AVX-512 here: about 4.5 ns a flight, where the 
 ``sin`` and ``cos`` alone took 24 ns), and the compaction of the flights still in the air
 (2.3 ns, also without a branch). An impact's own work (the new phase, its sine and cosine,
 eq. 5, the launch's first step) is split the same way into loops that vectorise and loops
-that compact. The grid takes 0.73 s on one thread (was 1.5 s with the C library's
-functions), 0.37 s on two.
+that compact; the new phase is wrapped without fmod's call (``_wrap_near``). The grid takes
+0.73 s on one thread (was 1.5 s with the C library's functions), 0.37 s on two, on the AMD
+machine; on an Intel Xeon with AVX-512, whose full width LLVM uses only when asked
+(``prefer_full_vector_width``), the wrap and the width took two threads from 0.79-0.89 s to
+0.54-0.75 s (in a slow hour of that machine).
 
 Bit-for-bit: every expression below is the numpy code's expression in the same order
 (IEEE double arithmetic, no fast-math, so no contraction into fused multiply-adds;
@@ -39,16 +42,42 @@ import contextlib
 import functools
 import math
 import sys
-from typing import Iterator
+from typing import Any, Iterator
 
 import numba
 import numpy as np
+from numba.core import codegen as numba_codegen, config as numba_config
 
 from .impact import LAST_STEP_LEVEL, POLISH_LIMIT, ROUNDING_LEVEL, STEP_FLOOR
 from .params import FixedPoint, ModelParams
 from .trig import sincos, sincos_of_float
 
 TWO_PI = 2.0 * math.pi
+
+
+def prefer_full_vector_width() -> bool:
+    """Let LLVM vectorise with the CPU's widest vectors: on CPUs with AVX-512 it keeps to
+    256-bit vectors by default (its tuning for Intel's server CPUs), and the kernel's loops
+    ran about a tenth slower so (the Fig. 4 grid on two threads: 0.70-0.75 s against
+    0.60-0.68 s on a 2-core Intel Xeon). Each flight's arithmetic is its own, so the width
+    changes no bit (``tests/engine/test_compiled.py`` compares a run without vectors).
+
+    Only where numba's own choice is in force: not when NUMBA_CPU_NAME or
+    NUMBA_CPU_FEATURES are set (a cache shared by several machines) or AVX is disabled, and
+    only before numba has compiled anything in this process (its target is made once);
+    whatever numba compiles later in the process gets the same width. Returns whether it
+    was set."""
+    config: Any = numba_config  # its names are set from the environment at run time
+    if config.CPU_NAME is not None or config.CPU_FEATURES is not None or not config.ENABLE_AVX:
+        return False
+    features = numba_codegen.get_host_cpu_features()
+    if "+avx512f" not in features.split(","):
+        return False
+    config.CPU_FEATURES = features + ",-prefer-256-bit"
+    return True
+
+
+prefer_full_vector_width()
 
 _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 #: small functions inlined into the loops that call them (in the numba IR: the loop stays

@@ -231,6 +231,61 @@ def test_controlled_basin_compiled_in_threads_is_one_process():
                 classify_grid(theta, v, cycle, kernel="compiled"))
 
 
+def _in_a_fresh_process(code: str, **env: str) -> str:
+    """What ``code`` prints in a new interpreter with ``env`` added (and numba's own
+    NUMBA_CPU_* variables removed unless given)."""
+    import os
+    import subprocess
+    import sys
+
+    clean = {k: v for k, v in os.environ.items() if not k.startswith("NUMBA_CPU")}
+    done = subprocess.run([sys.executable, "-c", code], env={**clean, **env},
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    return done.stdout
+
+
+CPU_FEATURES_AFTER_IMPORT = ("import bounce_cli.model.compiled\n"
+                             "from numba.core import config, codegen\n"
+                             "print(repr(config.CPU_FEATURES))\n"
+                             "print(config.ENABLE_AVX and '+avx512f' in "
+                             "codegen.get_host_cpu_features().split(','))")
+
+
+def test_the_widest_vectors_only_where_numba_s_choice_is_in_force():
+    """Importing the kernel lets LLVM use AVX-512's full width on CPUs that have it (numba's
+    features and '-prefer-256-bit'), leaves numba alone elsewhere, and never overrides
+    a CPU the user named (NUMBA_CPU_NAME: a cache shared by several machines)."""
+    features, avx512_in_use = _in_a_fresh_process(CPU_FEATURES_AFTER_IMPORT).splitlines()
+    if avx512_in_use == "True":
+        assert features.endswith(",-prefer-256-bit'") and "+avx512f" in features
+    else:
+        assert features == "None"
+    named, _ = _in_a_fresh_process(CPU_FEATURES_AFTER_IMPORT,
+                                   NUMBA_CPU_NAME="generic").splitlines()
+    assert named == "''"  # numba's own default for a generic CPU, untouched
+
+
+@pytest.mark.slow  # compiles the kernel for a generic CPU: about 10 s
+def test_the_vector_width_changes_no_bit(tmp_path):
+    """The kernel compiled for a generic x86-64 (no AVX: two doubles a vector at most) gives
+    the outcomes, impact counts and first-impact phases of this process's kernel (the
+    widest vectors the CPU has), bit for bit: each flight's arithmetic is its own."""
+    code = ("import numpy as np, sys\n"
+            "from bounce_cli.model import compiled\n"
+            "from bounce_cli.model.params import ModelParams\n"
+            "p = ModelParams(alpha=0.8, g=9.81, racket_amplitude=0.6, racket_period=0.92)\n"
+            "rng = np.random.default_rng(4)\n"
+            "th, v = rng.uniform(0, 2 * np.pi, 20000), rng.uniform(0, 10, 20000)\n"
+            "o, it = compiled.classify_arrays(th, v, p, p.fixed_point(), 100, 1e-3, 1e-3, 2000)\n"
+            "hop = compiled.first_impact_phase(th, v, p, max_steps=2000)\n"
+            "sys.stdout.write(o.tobytes().hex() + ' ' + it.tobytes().hex() + ' '"
+            " + hop.tobytes().hex())\n")
+    generic = _in_a_fresh_process(code, NUMBA_CPU_NAME="generic",
+                                  NUMBA_CACHE_DIR=str(tmp_path / "cache"))
+    assert _in_a_fresh_process(code) == generic
+
+
 def test_loading_the_kernel_leaves_scipy_linalg_importable():
     """``compiled.load`` keeps numba's set-up from importing scipy.linalg (start-up time), and
     scipy.linalg imports as usual afterwards; where it is imported already, nothing changes."""
