@@ -41,6 +41,7 @@ from ..analysis.classify import (
 )
 from ..model.control import ControlledMap, is_passive
 from ..model.maps import ImpactMap, PassiveMap
+from ..model.linear import is_stable, stability
 from ..model.params import ModelParams
 from ..runtime.figure_files import DeferredFigure
 from .plotting import publication_style
@@ -225,6 +226,11 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
         f"(limit {settings.max_iterations}"
         + ("; paper: no point reached 100)" if at_paper else ")"),
     ]
+    radius = unstable_radius(markers)
+    if radius is not None:
+        summary.append(f"no start is period-1: the fixed point is unstable (spectral radius "
+                       f"{radius:.3g}, eq. 10), so no orbit stays there; bounce attractors "
+                       "finds what the orbits settle on")
     if fig3:
         summary.append("Fig. 3 initial conditions: " + ", ".join(
             f"v0 = {row.v0_m_s:g} m/s -> {row.outcome} after {row.iterations}"
@@ -300,7 +306,9 @@ def marker_frame(params: ModelParams, settings: ClassifySettings, *,
                  fig3: bool = True, controller=None) -> pd.DataFrame:
     """The fixed point (eqs. 7, 8) and, with ``fig3``, Fig. 3's two initial conditions (the
     ball on the racket at x_b(0) = 0.205 m, theta0 = asin(x_b(0) / a_r)), each classified
-    (with the racket period controller, if any)."""
+    (with the racket period controller, if any); ``spectral_radius``: the fixed point's
+    (eq. 10) on every row for the passive map (where it is unstable no start is
+    ``period1``: ``PassiveMap.of``), NaN with a controller."""
     fp = params.fixed_point()
     starts = paper.FIG3_V0_M_S if fig3 else {}
     names = ["fixed_point", *starts]
@@ -311,10 +319,12 @@ def marker_frame(params: ModelParams, settings: ClassifySettings, *,
 
     if controller is None:  # three points: numpy (no need to load the compiled kernel)
         res = classify_batch(theta, v, params, settings, kernel="numpy")
+        radius = stability(params).spectral_radius
     else:
         from ..analysis.control_design import classify_controlled
 
         res = classify_controlled(theta, v, params, controller, settings)
+        radius = math.nan  # the controlled map keeps its target (its own 3 x 3 stability)
     return pd.DataFrame(
         {
             "marker": names,
@@ -322,6 +332,7 @@ def marker_frame(params: ModelParams, settings: ClassifySettings, *,
             "v0_m_s": v,
             "outcome": res.names(),
             "iterations": res.iterations,
+            "spectral_radius": radius,
         }
     )
 
@@ -433,18 +444,34 @@ def draw(frames: dict[str, pd.DataFrame], only: Collection[str] = FIGURES) -> di
             cycles = int(cycles)
             labels["locked"] += f", period {cycles} racket cycle{'s' if cycles != 1 else ''}"
         labels["undecided"] = "undecided in max impacts (chaotic or a long transient)"
+    radius = unstable_radius(markers)
+    title = "Domain of attraction of the period-1 attractor (paper Fig. 4)"
+    if radius is not None:
+        labels["period1"] = "period-1: none (unstable)"
+        title = (f"Outcomes of the starts: no period-1 attractor\n(the fixed point is "
+                 f"unstable, spectral radius {radius:.3g}, eq. 10)")
     grid = _Grid(basin)
     figures = {}
     if "basin.png" in only:
-        figures["basin.png"] = _outcome_figure(grid, codes, markers, shown, labels, exact)
+        figures["basin.png"] = _outcome_figure(grid, codes, markers, shown, labels, exact,
+                                               title)
     if "basin_iterations.png" in only:
         figures["basin_iterations.png"] = _iterations_figure(grid, codes, basin, markers,
                                                              exact)
     return figures
 
 
+def unstable_radius(markers: pd.DataFrame) -> float | None:
+    """The fixed point's spectral radius where markers.csv records it as unstable (eq. 10,
+    ``linear.is_stable``), else None (stable, a controller, or a table without it)."""
+    if "spectral_radius" not in markers or markers.empty:
+        return None
+    radius = float(markers["spectral_radius"].iloc[0])
+    return radius if math.isfinite(radius) and not is_stable(radius) else None
+
+
 def _outcome_figure(grid: _Grid, codes, markers: pd.DataFrame, shown: list[str],
-                    labels: dict[str, str], exact: bool):
+                    labels: dict[str, str], exact: bool, title: str):
     """basin.png: each start's outcome (Fig. 4's white, grey and black), with the markers."""
     from matplotlib.colors import BoundaryNorm, ListedColormap
     from matplotlib.patches import Patch
@@ -467,8 +494,7 @@ def _outcome_figure(grid: _Grid, codes, markers: pd.DataFrame, shown: list[str],
     fig.legend(handles=handles, **(LEGEND_BELOW | {"ncol": 2} if exact else LEGEND_BELOW))
     ax.set_xlabel(r"initial phase $\theta_0$ (deg)")
     ax.set_ylabel(r"initial velocity $v_0$ (m/s)")
-    ax.set_title("Domain of attraction of the period-1 attractor (paper Fig. 4)"
-                 + (",\nexact sticking (min_hop_s 0)" if exact else ""))
+    ax.set_title(title + (",\nexact sticking (min_hop_s 0)" if exact else ""))
     return fig
 
 

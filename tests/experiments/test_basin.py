@@ -345,3 +345,32 @@ def test_figures_colour_each_cell_by_its_outcome_and_impact_count():
         assert bar.get_ylim() == (expected - 0.5, expected + 0.5)
         ticks = [t for t in bar.get_yticks() if bar.get_ylim()[0] <= t <= bar.get_ylim()[1]]
         assert ticks == [expected]
+
+
+def test_an_unstable_fixed_point_is_said_and_reached_by_no_start(tmp_path, cli):
+    """At alpha 0.7, a_r 0.3 m the fixed point exists but is unstable (spectral radius 2.07):
+    no start is period-1 (the tree before counted starts that passed within the tolerance of
+    it, and the fixed point itself), markers.csv records the radius, the summary says why,
+    and basin.png's title says so, also when redrawn from the tables."""
+    result = cli("basin", *SMALL, "--jobs", 1, "--set", "model.alpha=0.7",
+                 "--out", tmp_path / "u")
+    assert result.exit_code == 0, result.output
+    assert "no start is period-1: the fixed point is unstable (spectral radius 2.07" \
+        in result.stderr
+    fractions = pd.read_csv(tmp_path / "u" / "fractions.csv").set_index("outcome")
+    assert fractions.loc["period1", "count"] == 0
+    markers = pd.read_csv(tmp_path / "u" / "markers.csv")
+    assert markers.outcome[0] != "period1"
+    assert markers.spectral_radius[0] == pytest.approx(2.0716, abs=1e-4)
+    figures = basin.draw({n: pd.read_csv(tmp_path / "u" / n)
+                          for n in ("basin.csv", "markers.csv")})
+    title = figures["basin.png"].axes[0].get_title()
+    assert "no period-1 attractor" in title and "2.07" in title
+    # at the paper's model the fixed point is stable: Fig. 4's title and period-1 starts
+    stable = cli("basin", *SMALL, "--jobs", 1, "--out", tmp_path / "s")
+    assert stable.exit_code == 0 and "no start is period-1" not in stable.stderr
+    markers = pd.read_csv(tmp_path / "s" / "markers.csv")
+    assert markers.outcome[0] == "period1" and markers.spectral_radius[0] < 1.0
+    assert basin.unstable_radius(markers) is None
+    assert pd.read_csv(tmp_path / "s" / "fractions.csv").set_index(
+        "outcome").loc["period1", "count"] > 0
