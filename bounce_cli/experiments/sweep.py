@@ -258,7 +258,8 @@ QUANTITIES = {
 @publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
     """sweep.png from sweep.csv and axes.csv: heat maps of each quantity over a 2-D sweep
-    (the spectral radius 1 contour dashed on each; grey: no fixed point), lines over a 1-D."""
+    (the spectral radius 1 contour dashed on each; grey: no value, i.e. no fixed point, or an
+    uncertainty exponent withheld), lines over a 1-D."""
     sweep, axes = frames["sweep.csv"], frames["axes.csv"]
     quantities = [q for q in QUANTITIES if q in sweep.columns]
     if len(axes) == 1:
@@ -304,7 +305,10 @@ def _draw_plane(sweep: pd.DataFrame, axes: pd.DataFrame, quantities: list[str]):
         ax.set_xlabel(SWEEP_PARAMETERS[x_axis["parameter"]][1])
         ax.set_ylabel(SWEEP_PARAMETERS[y_axis["parameter"]][1])
         ax.set_title(QUANTITIES[q].split(" (")[0], fontsize=9)
-    fig.suptitle("Basin atlas over parameters (grey: no period-1 fixed point, eq. 8; "
+    fig.suptitle("Basin atlas over parameters (grey: no value: no period-1 fixed point, eq. "
+                 "8, or too few uncertain points for the exponent; dashed: spectral radius 1, "
+                 "eq. 14's flip boundary)" if "uncertainty_exponent" in quantities else
+                 "Basin atlas over parameters (grey: no period-1 fixed point, eq. 8; "
                  "dashed: spectral radius 1, eq. 14's flip boundary)")
     return fig
 

@@ -63,3 +63,22 @@ def test_uncertainty_exponent_of_smooth_and_rough_boundaries():
 
     rough = uncertainty_exponent(noise, (0, 1), (0, 1), eps, 2000, rng)
     assert abs(rough.alpha) < 0.05
+
+
+def test_an_uncertainty_exponent_from_a_handful_of_uncertain_points_is_withheld():
+    """300 samples of a straight boundary: 5, 6 and 8 uncertain points at the three
+    eps. Fitted through them the slope is noise (the review of a sweep found -0.08 and 1.6
+    where the exponent lies in [0, 1]); no eps has MIN_UNCERTAIN_POINTS, so NaN."""
+    from bounce_cli.analysis.basin_measures import MIN_UNCERTAIN_POINTS
+
+    def half_plane(x, y):
+        return (x > 0.3 + 0.2 * y).astype(int)
+
+    eps = np.array([5e-3, 1e-2, 2e-2])
+    fit = uncertainty_exponent(half_plane, (0, 1), (0, 1), eps, 300, np.random.default_rng(2))
+    counts = np.round(fit.uncertain_fraction * 300)
+    assert (counts > 0).sum() >= 2 and (counts >= MIN_UNCERTAIN_POINTS).sum() < 2, counts
+    assert np.isnan(fit.alpha) and np.isnan(fit.alpha_se)
+    # with enough samples the same boundary gives its exponent, 1
+    fit = uncertainty_exponent(half_plane, (0, 1), (0, 1), eps, 20000, np.random.default_rng(2))
+    assert fit.alpha == pytest.approx(1.0, abs=0.1)
