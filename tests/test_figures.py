@@ -402,3 +402,26 @@ def test_a_png_laid_out_before_saving_is_what_savefig_writes(name):
     pdf = io.BytesIO()
     save_figure(fig, pdf, "pdf", dpi=150, source="test")  # type: ignore[arg-type]
     assert pdf.getvalue()[:5] == b"%PDF-"
+
+
+def test_the_learning_figure_names_its_fit_in_a_sentence():
+    """Fig. 6 over the study names the fit its trend lines come from: 'mixed: random intercept
+    and slope; a random-effects variance estimated at 0' (group_learning.csv's method) reads
+    'mixed model with random intercept and slope; ...', with no nested parentheses (a review
+    read the old title, '(fixed effect: mixed: ... (a random-effects variance at its
+    boundary, 0))', as garbled)."""
+    from bounce_cli.experiments.study_figures import learning_figure
+
+    trials = pd.DataFrame({"subject": ["s1"] * 3 + ["s2"] * 3, "condition": "a",
+                           "trial_number": [1, 2, 3] * 2,
+                           "ac_mean_g": [-0.4, -0.5, -0.6, -0.45, -0.5, -0.62],
+                           "apex_sd_m": [0.05, 0.04, 0.03, 0.06, 0.05, 0.04]})
+    method = "mixed: random intercept and slope; a random-effects variance estimated at 0"
+    trends = pd.DataFrame({"condition": "a", "quantity": ["ac_mean_g", "apex_sd_m"],
+                           "intercept": [-0.3, 0.06], "slope_per_trial": [-0.1, -0.01],
+                           "ci_low": [-0.2, -0.02], "ci_high": [0.0, 0.0],
+                           "method": method})
+    title = learning_figure(trials, trends)._suptitle.get_text()
+    assert ("(fixed effect: mixed model with random intercept and slope; a random-effects "
+            "variance estimated at 0)") in title
+    assert "((" not in title and "))" not in title

@@ -108,7 +108,7 @@ def mixed_trend(frame: pd.DataFrame, y: str, x: str = "trial_number", group: str
             # (the data show no spread of that effect across subjects): said, not refused
             if any("boundary" in str(w.message).lower() or "singular" in str(w.message).lower()
                    for w in caught):
-                method += " (a random-effects variance at its boundary, 0)"
+                method += "; a random-effects variance estimated at 0"
             t = stats.t.ppf(0.5 + confidence / 2.0, df)
             p = 2.0 * stats.t.sf(abs(slope / se), df)
             return Trend(slope, float(fit.fe_params["Intercept"]), se, slope - t * se,

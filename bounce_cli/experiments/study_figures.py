@@ -106,6 +106,9 @@ def learning_figure(trials: pd.DataFrame, trends: pd.DataFrame | None):
     # on a line of its own: a one-condition figure is narrow
     methods = (sorted(trends["method"].dropna().astype(str).unique())
                if trends is not None and "method" in trends else [])
+    # 'mixed: random intercept and slope' reads as a sentence in the title
+    methods = [f"mixed model with {m.removeprefix('mixed: ')}" if m.startswith("mixed: ")
+               else m for m in methods]
     fig.suptitle("Fig. 6 over the study: learning trends"
                  + (f"\n(fixed effect: {'; '.join(methods)})" if methods else ""), fontsize=10)
     return fig
