@@ -171,6 +171,17 @@ class Attractor:
         return self.kind
 
 
+def periodic_lyapunov(multipliers: np.ndarray, period: int) -> float:
+    """The largest Lyapunov exponent per impact of a period-``period`` orbit from its
+    multipliers (the eigenvalues of F^p's Jacobian): ln max |mu| / p (NaN without finite
+    multipliers; -inf where the largest is 0)."""
+    magnitudes = np.abs(np.asarray(multipliers))
+    if magnitudes.size == 0 or not np.all(np.isfinite(magnitudes)) or period < 1:
+        return math.nan
+    largest = float(magnitudes.max())
+    return math.log(largest) / period if largest > 0.0 else -math.inf
+
+
 def _cycles(n: int) -> str:
     """'1 cycle', '3 cycles' (racket cycles)."""
     return f"{n} cycle{'s' if n != 1 else ''}"
@@ -363,6 +374,7 @@ def _discover(cat: _Catalogue, impact_map: PassiveMap, theta, v, stick_label: in
                     continue
                 found = cat.add(Attractor(-1, "periodic", p, cycles, points_th, points_v,
                                           cat.cells.code(points_th, points_v), multipliers,
+                                          lyapunov=periodic_lyapunov(multipliers, p),
                                           refined=refined))
             labels[open_[i]] = found
         still = period == 0

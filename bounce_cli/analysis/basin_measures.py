@@ -17,6 +17,8 @@ shows one basin and calls its structure "complicated" for high initial velocitie
 
 from __future__ import annotations
 
+import math
+
 from dataclasses import dataclass
 from typing import Callable
 
@@ -25,13 +27,16 @@ import numpy as np
 
 @dataclass(frozen=True)
 class BasinEntropy:
-    """S_b, S_bb, the number of boxes and of boundary boxes, the box size in cells."""
+    """S_b, S_bb, the number of boxes and of boundary boxes, the box size in cells, and
+    the standard error of S_bb as the mean of the boundary boxes' entropies (NaN with fewer
+    than two)."""
 
     basin_entropy: float
     boundary_basin_entropy: float
     boxes: int
     boundary_boxes: int
     box: int
+    boundary_basin_entropy_se: float = math.nan
 
 
 def basin_entropy(outcome: np.ndarray, box: int = 5) -> BasinEntropy:
@@ -59,12 +64,15 @@ def basin_entropy(outcome: np.ndarray, box: int = 5) -> BasinEntropy:
     entropy = terms.sum(axis=1)
     boundary = (counts > 0).sum(axis=1) > 1
     n_boundary = int(boundary.sum())
+    se = (float(np.std(entropy[boundary], ddof=1) / math.sqrt(n_boundary))
+          if n_boundary >= 2 else math.nan)
     return BasinEntropy(
         basin_entropy=float(entropy.mean()),
         boundary_basin_entropy=float(entropy[boundary].mean()) if n_boundary else 0.0,
         boxes=int(entropy.size),
         boundary_boxes=n_boundary,
         box=box,
+        boundary_basin_entropy_se=se,
     )
 
 

@@ -372,6 +372,20 @@ def summary_lines(attractors, shares: dict[int, tuple], n_starts: int,
 UNDECIDED_CAVEAT = 0.05
 
 
+def ln2_verdict(value: float, se: float) -> str:
+    """measures.csv's reading of S_bb against ln 2 (Daza et al. 2016: above it, a fractal
+    boundary, a sufficient condition; below it the test says nothing), by two standard
+    errors: a margin within them (0.693167 over 91 boxes) decides nothing."""
+    ln2 = math.log(2.0)
+    if not math.isfinite(se):
+        return f"ln 2 = {ln2:.4f} (too few boundary boxes for a standard error: not tested)"
+    if value - 2.0 * se > ln2:
+        return f"above ln 2 = {ln2:.4f} by more than 2 SE: a fractal boundary (sufficient)"
+    if value + 2.0 * se < ln2:
+        return f"below ln 2 = {ln2:.4f} by more than 2 SE: this test is silent"
+    return f"within 2 SE of ln 2 = {ln2:.4f}: undecided by this test"
+
+
 def _measures(config: AttractorsConfig, finder: AttractorFinder, labels, theta_deg, v0,
               follow: Callable = map):
     """(measures.csv, uncertainty.csv): basin entropy, boundary basin entropy (Daza et al.
@@ -384,8 +398,9 @@ def _measures(config: AttractorsConfig, finder: AttractorFinder, labels, theta_d
         rows += [{"quantity": "basin_entropy", "value": be.basin_entropy, "se": math.nan,
                   "note": f"{be.boxes} boxes of {m.box} x {m.box} starts"},
                  {"quantity": "boundary_basin_entropy", "value": be.boundary_basin_entropy,
-                  "se": math.nan, "note": f"{be.boundary_boxes} boundary boxes; > ln 2 = "
-                  "0.693: a fractal boundary (sufficient)"}]
+                  "se": be.boundary_basin_entropy_se,
+                  "note": f"{be.boundary_boxes} boundary boxes; "
+                  + ln2_verdict(be.boundary_basin_entropy, be.boundary_basin_entropy_se)}]
     else:  # said, not left out
         note = (f"not measured: the grid ({labels.shape[1]} x {labels.shape[0]} starts) is "
                 f"smaller than one box of measures.box = {m.box} starts a side")
@@ -398,8 +413,9 @@ def _measures(config: AttractorsConfig, finder: AttractorFinder, labels, theta_d
                                   x_range, y_range,
                                   np.asarray(m.eps), m.samples, np.random.default_rng(m.seed))
         rows.append({"quantity": "uncertainty_exponent", "value": ue.alpha, "se": ue.alpha_se,
-                     "note": "f(eps) ~ eps^alpha; 1: a smooth boundary, < 1: fractal "
-                     f"(dimension 2 - alpha); {m.samples} starts per eps"})
+                     "note": "the uncertain fraction f(eps) ~ eps^u, u this value; 1: a "
+                     f"smooth boundary, < 1: fractal (dimension 2 - u); {m.samples} starts "
+                     "per eps"})
         uncertainty = pd.DataFrame({"eps": ue.eps, "uncertain_fraction": ue.uncertain_fraction})
     else:
         uncertainty = pd.DataFrame(columns=["eps", "uncertain_fraction"])
@@ -421,14 +437,21 @@ PALETTE = ["#4c72b0", "#dd8452", "#55a868", "#8172b3", "#937860", "#da8bc3", "#c
            "#64b5cd", "#c44e52", "#a1c9f4", "#ffb482", "#8de5a1", "#d0bbff", "#1f77b4"]
 
 
-def _colours(names: list[str]) -> dict[str, str]:
-    out, k = {}, 0
+def _colours(names: list[str], known: dict[str, str] | None = None) -> dict[str, str]:
+    """A colour per name: the starts no attractor took their fixed ones, a name in
+    ``known`` (attractors.png's) its colour there, the others the palette's next colours
+    not taken, in the order given (so that one attractor has one colour in both figures)."""
+    known = known or {}
+    out: dict[str, str] = {}
+    free = (c for c in PALETTE * (1 + len(names) // len(PALETTE))
+            if c not in known.values())
     for name in names:
         if name in OTHER_COLOURS:
             out[name] = OTHER_COLOURS[name]
-        else:
-            out[name] = PALETTE[k % len(PALETTE)]
-            k += 1
+        elif name in known:
+            out[name] = known[name]
+        elif name not in out:
+            out[name] = next(free, PALETTE[len(out) % len(PALETTE)])
     return out
 
 
@@ -475,7 +498,7 @@ def draw(frames: dict[str, pd.DataFrame], config: AttractorsConfig | None = None
     figures["attractors.png"] = fig
     if "continuation.csv" in frames and len(frames["continuation.csv"]):
         figures["attractors_continuation.png"] = _draw_continuation(
-            frames["continuation.csv"], config)
+            frames["continuation.csv"], config, colours)
     return figures
 
 
@@ -488,7 +511,20 @@ def shown(name: str) -> str:
 OTHER_NAMES_SHOWN = {"below_racket": "below the racket"}
 
 
-def _draw_continuation(table: pd.DataFrame, config: AttractorsConfig | None):
+#: attractors_continuation.png's title per continued parameter (Gamma is varied through the
+#: racket's amplitude, ``linear.with_parameters``)
+CONTINUED_OVER = {
+    "gamma": "Basin fractions over Gamma (the racket's amplitude varied, its period fixed)",
+    "racket_amplitude": "Basin fractions over the racket's amplitude (its period fixed)",
+    "racket_period": "Basin fractions over the racket's period (its amplitude fixed)",
+    "alpha": "Basin fractions over the coefficient of restitution",
+}
+
+
+def _draw_continuation(table: pd.DataFrame, config: AttractorsConfig | None,
+                       known: dict[str, str] | None = None):
+    """attractors_continuation.png: the basin fractions stacked over the continued parameter,
+    each attractor in its colour of attractors.png (``known``) where it is there."""
     from .plotting import new_figure
 
     parameter = next(c for c in table.columns if c in SWEEPABLE)
@@ -497,7 +533,15 @@ def _draw_continuation(table: pd.DataFrame, config: AttractorsConfig | None):
                                       "b" + table["branch"].astype(str)))
     keys = list(dict.fromkeys(table.sort_values([parameter, "label"])["key"]))
     first_name = {k: table.loc[table["key"] == k, "name"].iloc[0] for k in keys}
-    colours = _colours([first_name[k] if not k.startswith("b") else k for k in keys])
+    # a branch is coloured by the attractor it starts as (its first name), so that a name
+    # met in attractors.png keeps its colour; a second branch of that name gets its own
+    seen: set[str] = set()
+    colour_keys = []
+    for k in keys:
+        name = first_name[k]
+        colour_keys.append(name if name not in seen else f"{name} ({k})")
+        seen.add(name)
+    colours = _colours(colour_keys, known)
     stack = np.zeros((len(keys), values.size))
     for i, k in enumerate(keys):
         part = table[table["key"] == k].groupby(parameter)["fraction"].sum()
@@ -507,7 +551,7 @@ def _draw_continuation(table: pd.DataFrame, config: AttractorsConfig | None):
     repeated = {n for n in first_name.values() if list(first_name.values()).count(n) > 1}
     labels = [shown(first_name[k]) + (f" (branch {k[1:]})" if first_name[k] in repeated
                                       else "") for k in keys]
-    fills = [colours[first_name[k] if not k.startswith("b") else k] for k in keys]
+    fills = [colours[c] for c in colour_keys]
     if values.size > 1:
         ax.stackplot(values, stack, colors=fills, labels=labels, edgecolor="w", linewidth=0.3)
         ax.set_xlim(values[0], values[-1])
@@ -528,7 +572,7 @@ def _draw_continuation(table: pd.DataFrame, config: AttractorsConfig | None):
     ax.set_ylim(0.0, 1.0)
     ax.set_xlabel(SWEEPABLE[parameter][1])
     ax.set_ylabel("share of the starts (basin fraction)")
-    ax.set_title("Basin fractions continued over the racket", pad=14)
+    ax.set_title(CONTINUED_OVER.get(parameter, "Basin fractions continued"), pad=14)
     fig.legend(loc="outside right upper", fontsize=7, frameon=False)
     return fig
 

@@ -146,3 +146,36 @@ def test_an_orbit_that_sticks_while_its_recurrence_is_followed_is_sticking(monke
     assert orbit.stop_reason == "sticking" and 1256 < orbit.v.size - 1 < 6000
     found = find_attractors(np.array([theta0]), np.array([v0]), params, RecurrenceSettings())
     assert found.labels.tolist() == [STICKING]
+
+
+def test_a_periodic_orbit_s_exponent_is_its_largest_multiplier_s_log_per_impact():
+    """A periodic attractor's lyapunov_per_impact was NaN while its multipliers were given:
+    ln max |mu| / p (period-3 with |mu| 0.92, 0.13: ln 0.92 / 3), -inf for a superstable
+    orbit, NaN without multipliers."""
+    from bounce_cli.analysis.attractors import periodic_lyapunov
+
+    assert periodic_lyapunov(np.array([0.920417, -0.127821]), 3) == pytest.approx(
+        math.log(0.920417) / 3, rel=1e-12)
+    assert periodic_lyapunov(np.array([0.7 + 0.1j, 0.7 - 0.1j]), 1) == pytest.approx(
+        math.log(abs(0.7 + 0.1j)), rel=1e-12)
+    assert periodic_lyapunov(np.array([0.0, 0.0]), 2) == -math.inf
+    assert math.isnan(periodic_lyapunov(np.array([], complex), 2))
+    assert math.isnan(periodic_lyapunov(np.array([np.nan, 0.5]), 2))
+
+
+def test_the_boundary_entropy_is_read_against_ln_2_by_two_standard_errors():
+    """measures.csv said '> ln 2 = 0.693: a fractal boundary' beside 0.693167 over 91 boxes
+    (a margin of 2e-5, within any error): the verdict now takes the entropy's standard error
+    (the boundary boxes' spread), and says when it decides nothing."""
+    from bounce_cli.experiments.attractors import ln2_verdict
+
+    assert "undecided" in ln2_verdict(0.693167, 0.028)
+    assert "fractal boundary" in ln2_verdict(0.80, 0.02)
+    assert "silent" in ln2_verdict(0.40, 0.02)
+    assert "not tested" in ln2_verdict(0.75, math.nan)
+    # the standard error is the boundary boxes' entropies' spread over sqrt(their number)
+    grid = np.zeros((10, 10), int)
+    grid[:, 3:] = 1  # the two left boxes hold two outcomes
+    grid[0, 7] = 2  # a right box two others
+    measured = basin_entropy(grid, box=5)
+    assert measured.boundary_boxes == 3 and measured.boundary_basin_entropy_se > 0.0

@@ -238,3 +238,40 @@ def test_a_box_larger_than_the_grid_is_said_in_the_measures():
     for quantity in ("basin_entropy", "boundary_basin_entropy"):
         assert np.isnan(measures.loc[quantity, "value"])
         assert "smaller than one box of measures.box = 8" in measures.loc[quantity, "note"]
+
+
+def test_an_attractor_has_one_colour_in_both_figures():
+    """attractors.png and attractors_continuation.png coloured attractors by their order in
+    each table: period-1 blue in both by chance, but orange was period-3 (6 cycles) in one and
+    period-2 (4 cycles) in the other. A name met in attractors.png now keeps its colour in
+    the continuation, and no other attractor takes it; the title names what is varied."""
+    from matplotlib.colors import to_hex
+
+    from bounce_cli.experiments import attractors
+
+    names = ["sticking", "below_racket", "period-1 (2 cycles)", "period-3 (6 cycles)"]
+    theta, v = np.meshgrid([0.0, 120.0, 240.0, 360.0], [0.0, 5.0])
+    basin_frame = pd.DataFrame({"theta0_deg": theta.ravel(), "v0_m_s": v.ravel(),
+                                "attractor": names * 2})
+    fractions = pd.DataFrame({"name": names, "fraction": [0.25] * 4})
+    points = pd.DataFrame({"name": names[2:], "theta_deg": [40.0, 10.0], "v_m_s": [9.0, 9.5]})
+    continuation = pd.DataFrame({
+        "gamma": [1.4, 1.4, 1.6, 1.6, 1.6],
+        "label": [-3, 0, -3, 0, 1], "branch": [-3, 0, -3, 1, 0],
+        "name": ["sticking", "period-1 (2 cycles)", "sticking", "period-2 (4 cycles)",
+                 "period-1 (2 cycles)"],
+        "fraction": [0.9, 0.1, 0.8, 0.1, 0.1]})
+    figures = attractors.draw({"basin.csv": basin_frame, "fractions.csv": fractions,
+                               "attractor_points.csv": points,
+                               "continuation.csv": continuation})
+
+    def legend_colours(figure) -> dict[str, str]:
+        legend = figure.legends[0]
+        return {text.get_text().split(":")[0]: to_hex(handle.get_facecolor())
+                for text, handle in zip(legend.get_texts(), legend.legend_handles)}
+
+    main = legend_colours(figures["attractors.png"])
+    continued = legend_colours(figures["attractors_continuation.png"])
+    assert continued["period-1 (2 cycles)"] == main["period-1 (2 cycles)"]
+    assert continued["period-2 (4 cycles)"] not in main.values()
+    assert "Gamma" in figures["attractors_continuation.png"].axes[0].get_title()
