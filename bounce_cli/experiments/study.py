@@ -623,6 +623,44 @@ def unit_row(pooled: pd.DataFrame, frames: dict[str, pd.DataFrame], unit: Unit,
     return out
 
 
+def with_difference_verdicts(table: pd.DataFrame, confidence: float) -> pd.DataFrame:
+    """group_stability.csv's ``p_value_holm`` and ``verdict``: each row's paired test of
+    data against model (its interval at ``confidence``), read together with the table's
+    other rows by Holm's step-down adjustment (statsmodels), since the table holds one test
+    per estimator and condition (eight with two conditions): on simulated data whose truth
+    is the model, one of eight excluding 0 at 95 % is what chance gives a quarter of the
+    time. A row whose interval excludes 0 says so either way, and says when the difference
+    does not survive the adjustment."""
+    from statsmodels.stats.multitest import multipletests
+
+    table = table.copy()
+    tested = (table["units"] >= 2) & np.isfinite(table["p_value"])
+    holm = pd.Series(np.nan, index=table.index)
+    reject = pd.Series(False, index=table.index)
+    if tested.any():
+        rejected, adjusted, _, _ = multipletests(table.loc[tested, "p_value"],
+                                                 alpha=1.0 - confidence, method="holm")
+        holm[tested], reject[tested] = adjusted, rejected
+    n_tests = int(tested.sum())
+    verdicts = []
+    for i, row in table.iterrows():
+        if row["units"] < 2:
+            verdicts.append("too few units with an interval")
+            continue
+        side = ("data faster than the model" if row["ci_high"] < 0 else
+                "data slower than the model" if row["ci_low"] > 0 else None)
+        if side is None:
+            verdicts.append("no difference detected")
+        elif reject[i] or n_tests == 1:
+            verdicts.append(side)
+        else:
+            verdicts.append(f"{side} in this row alone; not after Holm's adjustment over "
+                            f"the table's {n_tests} tests")
+    table["p_value_holm"] = holm
+    table["verdict"] = verdicts
+    return table
+
+
 #: the spectral radius estimates of group.csv and group_stability.csv: the VAR(1) and, with
 #: each impact's racket period and amplitude as inputs, the VARX (acf --data's sources)
 RADIUS_ESTIMATORS = ("ols", "lag2", "varx_ols", "varx_lag2")
@@ -883,12 +921,8 @@ def group_tables(frames: dict[str, pd.DataFrame], units: list[Unit],
                                                           "model_spectral_radius"].mean()),
                              "difference_mean": d.mean, "difference_sd": d.sd,
                              "ci_low": d.ci_low, "ci_high": d.ci_high, "p_value": d.p_value,
-                             "confidence": conf,
-                             "verdict": ("too few units with an interval" if d.n < 2 else
-                                         "data faster than the model" if d.ci_high < 0 else
-                                         "data slower than the model" if d.ci_low > 0 else
-                                         "no difference detected")})
-        out["group_stability.csv"] = pd.DataFrame(rows)
+                             "confidence": conf})
+        out["group_stability.csv"] = with_difference_verdicts(pd.DataFrame(rows), conf)
     # Fig. 8 per condition: correlation functions averaged over units
     acf = _unit_frames(frames, units, "acf", "acf_data.csv")
     if len(acf):

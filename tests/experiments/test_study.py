@@ -941,3 +941,27 @@ def test_a_recording_s_reading_error_names_the_study_s_key(tmp_path):
                                           "analyses": ["regression"]})
     error = result.frames["failures.csv"]["error"].iloc[0]
     assert "set extract.columns.time" in error, error
+
+
+def test_stability_verdicts_are_read_over_the_table_s_tests():
+    """group_stability.csv holds a paired test per estimator and condition. A review's
+    simulated study (truth: the model) got 'data slower than the model' from one of eight
+    (p 0.03 alone): a row whose interval excludes 0 now says whether the difference
+    survives Holm's adjustment over the table's tests (p_value_holm)."""
+    from bounce_cli.experiments.study import with_difference_verdicts
+
+    p = [0.03, 0.001, 0.4, 0.6, 0.5, 0.7, 0.8, 0.9]
+    table = pd.DataFrame({
+        "units": [3] * 8 + [1],
+        "ci_low": [0.009, 0.02, -0.01, -0.02, -0.01, -0.03, -0.02, -0.01, np.nan],
+        "ci_high": [0.042, 0.05, 0.02, 0.01, 0.03, 0.02, 0.01, 0.02, np.nan],
+        "p_value": p + [np.nan]})
+    out = with_difference_verdicts(table, 0.95)
+    assert out.verdict[0] == ("data slower than the model in this row alone; not after "
+                              "Holm's adjustment over the table's 8 tests")
+    assert out.verdict[1] == "data slower than the model"  # 0.001 x 8 < 0.05
+    assert (out.verdict[2:8] == "no difference detected").all()
+    assert out.verdict[8] == "too few units with an interval"
+    assert out.p_value_holm[1] == pytest.approx(0.008)
+    assert out.p_value_holm[0] == pytest.approx(min(1.0, 0.03 * 7))
+    assert np.isnan(out.p_value_holm[8])
