@@ -47,6 +47,7 @@ import numpy as np
 
 from ..model.chatter import release_fate
 from ..model.impact import MAX_SAFE_STEPS
+from ..model.linear import stability
 from ..model.maps import ClassifySettings, ImpactMap, PassiveMap
 from ..model.params import FixedPoint, ModelError, ModelParams
 
@@ -111,6 +112,19 @@ def load_compiled_kernel() -> None:
         load()
 
 
+def passive_map(params: ModelParams, *, require_fixed_point: bool = True) -> PassiveMap:
+    """The passive map the classifier iterates: eqs. 7, 8's fixed point as target where it
+    attracts (linearly stable, eq. 10, by more than rounding: ``linear.is_stable``). Where
+    it is unstable no orbit stays at it, and a start that passes within the tolerance of it
+    by chance has reached no attractor: the target is NaN (no start is ``period1``). Where
+    there is no fixed point: NoFixedPointError, unless ``require_fixed_point`` is False (a
+    NaN target)."""
+    impact_map = PassiveMap.of(params, require_fixed_point=require_fixed_point)
+    if math.isnan(impact_map.target.v_m_s) or stability(params).stable:
+        return impact_map
+    return PassiveMap(params)
+
+
 def classify_batch(theta0, v0, params: ModelParams,
                    settings: ClassifySettings = ClassifySettings(), *,
                    require_fixed_point: bool = True,
@@ -126,7 +140,7 @@ def classify_batch(theta0, v0, params: ModelParams,
     compiled with numba (``model.compiled``: identical outcomes and iteration counts, about
     3x faster per core); "auto" the compiled one when ``compiled_kernel_available()``.
     """
-    return classify_states(PassiveMap.of(params, require_fixed_point=require_fixed_point),
+    return classify_states(passive_map(params, require_fixed_point=require_fixed_point),
                            theta0, v0, settings, kernel=kernel)
 
 
@@ -249,7 +263,7 @@ def classify_grid(
     it (for a progress bar). ``kernel`` as for ``classify_batch``. Results are identical for
     any ``map``, ``workers``, ``tile_points`` and ``kernel``.
     """
-    impact_map = PassiveMap.of(params) if isinstance(params, ModelParams) else params
+    impact_map = passive_map(params) if isinstance(params, ModelParams) else params
     theta0, v0 = np.broadcast_arrays(np.asarray(theta0, dtype=float), np.asarray(v0, dtype=float))
     shape = theta0.shape
     theta0, v0 = theta0.ravel(), v0.ravel()

@@ -38,9 +38,10 @@ from ..analysis.classify import (
     has_compiled_kernel,
     load_compiled_kernel,
     outcome_names,
+    passive_map,
 )
 from ..model.control import ControlledMap, is_passive
-from ..model.maps import ImpactMap, PassiveMap
+from ..model.maps import ImpactMap
 from ..model.linear import is_stable, stability
 from ..model.params import ModelParams
 from ..runtime.figure_files import DeferredFigure
@@ -181,7 +182,7 @@ def run(config: BasinConfig, options: RunOptions) -> ExperimentResult:
         raise ConfigError("classify.min_hop_s: 0 (exact sticking) is not implemented with "
                           "model.control; give a shortest hop > 0")
     # the passive map, or the racket period controller's map: the same classifier and tiles
-    impact_map = (PassiveMap.of(params) if controller is None else
+    impact_map = (passive_map(params) if controller is None else
                   ControlledMap.of(params, controller, require_fixed_point=True))
     result = classify_map_grid(theta_grid_rad.ravel(), v_grid.ravel(), impact_map, settings,
                                jobs=options.jobs, on_tile_done=options.progress.advance,
@@ -308,7 +309,7 @@ def marker_frame(params: ModelParams, settings: ClassifySettings, *,
     ball on the racket at x_b(0) = 0.205 m, theta0 = asin(x_b(0) / a_r)), each classified
     (with the racket period controller, if any); ``spectral_radius``: the fixed point's
     (eq. 10) on every row for the passive map (where it is unstable no start is
-    ``period1``: ``PassiveMap.of``), NaN with a controller."""
+    ``period1``: ``classify.passive_map``), NaN with a controller."""
     fp = params.fixed_point()
     starts = paper.FIG3_V0_M_S if fig3 else {}
     names = ["fixed_point", *starts]

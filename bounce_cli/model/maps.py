@@ -166,17 +166,11 @@ class PassiveMap:
 
     @classmethod
     def of(cls, params: ModelParams, *, require_fixed_point: bool = True) -> "PassiveMap":
-        """The map with eqs. 7, 8's fixed point as target where it attracts (linearly stable,
-        eq. 10, by more than rounding: ``linear.is_stable``). Where it is unstable no orbit
-        stays at it, and a start that passes within the tolerance of it by chance has not
-        reached an attractor: the target is NaN (no start is ``period1``). Where there is no
-        fixed point: NoFixedPointError, unless ``require_fixed_point`` is False (a NaN
-        target)."""
+        """The map with eqs. 7, 8's fixed point as target (NoFixedPointError where there is
+        none, unless ``require_fixed_point`` is False: then a NaN target). The classifier
+        takes it only where it attracts (``analysis.classify.passive_map``)."""
         if require_fixed_point or params.cos_theta_fixed() <= 1.0:
-            target = params.fixed_point()
-            from .linear import stability  # linear builds on this module's map_step
-
-            return cls(params, target) if stability(params).stable else cls(params)
+            return cls(params, params.fixed_point())
         return cls(params)
 
     def start(self, theta0, v0, *, wrap: bool = False) -> State:

@@ -90,9 +90,8 @@ def test_an_unstable_fixed_point_is_no_start_s_period1(paper_params):
     once); where it is linearly unstable (eq. 10: alpha 0.7, a_r 0.3 m, spectral radius 2.07)
     a start within the tolerance of it has not reached an attractor: it leaves, and no start
     is period1 (the target is NaN)."""
-    from bounce_cli.analysis.classify import OUTCOMES, classify_batch
+    from bounce_cli.analysis.classify import OUTCOMES, classify_batch, passive_map
     from bounce_cli.model.linear import stability
-    from bounce_cli.model.maps import PassiveMap
 
     for params, stable in ((paper_params, True),
                            (paper_params.with_alpha(0.7), False)):
@@ -101,7 +100,7 @@ def test_an_unstable_fixed_point_is_no_start_s_period1(paper_params):
         result = classify_batch(np.array([fp.theta_rad]), np.array([fp.v_m_s]), params)
         if stable:
             assert OUTCOMES[result.outcome[0]] == "period1" and result.iterations[0] == 1
-            assert PassiveMap.of(params).target == fp
+            assert passive_map(params).target == fp
         else:
             assert OUTCOMES[result.outcome[0]] != "period1"
-            assert math.isnan(PassiveMap.of(params).target.v_m_s)
+            assert math.isnan(passive_map(params).target.v_m_s)
