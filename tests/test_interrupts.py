@@ -345,3 +345,44 @@ def test_a_signal_after_the_command_ends_the_process_without_a_traceback():
                           text=True, timeout=60)
     assert done.returncode == -signal.SIGINT, done.stderr
     assert "Traceback" not in done.stderr and "Interrupted" not in done.stderr, done.stderr
+
+
+def _import_error_from_an_interrupt():
+    """What a C extension's initialisation (matplotlib._image) raises when the signal handler
+    raised inside it: ImportError('initialization failed') from the Interrupted."""
+    from bounce_cli.runtime.interrupts import Interrupted
+
+    try:
+        raise Interrupted(signal.SIGINT)
+    except Interrupted as exc:
+        raise ImportError("initialization failed") from exc
+
+
+def test_the_interrupt_behind_a_library_s_error_is_found():
+    from bounce_cli.runtime.interrupts import Interrupted, interrupt_behind
+
+    with pytest.raises(ImportError) as caught:
+        _import_error_from_an_interrupt()
+    behind = interrupt_behind(caught.value)
+    assert isinstance(behind, Interrupted) and behind.signum == signal.SIGINT
+    assert interrupt_behind(ValueError("plain")) is None
+    loop = ValueError("a")
+    loop.__context__ = ValueError("b")
+    loop.__context__.__context__ = loop  # a cycle ends the walk
+    assert interrupt_behind(loop) is None
+
+
+def test_a_signal_turned_into_an_import_error_ends_the_run_as_an_interrupt(
+        cli, tmp_path, monkeypatch):
+    """CI once sent SIGINT while `bounce basin` imported matplotlib.figure beside its
+    classification: matplotlib._image's initialisation turned the interrupt into
+    'ImportError: initialization failed', and the run ended with a traceback and exit 1. It
+    ends as an interrupt: the one line, 130, and the output folder it created removed."""
+    from bounce_cli.experiments import basin
+
+    monkeypatch.setattr(basin, "import_output_libraries", _import_error_from_an_interrupt)
+    out = tmp_path / "new" / "basin"
+    result = cli("basin", *SMALL_GRID, "--jobs", "1", "--out", out)
+    assert result.exit_code == 130, result.output
+    assert result.stderr.strip() == "bounce: interrupted"
+    assert not (tmp_path / "new").exists()

@@ -9,8 +9,10 @@ import errno
 import gc
 import os
 import sys
+from typing import NoReturn
 
-from ..runtime.interrupts import GC_THRESHOLDS, Interrupted, install, report, uninstall
+from ..runtime.interrupts import (GC_THRESHOLDS, Interrupted, install, interrupt_behind,
+                                  report, uninstall)
 from .stdout import WatchedStdout
 
 
@@ -49,26 +51,38 @@ def main() -> None:
             # interpreter's exit it would be an "Exception ignored" and status 120)
             sys.stdout.flush()
             raise
-    except OSError:
+    except OSError as exc:
         if watched is None or watched.failure is None:
-            raise
+            behind = interrupt_behind(exc)
+            if behind is None:
+                raise
+            _leave_interrupted(behind)
         sys.exit(_report_stdout_failure(watched.failure))
     except Interrupted as exc:
-        code = report(exc)
-        # what the run must undo was undone on the way here (staged files removed, worker
-        # processes and writers killed and reaped, threads' tiles cancelled or waited for);
-        # the interpreter's teardown after an interrupt can meet a library interrupted half
-        # way through its import, which once aborted the process (SIGABRT instead of 143):
-        # leave without it
-        for stream in (sys.stdout, sys.stderr):
-            try:
-                stream.flush()
-            except (OSError, ValueError):
-                pass
-        os._exit(code)
+        _leave_interrupted(exc)
+    except Exception as exc:  # a library's own error raised from an interrupt (an import's)
+        behind = interrupt_behind(exc)
+        if behind is None:
+            raise
+        _leave_interrupted(behind)
     finally:
         uninstall()  # the command is over: a signal now ends the process as any program's
         # the interpreter's last garbage collections at exit traverse every object numba,
         # pandas and matplotlib made: 0.36 s of a basin run; frozen, they are skipped (the
         # exit itself, atexit handlers and finalizers included, is unchanged): 0.04 s
         gc.freeze()
+
+
+def _leave_interrupted(exc: Interrupted) -> NoReturn:
+    """The one line, and out at once with 128 + the signal. What the run must undo was undone
+    on the way here (staged files removed, worker processes and writers killed and reaped,
+    threads' tiles cancelled or waited for); the interpreter's teardown after an interrupt
+    can meet a library interrupted half way through its import, which once aborted the
+    process (SIGABRT instead of 143): leave without it."""
+    code = report(exc)
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(code)

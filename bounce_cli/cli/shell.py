@@ -31,7 +31,7 @@ except ImportError:  # pragma: no cover - older typer on click
     )
 
 from ..version import __version__
-from ..runtime.interrupts import Interrupted, report as report_interrupt
+from ..runtime.interrupts import Interrupted, interrupt_behind, report as report_interrupt
 
 
 def _flags_show_no_type() -> None:
@@ -75,6 +75,11 @@ class BounceGroup(TyperGroup):
             code = exc.exit_code
         except Interrupted as exc:
             code = report_interrupt(exc)
+        except Exception as exc:  # a library's own error raised from an interrupt
+            behind = interrupt_behind(exc)
+            if behind is None:
+                raise
+            code = report_interrupt(behind)
         if standalone_mode:
             sys.exit(code)
         return code

@@ -92,6 +92,22 @@ def deferred() -> Iterator[None]:
             raise Interrupted(pending)
 
 
+def interrupt_behind(exc: BaseException) -> Interrupted | None:
+    """The :class:`Interrupted` an exception stands for: itself, or one in its chain of
+    causes and contexts. A signal that arrives while a C extension module initialises
+    (``import matplotlib.figure`` loading ``matplotlib._image``) is turned by it into
+    ``ImportError: initialization failed``, raised from the interrupt: it is still the
+    interrupt, and the run ends as one (one line, 128 + signal), not with a traceback."""
+    seen: set[int] = set()
+    current: BaseException | None = exc
+    while current is not None and id(current) not in seen:
+        if isinstance(current, Interrupted):
+            return current
+        seen.add(id(current))
+        current = current.__cause__ or current.__context__
+    return None
+
+
 def report(exc: Interrupted) -> int:
     """Print the one line and return the exit code (128 + signal number)."""
     try:
