@@ -51,17 +51,12 @@ def main() -> None:
             # interpreter's exit it would be an "Exception ignored" and status 120)
             sys.stdout.flush()
             raise
-    except OSError as exc:
-        if watched is None or watched.failure is None:
-            behind = interrupt_behind(exc)
-            if behind is None:
-                raise
-            _leave_interrupted(behind)
-        sys.exit(_report_stdout_failure(watched.failure))
     except Interrupted as exc:
         _leave_interrupted(exc)
-    except Exception as exc:  # a library's own error raised from an interrupt (an import's)
-        behind = interrupt_behind(exc)
+    except Exception as exc:
+        if isinstance(exc, OSError) and watched is not None and watched.failure is not None:
+            sys.exit(_report_stdout_failure(watched.failure))
+        behind = interrupt_behind(exc)  # a library's own error raised from an interrupt
         if behind is None:
             raise
         _leave_interrupted(behind)

@@ -12,6 +12,7 @@ same result seen coarser: ``paper_class`` in ``basin.csv``.
 
 from __future__ import annotations
 
+import itertools
 import math
 from typing import Any, Callable, Literal
 
@@ -443,15 +444,14 @@ def _colours(names: list[str], known: dict[str, str] | None = None) -> dict[str,
     not taken, in the order given (so that one attractor has one colour in both figures)."""
     known = known or {}
     out: dict[str, str] = {}
-    free = (c for c in PALETTE * (1 + len(names) // len(PALETTE))
-            if c not in known.values())
+    free = itertools.cycle([c for c in PALETTE if c not in known.values()] or PALETTE)
     for name in names:
         if name in OTHER_COLOURS:
             out[name] = OTHER_COLOURS[name]
         elif name in known:
             out[name] = known[name]
         elif name not in out:
-            out[name] = next(free, PALETTE[len(out) % len(PALETTE)])
+            out[name] = next(free)
     return out
 
 

@@ -236,8 +236,9 @@ def _first_impact(vv, cos_th, sin_th, m, c, max_steps, hop, pos, S, D0, C, SN, V
 def _impact(th, vv, cos_th, sin_th, m, c, max_steps, hop, pos, S, D0, C, SN, V, SH, CH):
     """One impact of the m wrapped states (``PassiveMap.step``'s arithmetic): hop[j] the
     flight's phase (``_first_impact``), then into the solver's scratch the impact's phase
-    S (wrapped: fmod, a call, in its own loop), its sine SN and cosine C and eq. 5's
-    velocity V (a loop that vectorises)."""
+    S (wrapped by ``_wrap_near`` in a loop that vectorises; fmod, a call, in a loop of its
+    own only where a phase lies beyond it), its sine SN and cosine C and eq. 5's velocity
+    V (a loop that vectorises)."""
     _first_impact(vv, cos_th, sin_th, m, c, max_steps, hop, pos, S, D0, C, SN, V, SH, CH)
     far = 0
     for j in range(m):  # np.mod near [0, 2 pi) (vectorised) ...
