@@ -75,11 +75,14 @@ class BounceGroup(TyperGroup):
             code = exc.exit_code
         except Interrupted as exc:
             code = report_interrupt(exc)
-        except Exception as exc:  # a library's own error raised from an interrupt
+        except Exception as exc:
+            # a library's own error raised from an interrupt (a C extension interrupted as it
+            # initialised): the interrupt goes on to the console script, which leaves at
+            # once (the interpreter's teardown met such a half-made module and aborted)
             behind = interrupt_behind(exc)
             if behind is None:
                 raise
-            code = report_interrupt(behind)
+            raise behind from None
         if standalone_mode:
             sys.exit(code)
         return code
