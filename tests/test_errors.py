@@ -168,6 +168,25 @@ def test_a_failed_run_leaves_no_folder_it_created_but_keeps_existing_ones(tmp_pa
     assert (tmp_path / "a").is_dir() and not (tmp_path / "a" / "b").exists()
 
 
+def test_an_output_folder_of_another_run_is_refused_before_any_warning(tmp_path):
+    """--out holding another command's run is one error line, and no warning about the model
+    comes before it (a reviewer read the warning as the reason the run failed)."""
+    out = tmp_path / "out"
+    result = run("stability", "--quiet", "--out", out)
+    assert result.exit_code == 0, result.output
+    unstable = ("--set", "model.alpha=0.7", "--set", "model.racket_amplitude=0.3",
+                "--set", "grid.theta0_deg.num=5", "--set", "grid.v0_m_s.num=5")
+    one_error_line(run("basin", "--quiet", *unstable, "--out", out), "different config",
+                   "--force")
+    forced = run("basin", "--quiet", *unstable, "--out", out, "--force")  # warned, then run
+    assert forced.exit_code == 0, forced.output
+    assert "bounce: warning: the period-1 fixed point is linearly unstable" in forced.stderr
+    fresh = tmp_path / "a" / "b"  # no fixed point: the folder it opened is gone again
+    one_error_line(run("basin", "--quiet", "--set", "model.racket_amplitude=0.01", "--out",
+                       fresh), "no period-1 fixed point")
+    assert not (tmp_path / "a").exists()
+
+
 # -- what a new user mistypes or mixes up ------------------------------------------------------
 @pytest.mark.parametrize("command, setting, suggestion", [
     ("fixed-point", "model.alpah=0.4", "(did you mean model.alpha?)"),

@@ -407,19 +407,19 @@ def execute(entry: Entry | str, config: Path | str | ExperimentConfig | None = N
     else:
         config = None if config is None else Path(config)
         experiment, path, cfg = load_run_config(entry, config, overrides)
-    if impacts is None:  # with impacts the model is the data's, not the config's
-        check_model(entry, cfg, warn)
-        if not isinstance(config, ExperimentConfig):
-            warn_if_swept_over(entry, cfg, config, overrides, warn)
     run_dir = None
     checkpoints = None
     try:
-        if write:
+        if write:  # --out checked first: its error is not preceded by a warning
             assert path is not None
             run_dir = open_run_directory(entry, cfg, path, config_given=config is not None,
                                          overrides=overrides,
                                          out=None if out is None else Path(out), force=force,
                                          figure_formats=figure_formats, dpi=dpi)
+        if impacts is None:  # with impacts the model is the data's, not the config's
+            check_model(entry, cfg, warn)
+            if not isinstance(config, ExperimentConfig):
+                warn_if_swept_over(entry, cfg, config, overrides, warn)
         if path is None:
             options = RunOptions(jobs=jobs, warn=warn, inform=inform, scheduler=scheduler)
         else:
