@@ -390,7 +390,13 @@ def test_a_png_laid_out_before_saving_is_what_savefig_writes(name):
     ours, theirs = io.BytesIO(), io.BytesIO()
     fig = drawn()
     engine, canvas, dpi = fig.get_layout_engine(), fig.canvas, fig.dpi
-    save_figure(fig, ours, "png", dpi=150, source="test")  # type: ignore[arg-type]
+    draws = []  # the artists drawn once: savefig's own draw without output is skipped too
+    original_draw = type(fig).draw
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(type(fig), "draw",
+                      lambda self, renderer: draws.append(1) or original_draw(self, renderer))
+        save_figure(fig, ours, "png", dpi=150, source="test")  # type: ignore[arg-type]
+    assert len(draws) == 1
     assert fig.get_layout_engine() is engine and fig.canvas is canvas and fig.dpi == dpi
     reference = drawn()
     with rc_context(SAVE_STYLE):  # type: ignore[arg-type]

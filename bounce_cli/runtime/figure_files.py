@@ -143,19 +143,21 @@ def save_figure(fig: Figure | DeferredFigure, path: Path | BinaryIO, kind: str, 
 def laid_out(fig: Figure, kind: str, dpi: float) -> Iterator[None]:
     """A PNG's layout done before ``savefig``, which then draws the figure once.
 
-    ``savefig`` of a figure with a layout engine (``constrained``) first draws the whole
-    figure without output, to run the engine in the course of it, and then draws it again:
-    the first draw resamples every image and lays out every text once more (0.03-0.05 s of
-    the 1000 x 1000 basin's 0.2-0.3 s figures). Here the engine runs alone, with the
-    renderer ``savefig`` would give it (Agg at ``dpi``: the same text metrics, hence the same
-    layout and the same bytes, which a test compares), and is set aside while the figure is
-    saved, as ``savefig`` sets it aside after its first draw. Only PNG (Agg): a vector
-    format measures text with its own renderer. The figure's canvas, resolution and engine
-    are restored afterwards."""
+    ``savefig`` of a figure with any layout engine (``constrained``, or the place holder
+    that ``set_layout_engine("none")`` leaves) first draws the whole figure without output,
+    to run the engine in the course of it, and then draws it again: the first draw resamples
+    every image and lays out every text once more (about a quarter of the 1000 x 1000
+    basin's figures). Here the engine runs alone, with the renderer ``savefig`` would give
+    it (Agg at ``dpi``: the same text metrics, hence the same layout and the same bytes,
+    which a test compares), and the figure has no engine at all while it is saved (``savefig``
+    sets its engine aside after its first draw). Only PNG (Agg): a vector format measures
+    text with its own renderer. The figure's canvas, resolution and engine are restored
+    afterwards."""
     engine = fig.get_layout_engine()
     if kind != "png" or engine is None:
         yield
         return
+    from matplotlib import rc_context
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     canvas, figure_dpi = fig.canvas, fig.dpi
@@ -163,7 +165,8 @@ def laid_out(fig: Figure, kind: str, dpi: float) -> Iterator[None]:
         FigureCanvasAgg(fig)  # the figure's canvas while it is laid out
         fig.dpi = dpi
         engine.execute(fig)
-        fig.set_layout_engine("none")  # as savefig does after its first draw
+        with rc_context({"figure.autolayout": False, "figure.constrained_layout.use": False}):
+            fig.set_layout_engine(None)  # no engine: savefig draws once
         yield
     finally:
         fig.set_layout_engine(engine)
