@@ -49,6 +49,47 @@ def user_error():
     return assert_one_line_error
 
 
+def layout_problems(fig, dpi: float = 150) -> list[str]:
+    """What a reader would see cut off or covered in ``fig`` drawn as a PNG at ``dpi``: a
+    title, axis label, legend entry or annotation reaching outside the figure, or a title
+    under a legend. Empty where the figure is laid out."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(fig)
+    fig.dpi = dpi
+    canvas.draw()  # the layout engine runs as part of the draw
+    renderer = canvas.get_renderer()
+    width, height = fig.bbox.width, fig.bbox.height
+    titles = [t for ax in fig.axes for t in (ax.title, ax._left_title, ax._right_title)]
+    if fig._suptitle is not None:
+        titles.append(fig._suptitle)
+    legends = [*fig.legends, *(ax.get_legend() for ax in fig.axes)]
+    legends = [lg for lg in legends if lg is not None and lg.get_visible()]
+    texts = [*titles, *(ax.xaxis.label for ax in fig.axes), *(ax.yaxis.label for ax in fig.axes),
+             *(t for ax in fig.axes for t in ax.texts), *fig.texts,
+             *(t for lg in legends for t in lg.get_texts())]
+    problems = []
+    for text in texts:
+        if not (text.get_visible() and text.get_text().strip()):
+            continue
+        box = text.get_window_extent(renderer)
+        if box.x0 < -1 or box.y0 < -1 or box.x1 > width + 1 or box.y1 > height + 1:
+            problems.append(f"{text.get_text()!r} reaches outside the figure")
+    for title in titles:
+        if not (title.get_visible() and title.get_text().strip()):
+            continue
+        box = title.get_window_extent(renderer)
+        for legend in legends:
+            if box.overlaps(legend.get_window_extent(renderer)):
+                problems.append(f"the title {title.get_text()!r} is under a legend")
+    return problems
+
+
+@pytest.fixture(scope="session")
+def figure_layout_problems():
+    return layout_problems
+
+
 @pytest.fixture(scope="session")
 def paper_params() -> ModelParams:
     """The paper's Figs. 3-4 and 9 parameters (sections 3, 7)."""

@@ -86,6 +86,16 @@ def test_the_checker_catches_what_it_is_for():
 INTEGER_AXIS = re.compile(r"\btrial\b|\blag\b|impact \$k\$|bounce \$k\$|impacts until")
 
 
+@pytest.mark.slow
+def test_every_figure_is_laid_out(figures, figure_layout_problems):
+    """No title, label, legend entry or annotation cut off at the figure's edge, and no title
+    under a legend (the attractors' continuation figure had both; its own test is beside
+    the command's)."""
+    found = [f"{name}: {problem}" for name, fig in figures.items()
+             for problem in figure_layout_problems(fig)]
+    assert not found, "\n".join(found)
+
+
 def test_integer_axes_have_whole_number_ticks(figures):
     checked = 0
     for name, fig in figures.items():

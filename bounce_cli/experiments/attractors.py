@@ -512,11 +512,12 @@ OTHER_NAMES_SHOWN = {"below_racket": "below the racket"}
 
 
 #: attractors_continuation.png's title per continued parameter (Gamma is varied through the
-#: racket's amplitude, ``linear.with_parameters``)
+#: racket's amplitude, ``linear.with_parameters``), in two lines: one is wider than the axes
+#: beside the legend
 CONTINUED_OVER = {
-    "gamma": "Basin fractions over Gamma (the racket's amplitude varied, its period fixed)",
-    "racket_amplitude": "Basin fractions over the racket's amplitude (its period fixed)",
-    "racket_period": "Basin fractions over the racket's period (its amplitude fixed)",
+    "gamma": "Basin fractions over Gamma\n(the racket's amplitude varied, its period fixed)",
+    "racket_amplitude": "Basin fractions over the racket's amplitude\n(its period fixed)",
+    "racket_period": "Basin fractions over the racket's period\n(its amplitude fixed)",
     "alpha": "Basin fractions over the coefficient of restitution",
 }
 

@@ -67,6 +67,7 @@ from ..analysis.control_design import (
 from ..paper import values as paper
 from .plotting import (
     IMPACT_AFTER_LABEL,
+    IMPACT_AFTER_LABEL_NARROW,
     LAG_LABEL,
     PANELS,
     PHASE_LABEL,
@@ -928,7 +929,7 @@ def draw_fit(frames):
                         label=f"{direction} ({int(part.events.iloc[0])} perturbations)")
             ax.plot(part.k, part[model], "-", color=c, lw=1, label=f"fit, {direction}")
         ax.axhline(0.0, color="k", lw=0.6, ls=":")
-        ax.set_xlabel(IMPACT_AFTER_LABEL)
+        ax.set_xlabel(IMPACT_AFTER_LABEL_NARROW)
         ax.set_ylabel(label)
         integer_axis(ax)
     axes[0, 0].legend(fontsize=7)

@@ -41,6 +41,8 @@ _MATHTEXT_TICK = re.compile(r"\$\\mathdefault\{([^\\{}$]*)\}\$")
 VELOCITY_LABEL = "velocity after impact $v_k$ (m/s)"
 PHASE_LABEL = r"phase of impact $\theta_k$ (deg)"
 IMPACT_AFTER_LABEL = "impact $k$ after the perturbation (0: the perturbed impact)"
+#: the same in two lines, under panels narrower than it (three across a page)
+IMPACT_AFTER_LABEL_NARROW = IMPACT_AFTER_LABEL.replace(" (0:", "\n(0:")
 
 F = TypeVar("F", bound=Callable[..., Any])
 

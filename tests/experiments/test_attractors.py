@@ -140,6 +140,22 @@ def test_the_continuation_figure_s_caption_names_its_own_grid_and_parameter():
         "continuation.stop=0.4")
 
 
+@pytest.mark.parametrize("parameter", ["gamma", "racket_amplitude", "racket_period",
+                                       "alpha"])
+def test_the_continuation_figure_is_laid_out_for_every_parameter(parameter,
+                                                                 figure_layout_problems):
+    # its one-line title was wider than the axes beside the legend: cut at the left edge and
+    # under the legend (a reviewer, at the bundled parameters)
+    from bounce_cli.experiments.attractors import _draw_continuation
+
+    values = np.linspace(0.4, 0.6, 3)
+    table = pd.DataFrame({parameter: np.repeat(values, 3), "label": [0, 1, -1] * 3,
+                          "name": ["period-1", "period-2", "sticking"] * 3,
+                          "branch": [0, 1, -1] * 3, "fraction": [0.5, 0.3, 0.2] * 3})
+    fig = _draw_continuation(table, None)
+    assert figure_layout_problems(fig) == []
+
+
 def test_orbits_above_the_cells_are_found():
     # alpha 0.9: a chaotic attractor up to about 40 m/s; with the cells up to 12 m/s 83 % of
     # the starts were undecided without a word, and measures.csv reported basin entropies of
