@@ -909,13 +909,17 @@ def group_tables(frames: dict[str, pd.DataFrame], units: list[Unit],
                 # (acf --data gives none below its stated minimum of bounces: such an estimate
                 # can be anything, e.g. a lag-2 radius of 30 on 170 bounces), and never where
                 # it is no estimate (withheld: NaN with its note; or not finite, above 1.5)
+                # and a unit without any estimate (its analysis failed or did not run) is
+                # counted as such, not as one whose data were too few for an interval
                 withheld = withheld_radii(part, method)
+                estimated = part[f"radius_{method}"].notna() & ~withheld
                 radius = part[f"radius_{method}"].where(
-                    np.isfinite(part[f"radius_{method}_ci_low"]) & ~withheld)
+                    np.isfinite(part[f"radius_{method}_ci_low"]) & estimated)
                 d = paired_difference(radius, part["model_spectral_radius"], conf)
                 rows.append({"condition": condition, "estimate": method, "units": d.n,
-                             "units_without_interval": int((radius.isna() & ~withheld).sum()),
+                             "units_without_interval": int((radius.isna() & estimated).sum()),
                              "units_withheld": int(withheld.sum()),
+                             "units_without_estimate": int((~estimated & ~withheld).sum()),
                              "data_mean": float(radius.mean()),
                              "model_mean": float(part.loc[radius.notna(),
                                                           "model_spectral_radius"].mean()),
@@ -983,7 +987,10 @@ def _stability_line(r: dict) -> str:
             + (f"; {r['units_without_interval']} without an interval, left out"
                if r["units_without_interval"] else "")
             + (f"; {r['units_withheld']} withheld (no estimate), left out"
-               if r.get("units_withheld") else "") + "): "
+               if r.get("units_withheld") else "")
+            + (f"; {r['units_without_estimate']} without an estimate (failures.csv, or "
+               "not run: group.csv), left out" if r.get("units_without_estimate") else "")
+            + "): "
             f"data {r['data_mean']:.3f} vs model {r['model_mean']:.3f}, difference "
             f"{r['difference_mean']:.3f} [{r['ci_low']:.3f}, {r['ci_high']:.3f}]: "
             f"{r['verdict']}")

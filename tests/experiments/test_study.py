@@ -762,6 +762,27 @@ def test_estimates_without_an_interval_are_left_out_of_the_paired_difference():
     assert table.set_index("estimate").loc["lag2", "verdict"] == "too few units with an interval"
 
 
+def test_a_unit_without_an_estimate_is_not_counted_as_one_without_an_interval():
+    """A unit whose extraction failed (or whose acf did not run) has no estimate at all: it
+    is counted apart (``units_without_estimate``), not as too few data for an interval (a
+    reviewer's study: a unit with swapped columns read "1 without an interval")."""
+    from bounce_cli.data.study_manifest import Unit
+
+    group = pd.DataFrame({
+        "subject": ["s1", "s2", "s3", "s4"], "condition": "a",
+        "model_spectral_radius": [0.5, 0.5, 0.5, np.nan], "failures": [0, 0, 0, 1],
+        "radius_ols": [0.40, 0.42, 0.9, np.nan], "radius_ols_ci_low": [0.3, 0.32, np.nan, np.nan],
+        "radius_ols_ci_high": [0.5, 0.52, np.nan, np.nan]})
+    units = [Unit((s, "a"), ("subject", "condition")) for s in group["subject"]]
+    table = study.group_tables({"group.csv": group}, units, study_config(Path("unused")))[
+        "group_stability.csv"].set_index("estimate")
+    ols = table.loc["ols"]
+    assert ols["units"] == 2 and ols["units_without_interval"] == 1
+    assert ols["units_without_estimate"] == 1 and ols["units_withheld"] == 0
+    line = study._stability_line(ols.to_dict() | {"estimate": "ols"})
+    assert "1 without an interval" in line and "1 without an estimate" in line
+
+
 def test_each_recording_gets_its_own_folder_inside_the_unit():
     """A stem that is '..' (a file named ``...csv``) or '.' would put a recording's outputs
     outside ``<unit>/extract/`` (onto the unit's own impacts.csv); two recordings ``A/t.csv``,
