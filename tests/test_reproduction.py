@@ -280,6 +280,11 @@ def test_a_run_that_changed_rewrites_its_tables_within_tolerance_too(tmp_path):
     assert pd.read_csv(out / "other.csv").y_m.iloc[0] == 1.0 / 3.0 * (1 + 3e-8)
     assert experiment_status(comparison) == (
         "changed: data.csv (rewritten with them, within tolerance: other.csv)")
+    # into a folder of no earlier run every file is new, and said so (it read "changed")
+    assert experiment_status({"data.csv": "new", "a.png": "new"}) == (
+        "new (no earlier results there): a.png, data.csv")
+    assert experiment_status({"data.csv": "changed", "a.png": "new", "b.csv": "identical"}
+                             ) == "changed: data.csv; new: a.png"
 
 
 def test_reproduce_refuses_an_unknown_experiment_before_running_any(cli, user_error, tmp_path):

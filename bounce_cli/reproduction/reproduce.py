@@ -142,12 +142,17 @@ def tables_agree(experiment: str):
 
 def experiment_status(comparison: dict[str, str]) -> str:
     """One line per experiment for ``bounce reproduce``: ``identical``, ``within tolerance``
-    (and which tables) or ``changed`` (and which files; the tables within tolerance that were
-    rewritten with them), from ``RunDirectory.comparison``."""
-    changed = sorted(name for name, how in comparison.items() if how in ("changed", "new"))
-    if changed:
+    (and which tables), ``changed`` (and which files; the tables within tolerance that were
+    rewritten with them; the files that were not there before) or ``new`` (every file: a
+    folder without earlier results), from ``RunDirectory.comparison``."""
+    changed = sorted(name for name, how in comparison.items() if how == "changed")
+    new = sorted(name for name, how in comparison.items() if how == "new")
+    if new and len(new) == len(comparison):
+        return "new (no earlier results there): " + ", ".join(new)
+    if changed or new:
         along = sorted(name for name, how in comparison.items() if how == "rewritten")
-        return "changed: " + ", ".join(changed) + (
+        return ("changed: " + ", ".join(changed) if changed else "") + (
+            ("; " if changed else "") + "new: " + ", ".join(new) if new else "") + (
             f" (rewritten with them, within tolerance: {', '.join(along)})" if along else "")
     close = sorted(name for name, how in comparison.items() if how == "within tolerance")
     if close:
