@@ -191,10 +191,25 @@ def relaxation_frame(params: ModelParams, config: ImpulseConfig, outcomes: dict)
     return df
 
 
+def warn_one_sided(alpha_p: list[float], alpha_0: float, warn) -> None:
+    """Warn where every alpha_p lies on one side of alpha_0 (the bundled 0.35-0.65 at
+    alpha_0 = 0.7): the figure's other column ("alpha_p above / below alpha_0") stays
+    empty."""
+    above, below = any(a > alpha_0 for a in alpha_p), any(a < alpha_0 for a in alpha_p)
+    if above == below:
+        return
+    missing, sign = ("above", ">") if below else ("below", "<")
+    warn(f"alpha_p: none {missing} alpha_0 = {alpha_0:g} (alpha_p: "
+         f"{', '.join(f'{a:g}' for a in alpha_p)}), so the figures' column "
+         f"'alpha_p {sign} alpha_0' stays empty; give alpha_p on both sides of alpha_0 to "
+         "see both directions")
+
+
 def run(config: ImpulseConfig, options: RunOptions) -> ExperimentResult:
     if config.data is not None or options.impacts is not None:
         return run_data(config, options, options.impacts)
     params = config.params
+    warn_one_sided(config.alpha_p, params.alpha, options.warn)
     options.progress.start(len(config.alpha_p) + 2, "impulse responses")
     outcomes = {}
     for ap in config.alpha_p:

@@ -143,3 +143,23 @@ def test_summary_says_in_words_when_the_response_never_leaves_the_basin(tmp_path
     assert "stays in the period-1 basin for every alpha_p above alpha_0 scanned (to 0.99)" in (
         " ".join(result.stderr.split()))
     assert "nan" not in result.stderr and "paper: about" not in result.stderr
+
+
+@pytest.mark.parametrize("alpha, side, model", [
+    (0.7, "above", ["model.g=3.71", "model.racket_amplitude=0.055", "model.racket_period=0.8"]),
+    (0.3, "below", ["model.racket_amplitude=0.4"])])
+def test_alpha_p_all_on_one_side_of_alpha_0_is_warned_of(alpha, side, model, tmp_path, cli):
+    """The bundled alpha_p (0.35-0.65) are all below alpha_0 = 0.7: the figure's column of
+    alpha_p above it stayed empty without a word (a reviewer, at a stable model of a boom's
+    gravity, took it for a plotting failure)."""
+    fast = [a for s in FAST for a in ("--set", s)]
+    model_set = [a for s in model for a in ("--set", s)]
+    result = cli("impulse", "--out", tmp_path / "o", *fast, "--set", f"model.alpha={alpha}",
+                 *model_set)
+    assert "unstable" not in result.stderr
+    assert result.exit_code == 0, result.output
+    said = " ".join(result.stderr.split())
+    assert f"bounce: warning: alpha_p: none {side} alpha_0 = {alpha:g}" in said
+    both = cli("impulse", "--out", tmp_path / "b", *fast)
+    assert "alpha_p: none" not in both.stderr
+
