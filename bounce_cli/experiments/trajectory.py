@@ -82,6 +82,27 @@ class TrajectoryConfig(ExperimentConfig):
         )
 
 
+#: a case "ends near the period-1 fixed point" when its last impact is within these of it
+NEAR_FIXED_POINT_V = 0.02  # relative, of v~
+NEAR_FIXED_POINT_DEG = 2.0
+
+
+def case_ending(track: pd.DataFrame, impacts: pd.DataFrame, v_fp: float,
+                theta_fp_deg: float) -> str:
+    """How one case's simulation ends, in words: on the racket, near the period-1 fixed
+    point (its last impact within ``NEAR_FIXED_POINT_V`` of v~ and ``NEAR_FIXED_POINT_DEG``
+    of theta~), or neither. The cases are named by the user (the bundled ones after what
+    they do at Fig. 3's model, which other parameters may not do)."""
+    if len(track) and track["state"].iloc[-1] == "stuck":
+        return "stuck on the racket"
+    last = impacts.iloc[-1]
+    off_deg = (float(last["theta_deg"]) - theta_fp_deg + 180.0) % 360.0 - 180.0
+    if (abs(float(last["v_m_s"]) - v_fp) <= NEAR_FIXED_POINT_V * abs(v_fp)
+            and abs(off_deg) <= NEAR_FIXED_POINT_DEG):
+        return "near the period-1 fixed point"
+    return "in flight, away from the period-1 fixed point"
+
+
 def case_frames(name: str, traj, params: ModelParams, sample_interval_s: float, theta0: float,
                 v0: float):
     """(trajectory rows, impact rows) of one simulated case."""
@@ -186,6 +207,7 @@ def run(config: TrajectoryConfig, options: RunOptions) -> ExperimentResult:
             f"theta = {last.theta_deg:.3f} deg (fixed point {fp.v_m_s:.4f} m/s, "
             f"{fp.theta_deg:.3f} deg); {len(stuck)} stuck phases"
             + (f", first {stuck[0][0]:.4f}-{stuck[0][1]:.4f} s" if stuck else "")
+            + f"; ends {case_ending(track, imp, fp.v_m_s, fp.theta_deg)}"
         )
         options.progress.advance(1)
     frames = {
@@ -245,7 +267,8 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
                           mew=0.5, label="accumulation point (complete chatter)")
         ax_x.set_ylabel("position (m)")
         ax_x.set_title(f"{name}: $v_0$ = {imp['v_m_s'].iloc[0]:g} m/s, "
-                       f"$\\theta_0$ = {imp['theta_deg'].iloc[0]:.1f} deg", fontsize=9)
+                       f"$\\theta_0$ = {imp['theta_deg'].iloc[0]:.1f} deg; ends "
+                       f"{case_ending(tr, imp, v_fp, th_fp)}", fontsize=9)
         ax_x.legend(loc="upper right", fontsize=7, ncol=3)
         ax_v.plot(imp["k"], imp["v_m_s"], "o-", ms=2.5, lw=0.8, color="C0")
         ax_v.axhline(v_fp, ls="--", color="0.4", lw=0.8, label=f"$\\tilde v$ = {v_fp:.3f} m/s")

@@ -162,3 +162,25 @@ def test_exact_sticking_trajectory_marks_the_accumulation_points(tmp_path, cli, 
     bad = cli("trajectory", "--set", "sticking.min_hop_s=0", "--set", "integrator=rk4",
               "--out", tmp_path / "rk4", "--quiet")
     user_error(bad, "exact sticking", "integrator")
+
+
+def test_each_case_says_how_it_ends_whatever_its_name(tmp_path, cli):
+    """The bundled cases are named after what they do at Fig. 3's model; at a reviewer's
+    model (alpha 0.7, g 3.71 m/s^2, a_r 0.055 m, tau 0.8 s) 'period-1' ended stuck and
+    'sticking' never stuck, and nothing said so. Each case's summary line and panel title
+    say how it ends."""
+    at_paper = cli("trajectory", "--out", tmp_path / "p")
+    assert at_paper.exit_code == 0, at_paper.output
+    said = " ".join(at_paper.stderr.split())
+    assert "ends near the period-1 fixed point" in said.split("sticking:")[0]
+    assert "sticking:" in said and "ends stuck on the racket" in said.split("sticking:")[1]
+    other = cli("trajectory", "--out", tmp_path / "o", "--set", "model.alpha=0.7",
+                "--set", "model.g=3.71", "--set", "model.racket_amplitude=0.055",
+                "--set", "model.racket_period=0.8")
+    assert other.exit_code == 0, other.output
+    assert "ends near the period-1 fixed point" not in other.stderr.split("sticking:")[0]
+    frames = {name: pd.read_csv(tmp_path / "o" / name) for name in
+              ("trajectory.csv", "impacts.csv", "fixed_point.csv")}
+    fig = trajectory.draw(frames)["trajectory.png"]
+    titles = [ax.get_title() for ax in fig.axes if ax.get_title()]
+    assert len(titles) == 2 and all("; ends " in t for t in titles)
