@@ -75,7 +75,7 @@ def test_a_value_the_user_sets_wins_and_is_printed_as_set(tmp_path, cli):
     out = tmp_path / "out"
     result = cli("acf", "--data", path, "--out", out, "--set", "model.alpha=0.5", *ACF_FAST)
     assert result.exit_code == 0, result.output
-    assert "model at the data's alpha 0.5 (set), g 9.50 m/s^2 (measured, setup.csv)" in (
+    assert "model at alpha 0.5 (set), g 9.50 m/s^2 (measured, setup.csv)" in (
         summary(result))
     stab = pd.read_csv(out / "stability_data.csv").set_index(["quantity", "source"])
     at = ModelParams(0.5, 9.5, *stab.loc[[("racket_amplitude", "data"), ("racket_period", "data")],
@@ -194,7 +194,7 @@ def test_a_printed_config_loaded_back_leaves_the_data_its_alpha_and_g(tmp_path, 
     assert edited.read_text() != printed.stdout
     result = cli("acf", "--config", edited, "--data", path, "--out", tmp_path / "e", *ACF_FAST)
     assert result.exit_code == 0, result.output
-    assert "model at the data's alpha 0.5 (set), g 9.50 m/s^2 (measured, setup.csv)" in (
+    assert "model at alpha 0.5 (set), g 9.50 m/s^2 (measured, setup.csv)" in (
         summary(result))
 
 

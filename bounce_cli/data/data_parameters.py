@@ -81,10 +81,13 @@ class DataModel:
     g: ModelValue
 
     def text(self) -> str:
-        """``model at the data's alpha 0.49 (measured, 438 impacts), g 5.80 m/s^2 (measured)``
-        (library use: ``model at the config's alpha 0.5 (config), ...``)."""
-        whose = "config's" if "config" in (self.alpha.source, self.g.source) else "data's"
-        return f"model at the {whose} {self.alpha.text()}, {self.g.text('m/s^2')}"
+        """``model at the data's alpha 0.49 (measured, 438 impacts), g 5.80 m/s^2 (measured)``;
+        where a value is the user's (set) or the config's (library use), not "the data's":
+        ``model at alpha 0.5 (set), g 9.50 m/s^2 (measured, setup.csv)``."""
+        given = any(v.source == "config" or v.source.startswith("set")
+                    for v in (self.alpha, self.g))
+        whose = "" if given else "the data's "
+        return f"model at {whose}{self.alpha.text()}, {self.g.text('m/s^2')}"
 
     def record(self) -> dict[str, Any]:
         return {"alpha": self.alpha.record(), "g": self.g.record()}

@@ -172,7 +172,7 @@ def test_a_value_set_by_the_user_wins_over_the_trials_column(tmp_path, cli):
     out = tmp_path / "o"
     result = cli("regression", "--data", path, "--out", out, "--set", "model.alpha=0.55")
     assert result.exit_code == 0, result.output
-    assert "model at the data's alpha 0.55 (set), g 9.50 m/s^2 (column, 6 trials)" in (
+    assert "model at alpha 0.55 (set), g 9.50 m/s^2 (column, 6 trials)" in (
         " ".join(result.stderr.split()))
     fit = pd.read_csv(out / "fit.csv").iloc[0]
     assert (fit.alpha, fit.g) == (0.55, 9.5)
