@@ -258,7 +258,8 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     ax2.set_ylim(0, top)
     ax2.set_xlabel("racket acceleration at impact AC (g)")
     ax2.set_ylabel("SD of ball amplitude (cm)")
-    ax2.set_title(f"model: SD of ball amplitude vs AC ($\\alpha$ = {alpha:g}, $\\tau$ = "
+    ax2.set_title(f"model: SD of ball amplitude vs AC ($\\alpha$ = {alpha:g}, $g$ = "
+                  f"{curve['g_m_s2'].iloc[0]:.3g} m/s$^2$, $\\tau$ = "
                   f"{curve['racket_period_s'].iloc[0]:.3g} s)", fontsize=10)
     ax2.legend(fontsize=8)
     return {"learning.png": fig}

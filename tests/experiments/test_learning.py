@@ -84,6 +84,10 @@ def test_learning_figure_and_redraw(learning_run):
     fig = learning.draw(frames)["learning.png"]
     labels = {ax.get_xlabel() for ax in fig.axes}
     assert "trial number" in labels and "racket acceleration at impact AC (g)" in labels
+    # the model's title names every parameter its curve depends on, g among them (a boom's
+    # gravity changes it; a reviewer found g missing)
+    g = frames["model_curve.csv"]["g_m_s2"].iloc[0]
+    assert any(f"$g$ = {g:.3g} m/s$^2$" in ax.get_title() for ax in fig.axes)
 
 
 @pytest.mark.slow
