@@ -848,11 +848,13 @@ def test_a_long_dropout_of_rows_at_a_crossing_is_named_as_a_gap():
     assert all(reason != "outside a complete racket cycle" for _, reason in inside), inside
 
 
-def test_a_dropout_written_as_minus_9999_is_warned_of_with_its_value(tmp_path):
+def test_a_dropout_written_as_minus_9999_is_read_as_a_gap_and_said_so(tmp_path):
     """Some systems write a lost marker as -9999 (or another code), not 0: 8 samples of it in
     the ball column were read as heights without a word (a review found the two phantom
-    contacts shift every later impact's k by 2). The warning names the value and the setting
-    that reads it as a gap; with it, the samples are gaps."""
+    contacts shift every later impact's k by 2), then with a warning only (a later review: the
+    tool knows the value is a code, yet the run went on with it). A value that far outside
+    the column's heights is read as a gap, and the warning says so and names the setting;
+    with the setting given, nothing is said."""
     from types import SimpleNamespace
 
     from bounce_cli.data.recordings import read_csv_recording
@@ -865,13 +867,14 @@ def test_a_dropout_written_as_minus_9999_is_warned_of_with_its_value(tmp_path):
     columns = SimpleNamespace(time="t_s", racket="racket_x_m", ball="ball_x_m", trial=None)
     units = SimpleNamespace(length="m", time="s")
     heard: list[str] = []
-    read_csv_recording(tmp_path / "r.csv", columns, units, None, heard.append)
+    (trial,) = read_csv_recording(tmp_path / "r.csv", columns, units, None, heard.append)
     assert len(heard) == 1 and "'ball_x_m' is exactly -9999 in 1 run(s)" in heard[0]
-    assert "--set 'csv.missing_heights=[-9999]'" in heard[0]
-    coded = SimpleNamespace(separator=",", decimal=".", skip_rows=0, missing_heights=[-9999])
-    (trial,) = read_csv_recording(tmp_path / "r.csv", columns, units, coded, heard.append)
-    assert len(heard) == 1 and np.isnan(trial.ball[100:108]).all()
+    assert "read as gaps" in heard[0] and "--set 'csv.missing_heights=[-9999]'" in heard[0]
+    assert np.isnan(trial.ball[100:108]).all()
     assert np.isfinite(np.delete(trial.ball, np.arange(100, 108))).all()
+    coded = SimpleNamespace(separator=",", decimal=".", skip_rows=0, missing_heights=[-9999])
+    (same,) = read_csv_recording(tmp_path / "r.csv", columns, units, coded, heard.append)
+    assert len(heard) == 1 and np.array_equal(same.ball, trial.ball, equal_nan=True)
 
 
 def test_a_racket_resting_at_0_is_no_dropout(tmp_path):

@@ -206,12 +206,30 @@ def _heights(frame: pd.DataFrame, path: Path, name: str, key: str, missing: list
         value = float(values[runs[0]])
         same = runs[values[runs] == value]
         written = f"{value:g}"
-        warn(f"{path}: column {name!r} is exactly {written} in {same.size} run(s) of "
-             f"{ZERO_RUN_SAMPLES} samples or more (the first at {time_name} = "
-             f"{frame[time_name].iloc[runs[0]]}): a marker dropout written as {written}? "
-             f"They are read as heights; --set 'csv.missing_heights=[{written}]' reads them "
-             "as gaps")
+        where = (f"{path}: column {name!r} is exactly {written} in {same.size} run(s) of "
+                 f"{ZERO_RUN_SAMPLES} samples or more (the first at {time_name} = "
+                 f"{frame[time_name].iloc[runs[0]]})")
+        if _far_outside(values, value):  # a code: no ball or racket was ever there
+            values = np.where(values == value, np.nan, values)
+            warn(f"{where}, far outside the column's other heights: a marker dropout "
+                 f"written as {written}, read as gaps (--set "
+                 f"'csv.missing_heights=[{written}]' says so and silences this)")
+        else:
+            warn(f"{where}: a marker dropout written as {written}? They are read as "
+                 f"heights; --set 'csv.missing_heights=[{written}]' reads them as gaps")
     return values
+
+
+def _far_outside(values: np.ndarray, value: float) -> bool:
+    """``value`` lies beyond the column's other (finite) values by more than their whole
+    range: -9999 beside heights of 0-2000 mm; not 0 beside heights of 0.1-2 m (a dropout
+    written as 0 may be a height: warned of, read as one)."""
+    rest = values[np.isfinite(values) & (values != value)]
+    if rest.size < 2:
+        return False
+    low, high = float(rest.min()), float(rest.max())
+    span = high - low
+    return span > 0.0 and (value < low - span or value > high + span)
 
 
 def read_csv_recording(path: Path, columns, units, csv_format=None,
