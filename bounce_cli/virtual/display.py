@@ -91,6 +91,9 @@ class Display:
     pointer: "queue.Queue[tuple[float, float]]" = field(default_factory=queue.Queue)
     connections: int = 0  # connected now
     _opened: int = 0  # connections so far: each one's number in latency.csv
+    #: the page whose pointer is the racket (``mouse``): the first that points, until it
+    #: closes; other pages watch
+    _pointer_page: int | None = None
     _frames: deque = field(default_factory=lambda: deque(maxlen=100_000))
     _lock: threading.Lock = field(default_factory=threading.Lock)
     _wakers: set = field(default_factory=set)
@@ -268,7 +271,7 @@ class Display:
                     elif kind == "drawn":
                         display._drawn(message, connection)
                     elif kind == "pointer":
-                        display._pointed(message)
+                        display._pointed(message, connection)
 
             sender = asyncio.ensure_future(send_frames())
             try:
@@ -279,6 +282,8 @@ class Display:
                 sender.cancel()
                 display._wakers.discard(wake)
                 display.connections -= 1
+                if display._pointer_page == connection:  # the next page that points
+                    display._pointer_page = None
 
         return Starlette(routes=[Route("/", index), WebSocketRoute("/ws", stream)])
 
@@ -295,12 +300,17 @@ class Display:
                              "connection": connection, "delay_ms": 1e3 * (drawn - clock),
                              "round_trip_ms": message.get("rtt")})
 
-    def _pointed(self, message: dict) -> None:
-        """The pointer's height on the page (0 at the bottom, 1 at the top), on the server's
-        clock, as a racket height in metres."""
+    def _pointed(self, message: dict, connection: int) -> None:
+        """The pointer's height on page ``connection`` (0 at the bottom, 1 at the top), on
+        the server's clock, as a racket height in metres; only the page that pointed first
+        (and is still open) moves the racket: a second page, an experimenter's, watches."""
         try:
             y, clock = float(message["y"]), float(message["clock"])
         except (KeyError, TypeError, ValueError):
+            return
+        if self._pointer_page is None:
+            self._pointer_page = connection
+        if connection != self._pointer_page:
             return
         if math.isfinite(y) and math.isfinite(clock):
             self.pointer.put((clock, self.view.low_m + y * (self.view.high_m - self.view.low_m)))
