@@ -16,7 +16,7 @@ from pydantic import Field, model_validator
 
 from ..runtime.config import ConfigError, ControllableModelBlock, ExperimentConfig, StrictModel
 from ..model.flight import FlightSettings, simulate
-from ..model.params import ModelParams, wrap_phase
+from ..model.params import ModelParams, phase_difference, wrap_phase
 from .plotting import caption_figures, control_caption, integer_axis, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
@@ -96,9 +96,9 @@ def case_ending(track: pd.DataFrame, impacts: pd.DataFrame, v_fp: float,
     if len(track) and track["state"].iloc[-1] == "stuck":
         return "stuck on the racket"
     last = impacts.iloc[-1]
-    off_deg = (float(last["theta_deg"]) - theta_fp_deg + 180.0) % 360.0 - 180.0
+    off = phase_difference(math.radians(float(last["theta_deg"])), math.radians(theta_fp_deg))
     if (abs(float(last["v_m_s"]) - v_fp) <= NEAR_FIXED_POINT_V * abs(v_fp)
-            and abs(off_deg) <= NEAR_FIXED_POINT_DEG):
+            and abs(float(off)) <= math.radians(NEAR_FIXED_POINT_DEG)):
         return "near the period-1 fixed point"
     return "in flight, away from the period-1 fixed point"
 

@@ -149,10 +149,11 @@ def experiment_status(comparison: dict[str, str]) -> str:
     new = sorted(name for name, how in comparison.items() if how == "new")
     if new and len(new) == len(comparison):
         return "new (no earlier results there): " + ", ".join(new)
-    if changed or new:
+    parts = [f"{word}: {', '.join(names)}" for word, names in (("changed", changed),
+                                                               ("new", new)) if names]
+    if parts:
         along = sorted(name for name, how in comparison.items() if how == "rewritten")
-        return ("changed: " + ", ".join(changed) if changed else "") + (
-            ("; " if changed else "") + "new: " + ", ".join(new) if new else "") + (
+        return "; ".join(parts) + (
             f" (rewritten with them, within tolerance: {', '.join(along)})" if along else "")
     close = sorted(name for name, how in comparison.items() if how == "within tolerance")
     if close:
