@@ -308,11 +308,11 @@ class Display:
             y, clock = float(message["y"]), float(message["clock"])
         except (KeyError, TypeError, ValueError):
             return
+        if not (math.isfinite(y) and math.isfinite(clock)):
+            return  # no height: the page does not take the racket with it
         if self._pointer_page is None:
             self._pointer_page = connection
-        if connection != self._pointer_page:
-            return
-        if math.isfinite(y) and math.isfinite(clock):
+        if connection == self._pointer_page:
             self.pointer.put((clock, self.view.low_m + y * (self.view.high_m - self.view.low_m)))
 
 

@@ -54,3 +54,21 @@ def test_one_page_s_pointer_is_the_racket_and_a_second_page_only_watches():
             assert heights(display, 1) == [0.75]
     finally:
         display.stop()
+
+
+def test_a_page_whose_pointer_height_is_not_finite_does_not_take_the_racket():
+    """Ownership went to the first page that sent a pointer message, before its height was
+    checked: a page sending NaN (a broken script, a page without a pointer) took the racket
+    and kept the subject's page from moving it."""
+    display = Display(View(low_m=0.0, high_m=1.0), mouse=True, port=0)
+    display.start()
+    ws = display.url.replace("http://", "ws://") + "ws"
+    try:
+        with websockets_sync.connect(ws, open_timeout=5) as broken, \
+                websockets_sync.connect(ws, open_timeout=5) as subject:
+            pointer(broken, float("nan"))  # json.dumps writes NaN, which the server parses
+            time.sleep(0.2)
+            pointer(subject, 0.5)
+            assert heights(display, 1) == [0.5]
+    finally:
+        display.stop()
