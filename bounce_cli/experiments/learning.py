@@ -124,6 +124,13 @@ def trial_table(config: LearningConfig, options: RunOptions, source=None
         number = impacts.trial_number(trial)  # its place in the series, short trials counted
         if "perturbed" in g.columns:  # the stationary state: not the relaxations
             g = g[settled_mask(g["perturbed"].to_numpy(), config.settle_after_perturbation)]
+            if len(g) < config.min_bounces:
+                options.warn(
+                    f"data: {impacts.path}: trial {trial}: {len(g)} impacts outside the "
+                    f"perturbations and the {config.settle_after_perturbation} after each "
+                    f"(settle_after_perturbation), fewer than min_bounces "
+                    f"({config.min_bounces}): left out of the per-trial statistics")
+                continue
         theta = g["theta_rad"].to_numpy()
         dtheta = phase_difference(theta, circular_mean(theta))
         apex = g["ball_apex_m"].dropna()

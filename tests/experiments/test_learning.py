@@ -156,3 +156,27 @@ def test_data_statistics_leave_out_the_relaxation_after_perturbations(tmp_path, 
         assert result.exit_code == 0, result.output
         sds[settle] = pd.read_csv(out / "trials.csv")["v_sd_m_s"].to_numpy()
     assert np.all(sds[4] < 0.6 * sds[0])
+
+
+def test_a_trial_left_with_too_few_settled_impacts_is_left_out_with_a_warning(tmp_path, cli):
+    """min_bounces was checked on the whole trial, before the perturbed impacts and the
+    relaxation after each were removed: a trial perturbed every fifth impact kept none (or
+    four) and still gave a row, its statistics over nothing, and the trend was fitted to it.
+    Four of the passive lab's eight trials are perturbed every fifth impact here: with
+    settle_after_perturbation 4 they keep no impact, and are left out with a warning."""
+    from pathlib import Path
+
+    frame = pd.read_csv(Path(__file__).resolve().parents[2] / "results" / "impulse-data"
+                        / "impacts.csv")
+    dense = frame["trial"] > frame["trial"].min() + 3  # the later four trials
+    frame.loc[dense, "perturbed"] = frame.loc[dense, "k"] % 5 == 0
+    data = tmp_path / "impacts.csv"
+    frame.to_csv(data, index=False)
+    out = tmp_path / "out"
+    result = cli("learning", "--data", data, "--set", "model.g=9.81", "--out", out, "--quiet")
+    assert result.exit_code == 0, result.output
+    trials = pd.read_csv(out / "trials.csv")
+    assert len(trials) == 4 and (trials["bounces"] >= 10).all()
+    assert trials["trial_number"].tolist() == [1, 2, 3, 4]
+    assert "fewer than min_bounces" in result.output
+    assert "settle_after_perturbation" in result.output
