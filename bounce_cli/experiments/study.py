@@ -420,6 +420,32 @@ def one_line(exc: BaseException) -> str:
     return text[0] if text else type(exc).__name__
 
 
+def condensed_warnings(labels: list[str], warnings: list[list[str]]) -> list[str]:
+    """The units' warnings (``warnings[i]``: unit ``labels[i]``'s, each starting with its
+    label), in order, a message that several units share word for word but for the label
+    once, naming them: ``every unit (40): impulse: not run: ...`` or ``2 units (s1/a,
+    s3/a): ...`` (a study of steady recordings: one line, not one per unit)."""
+    units_of: dict[str, list[str]] = {}
+    for label, messages in zip(labels, warnings):
+        for message in messages:
+            prefix = f"{label}: "
+            text = message[len(prefix):] if message.startswith(prefix) else message
+            units_of.setdefault(text if message.startswith(prefix) else message,
+                                []).append(label if message.startswith(prefix) else "")
+    lines = []
+    for text, units in units_of.items():
+        named = [u for u in units if u]
+        if len(named) <= 1:
+            lines.extend(f"{u}: {text}" if u else text for u in units)
+        elif len(named) == len(labels):
+            lines.append(f"every unit ({len(named)}): {text}")
+        else:
+            shown = ", ".join(named[:3]) + (f" and {len(named) - 3} more" if len(named) > 3
+                                            else "")
+            lines.append(f"{len(named)} units ({shown}): {text}")
+    return lines
+
+
 def analyse_unit(task: UnitTask) -> dict[str, Any]:
     """Everything of one unit (a worker's task): its extracted recordings, its analyses' tables,
     its row of group.csv, its warnings and failures; JSON-able (checkpoints, other processes)."""
@@ -452,7 +478,11 @@ def analyse_unit(task: UnitTask) -> dict[str, Any]:
             seed = unit_seed(cfg["seed"], unit)
             for name in cfg["analyses"]:
                 if name in NEEDS_PERTURBATIONS and not has_perturbations(pooled):
-                    continue  # nothing to align on: not a failure, the data have no perturbations
+                    # nothing to align on: not a failure, the data have no perturbations
+                    why = "the unit's impacts hold no perturbed impact to align on"
+                    warnings.append(f"{unit.label}: {name}: not run: {why}")
+                    not_run[name] = why
+                    continue
                 if name == "acf":
                     crowded = perturbations_leave_no_run(pooled, cfg, alpha, g, seed)
                     if crowded:  # a perturbation session: the stationary analysis needs
@@ -734,7 +764,8 @@ def run(config: StudyConfig, options: RunOptions) -> ExperimentResult:
                 done[result["index"]] = result
                 options.progress.advance()
     results = [done[t.index] for t in tasks]
-    warnings = [message for result in results for message in result["warnings"]]
+    warnings = condensed_warnings([t.unit.label for t in tasks],
+                                  [result["warnings"] for result in results])
     for message in warnings:
         options.warn(message)
     frames: dict[str, pd.DataFrame] = {}

@@ -986,3 +986,36 @@ def test_stability_verdicts_are_read_over_the_table_s_tests():
     assert out.p_value_holm[1] == pytest.approx(0.008)
     assert out.p_value_holm[0] == pytest.approx(min(1.0, 0.03 * 7))
     assert np.isnan(out.p_value_holm[8])
+
+
+def test_impulse_on_units_without_perturbations_is_not_run_with_one_warning(tiny, tmp_path,
+                                                                            cli_module):
+    """impulse was skipped without a word for a unit whose impacts hold no perturbation,
+    where the docs promise a warning (study.md's exit status, virtual.md). The same reason
+    for every unit is one line, not one per unit."""
+    out = tmp_path / "out"
+    result = cli_module("study", "--manifest", tiny / "study.csv", "--out", out,
+                        "--set", "analyses=[impulse]", "--figures", "none", *FAST)
+    assert result.exit_code == 0, result.output
+    said = [" ".join(line.split()) for line in result.stderr.split("warning:")[1:]]
+    about = [line for line in said if "impulse: not run" in line]
+    assert len(about) == 1, result.stderr
+    assert "every unit (2)" in about[0] and "no perturbed impact" in about[0]
+    assert "impulse: not run" in (out / "report.html").read_text()
+    assert pd.read_csv(out / "failures.csv").empty
+
+
+def test_condensed_warnings_name_the_units_that_share_a_message():
+    from bounce_cli.experiments.study import condensed_warnings
+
+    labels = ["s1/a", "s2/a", "s3/a", "s4/a", "s5/a"]
+    warnings = [["s1/a: impulse: not run: none", "s1/a: acf: trial 2 short"],
+                ["s2/a: impulse: not run: none"], ["s3/a: impulse: not run: none"],
+                ["s4/a: impulse: not run: none", "a message of no unit"],
+                ["s5/a: impulse: not run: none", "s5/a: acf: trial 2 short"]]
+    assert condensed_warnings(labels, warnings) == [
+        "every unit (5): impulse: not run: none", "2 units (s1/a, s5/a): acf: trial 2 short",
+        "a message of no unit"]
+    assert condensed_warnings(labels, [w[:1] for w in warnings[:4]] + [[]]) == [
+        "4 units (s1/a, s2/a, s3/a and 1 more): impulse: not run: none"]
+    assert condensed_warnings(["s1"], [["s1: x"]]) == ["s1: x"]
