@@ -32,6 +32,7 @@ from ..analysis.data_stats import (
     noise_from_sds,
     relaxation_impact,
     settled_mask,
+    still_relaxing,
     trial_correlations,
 )
 from ..analysis.racket_inputs import INPUT_COEFFICIENTS, racket_input_jacobian
@@ -263,6 +264,30 @@ def measurement_noise(block, source: ImpactsSource | None, data_path) -> Measure
     return MeasurementNoise(block.measurement_sd_v_m_s,
                             math.radians(block.measurement_sd_theta_deg), "assumed")
 
+def warn_if_still_relaxing(impacts: Impacts, first_settled: int, settle_key: str,
+                           options: RunOptions) -> None:
+    """Warn where the steady state an analysis takes after each perturbation (from impact
+    ``first_settled`` after it on) still holds the relaxation (``data_stats.still_relaxing``
+    on v and theta), naming the setting to raise (``settle_key``)."""
+    if "perturbed" not in impacts.frame.columns:
+        return
+    groups = [g for _, g in impacts.by_trial()]
+    found = still_relaxing(
+        {"v_m_s": ([g["v_m_s"].to_numpy(float) for g in groups], False),
+         "theta_rad": ([g["theta_rad"].to_numpy(float) for g in groups], True)},
+        [g["perturbed"].to_numpy(bool) for g in groups], first_settled,
+        k_trials=[g["k"].to_numpy() for g in groups])
+    if not found:
+        return
+    off = " and ".join(f"v {abs(f.mean):.3g} m/s (SE {f.se:.2g})" if f.quantity == "v_m_s"
+                       else f"theta {math.degrees(abs(f.mean)):.3g} deg "
+                            f"(SE {math.degrees(f.se):.2g})" for f in found)
+    options.warn(f"data: {impacts.path}: the response to the perturbations has not settled "
+                 f"by impact {first_settled} after them: {off} off the steady state (means "
+                 f"over {found[0].windows} perturbations, each signed by its kick), so the "
+                 f"steady state holds the relaxation; raise {settle_key}")
+
+
 def short_trials_warning(source: ImpactsSource | None, options: RunOptions):
     """``read_impacts``'s ``drop_short`` for a table handed over in memory (a study's unit,
     the Python API: a short trial is left out with a warning), None for a file given with
@@ -282,6 +307,8 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
     params = model_at_data(impacts, used, record=options.record)
     noise = measurement_noise(d, source, config.data)
     segments = stationary_segments(impacts, d.settle_after_perturbation, config.max_lag + 2)
+    warn_if_still_relaxing(impacts, d.settle_after_perturbation + 1,
+                           "data_analysis.settle_after_perturbation", options)
     segments_means = [(s[1], s[3]) for s in segments]
     racket = [s[4] for s in segments]
     segments = [s[:3] for s in segments]
@@ -1067,6 +1094,8 @@ def impulse_data_run(config, options, source: ImpactsSource | None = None
                           "to align (bounce impulse --data needs perturbations)")
     used = model_for_data(impacts, config, options, source)
     params = model_at_data(impacts, used, record=options.record)
+    warn_if_still_relaxing(impacts, d.settle_after_perturbation,
+                           "data_analysis.settle_after_perturbation", options)
     n = config.iterations
     groups = list(impacts.by_trial())
     alpha_0 = params.alpha

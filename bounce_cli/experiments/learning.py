@@ -109,7 +109,7 @@ def trial_table(config: LearningConfig, options: RunOptions, source=None
     mean racket period (NaN without that column), the model's alpha and g (the data's
     unless set by the user, ``data_parameters``) and the data's noise strengths (q_v, q_theta,
     pairs) from the VAR(1) residuals of each trial (``data_side.noise_from_trials``)."""
-    from .data_side import noise_from_trials, short_trials_warning
+    from .data_side import noise_from_trials, short_trials_warning, warn_if_still_relaxing
 
     if source is None:
         assert config.data is not None
@@ -119,6 +119,8 @@ def trial_table(config: LearningConfig, options: RunOptions, source=None
                            min_bounces_key="min_bounces",
                            drop_short=short_trials_warning(source, options))
     model = model_for_data(impacts, config, options, source)
+    warn_if_still_relaxing(impacts, config.settle_after_perturbation + 1,
+                           "settle_after_perturbation", options)
     rows = []
     for trial, g in impacts.by_trial():
         number = impacts.trial_number(trial)  # its place in the series, short trials counted
