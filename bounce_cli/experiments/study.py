@@ -432,7 +432,7 @@ def condensed_warnings(labels: list[str], warnings: list[list[str]]) -> list[str
             text = message[len(prefix):] if message.startswith(prefix) else message
             units_of.setdefault(text if message.startswith(prefix) else message,
                                 []).append(label if message.startswith(prefix) else "")
-    lines = []
+    lines: list[str] = []
     for text, units in units_of.items():
         named = [u for u in units if u]
         if len(named) <= 1:
