@@ -38,6 +38,7 @@ and ``setup.csv`` (else ``g_m_s2``) unless the user sets them (``bounce_cli.data
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Union
@@ -204,6 +205,21 @@ def read_session(paths: list) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True)
 
 
+_NUMBER_RUN = re.compile(r"[0-9]+")
+
+
+def session_order(labels: list[str]) -> list[str]:
+    """Trial labels in their session's order: by their numbers where the labels differ only
+    in them (``1, 2, ..., 10``; ``T1, ..., T10``; ``s1_t01, ...``: a file sorted as text, or
+    glued from several files, is put back in order, as a study's manifest orders its
+    recordings), else (words, or labels of several kinds) in the order they first appear.
+    Equal numbers (``01`` and ``1``) keep their order of appearance."""
+    if len({_NUMBER_RUN.sub("#", label) for label in labels}) != 1 or not _NUMBER_RUN.search(
+            labels[0] if labels else ""):
+        return labels
+    return sorted(labels, key=lambda label: [int(n) for n in _NUMBER_RUN.findall(label)])
+
+
 def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: str = "",
                  min_bounces: int = 2, optional: tuple[str, ...] = (),
                  min_bounces_key: str = "",
@@ -299,7 +315,7 @@ def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: st
                               f"(got {cell_text(frame['perturbed'].iloc[row])})")
         frame["perturbed"] = text.map(PERTURBED_VALUES).astype(bool)
     frame["trial"] = frame["trial"].astype(str)
-    order = list(dict.fromkeys(frame["trial"]))
+    order = session_order(list(dict.fromkeys(frame["trial"])))
     frame["_order"] = frame["trial"].map({t: i for i, t in enumerate(order)})
     frame = frame.sort_values(["_order", "k"], kind="stable").drop(columns="_order")
     frame = frame.reset_index(drop=True)
