@@ -642,6 +642,10 @@ def run(config: ExtractConfig, options: RunOptions) -> ExperimentResult:
     if config.events is not None:
         events = read_events(Path(config.events), config.event_columns, config.units, trials,
                              config.csv, shift_s=config.events_shift_s)
+    if g_set is None and events is not None and any(t.ball is None for t in trials):
+        options.warn(f"no ball data (columns.ball is null): v_k and AC come from the events' "
+                     f"flight times at g = {settings.g:g} m/s^2, model.g's default, which no "
+                     "flight measured; set model.g (or extraction.g) to the set-up's g")
     options.progress.start(len(trials), "extract")
     session = extract_all(trials, events, settings, source, measure_g=g_set is None,
                           measure_offset=config.extraction.ball_offset_m is None)

@@ -1136,3 +1136,21 @@ def test_the_stacked_mid_position_is_the_fit_at_each_time(seed):
     grid = times[:204].reshape(6, -1)
     np.testing.assert_allclose(cycles.mid_position(grid), stacked[:204].reshape(6, -1),
                                rtol=1e-13)
+
+
+def test_events_without_ball_data_say_which_g_the_flights_are_computed_at(simulated, tmp_path):
+    """Without ball data v_k comes from the events' flight times at a g that nothing
+    measured: model.g's default 9.81 was used without a word (on a g = 7.5 set-up v_k was
+    0.81 m/s off and AC -0.32 g for -0.42 g). A warning now names the g and the setting."""
+    events = simulated / "events.csv"
+    assert events.is_file()
+    result, out = extract_cli(tmp_path, "--data", str(simulated / "recording.csv"),
+                              "--events", str(events), "--set", "columns.ball=null")
+    assert result.exit_code == 0, result.output
+    said = " ".join(result.output.split())
+    assert "no ball data" in said and "g = 9.81 m/s^2" in said and "model.g" in said
+    result, out = extract_cli(tmp_path, "--data", str(simulated / "recording.csv"),
+                              "--events", str(events), "--set", "columns.ball=null",
+                              "--set", "model.g=9.81", "--force")
+    assert result.exit_code == 0, result.output
+    assert "no ball data" not in " ".join(result.output.split())
