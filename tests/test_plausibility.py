@@ -71,3 +71,28 @@ def test_an_impacts_table_in_the_wrong_unit_is_warned_about(tmp_path, cli, colum
     lines = [line for line in warnings_of(result) if column in line]
     assert len(lines) == 1, result.stderr
     assert f"data: {path}: column {column} (trial means)" in lines[0] and needle in lines[0]
+
+
+def test_radians_written_under_theta_deg_are_warned_about(tmp_path, cli):
+    """A lab's own table with radians in its theta_deg column was read as phases of 0.5-0.8
+    deg without a word (eq. 15's slope moved from 0.1235 to 0.1053 and still 'covered' the
+    prediction). Phases all within +-2 pi 'deg' are warned about; the same phases in
+    degrees are not, nor in a theta_rad column."""
+    from bounce_cli.data.plausibility import phase_unit_warning
+    from test_data_parameters import lab_table
+
+    path = lab_table(tmp_path)
+    frame = pd.read_csv(path)
+    assert "theta_deg" in frame.columns
+    degrees = frame.drop(columns=[c for c in ("theta_rad",) if c in frame.columns])
+    radians = degrees.assign(theta_deg=frame["theta_rad"] if "theta_rad" in frame.columns
+                             else degrees["theta_deg"] * 3.141592653589793 / 180)
+    for table, warned in ((degrees, False), (radians, True)):
+        table.to_csv(path, index=False)
+        result = cli("learning", "--data", path, "--out", tmp_path / "o", "--quiet", "--force")
+        lines = [line for line in warnings_of(result) if "theta_deg" in line]
+        assert len(lines) == int(warned), result.stderr
+        if warned:
+            assert "radians written as degrees?" in lines[0] and "theta_rad" in lines[0]
+    assert phase_unit_warning([0.5, 0.6] * 4, "x") is None  # too few to tell
+    assert phase_unit_warning([30.0, 0.5] * 10, "x") is None

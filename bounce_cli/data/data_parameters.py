@@ -40,7 +40,7 @@ import numpy as np
 from ..model.linear import stability
 from ..model.params import ModelError, ModelParams
 from ..runtime.config import DATA_MODEL_KEYS, ConfigError
-from .plausibility import racket_warnings
+from .plausibility import phase_unit_warning, racket_warnings
 from .setup_table import SETUP_FILE, read_setup
 
 
@@ -281,6 +281,11 @@ def model_for_data(impacts, config, options, source) -> DataModel:
     found = data_model(impacts, config.model, options.model_set_by_user, paths)
     options.record["model_at_data"] = found.record()
     frame = impacts.frame
+    if impacts.phase_in_degrees:
+        message = phase_unit_warning(frame["theta_deg"], f"data: {impacts.path}: column "
+                                                         "theta_deg")
+        if message:
+            options.warn(message)
     if {"racket_amplitude_m", "racket_period_s"} & set(frame.columns):
         means = frame.groupby("trial", sort=False).mean(numeric_only=True)
         for message in racket_warnings(

@@ -103,6 +103,8 @@ class Impacts:
     #: every trial of the table in its order, those left out for too few impacts included
     #: (``read_impacts``'s ``drop_short``): a trial's number in the series is its place here
     series: tuple = ()
+    #: the phases were read from ``theta_deg`` (the table had no ``theta_rad``)
+    phase_in_degrees: bool = False
 
     @property
     def trials(self) -> list:
@@ -280,7 +282,8 @@ def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: st
                               f"{frame['trial'].iloc[row]}, "
                               f"got {cell_text(frame[column].iloc[row])})")
         frame[column] = values.astype(float)
-    if "theta_rad" not in frame.columns:
+    phase_in_degrees = "theta_rad" not in frame.columns
+    if phase_in_degrees:
         frame["theta_rad"] = np.radians(frame["theta_deg"])
     elif "theta_deg" in frame.columns and not np.allclose(
             np.exp(1j * frame["theta_rad"].to_numpy(float)),
@@ -338,7 +341,7 @@ def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: st
             drop_short(f"trial {trial}: {int(count)} impacts, {needed}: left out ({lower} to "
                        "keep it)")
         frame = frame[~frame["trial"].isin(short.index)].reset_index(drop=True)
-    return Impacts(frame, path, series)
+    return Impacts(frame, path, series, phase_in_degrees)
 
 
 def impacts_frame(sim, params, trial_names=None) -> pd.DataFrame:

@@ -65,3 +65,29 @@ def racket_warnings(amplitude_m, period_s, amplitude_where: str,
                    f"can do ({span[0]:g}-{span[1]:g} {symbol}): "
                    + _slip(worst, span, slips, unit, symbol))
     return out
+
+
+#: fewest impacts from which phases that all lie within +-2 pi degrees are taken for radians
+#: written in degrees (a person's phase of impact varies by about 9 deg: section 6)
+RADIANS_AS_DEGREES_MIN_IMPACTS = 10
+
+
+def phase_unit_warning(theta_deg, where: str) -> str | None:
+    """A warning where every phase of impact (degrees) lies within +-2 pi: radians written
+    under a column of degrees (0.5-0.8 "deg" for the 30-45 deg a person hits at), else None.
+
+    Parameters
+    ----------
+    theta_deg : array of float
+        The phases of impact as read, degrees; NaN is ignored.
+    where : str
+        What holds them, for the message (``data: impacts.csv: column theta_deg``).
+    """
+    x = np.asarray(theta_deg, dtype=float)
+    x = x[np.isfinite(x)]
+    if len(x) < RADIANS_AS_DEGREES_MIN_IMPACTS or np.abs(x).max() > 2.0 * math.pi:
+        return None
+    return (f"{where}: every phase of impact lies within +-2 pi (the largest |value| is "
+            f"{np.abs(x).max():.3g} over {len(x)} impacts), where a person's vary by about 9 "
+            "deg: radians written as degrees? (name such a column theta_rad)")
+
