@@ -279,13 +279,21 @@ def warn_if_still_relaxing(impacts: Impacts, first_settled: int, settle_key: str
         k_trials=[g["k"].to_numpy() for g in groups])
     if not found:
         return
+    gaps = [np.diff(np.flatnonzero(g["perturbed"].to_numpy(bool))) for g in groups]
+    spacing = np.concatenate(gaps) if gaps else np.array([])
+    every = int(np.median(spacing)) if len(spacing) else 0
+    advice = (f"raise {settle_key}" + (f" (the perturbations come every {every} impacts)"
+                                       if every else "")
+              if not every or every - 1 > first_settled else
+              f"the perturbations come every {every} impacts, too close for the response to "
+              "die out between them")
     off = " and ".join(f"v {abs(f.mean):.3g} m/s (SE {f.se:.2g})" if f.quantity == "v_m_s"
                        else f"theta {math.degrees(abs(f.mean)):.3g} deg "
                             f"(SE {math.degrees(f.se):.2g})" for f in found)
     options.warn(f"data: {impacts.path}: the response to the perturbations has not settled "
                  f"by impact {first_settled} after them: {off} off the steady state (means "
                  f"over {found[0].windows} perturbations, each signed by its kick), so the "
-                 f"steady state holds the relaxation; raise {settle_key}")
+                 f"steady state holds the relaxation; {advice}")
 
 
 def short_trials_warning(source: ImpactsSource | None, options: RunOptions):

@@ -122,16 +122,13 @@ def trial_table(config: LearningConfig, options: RunOptions, source=None
     warn_if_still_relaxing(impacts, config.settle_after_perturbation + 1,
                            "settle_after_perturbation", options)
     rows = []
+    too_few = []  # trials left with fewer than min_bounces settled impacts: (trial, count)
     for trial, g in impacts.by_trial():
         number = impacts.trial_number(trial)  # its place in the series, short trials counted
         if "perturbed" in g.columns:  # the stationary state: not the relaxations
             g = g[settled_mask(g["perturbed"].to_numpy(), config.settle_after_perturbation)]
             if len(g) < config.min_bounces:
-                options.warn(
-                    f"data: {impacts.path}: trial {trial}: {len(g)} impacts outside the "
-                    f"perturbations and the {config.settle_after_perturbation} after each "
-                    f"(settle_after_perturbation), fewer than min_bounces "
-                    f"({config.min_bounces}): left out of the per-trial statistics")
+                too_few.append((trial, len(g)))
                 continue
         theta = g["theta_rad"].to_numpy()
         dtheta = phase_difference(theta, circular_mean(theta))
@@ -144,6 +141,14 @@ def trial_table(config: LearningConfig, options: RunOptions, source=None
             "theta_mean_deg": math.degrees(circular_mean(theta)),
             "theta_sd_deg": math.degrees(float(np.std(dtheta, ddof=1))),
         })
+    if too_few:
+        listed = ", ".join(f"{trial} ({n})" for trial, n in too_few[:5]) + (
+            f" and {len(too_few) - 5} more" if len(too_few) > 5 else "")
+        options.warn(
+            f"data: {impacts.path}: {len(too_few)} of {len(impacts.trials)} trials have fewer "
+            f"than min_bounces ({config.min_bounces}) impacts outside the perturbations and "
+            f"the {config.settle_after_perturbation} after each (settle_after_perturbation): "
+            f"left out of the per-trial statistics: trial {listed}")
     period = (float(impacts.frame["racket_period_s"].mean())
               if "racket_period_s" in impacts.frame.columns else math.nan)
     noise = noise_from_trials(impacts, config.settle_after_perturbation)

@@ -493,8 +493,9 @@ def analyse_unit(task: UnitTask) -> dict[str, Any]:
                     result = run_analysis(name, cfg, alpha, g, seed, unit, pooled, warnings)
                 except TooFewObservationsError as exc:  # the design cannot answer it (two
                     # trials for a trend: the virtual set-up's steady protocol): not a failure
-                    warnings.append(f"{unit.label}: {name}: not run: {one_line(exc)}")
-                    not_run[name] = one_line(exc)
+                    why = of_unit(one_line(exc), unit)
+                    warnings.append(f"{unit.label}: {name}: not run: {why}")
+                    not_run[name] = why
                     if name == "regression":  # its trials still count in the pooled Fig. 7
                         trials = regression_trials(cfg, alpha, g, seed, unit, pooled)
                         if trials is not None:
@@ -563,8 +564,14 @@ def run_analysis(name: str, cfg: dict[str, Any], alpha: float, g: float, seed: i
 
     config = analysis_config(name, cfg["settings"].get(name, {}), alpha, g, seed, None)
     return execute(name, config, write=False, impacts=(f"{unit.label}", pooled), figures=False,
-                   warn=lambda message: warnings.append(f"{unit.label}: {name}: {message}")
-                   ).result
+                   warn=lambda message: warnings.append(
+                       f"{unit.label}: {name}: {of_unit(message, unit)}")).result
+
+
+def of_unit(message: str, unit: Unit) -> str:
+    """An analysis' message about the unit's pooled table without the ``data: <unit>: `` it
+    starts with (the study's warning names the unit first)."""
+    return message.removeprefix(f"data: {unit.label}: ")
 
 
 def regression_trials(cfg: dict[str, Any], alpha: float, g: float, seed: int, unit: Unit,
