@@ -878,3 +878,17 @@ def test_acf_learning_and_impulse_data_warn_of_a_steady_state_still_relaxing(tmp
             assert ("has not settled" in said) is warned, (command, settle, said)
             if warned:
                 assert f"raise {key}" in said
+
+
+def test_acf_data_on_a_session_without_noise_says_there_is_nothing_to_correlate(tmp_path, cli,
+                                                                               user_error):
+    """The virtual set-up's sine racket without perturbations gives impacts equal to
+    rounding (SD of v 1.3e-8 m/s, of theta 4.3e-7 deg): acf --data reported correlation
+    functions and a radius of 0.588 from them. It is one line now (a study: not run)."""
+    from bounce_cli.data.impacts import impacts_frame
+
+    sim = simulate_impacts(PAPER, 0.0, 0.0, 3, 300, 0)
+    data = tmp_path / "impacts.csv"
+    impacts_frame(sim, PAPER).to_csv(data, index=False)
+    result = cli("acf", "--data", data, *FAST, "--out", tmp_path / "o")
+    user_error(result, "barely vary", "no fluctuations to correlate")

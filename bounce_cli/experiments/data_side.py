@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 from pydantic import Field
 
+from ..errors import TooFewObservationsError
 from ..runtime.config import ConfigError, StrictModel
 from ..runtime.forked import ForkedCall, can_fork
 from ..analysis.impulse import impulse_response_full
@@ -155,6 +156,11 @@ def noise_from_residual_covariance(sigma: np.ndarray) -> tuple[float, float]:
                                        else 0.0), 0.0))
     return q_v, q_theta
 
+
+#: an SD of the impacts' v (relative to their mean, at least 1 m/s) or theta (rad) at or below
+#: this is rounding, not fluctuations: ``acf --data`` has nothing to correlate (a session
+#: without noise: the virtual set-up's sine racket gave 1.3e-8 m/s and 7.5e-9 rad)
+ROUNDING_SD = 1e-6
 
 #: the shortest run of consecutive unperturbed impacts a VAR is fitted to, and the shortest
 #: trial of the trust study's simulated data (a VAR(1) per trial needs a few pairs beyond its
@@ -331,6 +337,13 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
     dv_all = np.concatenate([s[1] - s[1].mean() for s in segments])
     dth_all = np.concatenate([s[2] - s[2].mean() for s in segments])
     sd_v, sd_theta = float(np.sqrt(np.mean(dv_all**2))), float(np.sqrt(np.mean(dth_all**2)))
+    mean_v = float(np.mean(np.concatenate([s[1] for s in segments])))
+    if sd_v <= ROUNDING_SD * max(abs(mean_v), 1.0) or sd_theta <= ROUNDING_SD:
+        raise TooFewObservationsError(
+            f"data: {impacts.path}: the impacts barely vary (SD of v {sd_v:.2g} m/s, of theta "
+            f"{math.degrees(sd_theta):.2g} deg: rounding, not fluctuations), so there are no "
+            "fluctuations to correlate (a session without noise, such as the virtual set-up's "
+            "sine racket without perturbations)")
     q_v, q_theta = noise_from_sds(jac, sd_v, sd_theta)
     noise_note = "q from the data's SDs through eq. 19 at the model's J (section 6's route)"
     noise_source = "data_sd_match"
