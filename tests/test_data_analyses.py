@@ -892,3 +892,22 @@ def test_acf_data_on_a_session_without_noise_says_there_is_nothing_to_correlate(
     impacts_frame(sim, PAPER).to_csv(data, index=False)
     result = cli("acf", "--data", data, *FAST, "--out", tmp_path / "o")
     user_error(result, "barely vary", "no fluctuations to correlate")
+
+
+def test_trials_beyond_eq15_s_phases_are_a_question_the_data_cannot_answer(tmp_path):
+    """A virtual session of section 7's protocol with the sine racket ends mostly in chatter
+    (mean phase -105.7 deg): eq. 15 has no positive slope there. It was a ConfigError, which
+    a study counts as a failure (exit 1); it is a TooFewObservationsError now (still a
+    ConfigError: one line, exit 2, from bounce regression --data), which a study skips with
+    a warning."""
+    from bounce_cli.data.impacts import impacts_frame
+    from bounce_cli.errors import TooFewObservationsError
+    from bounce_cli.experiments.base import RunOptions
+    from bounce_cli.experiments.data_side import trial_means_from_impacts
+    from bounce_cli.experiments.regression import RegressionConfig
+
+    frame = impacts_frame(simulate_impacts(PAPER, 0.01, 0.01, 3, 40, 0), PAPER)
+    frame["theta_rad"] = frame["theta_rad"] - math.radians(150)
+    frame = frame.drop(columns="theta_deg")
+    with pytest.raises(TooFewObservationsError, match="outside \\(-90, 90\\)"):
+        trial_means_from_impacts(("chatter", frame), RegressionConfig(), RunOptions())

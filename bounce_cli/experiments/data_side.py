@@ -1306,7 +1306,9 @@ def trial_means_from_impacts(source: ImpactsSource, config, options
     frame = pd.DataFrame(rows)
     if (frame["theta_deg"].abs() >= 90).any():
         bad = frame[frame["theta_deg"].abs() >= 90].iloc[0]
-        raise ConfigError(f"data: {impacts.path}: trial {bad['trial']}: mean phase of impact "
-                          f"{bad['theta_deg']:.1f} deg is outside (-90, 90): eq. 15 has no "
-                          "positive slope there")
+        # the data cannot answer (a session that ends in chatter): a study skips it, warned
+        raise TooFewObservationsError(
+            f"data: {impacts.path}: trial {bad['trial']}: mean phase of impact "
+            f"{bad['theta_deg']:.1f} deg is outside (-90, 90): eq. 15 has no positive slope "
+            "there")
     return frame, model
