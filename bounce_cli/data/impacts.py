@@ -140,16 +140,19 @@ def read_data_csv(path: Path) -> pd.DataFrame:
     """A ``--data`` CSV as a DataFrame with stripped column names; an unreadable file is one
     line naming ``data`` and the file (so is a device or a file above the recordings' size
     limit, ``recordings.text_exports.check_recording_file``)."""
-    from .recordings.text_exports import check_recording_file
+    from .recordings.text_exports import check_recording_file, comment_lines
 
     check_recording_file(Path(path))
     try:
+        with open(path, "rb") as handle:
+            notes = comment_lines(handle.read(65536))  # "# ..." lines before the header
         # only an empty cell is missing: a cell such as 'n/a' stays text, so that an error
         # can show what the file holds
         # trial labels as written: "01" and "1" are two trials, not the number 1 twice
-        header = pd.read_csv(path, nrows=0)
+        header = pd.read_csv(path, nrows=0, skiprows=notes)
         labels = {c: str for c in header.columns if str(c).strip() == "trial"}
-        frame = pd.read_csv(path, keep_default_na=False, na_values=[""], dtype=labels)
+        frame = pd.read_csv(path, keep_default_na=False, na_values=[""], dtype=labels,
+                            skiprows=notes)
     except FileNotFoundError:
         raise ConfigError(f"data: {path}: file not found") from None
     except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:

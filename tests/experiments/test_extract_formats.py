@@ -240,3 +240,37 @@ def test_a_device_as_recording_is_one_line(tmp_path, cli, user_error):
     user_error(cli("extract", "--data", "/dev/zero", "--out", out), "/dev/zero",
                "not a regular file")
     assert not out.exists()
+
+
+def test_an_export_s_comment_lines_before_the_header_are_skipped(session, tmp_path):
+    """"# exported by ..." lines before the header gave pandas' tokenizer error ("Expected 2
+    fields in line 3, saw 4") with no hint and no setting to skip them. Lines starting with
+    # before the header are skipped: the same impacts as the plain file, and a bad cell's
+    line number is the file's. An impacts table with such lines reads too."""
+    rec, _ = session
+    plain, noted = tmp_path / "plain.csv", tmp_path / "noted.csv"
+    rec.to_csv(plain, index=False)
+    with open(noted, "w") as handle:
+        handle.write("# exported by LabSystem 3.2\n#   subject S07, 2026-01-01\n")
+        rec.to_csv(handle, index=False)
+    tables = {}
+    for path in (plain, noted):
+        out = tmp_path / f"out_{path.stem}"
+        result = runner.invoke(app, ["extract", "--data", str(path), "--out", str(out),
+                                     "--quiet"])
+        assert result.exit_code == 0, result.output
+        tables[path.stem] = pd.read_csv(out / "impacts.csv")
+    pd.testing.assert_frame_equal(tables["plain"], tables["noted"])
+    text = noted.read_text().splitlines()
+    text[9] = text[9].replace(text[9].split(",")[1], "oops", 1)  # file line 10
+    noted.write_text("\n".join(text) + "\n")
+    result = runner.invoke(app, ["extract", "--data", str(noted), "--out",
+                                 str(tmp_path / "bad")])
+    assert result.exit_code == 2 and "row 10" in " ".join(result.output.split()), result.output
+    impacts = tmp_path / "impacts.csv"
+    with open(impacts, "w") as handle:
+        handle.write("# impacts of S07\n")
+        tables["plain"].to_csv(handle, index=False)
+    from bounce_cli.data.impacts import read_impacts
+
+    assert len(read_impacts(impacts).frame) == len(tables["plain"])

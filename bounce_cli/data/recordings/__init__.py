@@ -34,6 +34,7 @@ from .text_exports import (
     DEFAULT_VERTICAL,
     check_recording_file,
     check_text,
+    comment_lines,
     detect_format,
     read_motive_csv,
     read_qtm_tsv,
@@ -75,11 +76,14 @@ def read_table(path: Path, csv_format: Any = None) -> pd.DataFrame:
     check_recording_file(path)
     try:
         with open(path, "rb") as handle:
-            check_text(path, handle.read(65536))
+            head = handle.read(65536)
+        check_text(path, head)
+        notes = comment_lines(head)  # an export's "# ..." lines before the header
+        skipped = [*range(notes), *range(notes + 1, notes + 1 + skip)]
         frame = pd.read_csv(path, sep=r"\s+" if not separator.strip() else separator,
-                            decimal=decimal, skiprows=range(1, 1 + skip) if skip else None,
+                            decimal=decimal, skiprows=skipped or None,
                             engine="c" if len(separator) == 1 else "python")
-        frame.attrs["first_row"] = 2 + skip
+        frame.attrs["first_row"] = 2 + notes + skip
         return frame
     except FileNotFoundError:
         raise ConfigError(f"{path}: file not found") from None

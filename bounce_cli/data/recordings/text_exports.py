@@ -103,6 +103,18 @@ def check_text(path: Path, head: bytes) -> None:
         raise ConfigError(f"{path}: a binary file, not a CSV table (it holds NUL bytes)")
 
 
+def comment_lines(head: bytes) -> int:
+    """How many lines at the start of a text table are comments (``#`` first, after any
+    blanks: an export's notes before its header, ``# exported by ...``), from its first
+    bytes ``head``; they are skipped, the header is the line after them."""
+    count = 0
+    for line in head.split(b"\n"):
+        if not line.lstrip().startswith(b"#"):
+            break
+        count += 1
+    return count
+
+
 def detect_format(path: Path) -> str:
     """``c3d`` by the suffix; else a text export's format from its first line: ``vicon``
     (a ``Trajectories`` or ``Devices`` section line), ``qtm`` (``NO_OF_FRAMES``), ``motive``
