@@ -51,8 +51,9 @@ def user_error():
 
 def layout_problems(fig, dpi: float = 150) -> list[str]:
     """What a reader would see cut off or covered in ``fig`` drawn as a PNG at ``dpi``: a
-    title, axis label, legend entry or annotation reaching outside the figure, or a title
-    under a legend. Empty where the figure is laid out."""
+    title, axis label, legend entry or annotation reaching outside the figure, a title
+    under a legend, or neighbouring tick labels less than 2 pixels apart. Empty where the
+    figure is laid out."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
 
     canvas = FigureCanvasAgg(fig)
@@ -82,6 +83,20 @@ def layout_problems(fig, dpi: float = 150) -> list[str]:
         for legend in legends:
             if box.overlaps(legend.get_window_extent(renderer)):
                 problems.append(f"the title {title.get_text()!r} is under a legend")
+    for ax in fig.axes:  # tick labels running into each other ("-1.00-0.75-0.50")
+        if ax.name != "rectilinear":  # a 3-d or polar axis lays its labels out otherwise
+            continue
+        for axis, lo, hi in ((ax.xaxis, "x0", "x1"), (ax.yaxis, "y0", "y1")):
+            low, high = sorted(axis.get_view_interval())
+            labels = [tick.label1 for tick in axis.get_major_ticks()
+                      if tick.label1.get_visible() and tick.label1.get_text()
+                      and low - 1e-9 * (high - low) <= tick.get_loc() <= high + 1e-9 * (
+                          high - low)]
+            boxes = sorted(((t.get_window_extent(renderer), t.get_text()) for t in labels),
+                           key=lambda item: getattr(item[0], lo))
+            for (a, text_a), (b, text_b) in zip(boxes, boxes[1:]):
+                if getattr(b, lo) < getattr(a, hi) + 2.0:  # less than 2 pixels apart
+                    problems.append(f"tick labels {text_a!r} and {text_b!r} run together")
     return problems
 
 

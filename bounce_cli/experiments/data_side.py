@@ -1059,6 +1059,9 @@ def _stability_figure(stab: pd.DataFrame, trust: pd.DataFrame | None):
     ax.set_aspect("equal")
     ax.set_xlim(-1.1, 1.1)
     ax.set_ylim(-1.1, 1.1)
+    ticks = [-1.0, -0.5, 0.0, 0.5, 1.0]  # a tick every 0.25 ran its labels together
+    ax.set_xticks(ticks)
+    ax.set_yticks(ticks)
     ax.set_xlabel(r"Re $\lambda$")
     ax.set_ylabel(r"Im $\lambda$")
     ax.set_title(r"eigenvalues of $J$ ($\pm$ SE): model eq. 10 vs VAR(1) and VARX fits",
