@@ -180,3 +180,18 @@ def test_a_trial_left_with_too_few_settled_impacts_is_left_out_with_a_warning(tm
     assert trials["trial_number"].tolist() == [1, 2, 3, 4]
     assert "fewer than min_bounces" in result.output
     assert "settle_after_perturbation" in result.output
+
+
+def test_the_printed_reading_s_curve_is_drawn_only_where_it_can_be_seen():
+    """learning.png's legend named a dotted eq. 19 curve (the noise of eqs. 16-18 as printed)
+    that lay under the solid one at the data's small phase noise. It is drawn where the two
+    differ by more than 1 % somewhere; else the solid curve's label says they agree."""
+    curve = learning.model_curve(0.5, 9.81, 0.92, 0.04, 0.05, 41)
+    close = learning.model_curve(0.5, 9.81, 0.92, 0.0408, 0.00232, 41)
+    for frame, dotted in ((curve, True), (close, False)):
+        fig = learning.draw({"model_curve.csv": frame})["learning.png"]
+        ax = fig.axes[0]
+        styles = [line.get_linestyle() for line in ax.get_lines()]
+        assert (":" in styles) is dotted
+        labels = ax.get_legend_handles_labels()[1]
+        assert any("the same within 1 %" in label for label in labels) is not dotted
