@@ -441,3 +441,31 @@ def test_the_learning_figure_names_its_fit_in_a_sentence():
     assert ("(fixed effect: mixed model with random intercept and slope; a random-effects "
             "variance estimated at 0)") in title
     assert "((" not in title and "))" not in title
+
+
+def test_fig2_draws_rounding_level_impacts_flat_without_an_offset_label():
+    """The virtual set-up's sine racket gives impacts that vary by 5e-8 m/s: Fig. 2's panels
+    blew that up under offset labels ('x1e-6 + 4.276349e1'). They span at least +-0.01 m/s
+    and +-0.5 deg now; a lab's impacts (0.3 m/s apart) keep their own range. The virtual
+    figure's title named trial 1 twice."""
+    from bounce_cli.experiments.plotting import draw_fig2
+    from bounce_cli.experiments.virtual import draw as draw_virtual
+
+    t = np.arange(0.0, 10.0, 0.01)
+    samples = pd.DataFrame({"trial": 1, "t_s": t, "racket_x_m": 0.3 * np.sin(t),
+                            "ball_x_m": 0.3 * np.sin(t) + 1.0})
+    hops = np.arange(1.0, 10.0, 0.9)
+    flat = pd.DataFrame({"trial": 1, "t_s": hops, "hop_s": 0.9,
+                         "v_m_s": 4.5126 + 5e-8 * np.cos(hops),
+                         "theta_deg": 42.76349 + 4e-6 * np.sin(hops)})
+    fig = draw_fig2(samples, flat, "x")
+    fig.canvas.draw()
+    for ax, span in ((fig.axes[1], 0.01), (fig.axes[2], 0.5)):
+        low, high = ax.get_ylim()
+        assert high - low >= 2 * span - 1e-12
+        assert ax.yaxis.get_offset_text().get_text() == ""
+    lab = flat.assign(v_m_s=4.5 + 0.3 * np.cos(hops))
+    assert np.ptp(draw_fig2(samples, lab, "x").axes[1].get_ylim()) < 1.0
+    frames = {"recordings/s1_virtual_t1.csv": samples, "impacts.csv": flat}
+    title = draw_virtual(frames)["virtual.png"].get_suptitle()
+    assert title.count("trial 1") == 1, title

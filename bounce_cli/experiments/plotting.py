@@ -197,6 +197,12 @@ def centred_deg(theta_deg):
 
 
 # -- Fig. 2 -------------------------------------------------------------------------------------
+#: Fig. 2's v_k and theta_k panels span at least +- this around their mean (m/s, deg): a
+#: session whose impacts vary by rounding only (the virtual set-up's sine racket: 5e-8 m/s)
+#: shows a flat line
+FIG2_MIN_SPAN = {"v_m_s": 0.01, "theta_deg": 0.5}
+
+
 def draw_fig2(samples: pd.DataFrame, impacts: pd.DataFrame, title: str, bounces: int = 10):
     """Fig. 2: continuous trajectories on top; v_k and theta_k of the same bounces below, each
     with its sample mean dashed. Shows the first trial of ``samples``, its impacts within the
@@ -234,6 +240,10 @@ def draw_fig2(samples: pd.DataFrame, impacts: pd.DataFrame, title: str, bounces:
             ax.legend(loc="best", fontsize=7)
         if len(y):
             ax.axhline(float(np.mean(y)), ls="--", color="0.4", lw=0.8)
+            span = FIG2_MIN_SPAN[column]
+            if np.ptp(y) < span:  # rounding-level variation (the model's own ball) drawn
+                # flat, not blown up under an offset label ("x1e-6 + 42.76349")
+                ax.set_ylim(float(np.mean(y)) - span, float(np.mean(y)) + span)
         ax.set_ylabel(label_)
         for ti in t:
             ax_x.axvline(ti, color="0.85", lw=0.6, zorder=0)

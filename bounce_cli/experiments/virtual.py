@@ -522,7 +522,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     if not first:
         return {}
     fig = draw_fig2(frames[first[0]], frames["impacts.csv"],
-                    "virtual set-up, trial 1: the first 10 bounces")
+                    "virtual set-up: the first 10 bounces")
     return {"virtual.png": fig}
 
 
