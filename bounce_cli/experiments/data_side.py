@@ -270,6 +270,17 @@ def measurement_noise(block, source: ImpactsSource | None, data_path) -> Measure
     return MeasurementNoise(block.measurement_sd_v_m_s,
                             math.radians(block.measurement_sd_theta_deg), "assumed")
 
+#: the units of stability_data.csv's matrix entries, with v in m/s and theta in rad (eqs.
+#: 9, 16-18; the racket inputs per s of period and per m of amplitude)
+_STATE_UNITS = {"v": "m/s", "theta": "rad"}
+ENTRY_UNITS = {
+    "J_vv": "1", "J_vtheta": "(m/s)/rad", "J_thetav": "rad/(m/s)", "J_thetatheta": "1",
+    "noise_cov_vv": "m^2/s^2", "noise_cov_vtheta": "(m/s) rad", "noise_cov_thetatheta": "rad^2",
+    **{name: f"{'(m/s)' if name.split('_')[1] == 'v' else 'rad'}/"
+             f"{'s' if name.endswith('period') else 'm'}" for name in INPUT_COEFFICIENTS},
+}
+
+
 def warn_if_still_relaxing(impacts: Impacts, first_settled: int, settle_key: str,
                            options: RunOptions) -> None:
     """Warn where the steady state an analysis takes after each perturbation (from impact
@@ -406,14 +417,15 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
                       "se": se, "ci_low": low, "ci_high": high, "note": note})
 
     for name, value in zip(J_ENTRIES, jac.ravel()):
-        add(name, "mixed", "model_eq9", float(value), note="eq. 9 at the data's parameters")
+        add(name, ENTRY_UNITS[name], "model_eq9", float(value),
+            note="eq. 9 at the data's parameters")
     add("spectral_radius", "1", "model_eq10", st.spectral_radius, note=f"regime {st.regime}")
     for label, lam in zip(("lambda_plus", "lambda_minus"), st.eigenvalues):
         add(f"{label}_re", "1", "model_eq10", lam.real)
         add(f"{label}_im", "1", "model_eq10", lam.imag)
     b_model = racket_input_jacobian(params).as_varx()
     for name, value in zip(INPUT_COEFFICIENTS, b_model.ravel()):
-        add(name, "mixed", "model_racket", float(value),
+        add(name, ENTRY_UNITS[name], "model_racket", float(value),
             note="d(v, theta)_{k+1} / d(period s, amplitude m) of impact k+1's (next) or k's "
                  "(this) racket cycle: eqs. 5-6 by the implicit function theorem")
     for method, fit in fits.items():
@@ -425,7 +437,7 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
         z = _z(conf)
         half = z if fit.has_interval else math.nan  # too few bounces: no interval
         for name, value, s in zip(J_ENTRIES, fit.jacobian.ravel(), se):
-            add(name, "mixed", label, float(value), float(s), value - half * s,
+            add(name, ENTRY_UNITS[name], label, float(value), float(s), value - half * s,
                 value + half * s, f"{fit.n_pairs} pairs in {fit.n_trials} runs")
         eig = fit.eigen_summary(conf)
         for name in EIGEN_QUANTITIES:
@@ -433,10 +445,11 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
             add(name, "1", label, value, se_, low, high, note=interval_note(fit, name))
         for (i, j), name in zip(((0, 0), (1, 1), (0, 1)), ("noise_cov_vv", "noise_cov_thetatheta",
                                                            "noise_cov_vtheta")):
-            add(name, "mixed", label, float(fit.noise_cov[i, j]), note="residual covariance")
+            add(name, ENTRY_UNITS[name], label, float(fit.noise_cov[i, j]),
+                note="residual covariance")
         for name, value, s_ in zip(INPUT_COEFFICIENTS, fit.exog_coef.ravel(),
                                    fit.exog_se.ravel()):
-            add(name, "mixed", label, float(value), float(s_), value - half * s_,
+            add(name, ENTRY_UNITS[name], label, float(value), float(s_), value - half * s_,
                 value + half * s_, note="racket input (deviation from the run's mean)")
     add("sd_v", "m/s", "data", sd_v, note="pooled within-run SD")
     add("sd_theta", "deg", "data", math.degrees(sd_theta), note="pooled within-run SD")
@@ -726,7 +739,7 @@ def prediction_rows(prediction: VarxPrediction, fits: dict, params: ModelParams,
         lows[-1] = max(lows[-1], 0.0)  # a modulus
         interval = f"{level:.0%} interval from the order statistics of {len(sims)} {how}"
         for i, name in enumerate(names):
-            unit = "1" if name == "spectral_radius" else "mixed"
+            unit = "1" if name == "spectral_radius" else ENTRY_UNITS[name]
             rows.append({"quantity": name, "unit": unit, "source": f"model_{source}",
                          "estimate": float(mean[i]), "se": float(sd[i]),
                          "ci_low": float(low[i]), "ci_high": float(high[i]),
