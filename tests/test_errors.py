@@ -376,3 +376,15 @@ def test_a_fitted_g_that_is_no_fall_gets_a_hint_not_a_math_error(g):
 def test_an_orbit_launched_beyond_reach_is_one_line(theta, v, needle):
     """--v0 1e200 printed numpy's overflow warnings and a NaN row (a new-user review)."""
     one_error_line(run("orbit", "--theta0-deg", theta, "--v0", v), needle)
+
+
+@pytest.mark.parametrize("args, key", [
+    (["virtual", "--racket", "sine", "--headless", "--set", "subject=a b"], "subject"),
+    (["simulate-study", "--set", "conditions=[{name: a/b}]"], "conditions.0.name"),
+])
+def test_a_name_that_cannot_name_files_is_said_in_words_not_as_a_regex(args, key, cli,
+                                                                       user_error, tmp_path):
+    """'String should match pattern '^[A-Za-z0-9._\\-]+$'' told a user the rule in a regex."""
+    result = cli(*args, "--out", tmp_path / "o")
+    user_error(result, f"{key}: letters, digits, '.', '_' and '-' only: it names files")
+    assert "pattern" not in result.output

@@ -26,7 +26,7 @@ import numpy as np
 import pandas as pd
 from pydantic import Field, ValidationError, model_validator
 
-from ..runtime.config import ConfigError, ExperimentConfig, ModelBlock, StrictModel
+from ..runtime.config import NAME_PATTERN, ConfigError, ExperimentConfig, ModelBlock, StrictModel
 from ..model.linear import racket_amplitude_for_ac, stable_ac_range_g
 from ..model.params import ModelError
 from .base import OUT_DIR, Experiment, ExperimentResult, RunOptions
@@ -48,7 +48,7 @@ class SubjectsBlock(StrictModel):
 class ConditionSpec(StrictModel):
     """One condition every subject performs."""
 
-    name: str = Field(min_length=1, pattern=r"^[A-Za-z0-9._\-]+$")
+    name: str = Field(min_length=1, pattern=NAME_PATTERN)
     velocity_noise_m_s: float = Field(0.04, ge=0.0, description="q_v of eq. 16, m/s")
 
 

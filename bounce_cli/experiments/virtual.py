@@ -38,7 +38,8 @@ from ..data.study_manifest import names_a_folder
 from ..errors import ConfigError, ModelError, NoFixedPointError
 from ..model.flight import restitution_of
 from ..model.params import ModelParams
-from ..runtime.config import ControlBlock, ExperimentConfig, ModelBlock, StrictModel
+from ..runtime.config import (NAME_PATTERN, ControlBlock, ExperimentConfig, ModelBlock,
+                              StrictModel)
 from ..runtime.artifacts import RECORDED_LIVE
 from ..runtime.interrupts import Interrupted
 from ..virtual.display import Display, MouseSource, View, latency_summary
@@ -164,8 +165,8 @@ class VirtualConfig(ExperimentConfig):
                                "recordings hold, the virtual racket)")
     sample_rate_hz: float = Field(1000.0, ge=20.0, le=100_000.0,
                                   description="sine: racket samples per second")
-    subject: str = Field("s1", pattern=r"^[A-Za-z0-9._\-]+$")
-    condition: str = Field("virtual", pattern=r"^[A-Za-z0-9._\-]+$")
+    subject: str = Field("s1", pattern=NAME_PATTERN)
+    condition: str = Field("virtual", pattern=NAME_PATTERN)
     seed: int = Field(0, ge=0)
     trials: int = Field(2, ge=1, le=1000)
     trial_s: float = Field(40.0, gt=1.0, le=3600.0)

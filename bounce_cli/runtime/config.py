@@ -484,6 +484,10 @@ def format_validation_error(
             reason += did_you_mean(loc, keys_at(schema, tuple(err["loc"][:-1])))
     elif err["type"] == "missing":
         reason = "required key is missing"
+    elif (err["type"] == "string_pattern_mismatch"
+          and err.get("ctx", {}).get("pattern") == NAME_PATTERN):
+        reason = (f"letters, digits, '.', '_' and '-' only: it names files "
+                  f"(got {show_value(err.get('input'))})")
     else:
         reason = err["msg"].removeprefix("Value error, ")
         if "input" in err and not isinstance(err["input"], (dict, list)):
@@ -493,6 +497,11 @@ def format_validation_error(
     if not err["loc"] and source == "--set":
         return f"--set: {reason}{tail}"  # the reason names the keys
     return f"{source}: {loc}: {reason}{tail}"
+
+
+#: the pattern of a config value that names files (a subject, a condition): ``Field(...,
+#: pattern=NAME_PATTERN)``; a value that does not match is reported in words, not as the regex
+NAME_PATTERN = r"^[A-Za-z0-9._\-]+$"
 
 
 def _as_named(key: str) -> tuple[str, ...]:
