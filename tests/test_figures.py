@@ -469,3 +469,17 @@ def test_fig2_draws_rounding_level_impacts_flat_without_an_offset_label():
     frames = {"recordings/s1_virtual_t1.csv": samples, "impacts.csv": flat}
     title = draw_virtual(frames)["virtual.png"].get_suptitle()
     assert title.count("trial 1") == 1, title
+
+
+def test_one_unit_s_radii_sit_beside_its_tick():
+    """With one unit, autoscaling put its OLS and lag-2 points at the axis' two ends, far
+    from the unit's tick; a unit's place is one wide now."""
+    from bounce_cli.experiments.study_figures import stability_figure
+
+    row = {"subject": "s1", "condition": "virtual", "model_spectral_radius": 0.5}
+    for method, value in (("ols", 0.45), ("lag2", 0.5)):
+        row.update({f"radius_{method}": value, f"radius_{method}_ci_low": value - 0.01,
+                    f"radius_{method}_ci_high": value + 0.01})
+    fig = stability_figure(pd.DataFrame([row]), None)
+    ax = fig.axes[0]
+    assert ax.get_xlim() == pytest.approx((-0.6, 0.6))

@@ -157,6 +157,9 @@ def stability_figure(group: pd.DataFrame, table: pd.DataFrame | None):
             label="model, eq. 10 at the unit's parameters")
     labels = [f"{s}\n{c}" for s, c in zip(order["subject"].astype(str), order["_c"])]
     ax.set_xticks(x, labels, fontsize=7)
+    # a unit's place is one wide, its estimators beside its tick (one unit: autoscaling put
+    # them at the axis' two ends)
+    ax.set_xlim(-0.6, len(order) - 0.4)
     ax.axhline(1.0, color="0.7", lw=0.8, ls=":")
     ax.set_ylim(0.0, max(1.2, 1.08 * highest))
     ax.set_ylabel("spectral radius")
