@@ -483,3 +483,19 @@ def test_one_unit_s_radii_sit_beside_its_tick():
     fig = stability_figure(pd.DataFrame([row]), None)
     ax = fig.axes[0]
     assert ax.get_xlim() == pytest.approx((-0.6, 0.6))
+
+
+def test_the_group_impulse_figure_shows_the_racket_in_ms_and_mm():
+    """group_impulse.png drew the racket's modulation in s and m (0.115 s, a fixed +-0.001 m
+    axis) where each unit's modulation_data.png uses ms and mm."""
+    from bounce_cli.experiments.study_figures import impulse_figure
+
+    rows = [{"condition": "virtual", "quantity": q, "direction": d, "k": k,
+             "mean": (0.1155 if q == "racket_period_s" else 2e-5) * (0.5 ** k), "sd": 0.0}
+            for q in ("racket_period_s", "racket_amplitude_m")
+            for d in ("decrease", "increase") for k in range(5)]
+    fig = impulse_figure(pd.DataFrame(rows))
+    period, amplitude = fig.axes[0], fig.axes[2]
+    assert period.get_ylabel().endswith("(ms)") and amplitude.get_ylabel().endswith("(mm)")
+    assert period.get_ylim()[1] > 100.0  # 115.5 ms
+    assert amplitude.get_ylim() == pytest.approx((-0.99, 1.01), abs=0.02)  # +-1 mm floor

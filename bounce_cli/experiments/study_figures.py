@@ -15,13 +15,16 @@ from .plotting import new_figure
 COLORS = ["k", "tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange"]
 PAIRS = (("v_v", "$v \\to v$"), ("theta_to_v", "$\\theta \\to v$"),
          ("v_to_theta", "$v \\to \\theta$"), ("theta_theta", "$\\theta \\to \\theta$"))
-RESPONSES = (("v_m_s", "$\\Delta v_k$ (m/s)"), ("theta_deg", "$\\Delta \\theta_k$ (deg)"),
-             ("racket_period_s", "$\\Delta$ racket period (s)"),
-             ("racket_amplitude_m", "$\\Delta$ racket amplitude (m)"))
-#: the smallest half-span a response panel shows, in its unit: a response within it (a
+#: (quantity, axis label, factor from the table's unit to the axis'): the racket's in ms and
+#: mm, as the unit's own modulation_data.png
+RESPONSES = (("v_m_s", "$\\Delta v_k$ (m/s)", 1.0),
+             ("theta_deg", "$\\Delta \\theta_k$ (deg)", 1.0),
+             ("racket_period_s", "$\\Delta$ racket period (ms)", 1e3),
+             ("racket_amplitude_m", "$\\Delta$ racket amplitude (mm)", 1e3))
+#: the smallest half-span a response panel shows, in its axis' unit: a response within it (a
 #: sine racket's period, unchanged up to rounding, 1e-16 s) is drawn flat, not magnified
-RESPONSE_FLOOR = {"v_m_s": 1e-3, "theta_deg": 0.1, "racket_period_s": 1e-3,
-                  "racket_amplitude_m": 1e-3}
+RESPONSE_FLOOR = {"v_m_s": 1e-3, "theta_deg": 0.1, "racket_period_s": 1.0,
+                  "racket_amplitude_m": 1.0}
 
 
 def group_figure_builders(frames: dict[str, pd.DataFrame]) -> dict[str, Callable[[], Any]]:
@@ -221,19 +224,21 @@ def acf_figure(table: pd.DataFrame):
 def impulse_figure(table: pd.DataFrame):
     """Figs. 9 and 11 per condition: mean response after a perturbation of alpha (SD across
     subjects as bars), for decreases (left) and increases (right)."""
-    quantities = [(q, label) for q, label in RESPONSES if q in set(table["quantity"])]
+    quantities = [(q, label, scale) for q, label, scale in RESPONSES
+                  if q in set(table["quantity"])]
     fig, axes = new_figure(len(quantities), 2, width=9.0, height=2.3 * len(quantities) + 0.6,
                            sharex=True)
     conditions = sorted(table["condition"].astype(str).unique())
-    for i, (quantity, label) in enumerate(quantities):
+    for i, (quantity, label, scale) in enumerate(quantities):
         for j, direction in enumerate(("decrease", "increase")):
             ax = axes[i, j]
             for c, condition in enumerate(conditions):
                 part = table[(table["condition"].astype(str) == condition)
                              & (table["quantity"] == quantity) & (table["direction"] == direction)]
                 part = part.sort_values("k")
-                ax.errorbar(part["k"] + 0.08 * c, part["mean"], yerr=part["sd"], fmt="-o",
-                            ms=3, color=COLORS[c % len(COLORS)], capsize=2, label=condition)
+                ax.errorbar(part["k"] + 0.08 * c, scale * part["mean"], yerr=scale * part["sd"],
+                            fmt="-o", ms=3, color=COLORS[c % len(COLORS)], capsize=2,
+                            label=condition)
             ax.axhline(0, color="0.8", lw=0.8)
             low, high = ax.get_ylim()
             floor = RESPONSE_FLOOR[quantity]
