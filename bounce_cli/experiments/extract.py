@@ -351,6 +351,37 @@ def missing_rows_warnings(trials: list[Trial], source: str, max_gap_s: float) ->
             f"max_gap_s ({1000 * max_gap_s:g} ms) are gaps"]
 
 
+#: sample intervals that vary (robust SD) by more than this fraction of their median are a
+#: jittering clock (a PC's time stamps, not the capture system's frames)
+JITTER_FRACTION = 0.05
+
+
+def jitter_warnings(trials: list[Trial], source: str) -> list[str]:
+    """A warning where the sample times jitter: the intervals between samples vary (a robust
+    SD, which rows missing do not move) by more than JITTER_FRACTION of their median. The
+    ball's contacts are found from positions at those times: a review's 1 ms of jitter at
+    200 Hz found contacts where there were none (one v_k 0.2 m/s off, impacts lost) without
+    a word."""
+    worst: tuple[float, float, object] | None = None  # (fraction, median step, trial)
+    for trial in trials:
+        steps = np.diff(trial.t)
+        if steps.size < 10:
+            continue
+        median = float(np.median(steps))
+        spread = 1.4826 * float(np.median(np.abs(steps - median)))
+        if median > 0 and spread > JITTER_FRACTION * median and (
+                worst is None or spread / median > worst[0]):
+            worst = (spread / median, median, trial.label)
+    if worst is None:
+        return []
+    fraction, median, label = worst
+    return [f"{source}: the sample times jitter (the intervals between samples vary by about "
+            f"{1000 * fraction * median:.2g} ms around {1000 * median:.3g} ms, in trial "
+            f"{label}): contacts are found from the positions at those times, and a jittering "
+            "clock can make contacts where there were none; export the capture system's own "
+            "clock (frame number / frame rate) where it has one"]
+
+
 def unit_slip_hint(g: float) -> str:
     """What a fitted g far from any set-up's suggests (lengths scaled by a power of ten)."""
     ratio = g / STANDARD_GRAVITY
@@ -382,7 +413,8 @@ def extract_all(trials: list[Trial], events, settings: ExtractionSettings, sourc
     caches: list[dict] = [{} for _ in trials]  # one pass finds each trial's racket cycles
     first = _extract_trials(trials, events, settings, source, caches)
     gravity = pooled_gravity([f for _, _, r in first for f in r.flights])
-    warnings: list[str] = missing_rows_warnings(trials, source, settings.max_gap_s)
+    warnings: list[str] = [*missing_rows_warnings(trials, source, settings.max_gap_s),
+                           *jitter_warnings(trials, source)]
     g = settings.g
     if gravity is not None:
         lo, hi = PLAUSIBLE_G_M_S2

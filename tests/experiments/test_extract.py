@@ -1203,3 +1203,19 @@ def test_the_separation_noise_is_the_markers_noise_beside_a_moving_racket():
         assert separation_noise_m(noisy[1], noisy[0]) == pytest.approx(np.sqrt(2) * sd,
                                                                       rel=0.15)
     assert separation_noise_m(racket, ball) < 2e-4
+
+
+def test_jittering_sample_times_are_warned_about(simulated, tmp_path):
+    """1 ms of jitter in a 200 Hz recording's time stamps (a PC's clock) found contacts where
+    there were none, without a word. The capture system's own clock, with rows missing here
+    and there, is not jitter."""
+    rec = pd.read_csv(simulated / "recording.csv")
+    jittered = rec.assign(t_s=rec["t_s"] + np.random.default_rng(7).uniform(
+        -0.001, 0.001, len(rec)))
+    holes = rec.drop(index=rec.index[100:2000:97])  # a few rows missing, regular clock
+    for name, frame, warned in (("jittered", jittered, True), ("holes", holes, False)):
+        path = tmp_path / f"{name}.csv"
+        frame.to_csv(path, index=False)
+        result, out = extract_cli(tmp_path, "--data", str(path), "--force")
+        said = " ".join(result.output.split())
+        assert ("sample times jitter" in said) is warned, (name, said)
