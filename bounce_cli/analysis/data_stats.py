@@ -317,9 +317,10 @@ def still_relaxing(quantities: dict[str, tuple[Sequence[np.ndarray], bool]],
     no alpha column is needed). A quantity is still relaxing where its signed mean at
     ``first_settled`` lies beyond ``z`` standard errors of 0 over at least ``min_windows``
     windows that reach it, and beyond ``rounding`` times its largest mean response before it
-    (a deterministic session relaxes to rounding, not to 0). The passive model at alpha 0.5
-    keeps 0.5^5 of a kick after five impacts: with the default settle of 4 the steady state of
-    a session without noise was 3 % of a kick off, and its VAR radius 0.454 against 0.500.
+    (a deterministic session relaxes to rounding, not to 0). The passive model's ball relaxes
+    slowly (|lambda| 0.5, and slower after a kick up: section 7): five impacts after a kick of
+    alpha by 0.1 it was still a third of the kick off, and a session without noise gave a VAR
+    radius of 0.454 against the model's 0.500 with acf's default settle of 4.
 
     Parameters
     ----------

@@ -219,8 +219,8 @@ def session_order(labels: list[str]) -> list[str]:
     glued from several files, is put back in order, as a study's manifest orders its
     recordings), else (words, or labels of several kinds) in the order they first appear.
     Equal numbers (``01`` and ``1``) keep their order of appearance."""
-    if len({_NUMBER_RUN.sub("#", label) for label in labels}) != 1 or not _NUMBER_RUN.search(
-            labels[0] if labels else ""):
+    skeletons = {_NUMBER_RUN.sub("#", label) for label in labels}
+    if len(skeletons) != 1 or "#" not in next(iter(skeletons)):
         return labels
     return sorted(labels, key=lambda label: [int(n) for n in _NUMBER_RUN.findall(label)])
 

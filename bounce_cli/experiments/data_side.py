@@ -270,9 +270,9 @@ def measurement_noise(block, source: ImpactsSource | None, data_path) -> Measure
     return MeasurementNoise(block.measurement_sd_v_m_s,
                             math.radians(block.measurement_sd_theta_deg), "assumed")
 
+
 #: the units of stability_data.csv's matrix entries, with v in m/s and theta in rad (eqs.
 #: 9, 16-18; the racket inputs per s of period and per m of amplitude)
-_STATE_UNITS = {"v": "m/s", "theta": "rad"}
 ENTRY_UNITS = {
     "J_vv": "1", "J_vtheta": "(m/s)/rad", "J_thetav": "rad/(m/s)", "J_thetatheta": "1",
     "noise_cov_vv": "m^2/s^2", "noise_cov_vtheta": "(m/s) rad", "noise_cov_thetatheta": "rad^2",
@@ -299,11 +299,12 @@ def warn_if_still_relaxing(impacts: Impacts, first_settled: int, settle_key: str
     gaps = [np.diff(np.flatnonzero(g["perturbed"].to_numpy(bool))) for g in groups]
     spacing = np.concatenate(gaps) if gaps else np.array([])
     every = int(np.median(spacing)) if len(spacing) else 0
-    advice = (f"raise {settle_key}" + (f" (the perturbations come every {every} impacts)"
-                                       if every else "")
-              if not every or every - 1 > first_settled else
-              f"the perturbations come every {every} impacts, too close for the response to "
-              "die out between them")
+    if every and every - 1 <= first_settled:  # no later impact to start the steady state at
+        advice = (f"the perturbations come every {every} impacts, too close for the response "
+                  "to die out between them")
+    else:
+        advice = f"raise {settle_key}" + (
+            f" (the perturbations come every {every} impacts)" if every else "")
     off = " and ".join(f"v {abs(f.mean):.3g} m/s (SE {f.se:.2g})" if f.quantity == "v_m_s"
                        else f"theta {math.degrees(abs(f.mean)):.3g} deg "
                             f"(SE {math.degrees(f.se):.2g})" for f in found)

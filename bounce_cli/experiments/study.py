@@ -425,21 +425,21 @@ def condensed_warnings(labels: list[str], warnings: list[list[str]]) -> list[str
     label), in order, a message that several units share word for word but for the label
     once, naming them: ``every unit (40): impulse: not run: ...`` or ``2 units (s1/a,
     s3/a): ...`` (a study of steady recordings: one line, not one per unit)."""
-    units_of: dict[str, list[str]] = {}
+    units_of: dict[str, list[str]] = {}  # text -> the units that gave it ("": no unit's)
     for label, messages in zip(labels, warnings):
+        prefix = f"{label}: "
         for message in messages:
-            prefix = f"{label}: "
-            text = message[len(prefix):] if message.startswith(prefix) else message
-            units_of.setdefault(text if message.startswith(prefix) else message,
-                                []).append(label if message.startswith(prefix) else "")
+            own = message.startswith(prefix)
+            units_of.setdefault(message.removeprefix(prefix), []).append(label if own else "")
     lines: list[str] = []
     for text, units in units_of.items():
         named = [u for u in units if u]
-        if len(named) <= 1:
-            lines.extend(f"{u}: {text}" if u else text for u in units)
-        elif len(named) == len(labels):
+        lines.extend(text for u in units if not u)
+        if len(named) == 1:
+            lines.append(f"{named[0]}: {text}")
+        elif named and len(named) == len(labels):
             lines.append(f"every unit ({len(named)}): {text}")
-        else:
+        elif named:
             shown = ", ".join(named[:3]) + (f" and {len(named) - 3} more" if len(named) > 3
                                             else "")
             lines.append(f"{len(named)} units ({shown}): {text}")
