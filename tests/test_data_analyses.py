@@ -842,8 +842,25 @@ def test_a_steady_state_that_still_holds_the_relaxation_is_found():
     assert [f.quantity for f in found] == ["v_m_s", "theta_rad"]
     v = found[0]
     kick = np.nanmean(np.abs(sim.v[sim.perturbed] - sim.v[~sim.perturbed].mean()))
-    assert 0.01 * kick < v.mean < kick and v.windows >= 30
+    assert 0.01 * kick < abs(v.mean) < kick and v.windows >= 10
     assert _relaxing(sim, 30) == []
+
+
+def test_each_kick_direction_is_tested_on_its_own():
+    """A few impacts after a kick the model's response has the same sign whichever way the
+    kick went: windows signed by their kick and pooled cancelled, and a session without noise
+    still 20 deg off at impact 3 (a_r 0.2422 m, AC -0.48 g, a kick every 12th impact) passed
+    without a warning."""
+    from bounce_cli.analysis.data_stats import perturbation_schedule, still_relaxing
+
+    params = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.2422, racket_period=0.92)
+    alpha = perturbation_schedule(8, 60, 12, 0.5, [(0.6, 0.6), (0.4, 0.4)], 1, first=6)
+    sim = simulate_impacts(params, 0.0, 0.0, 8, 60, 1, alpha=alpha)
+    found = still_relaxing({"v_m_s": (list(sim.v), False),
+                            "theta_rad": (list(sim.theta), True)}, list(sim.perturbed), 3)
+    assert {f.quantity for f in found} == {"v_m_s", "theta_rad"}
+    theta = next(f for f in found if f.quantity == "theta_rad")
+    assert math.degrees(abs(theta.mean)) > 5.0
 
 
 def test_a_settled_noisy_session_is_not_flagged_and_a_short_settle_is():

@@ -305,13 +305,13 @@ def warn_if_still_relaxing(impacts: Impacts, first_settled: int, settle_key: str
     else:
         advice = f"raise {settle_key}" + (
             f" (the perturbations come every {every} impacts)" if every else "")
-    off = " and ".join(f"v {abs(f.mean):.3g} m/s (SE {f.se:.2g})" if f.quantity == "v_m_s"
-                       else f"theta {math.degrees(abs(f.mean)):.3g} deg "
-                            f"(SE {math.degrees(f.se):.2g})" for f in found)
+    off = " and ".join(
+        (f"v {f.mean:+.3g} m/s (SE {f.se:.2g})" if f.quantity == "v_m_s" else
+         f"theta {math.degrees(f.mean):+.3g} deg (SE {math.degrees(f.se):.2g})")
+        + f" after the {f.windows} kicks {f.direction}" for f in found)
     options.warn(f"data: {impacts.path}: the response to the perturbations has not settled "
-                 f"by impact {first_settled} after them: {off} off the steady state (means "
-                 f"over {found[0].windows} perturbations, each signed by its kick), so the "
-                 f"steady state holds the relaxation; {advice}")
+                 f"by impact {first_settled} after them: {off} (mean response there, from "
+                 f"the steady state), so the steady state holds the relaxation; {advice}")
 
 
 def short_trials_warning(source: ImpactsSource | None, options: RunOptions):
