@@ -253,22 +253,29 @@ def test_least_squares_falls_back_to_svd_where_the_normal_equations_lose_digits(
 
 @pytest.mark.parametrize("labels, ordered", [
     (["3", "1", "10"], ["1", "3", "10"]),  # numbers, e.g. sorted as text or files glued
-    (["T3", "T1", "T10"], ["T1", "T3", "T10"]),  # labels that differ only in their numbers
-    (["s1_t02", "s1_t1", "s1_t10"], ["s1_t1", "s1_t02", "s1_t10"]),
+    (["03", "1", "-2"], ["-2", "1", "03"]),
+    # labels with numbers in them need not be in time order by them (a review: conditions
+    # recorded as cond3, cond1, ...; dates 28.12.2025_1 before 05.01.2026_1; amp0.25 after
+    # amp0.3 where the numbers were split at the point): the file's order
+    (["T3", "T1", "T10"], ["T3", "T1", "T10"]),
+    (["cond3", "cond1", "cond2"], ["cond3", "cond1", "cond2"]),
+    (["28.12.2025_1", "05.01.2026_1", "05.01.2026_2"],
+     ["28.12.2025_1", "05.01.2026_1", "05.01.2026_2"]),
     (["post", "pre", "mid"], ["post", "pre", "mid"]),  # words: the file's order
     (["2", "x", "1"], ["2", "x", "1"]),  # numbers and words: the file's order
-    (["a3", "b1", "a2"], ["a3", "b1", "a2"]),  # two kinds of label: the file's order
 ])
 def test_trials_are_in_the_order_of_their_numbers(table, tmp_path, labels, ordered):
     """Trials were in the file's order of first appearance, whatever their labels: a lab's
     file sorted as text (1, 10, 2) or glued from several files numbered trial 3 before trial
     1, and learning's trend over trials (trial_number) was fitted in that order, silently
-    (an AC trend of -0.0137 g per trial read as +0.0022). Labels that differ only in their
-    numbers are ordered by them, as a study's manifest orders its recordings."""
+    (an AC trend of -0.0137 g per trial read as +0.0022). Whole numbers are ordered by
+    their value, as a study's manifest orders numbered recordings; other labels keep the
+    file's order, and ``listed`` says where the order differs from the file's."""
     frame = table.copy()
     frame["trial"] = frame["trial"].map(dict(zip([1, 2, 3], labels)))
     read = read_impacts(write(tmp_path, frame))
     assert read.trials == ordered
+    assert read.listed == (() if ordered == labels else tuple(labels))
     assert [read.trial_number(t) for t in ordered] == [1, 2, 3]
     for label, rows in read.by_trial():
         np.testing.assert_array_equal(rows["v_m_s"], frame[frame.trial == label]["v_m_s"])

@@ -105,6 +105,9 @@ class Impacts:
     series: tuple = ()
     #: the phases were read from ``theta_deg`` (the table had no ``theta_rad``)
     phase_in_degrees: bool = False
+    #: the trials as the file lists them (first appearance), where ``series`` put them in the
+    #: order of their numbers instead (``session_order``); empty where the two agree
+    listed: tuple = ()
 
     @property
     def trials(self) -> list:
@@ -210,19 +213,18 @@ def read_session(paths: list) -> pd.DataFrame:
     return pd.concat(frames, ignore_index=True)
 
 
-_NUMBER_RUN = re.compile(r"[0-9]+")
+_WHOLE_NUMBER = re.compile(r"\s*[+-]?[0-9]+\s*")
 
 
 def session_order(labels: list[str]) -> list[str]:
-    """Trial labels in their session's order: by their numbers where the labels differ only
-    in them (``1, 2, ..., 10``; ``T1, ..., T10``; ``s1_t01, ...``: a file sorted as text, or
-    glued from several files, is put back in order, as a study's manifest orders its
-    recordings), else (words, or labels of several kinds) in the order they first appear.
+    """Trial labels in their session's order: by their value where every label is a whole
+    number (``1, 2, ..., 10``: a file sorted as text, or glued from several files, is put
+    back in order, as a study's manifest orders numbered recordings), else in the order they
+    first appear (``T1``, ``cond3``, a date: their numbers need not be the order in time).
     Equal numbers (``01`` and ``1``) keep their order of appearance."""
-    skeletons = {_NUMBER_RUN.sub("#", label) for label in labels}
-    if len(skeletons) != 1 or "#" not in next(iter(skeletons)):
+    if not labels or not all(_WHOLE_NUMBER.fullmatch(label) for label in labels):
         return labels
-    return sorted(labels, key=lambda label: [int(n) for n in _NUMBER_RUN.findall(label)])
+    return sorted(labels, key=int)
 
 
 def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: str = "",
@@ -321,7 +323,8 @@ def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: st
                               f"(got {cell_text(frame['perturbed'].iloc[row])})")
         frame["perturbed"] = text.map(PERTURBED_VALUES).astype(bool)
     frame["trial"] = frame["trial"].astype(str)
-    order = session_order(list(dict.fromkeys(frame["trial"])))
+    listed = list(dict.fromkeys(frame["trial"]))
+    order = session_order(listed)
     frame["_order"] = frame["trial"].map({t: i for i, t in enumerate(order)})
     frame = frame.sort_values(["_order", "k"], kind="stable").drop(columns="_order")
     frame = frame.reset_index(drop=True)
@@ -344,7 +347,8 @@ def read_impacts(source: ImpactsSource, needs: tuple[str, ...] = (), command: st
             drop_short(f"trial {trial}: {int(count)} impacts, {needed}: left out ({lower} to "
                        "keep it)")
         frame = frame[~frame["trial"].isin(short.index)].reset_index(drop=True)
-    return Impacts(frame, path, series, phase_in_degrees)
+    return Impacts(frame, path, series, phase_in_degrees,
+                   tuple(listed) if order != listed else ())
 
 
 def impacts_frame(sim, params, trial_names=None) -> pd.DataFrame:

@@ -195,3 +195,26 @@ def test_the_printed_reading_s_curve_is_drawn_only_where_it_can_be_seen():
         assert (":" in styles) is dotted
         labels = ax.get_legend_handles_labels()[1]
         assert any("the same within 1 %" in label for label in labels) is not dotted
+
+
+def test_trials_put_in_the_order_of_their_numbers_are_said(tmp_path, cli):
+    """A file listing trials 3, 1, 4, 2 is read in the order 1, 2, 3, 4 (learning's trend runs
+    over it): a warning says so, with both orders."""
+    from pathlib import Path
+
+    frame = pd.read_csv(Path(__file__).resolve().parents[2] / "results" / "impulse-data"
+                        / "impacts.csv")
+    first = sorted(frame["trial"].unique())[:4]
+    frame = pd.concat([frame[frame.trial == first[i]] for i in (2, 0, 3, 1)])
+    data = tmp_path / "impacts.csv"
+    frame.to_csv(data, index=False)
+    result = cli("learning", "--data", data, "--set", "model.g=9.81", "--out",
+                 tmp_path / "out", "--quiet")
+    assert result.exit_code == 0, result.output
+    said = " ".join(result.output.split())
+    ordered = ", ".join(str(t) for t in first)
+    listed = ", ".join(str(first[i]) for i in (2, 0, 3, 1))
+    assert f"trials in the order of their numbers ({ordered}), not as the file lists them " \
+           f"({listed})" in said
+    trials = pd.read_csv(tmp_path / "out" / "trials.csv")
+    assert trials["trial"].tolist() == first
