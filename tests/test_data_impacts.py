@@ -279,3 +279,17 @@ def test_trials_are_in_the_order_of_their_numbers(table, tmp_path, labels, order
     assert [read.trial_number(t) for t in ordered] == [1, 2, 3]
     for label, rows in read.by_trial():
         np.testing.assert_array_equal(rows["v_m_s"], frame[frame.trial == label]["v_m_s"])
+
+
+@pytest.mark.parametrize("prefix, commented", [("\ufeff# impacts of S07\n", False),
+                                               ("# impacts of S07\n\n# S07\n", False),
+                                               ("# impacts of S07\n", True)])
+def test_an_impacts_table_after_an_export_s_notes(table, tmp_path, prefix, commented):
+    """Notes before the header, after a byte-order mark or with a blank line among them, and
+    a header written as a comment ('#trial,k,...'), read as the plain table."""
+    body = table.to_csv(index=False)
+    path = tmp_path / "impacts.csv"
+    path.write_text(prefix + ("#" if commented else "") + body, encoding="utf-8")
+    read = read_impacts(path).frame
+    plain = read_impacts(write(tmp_path, table, "plain.csv")).frame
+    pd.testing.assert_frame_equal(read, plain)

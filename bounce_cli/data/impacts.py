@@ -143,17 +143,20 @@ def read_data_csv(path: Path) -> pd.DataFrame:
     """A ``--data`` CSV as a DataFrame with stripped column names; an unreadable file is one
     line naming ``data`` and the file (so is a device or a file above the recordings' size
     limit, ``recordings.text_exports.check_recording_file``)."""
-    from .recordings.text_exports import check_recording_file, comment_lines
+    from .recordings.text_exports import check_recording_file, comment_lines, uncommented
 
     check_recording_file(Path(path))
     try:
         with open(path, "rb") as handle:
-            notes = comment_lines(handle.read(65536))  # "# ..." lines before the header
+            # "# ..." lines before the header, by line number (an int would not count the
+            # blank lines among them)
+            notes = list(range(comment_lines(handle.read(65536))))
         # only an empty cell is missing: a cell such as 'n/a' stays text, so that an error
         # can show what the file holds
         # trial labels as written: "01" and "1" are two trials, not the number 1 twice
         header = pd.read_csv(path, nrows=0, skiprows=notes)
-        labels = {c: str for c in header.columns if str(c).strip() == "trial"}
+        labels = {c: str for c, name in zip(header.columns, uncommented(header.columns))
+                  if name.strip() == "trial"}
         frame = pd.read_csv(path, keep_default_na=False, na_values=[""], dtype=labels,
                             skiprows=notes)
     except FileNotFoundError:
@@ -161,7 +164,7 @@ def read_data_csv(path: Path) -> pd.DataFrame:
     except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise _fail(path, f"cannot read as CSV: {first}") from None
-    frame.columns = [str(c).strip() for c in frame.columns]
+    frame.columns = [c.strip() for c in uncommented(frame.columns)]
     return frame
 
 

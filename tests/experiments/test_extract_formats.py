@@ -274,3 +274,30 @@ def test_an_export_s_comment_lines_before_the_header_are_skipped(session, tmp_pa
     from bounce_cli.data.impacts import read_impacts
 
     assert len(read_impacts(impacts).frame) == len(tables["plain"])
+
+
+@pytest.mark.parametrize("layout", ["bom", "commented header", "blank between", "bom header"])
+def test_comment_lines_with_a_bom_a_commented_header_or_blank_lines(session, tmp_path, layout):
+    """A review found three exports the first version misread: a byte-order mark (Excel's
+    'CSV UTF-8') before '# ...' lines, the header itself written as a comment
+    ('#trial,t_s,...': the first data row became the header), and a blank line between two
+    comment lines (the second became the header). Each gives the plain file's impacts."""
+    rec, _ = session
+    plain = tmp_path / "plain.csv"
+    rec.to_csv(plain, index=False)
+    body = plain.read_text()
+    header, rows = body.split("\n", 1)
+    text = {"bom": "\ufeff# exported by LabX 2.1\n" + body,
+            "commented header": "# exported by LabX 2.1\n#" + header + "\n" + rows,
+            "blank between": "# exported by LabX 2.1\n\n# subject S07\n" + body,
+            "bom header": "\ufeff" + body}[layout]
+    noted = tmp_path / "noted.csv"
+    noted.write_text(text, encoding="utf-8")
+    tables = []
+    for path in (plain, noted):
+        out = tmp_path / f"out_{path.stem}"
+        result = runner.invoke(app, ["extract", "--data", str(path), "--out", str(out),
+                                     "--quiet"])
+        assert result.exit_code == 0, result.output
+        tables.append(pd.read_csv(out / "impacts.csv"))
+    pd.testing.assert_frame_equal(*tables)

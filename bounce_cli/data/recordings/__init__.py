@@ -35,6 +35,7 @@ from .text_exports import (
     check_recording_file,
     check_text,
     comment_lines,
+    uncommented,
     detect_format,
     read_motive_csv,
     read_qtm_tsv,
@@ -83,6 +84,7 @@ def read_table(path: Path, csv_format: Any = None) -> pd.DataFrame:
         frame = pd.read_csv(path, sep=r"\s+" if not separator.strip() else separator,
                             decimal=decimal, skiprows=skipped or None,
                             engine="c" if len(separator) == 1 else "python")
+        frame.columns = uncommented(frame.columns)  # a header written as "#trial,t_s,..."
         frame.attrs["first_row"] = 2 + notes + skip
         return frame
     except FileNotFoundError:

@@ -25,6 +25,7 @@ import csv
 import io
 import math
 import os
+import re
 import stat
 from pathlib import Path
 from typing import Callable
@@ -104,15 +105,48 @@ def check_text(path: Path, head: bytes) -> None:
 
 
 def comment_lines(head: bytes) -> int:
-    """How many lines at the start of a text table are comments (``#`` first, after any
-    blanks: an export's notes before its header, ``# exported by ...``), from its first
-    bytes ``head``; they are skipped, the header is the line after them."""
+    """How many lines at the start of a text table to skip before its header, from its first
+    bytes ``head``: an export's notes, lines starting with ``#`` (after a byte-order mark and
+    blanks; blank lines between them too), ``# exported by ...``. Where the last ``#`` line
+    holds names only, as many as the fields of the line after it, which holds a number, it
+    is the header written as a comment (``#trial,t_s,...``) and is kept: the caller removes
+    the ``#`` from the first column's name (``uncommented``)."""
+    text = head.removeprefix(b"\xef\xbb\xbf")
+    lines = text.split(b"\n")
     count = 0
-    for line in head.split(b"\n"):
-        if not line.lstrip().startswith(b"#"):
+    for i, line in enumerate(lines):
+        stripped = line.strip()
+        if stripped.startswith(b"#"):
+            count = i + 1
+        elif stripped:
             break
-        count += 1
+    if count and count < len(lines):
+        following = _fields(next((line for line in lines[count:] if line.strip()), b""))
+        last = _fields(lines[count - 1].strip().lstrip(b"#"))
+        if (len(last) == len(following) > 1 and not any(map(_number, last))
+                and any(map(_number, following))):  # names above a row of data
+            return count - 1
     return count
+
+
+def uncommented(columns) -> list[str]:
+    """Column names with a header written as a comment undone: ``#trial`` -> ``trial``."""
+    names = [str(c) for c in columns]
+    if names and names[0].lstrip().startswith("#"):
+        names[0] = names[0].lstrip().lstrip("#").strip()
+    return names
+
+
+def _fields(line: bytes) -> list[bytes]:
+    return [f for f in re.split(rb"[,;\t ]+", line.strip()) if f]
+
+
+def _number(field: bytes) -> bool:
+    try:
+        float(field)
+    except ValueError:
+        return False
+    return True
 
 
 def detect_format(path: Path) -> str:
