@@ -26,6 +26,7 @@ import pandas as pd
 from pydantic import Field, field_validator, model_validator
 
 from ..runtime.config import ConfigError, ExperimentConfig, StrictModel
+from ..model.impact import first_impact_phase
 from ..model.params import ModelError
 from ..data.extraction import (
     PLAUSIBLE_G_M_S2,
@@ -351,6 +352,42 @@ def missing_rows_warnings(trials: list[Trial], source: str, max_gap_s: float) ->
             f"max_gap_s ({1000 * max_gap_s:g} ms) are gaps"]
 
 
+#: a flight longer than this many times the one its launch gives (the model's flight from
+#: the impact at the cycle's racket) holds a bounce that was not found
+MISSED_BOUNCE_RATIO = 1.5
+
+
+def missed_bounce_warnings(impacts: pd.DataFrame, g: float, source: str) -> list[str]:
+    """A warning where flights last far longer than their launch allows: the model's flight
+    from (theta_k, v_k) to the first meeting with the racket of the impact's cycle (eq. 6,
+    ``model.impact.first_impact_phase``; a ballistic 2 v_k / g alone misjudged the low hops
+    of chatter, whose racket falls away under them), and a flight 1.5 times that or more held
+    a bounce the extraction did not find (a review's 8 mm of marker noise lost 5 of 16
+    bounces without a word, and k, which counts the bounces found, paired the impacts around
+    them as consecutive)."""
+    needed = {"theta_rad", "v_m_s", "hop_s", "racket_period_s", "racket_amplitude_m"}
+    if not len(impacts) or not needed <= set(impacts.columns):
+        return []
+    v, hop = impacts["v_m_s"].to_numpy(float), impacts["hop_s"].to_numpy(float)
+    omega = 2.0 * math.pi / impacts["racket_period_s"].to_numpy(float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        flight = first_impact_phase(impacts["theta_rad"].to_numpy(float), v,
+                                    impacts["racket_amplitude_m"].to_numpy(float), omega,
+                                    g) / omega
+        ratio = hop / flight
+    long = np.flatnonzero(np.isfinite(ratio) & (ratio > MISSED_BOUNCE_RATIO))
+    if not long.size:
+        return []
+    worst = int(long[np.argmax(ratio[long])])
+    trial, t_s = impacts["trial"].iloc[worst], float(impacts["t_s"].iloc[worst])
+    return [f"{source}: {long.size} flight(s) last {MISSED_BOUNCE_RATIO:g} times or more what "
+            f"their launch gives (the model's flight from theta_k and v_k at the cycle's "
+            f"racket; the longest {hop[worst]:.2f} s where {flight[worst]:.2f} s, trial "
+            f"{trial} at t = {t_s:.2f} s): a bounce in such a flight was not found (noisy "
+            "markers? see setup.csv's noise), and k, which counts the bounces found, pairs "
+            "the impacts around it as consecutive"]
+
+
 #: sample intervals that vary (robust SD) by more than this fraction of their median are a
 #: jittering clock (a PC's time stamps, not the capture system's frames)
 JITTER_FRACTION = 0.05
@@ -465,6 +502,7 @@ def extract_all(trials: list[Trial], events, settings: ExtractionSettings, sourc
     warnings += event_clock_warnings(setup, impacts_frame, source, [r for _, _, r in results],
                                      float(np.median([np.median(np.diff(trial.t))
                                                       for trial in trials])))
+    warnings += missed_bounce_warnings(impacts_frame, used.g, source)
     return SessionExtraction(impacts_frame, excluded_frame, pd.concat(cycles, ignore_index=True),
                              setup, used, warnings)
 
