@@ -96,3 +96,16 @@ def test_radians_written_under_theta_deg_are_warned_about(tmp_path, cli):
             assert "radians written as degrees?" in lines[0] and "theta_rad" in lines[0]
     assert phase_unit_warning([0.5, 0.6] * 4, "x") is None  # too few to tell
     assert phase_unit_warning([30.0, 0.5] * 10, "x") is None
+    # a stable racket hit at about 3 deg (AC -0.06 g; a review was warned of radians there):
+    # the table's AC fits the phases read as degrees, so no warning; phases of 0.5-0.7 whose
+    # AC fits them read as radians are warned of
+    import numpy as np
+
+    deg = np.linspace(2.5, 3.9, 20)
+    amplitude, period, g = 0.2206, 0.92, 9.81
+    scale = amplitude * (2 * np.pi / period) ** 2 / g
+    ac_deg = -scale * np.sin(np.radians(deg))
+    assert phase_unit_warning(deg, "x", (ac_deg, amplitude, period, g)) is None
+    rad = np.linspace(0.5, 0.7, 20)
+    ac_rad = -scale * np.sin(rad)
+    assert phase_unit_warning(rad, "x", (ac_rad, amplitude, period, g)) is not None

@@ -282,8 +282,11 @@ def model_for_data(impacts, config, options, source) -> DataModel:
     options.record["model_at_data"] = found.record()
     frame = impacts.frame
     if impacts.phase_in_degrees:
+        columns = ("racket_acc_g", "racket_amplitude_m", "racket_period_s")
+        racket = ((*(frame[c] for c in columns), found.g.value)
+                  if set(columns) <= set(frame.columns) else None)
         message = phase_unit_warning(frame["theta_deg"], f"data: {impacts.path}: column "
-                                                         "theta_deg")
+                                                         "theta_deg", racket)
         if message:
             options.warn(message)
     if {"racket_amplitude_m", "racket_period_s"} & set(frame.columns):

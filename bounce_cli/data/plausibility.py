@@ -72,9 +72,12 @@ def racket_warnings(amplitude_m, period_s, amplitude_where: str,
 RADIANS_AS_DEGREES_MIN_IMPACTS = 10
 
 
-def phase_unit_warning(theta_deg, where: str) -> str | None:
+def phase_unit_warning(theta_deg, where: str, racket=None) -> str | None:
     """A warning where every phase of impact (degrees) lies within +-2 pi: radians written
     under a column of degrees (0.5-0.8 "deg" for the 30-45 deg a person hits at), else None.
+    Where the table also gives the racket (``racket``: AC in g, amplitude m, period s, and g
+    m/s^2), the unit whose phases give the table's AC (-a_r w^2 sin theta / g, section 4)
+    decides: a stable racket hit at 3 deg (AC -0.06 g) is degrees, and was warned of.
 
     Parameters
     ----------
@@ -82,12 +85,22 @@ def phase_unit_warning(theta_deg, where: str) -> str | None:
         The phases of impact as read, degrees; NaN is ignored.
     where : str
         What holds them, for the message (``data: impacts.csv: column theta_deg``).
+    racket : tuple of (array, array, array, float), optional
+        racket_acc_g, racket_amplitude_m, racket_period_s per impact, and g.
     """
     x = np.asarray(theta_deg, dtype=float)
-    x = x[np.isfinite(x)]
-    if len(x) < RADIANS_AS_DEGREES_MIN_IMPACTS or np.abs(x).max() > 2.0 * math.pi:
+    finite = np.isfinite(x)
+    if finite.sum() < RADIANS_AS_DEGREES_MIN_IMPACTS or np.abs(x[finite]).max() > 2.0 * math.pi:
         return None
+    if racket is not None:
+        ac, amplitude, period, g = (np.asarray(r, dtype=float) for r in racket)
+        scale = amplitude * (2.0 * math.pi / period) ** 2 / g
+        as_degrees = np.abs(ac + scale * np.sin(np.radians(x)))
+        as_radians = np.abs(ac + scale * np.sin(x))
+        ok = np.isfinite(as_degrees) & np.isfinite(as_radians)
+        if ok.any() and np.median(as_degrees[ok]) <= np.median(as_radians[ok]):
+            return None
+    x = x[finite]
     return (f"{where}: every phase of impact lies within +-2 pi (the largest |value| is "
             f"{np.abs(x).max():.3g} over {len(x)} impacts), where a person's vary by about 9 "
             "deg: radians written as degrees? (name such a column theta_rad)")
-
