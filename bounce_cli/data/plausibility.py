@@ -15,6 +15,8 @@ import math
 
 import numpy as np
 
+from ..model.params import racket_acceleration_g
+
 #: racket amplitude a_r a person can move a racket by, m
 HUMAN_RACKET_AMPLITUDE_M: tuple[float, float] = (0.002, 1.0)
 #: racket period tau a person can move a racket at, s
@@ -94,9 +96,9 @@ def phase_unit_warning(theta_deg, where: str, racket=None) -> str | None:
         return None
     if racket is not None:
         ac, amplitude, period, g = (np.asarray(r, dtype=float) for r in racket)
-        scale = amplitude * (2.0 * math.pi / period) ** 2 / g
-        as_degrees = np.abs(ac + scale * np.sin(np.radians(x)))
-        as_radians = np.abs(ac + scale * np.sin(x))
+        omega = 2.0 * math.pi / period
+        as_degrees = np.abs(ac - racket_acceleration_g(amplitude, omega, g, np.radians(x)))
+        as_radians = np.abs(ac - racket_acceleration_g(amplitude, omega, g, x))
         ok = np.isfinite(as_degrees) & np.isfinite(as_radians)
         if ok.any() and np.median(as_degrees[ok]) <= np.median(as_radians[ok]):
             return None
