@@ -928,3 +928,22 @@ def test_trials_beyond_eq15_s_phases_are_a_question_the_data_cannot_answer(tmp_p
     frame = frame.drop(columns="theta_deg")
     with pytest.raises(TooFewObservationsError, match="outside \\(-90, 90\\)"):
         trial_means_from_impacts(("chatter", frame), RegressionConfig(), RunOptions())
+
+
+def test_acf_data_on_impacts_that_vary_by_their_measurement_alone_warns(tmp_path, cli):
+    """A recording without motor noise, extracted: its impacts vary by the measurement only
+    (SD of v about 0.1 mm/s, what setup.csv measures), and acf --data reported correlation
+    functions of the measurement noise with only a 'negative noise variance' note to tell."""
+    sim = tmp_path / "sim"
+    made = cli("simulate-recording", "--out", sim, "--quiet", "--set", "trials=3", "--set",
+               "duration_s=40", "--set", "velocity_noise_m_s=0", "--set",
+               "perturbations.every=0", "--set", "seed=2")
+    assert made.exit_code == 0, made.output
+    extracted = cli("extract", "--data", sim / "recording.csv", "--out", tmp_path / "ex",
+                    "--quiet")
+    assert extracted.exit_code == 0, extracted.output
+    result = cli("acf", "--data", tmp_path / "ex" / "impacts.csv", *FAST, "--out",
+                 tmp_path / "acf", "--quiet")
+    assert result.exit_code == 0, result.output
+    said = " ".join(result.output.split())
+    assert "vary no more than their measurement noise" in said, said

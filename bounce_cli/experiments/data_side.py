@@ -162,6 +162,11 @@ def noise_from_residual_covariance(sigma: np.ndarray) -> tuple[float, float]:
 #: without noise: the virtual set-up's sine racket gave 1.3e-8 m/s and 7.5e-9 rad)
 ROUNDING_SD = 1e-6
 
+#: impacts whose SDs are both at most this many times their measured measurement noise
+#: (setup.csv) vary by the measurement, not the ball: acf --data warns (a session without
+#: motor noise, extracted: SD of v 0.14 mm/s)
+NOISE_ONLY_FACTOR = 1.5
+
 #: the shortest run of consecutive unperturbed impacts a VAR is fitted to, and the shortest
 #: trial of the trust study's simulated data (a VAR(1) per trial needs a few pairs beyond its
 #: six coefficients)
@@ -356,6 +361,14 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
             f"{math.degrees(sd_theta):.2g} deg: rounding, not fluctuations), so there are no "
             "fluctuations to correlate (a session without noise, such as the virtual set-up's "
             "sine racket without perturbations)")
+    if (noise.source == SETUP_FILE and sd_v <= NOISE_ONLY_FACTOR * noise.sd_v_m_s
+            and sd_theta <= NOISE_ONLY_FACTOR * noise.sd_theta_rad):
+        options.warn(
+            f"data: {impacts.path}: the impacts vary no more than their measurement noise (SD "
+            f"of v {sd_v:.2g} m/s against {noise.sd_v_m_s:.2g}, of theta "
+            f"{math.degrees(sd_theta):.2g} deg against {math.degrees(noise.sd_theta_rad):.2g}; "
+            f"{SETUP_FILE}): the correlations and the stability below are the measurement's, "
+            "not the ball's")
     q_v, q_theta = noise_from_sds(jac, sd_v, sd_theta)
     noise_note = "q from the data's SDs through eq. 19 at the model's J (section 6's route)"
     noise_source = "data_sd_match"
