@@ -389,7 +389,7 @@ def _refined_extrema(t, x, measured, index, kind: int, s: ExtractionSettings):
     return out
 
 
-def _robust_sd(x) -> float:
+def robust_sd(x) -> float:
     """The SD of a normal sample from its median absolute deviation (outliers barely count)."""
     x = np.asarray(x, dtype=float)
     return 1.4826 * float(np.median(np.abs(x - np.median(x))))
@@ -414,7 +414,7 @@ def _motion_onset(t, x, t0: float, half_window: float, t_peak: float,
     if not (starts_here or still_here):
         return None
     rest = float(np.median(before))
-    band = max(4.0 * _robust_sd(before), ROUNDING_TOLERANCE * abs(amplitude))
+    band = max(4.0 * robust_sd(before), ROUNDING_TOLERANCE * abs(amplitude))
     ahead = (t >= t0 - half_window) & (t < t_peak) & finite
     still = np.flatnonzero(ahead & (np.abs(x - rest) <= band))
     if still.size == 0:
@@ -714,7 +714,7 @@ def detect_contacts(t, ball, racket, s: ExtractionSettings, bridged=None) -> np.
     finite = jump[np.isfinite(jump)]
     threshold = s.min_velocity_jump_m_s
     if finite.size:
-        threshold = max(threshold, JUMP_NOISE_FACTOR * _robust_sd(finite))
+        threshold = max(threshold, JUMP_NOISE_FACTOR * robust_sd(finite))
     near = (ball - s.ball_offset_m - racket) < s.contact_distance_m + CLOSING_SPEED_M_S * span
     if bridged is not None and np.any(bridged):
         _jumps_across_gaps(t, ball, racket, bridged, m, jump, near, s)

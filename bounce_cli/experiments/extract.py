@@ -36,6 +36,7 @@ from ..data.extraction import (
     extract_trial,
     match_impacts,
     pooled_gravity,
+    robust_sd,
 )
 from ..data.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
 from ..data.setup_table import SetupQuantity, setup_frame
@@ -303,7 +304,7 @@ def separation_noise_m(racket: np.ndarray, ball: np.ndarray) -> float:
     d2 = np.diff(d[np.isfinite(d)], 2)
     if d2.size < 10:
         return math.nan
-    return 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / math.sqrt(6.0)
+    return robust_sd(d2) / math.sqrt(6.0)
 
 
 def noise_hint(trial: Trial, tolerance_m: float) -> str:
@@ -405,7 +406,7 @@ def jitter_warnings(trials: list[Trial], source: str) -> list[str]:
         if steps.size < 10:
             continue
         median = float(np.median(steps))
-        spread = 1.4826 * float(np.median(np.abs(steps - median)))
+        spread = robust_sd(steps)
         if median > 0 and spread > JITTER_FRACTION * median and (
                 worst is None or spread / median > worst[0]):
             worst = (spread / median, median, trial.label)

@@ -127,13 +127,12 @@ def trial_table(config: LearningConfig, options: RunOptions, source=None
     warn_if_still_relaxing(impacts, config.settle_after_perturbation + 1,
                            "settle_after_perturbation", options)
     if impacts.listed:
-        shown = ", ".join(str(t) for t in impacts.series[:6]) + (
-            ", ..." if len(impacts.series) > 6 else "")
-        as_listed = ", ".join(str(t) for t in impacts.listed[:6]) + (
-            ", ..." if len(impacts.listed) > 6 else "")
-        options.warn(f"data: {impacts.path}: trials in the order of their numbers ({shown}), "
-                     f"not as the file lists them ({as_listed}): trial_number follows the "
-                     "numbers")
+        def first(trials) -> str:
+            return ", ".join(str(t) for t in trials[:6]) + (", ..." if len(trials) > 6 else "")
+
+        options.warn(f"data: {impacts.path}: trials in the order of their numbers "
+                     f"({first(impacts.series)}), not as the file lists them "
+                     f"({first(impacts.listed)}): trial_number follows the numbers")
     rows = []
     too_few = []  # trials left with fewer than min_bounces settled impacts: (trial, count)
     for trial, g in impacts.by_trial():
