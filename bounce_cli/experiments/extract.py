@@ -389,32 +389,41 @@ def missed_bounce_warnings(impacts: pd.DataFrame, g: float, source: str) -> list
             "the impacts around it as consecutive"]
 
 
-#: sample intervals that vary (robust SD) by more than this fraction of their median are a
+#: sample intervals that vary (robust SD) by more than this fraction of the clock's step are a
 #: jittering clock (a PC's time stamps, not the capture system's frames)
 JITTER_FRACTION = 0.05
 
 
+def clock_step(steps: np.ndarray) -> float:
+    """The step of the clock behind sample intervals ``steps`` (> 0) that may skip samples:
+    the median of the intervals no longer than 1.5 times their 10th percentile, so that rows
+    missing (intervals of 2, 3, ... steps, even as many as of one step) do not move it."""
+    shortest = float(np.percentile(steps, 10))
+    return float(np.median(steps[steps <= 1.5 * shortest]))
+
+
 def jitter_warnings(trials: list[Trial], source: str) -> list[str]:
-    """A warning where the sample times jitter: the intervals between samples vary (a robust
-    SD, which rows missing do not move) by more than JITTER_FRACTION of their median. The
+    """A warning where the sample times jitter: the intervals between samples stray from
+    whole multiples of the clock's step (``clock_step``; a robust SD of the distances) by more
+    than JITTER_FRACTION of the step. Rows missing give whole multiples and do not count. The
     ball's contacts are found from positions at those times: a review's 1 ms of jitter at
     200 Hz found contacts where there were none (one v_k 0.2 m/s off, impacts lost) without
     a word."""
-    worst: tuple[float, float, object] | None = None  # (fraction, median step, trial)
+    worst: tuple[float, float, object] | None = None  # (fraction, clock step, trial)
     for trial in trials:
         steps = np.diff(trial.t)
+        steps = steps[np.isfinite(steps) & (steps > 0)]
         if steps.size < 10:
             continue
-        median = float(np.median(steps))
-        spread = robust_sd(steps)
-        if median > 0 and spread > JITTER_FRACTION * median and (
-                worst is None or spread / median > worst[0]):
-            worst = (spread / median, median, trial.label)
+        step = clock_step(steps)
+        spread = robust_sd(steps - step * np.maximum(np.round(steps / step), 1.0))
+        if spread > JITTER_FRACTION * step and (worst is None or spread / step > worst[0]):
+            worst = (spread / step, step, trial.label)
     if worst is None:
         return []
-    fraction, median, label = worst
-    return [f"{source}: the sample times jitter (the intervals between samples vary by about "
-            f"{1000 * fraction * median:.2g} ms around {1000 * median:.3g} ms, in trial "
+    fraction, step, label = worst
+    return [f"{source}: the sample times jitter (the intervals between samples stray by about "
+            f"{1000 * fraction * step:.2g} ms from multiples of {1000 * step:.3g} ms, in trial "
             f"{label}): contacts are found from the positions at those times, and a jittering "
             "clock can make contacts where there were none; export the capture system's own "
             "clock (frame number / frame rate) where it has one"]

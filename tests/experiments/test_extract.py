@@ -1208,17 +1208,39 @@ def test_the_separation_noise_is_the_markers_noise_beside_a_moving_racket():
 def test_jittering_sample_times_are_warned_about(simulated, tmp_path):
     """1 ms of jitter in a 200 Hz recording's time stamps (a PC's clock) found contacts where
     there were none, without a word. The capture system's own clock, with rows missing here
-    and there, is not jitter."""
+    and there or every third row missing, is not jitter."""
     rec = pd.read_csv(simulated / "recording.csv")
     jittered = rec.assign(t_s=rec["t_s"] + np.random.default_rng(7).uniform(
         -0.001, 0.001, len(rec)))
     holes = rec.drop(index=rec.index[100:2000:97])  # a few rows missing, regular clock
-    for name, frame, warned in (("jittered", jittered, True), ("holes", holes, False)):
+    # every third row missing (a capture that drops frames regularly): the intervals are
+    # 5 and 10 ms in turn, multiples of one clock's step, not jitter (the first version
+    # said they jittered by 3.7 ms around 7.5 ms)
+    thirds = rec.drop(index=rec.index[2::3])
+    jittered_thirds = jittered.drop(index=jittered.index[2::3])
+    for name, frame, warned in (("jittered", jittered, True), ("holes", holes, False),
+                                ("thirds", thirds, False),
+                                ("jittered_thirds", jittered_thirds, True)):
         path = tmp_path / f"{name}.csv"
         frame.to_csv(path, index=False)
         result, out = extract_cli(tmp_path, "--data", str(path), "--force")
         said = " ".join(result.output.split())
         assert ("sample times jitter" in said) is warned, (name, said)
+
+
+def test_the_clock_step_is_found_under_rows_missing_and_jitter():
+    """``clock_step``: the capture's step whatever share of rows is missing (every third row:
+    intervals of 1 and 2 steps in equal numbers, whose median is neither; three rows in five
+    at random), and about the mean interval under jitter."""
+    from bounce_cli.experiments.extract import clock_step
+
+    t = 0.1 + np.arange(4000) * 0.005  # time stamps as a file gives them, with rounding
+    rng = np.random.default_rng(3)
+    for kept in (t, np.delete(t, np.arange(2, t.size, 3)),
+                 np.sort(rng.choice(t, size=1600, replace=False))):
+        assert clock_step(np.diff(kept)) == pytest.approx(0.005, rel=1e-9)
+    jittered = t + rng.uniform(-0.0005, 0.0005, t.size)
+    assert clock_step(np.diff(jittered)) == pytest.approx(0.005, rel=0.1)
 
 
 def test_flights_too_long_for_their_launch_say_a_bounce_was_missed(tmp_path):
