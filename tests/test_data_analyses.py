@@ -492,6 +492,39 @@ def test_rank_interval_is_the_range_of_39_sessions_at_95_percent():
     assert level == pytest.approx(0.95)
 
 
+def test_a_radius_corrected_by_the_model_bias_is_not_negative():
+    """A review's lag-2 VARX radius of 0.197, with the model predicting 0.863 where eq. 10
+    gives 0.616, was written corrected as -0.050 beside an interval [0, 0.365] that left out
+    its own estimate. A modulus is not negative: the estimate is held at 0 as its interval
+    is, and the note says so; the J entries are shifted as before."""
+    from types import SimpleNamespace
+
+    from bounce_cli.experiments.data_side import VarxPrediction, prediction_rows
+    from bounce_cli.model.linear import jacobian, stability
+
+    params = ModelParams(alpha=0.3, g=9.81, racket_amplitude=0.2, racket_period=0.6)
+    target = np.append(jacobian(params).ravel(), stability(params).spectral_radius)
+    observed_j = np.array([[-0.68, -0.53], [1.34, 0.98]])
+    observed_radius = float(max(abs(np.linalg.eigvals(observed_j))))
+    sims = target + np.random.default_rng(2).normal(0.0, 0.02, (22, 5))
+    sims[:, 4] += observed_radius + 0.05  # the model's bias: more than the estimate
+    fit = SimpleNamespace(method="lag2+jackknife", jacobian=observed_j,
+                          eigen_summary=lambda: {"spectral_radius": (observed_radius,)})
+    prediction = VarxPrediction(sessions=39, q_v=0.03, q_v_residual=0.03, redrawn=0,
+                                estimates={"lag2": sims})
+    rows, lines = prediction_rows(prediction, {"lag2": fit}, params, 0.95)
+    frame = pd.DataFrame(rows)
+    corrected = frame[frame.source == "varx_lag2+jackknife+model_bias"].set_index("quantity")
+    radius = corrected.loc["spectral_radius"]
+    assert radius.estimate == 0.0 and radius.ci_low == 0.0
+    assert radius.ci_low <= radius.estimate <= radius.ci_high
+    assert "held at 0" in radius.note
+    model_mean = sims.mean(axis=0)
+    assert corrected.loc["J_vv"].estimate == pytest.approx(
+        observed_j[0, 0] - (model_mean[0] - target[0]))
+    assert "22 of the 39" in radius.note
+
+
 @pytest.mark.slow
 def test_the_model_bias_of_the_varx_brings_eq9_into_its_interval():
     """Exact impacts of the simulated lab (no extraction, no measurement noise) with the

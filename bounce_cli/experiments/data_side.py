@@ -750,8 +750,14 @@ def prediction_rows(prediction: VarxPrediction, fits: dict, params: ModelParams,
         observed = np.append(fit.jacobian.ravel(), fit.eigen_summary()["spectral_radius"][0])
         corrected = observed - (mean - target)
         lows, highs = observed - (high - target), observed - (low - target)
-        lows[-1] = max(lows[-1], 0.0)  # a modulus
-        interval = f"{level:.0%} interval from the order statistics of {len(sims)} {how}"
+        # a modulus: a bias larger than the estimate holds it (and its interval) at 0
+        held = corrected[-1] < 0.0
+        corrected[-1], lows[-1], highs[-1] = (max(x, 0.0) for x in
+                                              (corrected[-1], lows[-1], highs[-1]))
+        used = (f"{len(sims)} of the {prediction.sessions}" if len(sims) < prediction.sessions
+                else f"{len(sims)}")
+        fewer = f" (from {used} sessions)" if len(sims) < prediction.sessions else ""
+        interval = f"{level:.0%} interval from the order statistics of {used} {how}"
         for i, name in enumerate(names):
             unit = "1" if name == "spectral_radius" else ENTRY_UNITS[name]
             rows.append({"quantity": name, "unit": unit, "source": f"model_{source}",
@@ -763,8 +769,11 @@ def prediction_rows(prediction: VarxPrediction, fits: dict, params: ModelParams,
                          "estimate": float(corrected[i]), "se": float(sd[i]),
                          "ci_low": float(lows[i]), "ci_high": float(highs[i]),
                          "note": f"{source} minus the model's bias for it (prediction minus "
-                                 f"eq. 9/10); its {level:.0%} interval holds eq. 9's J when the "
-                                 "data are the model"})
+                                 f"eq. 9/10); its {level:.0%} interval{fewer} holds eq. 9's J "
+                                 "when the data are the model"
+                                 + ("; held at 0: the bias is larger than the estimate, and a "
+                                    "modulus is not negative"
+                                    if held and name == "spectral_radius" else "")})
         lines.append(f"VARX {source}: the model predicts spectral radius {mean[4]:.3f} "
                      f"[{low[4]:.3f}, {high[4]:.3f}] for this estimate (eq. 10: "
                      f"{st.spectral_radius:.3f}: the map's nonlinearity at the data's spread); "
