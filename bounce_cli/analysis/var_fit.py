@@ -542,12 +542,18 @@ class LagOrder:
     n_rows: int
 
 
+#: impacts per coefficient of an equation a VAR(p) beyond p = 1 needs to enter the lag-order
+#: comparison (a review's 15 impacts "preferred" a VAR(5): 10 slopes an equation)
+ROWS_PER_COEFFICIENT = 10
+
+
 def lag_order_criteria(trials: Sequence[np.ndarray], max_order: int) -> list[LagOrder]:
     """AIC and BIC of VAR(p), p = 1..max_order, fitted by least squares pooled over trials
     (each trial's mean removed, no lag across a trial boundary; statsmodels' VAR knows no
     trial boundaries): ln det Sigma_p + 2 K^2 p / T and ln det Sigma_p + ln(T) K^2 p / T with
     K = 2, Sigma_p the maximum-likelihood residual covariance and T the rows used, the same
-    rows for every p (each trial from its impact max_order on).
+    rows for every p (each trial from its impact max_order on). Orders beyond 1 are compared
+    while the rows number at least ``ROWS_PER_COEFFICIENT`` per coefficient of an equation.
 
     Parameters
     ----------
@@ -568,7 +574,7 @@ def lag_order_criteria(trials: Sequence[np.ndarray], max_order: int) -> list[Lag
     out = []
     for order in range(1, max_order + 1):
         x = np.hstack([parts[max_order - lag] for lag in range(1, order + 1)])
-        if n <= x.shape[1] + len(y):
+        if n <= x.shape[1] + len(y) or (order > 1 and n < ROWS_PER_COEFFICIENT * x.shape[1]):
             break
         coef, *_ = np.linalg.lstsq(x, target, rcond=None)
         resid = target - x @ coef

@@ -811,7 +811,7 @@ def var_diagnostics(fits: dict, trials: list[np.ndarray], max_lag: int
     """var_diagnostics.csv and its summary lines: the Ljung-Box test of the OLS fits'
     residuals (VAR and VARX; per run, pooled) at min(max_lag, shortest run / 4) lags, and the
     lag orders 1..min(5, shortest run / 4) by AIC and BIC beside the paper's VAR(1)."""
-    from ..analysis.var_fit import lag_order_criteria, ljung_box
+    from ..analysis.var_fit import ROWS_PER_COEFFICIENT, lag_order_criteria, ljung_box
 
     shortest = min(len(t) for t in trials)
     lags = max(1, min(max_lag, shortest // 4))
@@ -826,11 +826,19 @@ def var_diagnostics(fits: dict, trials: list[np.ndarray], max_lag: int
                          "lags": t.lags, "statistic": t.statistic, "df": t.df,
                          "p_value": t.p_value, "aic": math.nan, "bic": math.nan,
                          "preferred_by": ""})
+        if not all(t.df > 0 for t in tests):  # chi^2 with no degree of freedom left
+            lines.append(f"Ljung-Box ({label} residuals, {lags} lags): not tested: the runs' "
+                         f"{lags} lags leave no degree of freedom beside the "
+                         f"{2 + fit.exog_coef.shape[1]} fitted slopes (too few impacts)")
+            continue
         verdict = ", ".join(f"{t.component} p = {t.p_value:.3g}" for t in tests)
         white = all(t.p_value >= 0.05 for t in tests)
         lines.append(f"Ljung-Box ({label} residuals, {lags} lags, each run's own, pooled): "
                      f"{verdict}: {'white' if white else 'NOT white'} at 5 %")
     orders = lag_order_criteria(trials, max(1, min(5, shortest // 4)))
+    if len(orders) == 1:
+        lines.append(f"lag order: not compared: {orders[0].n_rows} impacts fit no VAR(p) "
+                     f"beyond p = 1 with {ROWS_PER_COEFFICIENT} impacts per coefficient")
     if orders:
         best_aic = min(orders, key=lambda o: o.aic).order
         best_bic = min(orders, key=lambda o: o.bic).order
@@ -840,9 +848,10 @@ def var_diagnostics(fits: dict, trials: list[np.ndarray], max_lag: int
             rows.append({"diagnostic": "lag_order", "estimator": "ols", "component": "",
                          "lags": o.order, "statistic": math.nan, "df": math.nan,
                          "p_value": math.nan, "aic": o.aic, "bic": o.bic, "preferred_by": by})
-        lines.append(f"lag order (VAR(p) by OLS, p = 1..{orders[-1].order}, on the same "
-                     f"{orders[0].n_rows} impacts): AIC prefers {best_aic}, BIC {best_bic} "
-                     "(eq. 19 is a VAR(1))")
+        if len(orders) > 1:
+            lines.append(f"lag order (VAR(p) by OLS, p = 1..{orders[-1].order}, on the same "
+                         f"{orders[0].n_rows} impacts): AIC prefers {best_aic}, BIC {best_bic} "
+                         "(eq. 19 is a VAR(1))")
     columns = ["diagnostic", "estimator", "component", "lags", "statistic", "df", "p_value",
                "aic", "bic", "preferred_by"]
     return pd.DataFrame(rows, columns=columns), lines
@@ -980,7 +989,8 @@ def _trust_fits(panels, lengths, method, jackknife, truth, z):
     jac, cov = fit.jacobian[fit.identified], fit.cov_vec[fit.identified]
     value = spectral_radii_2x2(jac)
     half = np.minimum(z * log_radius_se(jac, cov), 700.0)
-    inside = int(np.sum((value * np.exp(-half) <= truth) & (truth <= value * np.exp(half))))
+    with np.errstate(over="ignore"):  # an interval of a wild fit reaching infinity holds it
+        inside = int(np.sum((value * np.exp(-half) <= truth) & (truth <= value * np.exp(half))))
     return value, inside
 
 

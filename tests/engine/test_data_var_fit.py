@@ -378,3 +378,15 @@ def test_information_criteria_pick_the_true_lag_order():
                                               rng)), 4)
     assert min(two, key=lambda o: o.aic).order == 2
     assert min(two, key=lambda o: o.bic).order == 2
+
+
+def test_lag_orders_beyond_one_need_ten_impacts_per_coefficient():
+    """A review's one run of 20 impacts compared VAR(1) .. VAR(5) on 15 rows (10 slopes an
+    equation) and "preferred" 5. Orders beyond 1 now enter only with 10 rows per
+    coefficient of an equation (2 p): 15 rows give order 1 alone, 40 rows order 2, 100 rows
+    order 5."""
+    rng = np.random.default_rng(8)
+    truth = jacobian(PAPER)
+    for length, orders in ((20, [1]), (45, [1, 2]), (105, [1, 2, 3, 4, 5])):
+        found = lag_order_criteria(list(var1_series(truth, Q, 1, length, rng)), 5)
+        assert [o.order for o in found] == orders, (length, found)
