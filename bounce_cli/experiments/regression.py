@@ -181,7 +181,8 @@ def read_trials(path_text: str) -> pd.DataFrame:
 
 # -- fit ----------------------------------------------------------------------------------
 #: tau^2 spanning less than this fraction of its mean determines no slope worth reporting
-#: (the paper's Fig. 7 spans about a factor 2); the fit is still written, with a warning
+#: (the paper's Fig. 7 spans about a factor 2): refused when every condition is this narrow
+#: (a one-period design, e.g. the virtual set-up's), a warning when only some are
 NARROW_TAU2 = 0.01
 
 
@@ -286,17 +287,23 @@ def run(config: RegressionConfig, options: RunOptions, source=None) -> Experimen
         described = (f"{len(trials)} simulated trials ({int(trials['lost'].sum())} lost the "
                      "ball and are not fitted)")
     trials = with_squared_period(trials)
-    fit = fit_frame(trials, config, model)
     fitted = trials[~trials["lost"].astype(bool)] if "lost" in trials.columns else trials
     groups = (fitted.groupby("condition") if "condition" in fitted.columns
               else [("all", fitted)])
+    narrow = {}  # condition -> the message saying its tau^2 spans nothing
     for condition, group in groups:
         spread = float(np.ptp(group["tau2_s2"]) / group["tau2_s2"].mean())
         if spread < NARROW_TAU2:
-            options.warn(
+            narrow[condition] = (
                 f"condition {condition!r}: the trials' squared racket periods span only "
                 f"{spread:.2%} of their mean, so eq. 15's slope is not determined (fit "
                 "trials at different racket periods, e.g. different target heights)")
+    if narrow and len(narrow) == len(groups):  # no line anywhere: nothing to report
+        raise TooFewObservationsError(f"{data_label or 'simulated trials'}: "
+                                      + "; ".join(narrow.values()))
+    for message in narrow.values():  # the other conditions' lines stand
+        options.warn(message)
+    fit = fit_frame(trials, config, model)
     figures = draw({"trials.csv": trials, "fit.csv": fit}) if options.figures else {}
     if data_label is not None:
         caption_figures(figures, None, f"data: {data_label}{at_model}")

@@ -118,19 +118,41 @@ def test_figure_redraws_from_csvs(small_run):
 
 
 @pytest.mark.slow
-def test_trials_at_one_period_warn_that_the_slope_is_undetermined(tmp_path, cli):
+def test_trials_at_one_period_are_refused_with_one_line(tmp_path, cli):
     """All trials at (nearly) the same racket period: tau^2 spans nothing, eq. 15's slope is
-    not determined; the fit is written with its (wide) interval and a warning says why."""
+    not determined. Written before, with a warning, as a tight line (a virtual session: slope
+    -0.568, R^2 0.979); now refused in one line, nothing written, as study.md promises."""
     rng = np.random.default_rng(2)
     tau = 0.92 + rng.normal(0, 1e-4, 6)
     pd.DataFrame({"a_r_m": 0.30 + rng.normal(0, 0.01, 6), "tau_s": tau}).to_csv(
         tmp_path / "t.csv", index=False)
     result = cli("regression", "--data", tmp_path / "t.csv", "--out", tmp_path / "o", *SET_MODEL)
-    assert result.exit_code == 0, result.output
-    assert "bounce: warning: condition 'all': the trials' squared racket periods span only" in (
-        result.stderr)
+    assert result.exit_code == 2, result.output
+    message = " ".join(result.stderr.split())
+    assert "condition 'all': the trials' squared racket periods span only" in message
+    assert "eq. 15's slope is not determined" in message
+    assert not (tmp_path / "o").exists()
     spread = cli("regression", "--out", tmp_path / "s", "--quiet")
     assert "warning" not in spread.stderr
+
+
+def test_one_condition_at_one_period_beside_a_spread_one_warns(tmp_path, cli):
+    """Only one condition at one period: the other's line is determined; both are written and
+    the narrow one is named in a warning."""
+    rng = np.random.default_rng(3)
+    wide = np.linspace(0.5, 0.85, 6)
+    frame = pd.DataFrame({
+        "condition": ["wide"] * 6 + ["narrow"] * 6,
+        "tau_s": np.concatenate([wide, 0.92 + rng.normal(0, 1e-4, 6)]),
+    })
+    frame["a_r_m"] = 0.5 * frame["tau_s"] ** 2 + rng.normal(0, 0.002, 12)
+    frame.to_csv(tmp_path / "t.csv", index=False)
+    result = cli("regression", "--data", tmp_path / "t.csv", "--out", tmp_path / "o", *SET_MODEL)
+    assert result.exit_code == 0, result.output
+    message = " ".join(result.stderr.split())
+    assert "warning: condition 'narrow': the trials' squared racket periods span only" in message
+    assert "condition 'wide'" not in message
+    assert len(pd.read_csv(tmp_path / "o" / "fit.csv")) == 2
 
 
 def eq15_trials(tmp_path, alpha=None, g=None, name="trials.csv"):
