@@ -62,6 +62,29 @@ def test_fixed_point_json_without_a_fixed_point_says_so_in_json_and_exits_1(cli)
     assert cli("fixed-point", "--json", "--set", "model.nope=1").exit_code == 2
 
 
+@pytest.mark.parametrize("alpha, amplitude_factor, needle", [
+    (0.0, 1.01, "cannot leave the racket"),  # alpha 0: the ball leaves at the racket's speed
+    (0.01, 1.0001, "meets the racket again after 0.0249 of a racket cycle"),
+])
+def test_eq8_s_point_where_the_ball_falls_back_at_once_is_no_fixed_point(
+        cli, user_error, alpha, amplitude_factor, needle):
+    """Eq. 8 solved, but the racket decelerates slower than gravity (AC > -1 g) and a nearly
+    dead impact gives the ball too little lead: the next impact comes at once, not a racket
+    cycle later. A review got "exists, stable" for it; eq. 8's point is no orbit of the map."""
+    amplitude = amplitude_factor * math.pi * (1 - alpha) / (1 + alpha) * 9.81 / (
+        2 * math.pi / 0.92) ** 2
+    args = ["--set", f"model.alpha={alpha}", "--set", f"model.racket_amplitude={amplitude}"]
+    result = cli("fixed-point", "--json", *args)
+    assert result.exit_code == 1, result.output
+    data = json.loads(result.stdout)
+    assert data["exists"] is False and needle in data["reason"], data
+    user_error(cli("fixed-point", *args), needle)
+    # a lively ball (alpha 0.05) at the same small lead flies its racket cycle
+    alive = cli("fixed-point", "--json", "--set", "model.alpha=0.05", "--set",
+                f"model.racket_amplitude={amplitude * 1.1}")
+    assert json.loads(alive.stdout)["exists"] is True
+
+
 @pytest.mark.parametrize(
     "args, needles",
     [

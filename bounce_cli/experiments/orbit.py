@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 
 from ..model.linear import stability
+from ..model.impact import check_period1_orbit
 from ..model.params import ModelParams, wrap_phase
 
 
@@ -38,8 +39,10 @@ def fixed_point_report(params: ModelParams) -> dict:
     Raises
     ------
     NoFixedPointError
-        Where eq. 8 has no solution.
+        Where eq. 8 has no solution or its point is no orbit of the map
+        (``check_period1_orbit``).
     """
+    check_period1_orbit(params)
     fp = params.fixed_point()
     st = stability(params)
     return {

@@ -32,6 +32,7 @@ from ..runtime.config import (
     keys_set_by_user,
     load_config,
 )
+from ..model.impact import check_period1_orbit
 from ..model.params import ModelParams
 from ..model.linear import stability
 from .base import Experiment, ExperimentResult, Progress, RunOptions, no_warning
@@ -521,5 +522,5 @@ def load_model_block(config: Path | None, overrides: Sequence[str] | None, *,
     cfg = validate(ModelOnlyConfig, {"model": data.get("model") or {}}, str(path), overrides)
     warn_if_implausible_racket(cfg.model, warn)
     if need_fixed_point:
-        cfg.params.fixed_point()
+        check_period1_orbit(cfg.params)
     return cfg.model

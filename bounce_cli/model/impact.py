@@ -82,7 +82,7 @@ from typing import Any, Callable, NamedTuple, Protocol
 
 import numpy as np
 
-from .params import ModelParams
+from .params import ModelParams, NoFixedPointError
 from .trig import numpy_sincos
 
 #: steps after which a state still not converged is reported as NaN (never seen in tests:
@@ -374,6 +374,39 @@ def next_impact_phase(theta, v, params: ModelParams, *, max_steps: int = MAX_SAF
     """
     return first_impact_phase(theta, v, params.racket_amplitude, params.omega, params.g,
                               max_steps=max_steps, released=released)
+
+
+#: how far from one racket cycle (relative) the fixed point's hop may come out numerically
+PERIOD1_HOP_TOLERANCE = 1e-6
+
+
+def check_period1_orbit(params: ModelParams) -> None:
+    """Raise unless eq. 8's fixed point is an orbit of the map (eqs. 5, 6): leaving the racket
+    at (theta~, v~) of eqs. 7, 8, the FIRST impact must come one racket cycle later.
+
+    Eq. 8 asks only that an impact one cycle later exists. Where the racket decelerates slower
+    than gravity (AC > -1 g) and the impact is nearly dead (alpha near 0), the racket meets
+    the ball again at once (alpha 0.01 at the least amplitude: after 0.025 of a cycle), or the
+    ball cannot leave it at all (alpha 0): no period-1 orbit, whatever eq. 10 says of it.
+
+    Raises
+    ------
+    NoFixedPointError
+        Where eq. 8 has no solution, or its point is no orbit of the map.
+    """
+    fp = params.fixed_point()
+    cycles = float(next_impact_phase(fp.theta_rad, fp.v_m_s, params)) / (2.0 * math.pi)
+    if abs(cycles - 1.0) <= PERIOD1_HOP_TOLERANCE:
+        return
+    ac = params.racket_acceleration_g(fp.theta_rad)
+    where = (f"eq. 8's fixed point (theta~ = {fp.theta_deg:.4g} deg) is no orbit of the map at "
+             f"alpha={params.alpha:g}, a_r={params.racket_amplitude:g} m: ")
+    what = ("the ball cannot leave the racket there" if math.isnan(cycles) else
+            f"leaving the racket there, the ball meets the racket again after {cycles:.3g} "
+            "of a racket cycle, not one")
+    raise NoFixedPointError(
+        f"no period-1 fixed point: {where}{what} (AC = {ac:.3g} g; a larger model.alpha or "
+        "model.racket_amplitude gives the ball its flight)")
 
 
 def first_impact_phase(theta, v, amplitude, omega, g, *, max_steps: int = MAX_SAFE_STEPS,
