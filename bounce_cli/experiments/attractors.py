@@ -36,7 +36,7 @@ from ..runtime.config import ExperimentConfig, ModelBlock, StrictModel
 from .base import Experiment, ExperimentResult, RunOptions
 from ..runtime import parallel
 from .basin import POOL_MIN_POINTS, GridBlock
-from .plotting import caption_figures, publication_style
+from .plotting import caption_figures, cell_extent, publication_style
 
 
 class RecurrenceBlock(StrictModel):
@@ -474,7 +474,7 @@ def draw(frames: dict[str, pd.DataFrame], config: AttractorsConfig | None = None
     fig, axes = new_figure(width=7.0, height=5.6)
     ax = axes[0, 0]
     ax.imshow(grid, origin="lower", aspect="auto", interpolation="nearest",
-              extent=(theta[0], theta[-1], v[0], v[-1]),
+              extent=cell_extent(theta, v),
               cmap=ListedColormap([colours[n] for n in order]), vmin=-0.5,
               vmax=len(order) - 0.5)
     # a periodic orbit's points in its colour ringed white and black, a chaotic attractor's

@@ -45,7 +45,7 @@ from ..model.maps import ImpactMap
 from ..model.linear import is_stable, stability
 from ..model.params import ModelParams
 from ..runtime.figure_files import DeferredFigure
-from .plotting import publication_style
+from .plotting import cell_extent, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
 if TYPE_CHECKING:
@@ -359,8 +359,7 @@ class _Grid:
             th, vs = np.unique(theta), np.unique(v)
             self.index = (np.searchsorted(vs, v), np.searchsorted(th, theta))
         self.shape = (vs.size, th.size)
-        dth, dv = _cell_width(th), _cell_width(vs)
-        self.extent = (th[0] - dth / 2, th[-1] + dth / 2, vs[0] - dv / 2, vs[-1] + dv / 2)
+        self.extent = cell_extent(th, vs)
         self.stride = tuple(-(-n // MAX_IMAGE_CELLS) for n in self.shape)
 
     def image(self, values, fill=0):
@@ -388,12 +387,6 @@ def _canonical_axes(theta: np.ndarray, v: np.ndarray):
             and (theta.reshape(shape) == th).all() and (v.reshape(shape) == vs[:, None]).all()):
         return th, vs
     return None
-
-
-def _cell_width(values: np.ndarray) -> float:
-    """Width of one grid cell along an axis; an axis of one value (``num: 1``) is drawn one
-    unit (deg or m/s) wide, centred on the value."""
-    return float(values[-1] - values[0]) / (values.size - 1) if values.size > 1 else 1.0
 
 
 def _draw_markers(ax, markers: pd.DataFrame, extent) -> None:

@@ -190,6 +190,19 @@ def finish_correlation_panel(ax: Any, pair: str, bottom: bool) -> None:
         ax.set_xlabel(LAG_LABEL)
 
 
+def cell_extent(x, y) -> tuple[float, float, float, float]:
+    """imshow's ``extent`` for an image whose cells are centred on the sorted, evenly spaced
+    grid values ``x`` (columns) and ``y`` (rows): half a cell beyond the first and last value
+    on each axis. An axis of one value is drawn one unit (deg, m/s) wide, centred on it."""
+    def half(values) -> float:
+        values = np.asarray(values, dtype=float)
+        return 0.5 * (float(values[-1] - values[0]) / (values.size - 1) if values.size > 1
+                      else 1.0)
+
+    hx, hy = half(x), half(y)
+    return (float(x[0]) - hx, float(x[-1]) + hx, float(y[0]) - hy, float(y[-1]) + hy)
+
+
 def centred_deg(theta_deg):
     """Phases in degrees mapped to [-180, 180): means and plots of phases near 0 stay
     meaningful (the table keeps [0, 360))."""

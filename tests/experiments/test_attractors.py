@@ -291,3 +291,21 @@ def test_an_attractor_has_one_colour_in_both_figures():
     assert continued["period-1 (2 cycles)"] == main["period-1 (2 cycles)"]
     assert continued["period-2 (4 cycles)"] not in main.values()
     assert "Gamma" in figures["attractors_continuation.png"].axes[0].get_title()
+
+
+def test_each_cell_of_the_basin_image_is_centred_on_its_start():
+    """attractors.png drew its grid from the first start to the last one (the cells' edges on
+    the starts), half a cell off basin.png, where each cell is centred on its start."""
+    from bounce_cli.experiments import attractors
+
+    theta, v = np.meshgrid([0.0, 120.0, 240.0], [1.0, 3.0, 5.0, 7.0])
+    names = np.where(theta.ravel() < 100, "sticking", "period-1 (1 cycles)")
+    frame = pd.DataFrame({"theta0_deg": theta.ravel(), "v0_m_s": v.ravel(),
+                          "attractor": names})
+    fractions = pd.DataFrame({"name": ["sticking", "period-1 (1 cycles)"],
+                              "fraction": [1 / 3, 2 / 3]})
+    points = pd.DataFrame({"name": ["period-1 (1 cycles)"], "theta_deg": [40.0],
+                           "v_m_s": [4.0]})
+    figure = attractors.draw({"basin.csv": frame, "fractions.csv": fractions,
+                              "attractor_points.csv": points})["attractors.png"]
+    assert figure.axes[0].images[0].get_extent() == pytest.approx((-60.0, 300.0, 0.0, 8.0))
