@@ -420,7 +420,7 @@ def test_a_png_laid_out_before_saving_is_what_savefig_writes(name):
     assert pdf.getvalue()[:5] == b"%PDF-"
 
 
-def test_the_learning_figure_names_its_fit_in_a_sentence():
+def test_the_learning_figure_names_its_fit_in_a_sentence(figure_layout_problems):
     """Fig. 6 over the study names the fit its trend lines come from: 'mixed: random intercept
     and slope; a random-effects variance estimated at 0' (group_learning.csv's method) reads
     'mixed model with random intercept and slope; ...', with no nested parentheses (a review
@@ -437,10 +437,13 @@ def test_the_learning_figure_names_its_fit_in_a_sentence():
                            "intercept": [-0.3, 0.06], "slope_per_trial": [-0.1, -0.01],
                            "ci_low": [-0.2, -0.02], "ci_high": [0.0, 0.0],
                            "method": method})
-    title = learning_figure(trials, trends)._suptitle.get_text()
+    fig = learning_figure(trials, trends)
+    title = " ".join(fig._suptitle.get_text().split())
     assert ("(fixed effect: mixed model with random intercept and slope; a random-effects "
             "variance estimated at 0)") in title
     assert "((" not in title and "))" not in title
+    # one condition: a narrow figure, whose title line ran off both sides (a data review)
+    assert figure_layout_problems(fig) == []
 
 
 def test_fig2_draws_rounding_level_impacts_flat_without_an_offset_label():

@@ -246,7 +246,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         fig, axes = new_figure(1, 2, width=12, height=4.8)
         ax = axes[0, 0]
         ax.axhspan(low, 0.0, color="0.92",
-                   label=f"stable AC range, eq. 14 ($\\alpha$ = {alpha:g})")
+                   label=f"stable AC range, eq. 14 ($\\alpha$ = {alpha:.3g})")
         ax.errorbar(trials["trial_number"], trials["ac_mean_g"], yerr=trials["ac_sd_g"], fmt="-o",
                     color="k", ms=4, capsize=2, label=r"mean AC $\pm$ SD per trial")
         ax.set_xlabel("trial number")
@@ -292,7 +292,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     ax2.set_ylim(0, top)
     ax2.set_xlabel("racket acceleration at impact AC (g)")
     ax2.set_ylabel("SD of ball amplitude (cm)")
-    ax2.set_title(f"model: SD of ball amplitude vs AC ($\\alpha$ = {alpha:g}, $g$ = "
+    ax2.set_title(f"model: SD of ball amplitude vs AC ($\\alpha$ = {alpha:.3g}, $g$ = "
                   f"{curve['g_m_s2'].iloc[0]:.3g} m/s$^2$, $\\tau$ = "
                   f"{curve['racket_period_s'].iloc[0]:.3g} s)", fontsize=10)
     ax2.legend(fontsize=8)

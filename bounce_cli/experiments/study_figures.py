@@ -4,6 +4,7 @@ against the model's."""
 
 from __future__ import annotations
 
+import textwrap
 from typing import Any, Callable, Iterable
 
 import numpy as np
@@ -65,6 +66,11 @@ def draw_group(frames: dict[str, pd.DataFrame], names: Iterable[str] | None = No
     return {name: builders[name]() for name in chosen}
 
 
+#: characters of a 10-point title line per inch of figure width (DejaVu Sans averages about
+#: 5.5 points a character: 13 per inch; one fewer for a margin)
+TITLE_CHARS_PER_INCH = 12
+
+
 def learning_figure(trials: pd.DataFrame, trends: pd.DataFrame | None):
     """Fig. 6 over the study: each subject's per-trial AC and SD of ball amplitude (thin), the
     trend's fixed-effect line (thick; the title names its method), one column per condition."""
@@ -112,8 +118,11 @@ def learning_figure(trials: pd.DataFrame, trends: pd.DataFrame | None):
     # 'mixed: random intercept and slope' reads as a sentence in the title
     methods = [f"mixed model with {m.removeprefix('mixed: ')}" if m.startswith("mixed: ")
                else m for m in methods]
+    # wrapped to the figure's width: one condition's figure is narrow (the line ran off it)
+    method_line = textwrap.fill(f"(fixed effect: {'; '.join(methods)})",
+                                width=int(fig.get_figwidth() * TITLE_CHARS_PER_INCH))
     fig.suptitle("Fig. 6 over the study: learning trends"
-                 + (f"\n(fixed effect: {'; '.join(methods)})" if methods else ""), fontsize=10)
+                 + (f"\n{method_line}" if methods else ""), fontsize=10)
     return fig
 
 

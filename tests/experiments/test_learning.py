@@ -88,6 +88,13 @@ def test_learning_figure_and_redraw(learning_run):
     # gravity changes it; a reviewer found g missing)
     g = frames["model_curve.csv"]["g_m_s2"].iloc[0]
     assert any(f"$g$ = {g:.3g} m/s$^2$" in ax.get_title() for ax in fig.axes)
+    # alpha measured from data (0.601577) is shown to the figures' 3 digits, as g and tau
+    frames["model_curve.csv"]["alpha"] = 0.601577
+    fig = learning.draw(frames)["learning.png"]
+    shown = " ".join([ax.get_title() for ax in fig.axes]
+                     + [t.get_text() for ax in fig.axes if ax.get_legend()
+                        for t in ax.get_legend().get_texts()])
+    assert "$\\alpha$ = 0.602" in shown and "0.601577" not in shown
 
 
 @pytest.mark.slow
