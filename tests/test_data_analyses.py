@@ -1008,3 +1008,28 @@ def test_acf_data_on_impacts_that_vary_by_their_measurement_alone_warns(tmp_path
     assert result.exit_code == 0, result.output
     said = " ".join(result.output.split())
     assert "vary no more than their measurement noise" in said, said
+
+
+def test_model_sessions_that_stick_lose_only_the_varx_prediction(tmp_path, cli):
+    """A racket varying by ~6 cm and ~60 ms per cycle: the model's sessions simulated at that
+    variability fall into sticking. That ended the whole `acf --data` (OLS, lag-2, ACFs) with
+    one error naming no way round it (5 of a review's 40 units); now only the model's
+    prediction for the VARX estimates is left out, with a warning saying why and how to skip
+    it."""
+    sim = simulate_impacts(PAPER, 0.04, 0.05, 4, 150, seed=5)
+    frame = impacts_frame(sim, PAPER)
+    rng = np.random.default_rng(1)
+    frame["racket_period_s"] = 0.92 + rng.normal(0, 0.06, len(frame))
+    frame["racket_amplitude_m"] = 0.30 + rng.normal(0, 0.05, len(frame))
+    path = tmp_path / "impacts.csv"
+    frame.to_csv(path, index=False)
+    out = tmp_path / "o"
+    result = cli("acf", "--data", path, "--out", out, "--quiet")
+    assert result.exit_code == 0, result.output
+    said = " ".join(result.stderr.split())
+    assert "the model's prediction for the VARX estimates is not made" in said
+    assert "fall into sticking" in said and "data_analysis.model_sessions=0" in said
+    stab = pd.read_csv(out / "stability_data.csv")
+    assert stab.query("quantity == 'spectral_radius' and source == 'ols'").estimate.notna().all()
+    assert not stab.source.astype(str).str.contains("prediction").any()
+    assert len(pd.read_csv(out / "acf_data.csv")) > 0

@@ -408,7 +408,13 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
                               "the process of the trust study").start()
                    if options.jobs > 1 and can_fork() else None)
     try:
-        prediction = varx_prediction(params, fits, trials, pooled_racket_sd(racket), d)
+        try:
+            prediction = varx_prediction(params, fits, trials, pooled_racket_sd(racket), d)
+        except ModelError as exc:  # the model's sessions stick: the fits stand without it
+            prediction = None
+            options.warn(f"the model's prediction for the VARX estimates is not made: {exc}; "
+                         "the fits are written without it (--set "
+                         "data_analysis.model_sessions=0 skips it)")
         if trust_child is None:
             trust = trust_call(options)
         else:
