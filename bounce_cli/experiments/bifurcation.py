@@ -426,8 +426,8 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
         value = getattr(row, f"continuation_{column}")
         if not np.isfinite(value):
             value = getattr(row, f"closed_form_{column}")
-        if not np.isfinite(value):
-            continue
+        if not np.isfinite(value) or not (x.min() - half_step <= value <= x.max() + half_step):
+            continue  # outside the sweep: a line there would stretch the axis to it
         paper_orbit = row.cycles == 1
         verb = "exists" if row.threshold == "existence" else "flips"
         text = (f"period-1 orbit {verb} (continuation; {row.equation})" if paper_orbit else

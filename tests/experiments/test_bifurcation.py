@@ -11,6 +11,7 @@ import pytest
 from typer.testing import CliRunner
 
 from bounce_cli.cli.commands import app
+from bounce_cli.experiments import bifurcation as bifurcation_experiment
 from bounce_cli.model.impact import next_impact_phase
 from bounce_cli.model.linear import flip_boundary_g, racket_acceleration_at_impact_g, stability
 from bounce_cli.model.params import ModelError, ModelParams
@@ -556,3 +557,16 @@ def test_a_model_key_the_sweep_replaces_is_said_to_have_no_effect(tmp_path):
                                  "--set", "iterate.measured_impacts=64", "--set",
                                  "flip.locate=false", "--out", str(tmp_path / "b"), "--quiet"])
     assert result.exit_code == 0 and "no effect" not in result.stderr
+
+
+def test_the_figure_spans_the_sweep_not_the_thresholds_outside_it(tmp_path):
+    """Gamma swept from 1.40: eq. 8's existence threshold, pi/3 = 1.047, lies outside. Its line
+    stretched the x-axis to it, a third of the figure empty (a review); lines outside the
+    sweep are not drawn and the axis spans the sweep."""
+    result = runner.invoke(app, ["bifurcation", *SMALL, "--out", str(tmp_path), "--quiet"])
+    assert result.exit_code == 0, result.output
+    frames = {p.name: pd.read_csv(p) for p in tmp_path.glob("*.csv")}
+    fig = bifurcation_experiment.draw(frames)["bifurcation.png"]
+    for ax in fig.axes:
+        low, high = ax.get_xlim()
+        assert 1.37 <= low and high <= 1.83, (low, high)  # the sweep and 5 % margins
