@@ -1281,3 +1281,25 @@ def test_a_low_hop_over_a_falling_racket_is_not_taken_for_a_missed_bounce():
     assert missed_bounce_warnings(frame, 9.81, "x") == []
     frame.loc[3, "hop_s"] = 2 * hop[3]  # a bounce missed in the last flight
     assert len(missed_bounce_warnings(frame, 9.81, "x")) == 1
+
+
+def test_a_pause_of_the_clock_is_no_flight(simulated, tmp_path):
+    """The virtual set-up stops its world while the racket's stream is silent: 300 ms without
+    rows, the ball where it was on both sides. Fitted across the hole as one free flight, that
+    flight's curvature pulled the measured g to 9.06 m/s^2, the marker offset measured at it
+    to 55 mm, and with events trial 1 had 'no bounce found'. A stretch without rows longer
+    than max_gap_s now ends a flight's fit as a gap of cells does."""
+    rec = pd.read_csv(simulated / "recording.csv")
+    events = pd.read_csv(simulated / "events.csv")
+    for frame in (rec, events):
+        frame.loc[(frame.trial == 1) & (frame.t_s > 5.0), "t_s"] += 0.3
+    rec.to_csv(tmp_path / "paused.csv", index=False)
+    events.to_csv(tmp_path / "paused_events.csv", index=False)
+    result, out = extract_cli(tmp_path, "--data", tmp_path / "paused.csv",
+                              "--events", tmp_path / "paused_events.csv")
+    assert result.exit_code == 0, result.output
+    setup = pd.read_csv(out / "setup.csv").set_index("quantity")["estimate"]
+    assert setup["g_m_s2"] == pytest.approx(9.81, rel=1e-3)
+    assert abs(setup["ball_offset_m"]) < 1e-3
+    impacts = pd.read_csv(out / "impacts.csv")
+    assert (impacts.trial == 1).sum() >= 10  # 12 without the pause, 1-2 beside it lost
