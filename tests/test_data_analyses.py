@@ -1033,3 +1033,34 @@ def test_model_sessions_that_stick_lose_only_the_varx_prediction(tmp_path, cli):
     assert stab.query("quantity == 'spectral_radius' and source == 'ols'").estimate.notna().all()
     assert not stab.source.astype(str).str.contains("prediction").any()
     assert len(pd.read_csv(out / "acf_data.csv")) > 0
+
+
+def test_a_radius_whose_interval_lies_above_one_is_warned_of(tmp_path, cli):
+    """Runs grown by an explosive J (v's coefficient 1.15): OLS gives 1.153 [1.142, 1.164]. A
+    ball that kept bouncing has a stable map, so the estimate is off; it went into a study's
+    group statistics without a word (a review's 1.153 [1.029, 1.292], truth 0.6). Said now."""
+    sim = simulate_impacts(PAPER, 0.04, 0.05, 6, 60, seed=5)
+    frame = impacts_frame(sim, PAPER)
+    rng = np.random.default_rng(2)
+    explosive = np.array([[1.15, 0.0], [0.0, 0.3]])
+    for _, index in frame.groupby("trial").groups.items():
+        x, states = np.zeros(2), []
+        for _ in index:
+            x = explosive @ x + rng.normal(0, [0.01, 0.005])
+            states.append(x.copy())
+        states = np.array(states)
+        frame.loc[index, "v_m_s"] = 4.51 + states[:, 0]
+        frame.loc[index, "theta_rad"] = 0.75 + states[:, 1]
+        frame.loc[index, "theta_deg"] = np.degrees(0.75 + states[:, 1])
+    path = tmp_path / "impacts.csv"
+    frame.to_csv(path, index=False)
+    result = cli("acf", "--data", path, "--out", tmp_path / "o", "--quiet",
+                 "--set", "data_analysis.model_sessions=0")
+    assert result.exit_code == 0, result.output
+    said = " ".join(result.stderr.split())
+    assert "warning: ols+jackknife: spectral radius 1.15 [1.14, 1.16] lies above 1" in said
+    # the map's own impacts (radius 0.5): no such word
+    impacts_frame(sim, PAPER).to_csv(path, index=False)
+    healthy = cli("acf", "--data", path, "--out", tmp_path / "h", "--quiet",
+                  "--set", "data_analysis.model_sessions=0")
+    assert healthy.exit_code == 0 and "lies above 1" not in healthy.stderr

@@ -463,6 +463,14 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
         for name in EIGEN_QUANTITIES:
             value, se_, low, high = eig[name]
             add(name, "1", label, value, se_, low, high, note=interval_note(fit, name))
+        value, _, low, high = eig["spectral_radius"]
+        if low > 1.0:  # (NaN: no interval, no claim)
+            options.warn(
+                f"{label}: spectral radius {value:.3g} [{low:.3g}, {high:.3g}] lies above 1 "
+                "with its whole interval: a ball that kept bouncing has a stable map, so the "
+                "estimate is off (runs too short or too few, a nonlinearity a VAR(1) does not "
+                "hold, or an extraction problem); it is written, and a study's group "
+                "statistics include it")
         for (i, j), name in zip(((0, 0), (1, 1), (0, 1)), ("noise_cov_vv", "noise_cov_thetatheta",
                                                            "noise_cov_vtheta")):
             add(name, ENTRY_UNITS[name], label, float(fit.noise_cov[i, j]),
