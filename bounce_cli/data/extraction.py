@@ -797,12 +797,16 @@ def _segment_fits(t, ball, long_gap, racket, lo: int, hi: int, t_after: float,
     gap = xb - s.ball_offset_m - racket[seg]
     with np.errstate(invalid="ignore"):
         resting = gap < s.contact_tolerance_m
-    in_gap = long_gap[seg].copy()
     # a stretch without rows longer than max_gap_s is a gap as a run of empty cells is (the
     # virtual set-up stops its world while the racket's stream is silent: a flight fitted
     # across that hole measured g 8 % low): the sample after it ends the fits before it
+    in_gap = long_gap[seg].copy()
     in_gap[1:] |= np.diff(t[seg]) > s.max_gap_s
-    has_gap = bool(np.any(in_gap))
+    has_gap = bool(np.any(in_gap))  # the ball's data has a hole: the next hop is unknown
+    # where the racket is not measured (a gap too long to bridge) no contact is seen, so the
+    # ball's way down and up again was fitted as one flight (g measured 30 % low): it ends
+    # the fits too
+    in_gap |= ~np.isfinite(racket[seg])
     rest_s = 0.0
     if resting.any():
         r = seg[resting]

@@ -1303,3 +1303,26 @@ def test_a_pause_of_the_clock_is_no_flight(simulated, tmp_path):
     assert abs(setup["ball_offset_m"]) < 1e-3
     impacts = pd.read_csv(out / "impacts.csv")
     assert (impacts.trial == 1).sum() >= 10  # 12 without the pause, 1-2 beside it lost
+
+
+def test_a_long_racket_gap_over_a_contact_is_no_flight(simulated, tmp_path):
+    """150 ms of the racket's column empty around a contact in every trial: no contact is seen
+    there, and the ball's way down and up again was fitted as one free flight, whose curvature
+    measured g 6.88 m/s^2 (truth 9.81), the marker offset 64 mm, and then the whole file had
+    'no bounce found (sticking ...)' (a data review). Where the racket is not measured, a
+    flight's fit ends; the impact there is lost, not the file."""
+    rec = pd.read_csv(simulated / "recording.csv")
+    truth = pd.read_csv(simulated / "truth.csv")
+    lost = 0
+    for trial, impacts in truth.groupby("trial"):
+        at = float(impacts.t_s.iloc[len(impacts) // 2])
+        rec.loc[(rec.trial == trial) & rec.t_s.between(at - 0.075, at + 0.075),
+                "racket_x_m"] = np.nan
+        lost += 1
+    rec.to_csv(tmp_path / "racket_gaps.csv", index=False)
+    result, out = extract_cli(tmp_path, "--data", tmp_path / "racket_gaps.csv")
+    assert result.exit_code == 0, result.output
+    setup = pd.read_csv(out / "setup.csv").set_index("quantity")["estimate"]
+    assert setup["g_m_s2"] == pytest.approx(9.81, rel=1e-3)
+    assert abs(setup["ball_offset_m"]) < 1e-3
+    assert len(pd.read_csv(out / "impacts.csv")) >= len(truth) - lost - 4  # 4: edges, cycles
