@@ -307,6 +307,42 @@ def separation_noise_m(racket: np.ndarray, ball: np.ndarray) -> float:
     return robust_sd(d2) / math.sqrt(6.0)
 
 
+#: the half-width (s) of the window in which a bounce's lowest point is the least height of
+#: the ball above the racket: shorter than any hop, longer than a contact
+LOWEST_POINT_HALF_WINDOW_S = 0.05
+
+
+def lowest_points_m(t: np.ndarray, racket: np.ndarray, ball: np.ndarray) -> np.ndarray:
+    """The ball's height above the racket's marker (m) at its lowest points: the samples that
+    are the least within +-``LOWEST_POINT_HALF_WINDOW_S`` (the contacts, and a resting ball)."""
+    d = np.asarray(ball, float) - np.asarray(racket, float)
+    dt = float(np.median(np.diff(t))) if len(t) > 1 else math.nan
+    if not dt > 0.0:
+        return np.empty(0)
+    from scipy.ndimage import minimum_filter1d
+
+    half = max(int(round(LOWEST_POINT_HALF_WINDOW_S / dt)), 1)
+    if d.size < 2 * half + 1:
+        return np.empty(0)
+    least = minimum_filter1d(np.where(np.isfinite(d), d, np.inf), 2 * half + 1,
+                             mode="constant", cval=np.inf)
+    return d[np.isfinite(d) & (d == least)]
+
+
+def seeded_offset(trials: list[Trial], settings) -> float:
+    """The marker offset a first pass starts from: the median of the ball's lowest points
+    above the racket's marker (``lowest_points_m``, all trials) where it lies below
+    -``contact_tolerance_m`` (the ball's marker under the racket's at every bounce: a racket
+    marker 30 mm above the face stopped the extraction), else ``settings``' own. The offset
+    is then measured at the impacts as always."""
+    lows = [lowest_points_m(tr.t, tr.racket, tr.ball) for tr in trials if tr.ball is not None]
+    lows = np.concatenate(lows) if lows else np.empty(0)
+    if lows.size < 3:
+        return settings.ball_offset_m
+    below = float(np.median(lows))
+    return below if below < -settings.contact_tolerance_m else settings.ball_offset_m
+
+
 def noise_hint(trial: Trial, tolerance_m: float) -> str:
     """Where no bounce was found because the markers' noise reaches the distance within which
     the ball counts as resting (``contact_tolerance_m``): the measured noise and the setting
@@ -456,8 +492,13 @@ def extract_all(trials: list[Trial], events, settings: ExtractionSettings, sourc
     marker offset measured at the impacts: a first pass at ``settings`` measures both, a
     second extracts at them. A measured g outside any set-up's (PLAUSIBLE_G_M_S2) is a unit
     slip: an error when it would be used, else a warning; a set g that the flights
-    contradict by more than 3 SE is a warning."""
+    contradict by more than 3 SE is a warning. Where the ball's marker goes below the
+    racket's at its lowest points (a racket marker above the face), the first pass starts
+    from that depth (``seeded_offset``): at offset 0 the ball reads as resting at every
+    bounce."""
     caches: list[dict] = [{} for _ in trials]  # one pass finds each trial's racket cycles
+    if measure_offset:
+        settings = replace(settings, ball_offset_m=seeded_offset(trials, settings))
     first = _extract_trials(trials, events, settings, source, caches)
     gravity = pooled_gravity([f for _, _, r in first for f in r.flights])
     warnings: list[str] = [*missing_rows_warnings(trials, source, settings.max_gap_s),

@@ -1326,3 +1326,27 @@ def test_a_long_racket_gap_over_a_contact_is_no_flight(simulated, tmp_path):
     assert setup["g_m_s2"] == pytest.approx(9.81, rel=1e-3)
     assert abs(setup["ball_offset_m"]) < 1e-3
     assert len(pd.read_csv(out / "impacts.csv")) >= len(truth) - lost - 4  # 4: edges, cycles
+
+
+@pytest.mark.parametrize("racket_above_m", [0.03, 0.05, 0.08])
+def test_a_racket_marker_above_the_face_is_measured_not_taken_for_resting(
+        simulated, tmp_path, racket_above_m):
+    """The racket's marker 30 to 80 mm above its face: at every bounce the ball's marker goes
+    that far below it, read as resting at offset 0, and a lab's file had 'no bounce found
+    (sticking ...)' with advice on units only (a data review). The first pass now starts
+    from the depth of the ball's lowest points; the offset is then measured at the impacts
+    as always, and the impacts are the plain file's."""
+    rec = pd.read_csv(simulated / "recording.csv")
+    plain, plain_out = extract_cli(tmp_path / "plain", "--data", simulated / "recording.csv")
+    assert plain.exit_code == 0, plain.output
+    rec["racket_x_m"] += racket_above_m
+    rec.to_csv(tmp_path / "marker.csv", index=False)
+    result, out = extract_cli(tmp_path, "--data", tmp_path / "marker.csv")
+    assert result.exit_code == 0, result.output
+    setup = pd.read_csv(out / "setup.csv").set_index("quantity")["estimate"]
+    plain_setup = pd.read_csv(plain_out / "setup.csv").set_index("quantity")["estimate"]
+    assert setup["ball_offset_m"] == pytest.approx(
+        plain_setup["ball_offset_m"] - racket_above_m, abs=1e-4)
+    ours, theirs = (pd.read_csv(o / "impacts.csv") for o in (out, plain_out))
+    assert len(ours) == len(theirs)
+    assert np.allclose(ours.t_s, theirs.t_s, atol=1e-9) and np.allclose(ours.v_m_s, theirs.v_m_s)
