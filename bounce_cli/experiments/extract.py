@@ -335,8 +335,9 @@ def seeded_offset(trials: list[Trial], settings) -> float:
     -``contact_tolerance_m`` (the ball's marker under the racket's at every bounce: a racket
     marker 30 mm above the face stopped the extraction), else ``settings``' own. The offset
     is then measured at the impacts as always."""
-    lows = [lowest_points_m(tr.t, tr.racket, tr.ball) for tr in trials if tr.ball is not None]
-    lows = np.concatenate(lows) if lows else np.empty(0)
+    per_trial = [lowest_points_m(tr.t, tr.racket, tr.ball) for tr in trials
+                 if tr.ball is not None]
+    lows = np.concatenate(per_trial) if per_trial else np.empty(0)
     if lows.size < 3:
         return settings.ball_offset_m
     below = float(np.median(lows))
