@@ -37,6 +37,7 @@ from ..data.extraction import (
     match_impacts,
     pooled_gravity,
     robust_sd,
+    sample_noise_m,
 )
 from ..data.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS
 from ..data.setup_table import SetupQuantity, setup_frame
@@ -295,16 +296,9 @@ def _extract_trials(trials: list[Trial], events, settings: ExtractionSettings, s
 
 
 def separation_noise_m(racket: np.ndarray, ball: np.ndarray) -> float:
-    """The measurement noise of the ball's height above the racket (m): a robust SD of its
-    second differences, sqrt(6) times the noise's SD where the samples' noise is white (the
-    motion itself changes little from one sample to the next at a lab's rates: a racket's
-    0.3 m at 0.92 s adds 0.35 mm at 200 Hz, 0.1 mm to the estimate); NaN with too few
-    samples."""
-    d = np.asarray(ball, float) - np.asarray(racket, float)
-    d2 = np.diff(d[np.isfinite(d)], 2)
-    if d2.size < 10:
-        return math.nan
-    return robust_sd(d2) / math.sqrt(6.0)
+    """The measurement noise of the ball's height above the racket (m): ``sample_noise_m`` of
+    ball minus racket; NaN with too few samples."""
+    return sample_noise_m(np.asarray(ball, float) - np.asarray(racket, float))
 
 
 #: the half-width (s) of the window in which a bounce's lowest point is the least height of

@@ -30,7 +30,8 @@ import numpy as np
 import pandas as pd
 from pydantic import Field, field_validator, model_validator
 
-from ..data.extraction import ExtractionSettings, racket_cycles, widened_windows
+from ..data.extraction import (ExtractionSettings, racket_cycles, sample_noise_m,
+                               widened_windows)
 from ..data.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS, ball_apex
 from ..data.setup_table import SETUP_FILE, SetupQuantity, setup_frame
 from ..data.simulated_lab import LAB_MIN_HOP_S
@@ -43,7 +44,7 @@ from ..runtime.config import (NAME_PATTERN, ControlBlock, ExperimentConfig, Mode
 from ..runtime.artifacts import RECORDED_LIVE
 from ..runtime.interrupts import Interrupted
 from ..virtual.display import Display, MouseSource, View, latency_summary
-from ..virtual.physics import Impact
+from ..virtual.physics import Impact, racket_velocity_noise_m_s
 from ..virtual.session import Launch, Paced, Schedule, TrialRecord, run_trial
 from ..virtual.sources import LslSettings, open_source
 from ..virtual.subject import DEFAULT_GAIN, SubjectControl
@@ -453,6 +454,10 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
                      f"{config.trial_s:g} s (the ball's first flight is longer, or it was "
                      "launched after the trial's end): lengthen trial_s or launch earlier")
     trials = kept
+    warning = racket_noise_warning(
+        [frames[trial_name(config, n, "recordings")] for n in kept], params.alpha)
+    if warning:
+        options.warn(warning)
     impacts_table = pd.concat(impacts, ignore_index=True)
     # a copy first (one step under the GIL): the page's server thread may still append a
     # row while the table is built from the list (CI once: 467 values for 468 rows)
@@ -495,6 +500,39 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
         summary.append(latency_summary(latency.to_dict("records")) + " (latency.csv)")
     return ExperimentResult(frames=frames, figures=figures, summary=summary,
                             exit_code=128 + interrupted_by if interrupted_by else 0)
+
+
+#: the noise (m/s) in the ball's velocity after impact that the racket's sampled noise may add
+#: unannounced: the paper's subjects' map noise q_v is 0.03 m/s (section 7)
+RACKET_NOISE_WARN_M_S = 0.02
+
+
+def racket_noise_warning(recordings: list[pd.DataFrame], alpha: float) -> str:
+    """A warning where the racket's samples are noisy enough that the ball's velocity after
+    each impact shakes by more than ``RACKET_NOISE_WARN_M_S``: eq. 3 gives the ball (1 +
+    alpha) times the racket's velocity, taken from the cubic through the 4 latest samples,
+    which amplifies their noise (``racket_velocity_noise_m_s``). The noise is measured from
+    the racket's fourth differences (``sample_noise_m``, median over the trials: second
+    differences hold a 0.3 m racket's own motion at 200 Hz); empty where it is small."""
+    noise, interval = [], []
+    for frame in recordings:
+        t, x = frame["t_s"].to_numpy(float), frame["racket_x_m"].to_numpy(float)
+        if t.size > 12:
+            noise.append(sample_noise_m(x, order=4))  # (a sine's own motion: 4e-4 mm)
+            interval.append(float(np.median(np.diff(t))))
+    if not noise or not np.isfinite(np.median(noise)):
+        return ""
+    sigma, h = float(np.median(noise)), float(np.median(interval))
+    ball = (1.0 + alpha) * racket_velocity_noise_m_s(sigma, h)
+    if not ball > RACKET_NOISE_WARN_M_S:
+        return ""
+    return (f"the racket's samples carry about {1000 * sigma:.2g} mm of noise (from their "
+            f"fourth differences, at {1 / h:.0f} Hz); the ball leaves each impact with the "
+            "velocity of a cubic through the 4 latest samples, which makes that about "
+            f"{ball:.2g} m/s of noise in the ball's velocity after each impact (the paper's "
+            "subjects' map noise is 0.03 m/s) and dominates impacts.csv's racket_acc_g: "
+            "filter the racket's positions at their source (the motion-capture software's "
+            "smoothing) before they stream")
 
 
 def _screen(display: Display, config: VirtualConfig, trial: int):

@@ -48,6 +48,18 @@ AT_RACKET_M = 1e-12
 #: samples in the racket's interpolant
 STENCIL = 4
 
+#: the RMS over an interval of the cubic's derivative weights on its 4 samples (nodes -3..0 in
+#: sample steps, the impact anywhere in the last interval): white position noise sigma in the
+#: samples every h gives the racket's velocity at an impact a noise of this times sigma / h
+CUBIC_VELOCITY_NOISE_GAIN = 1.945
+
+
+def racket_velocity_noise_m_s(position_noise_m: float, sample_interval_s: float) -> float:
+    """The SD of the racket's velocity at an impact (m/s) that white noise of SD
+    ``position_noise_m`` in its samples every ``sample_interval_s`` gives through the cubic
+    (``CUBIC_VELOCITY_NOISE_GAIN``); eq. 3 passes (1 + alpha) times it to the ball."""
+    return CUBIC_VELOCITY_NOISE_GAIN * position_noise_m / sample_interval_s
+
 
 @dataclass(frozen=True)
 class Impact:

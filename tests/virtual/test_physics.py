@@ -115,3 +115,21 @@ def test_samples_out_of_order_are_refused():
     ball.push(0.0, 0.0)
     with pytest.raises(ModelError, match="increasing time"):
         ball.push(0.0, 0.1)
+
+
+def test_the_cubic_s_velocity_noise_gain_is_measured_on_white_noise():
+    """CUBIC_VELOCITY_NOISE_GAIN (1.945, the RMS of the cubic's derivative weights over the
+    last interval) against the racket's velocity through the physics' own interpolant on
+    samples of pure white noise, at uniform times in the interval: within 2 %."""
+    from bounce_cli.virtual.physics import (CUBIC_VELOCITY_NOISE_GAIN, RacketInterval,
+                                            racket_velocity_noise_m_s)
+
+    rng = np.random.default_rng(4)
+    h, sigma = 0.005, 2e-4
+    times = np.arange(4) * h
+    velocities = [RacketInterval(times, rng.normal(0.0, sigma, 4)).velocity(
+        times[2] + rng.uniform(0.0, h)) for _ in range(40_000)]
+    measured = float(np.sqrt(np.mean(np.square(velocities))))
+    assert measured == pytest.approx(racket_velocity_noise_m_s(sigma, h), rel=0.02)
+    assert racket_velocity_noise_m_s(sigma, h) == pytest.approx(
+        CUBIC_VELOCITY_NOISE_GAIN * sigma / h)
