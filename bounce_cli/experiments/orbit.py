@@ -96,7 +96,7 @@ def passive_orbit(theta0: float, v0: float, params: ModelParams, n_impacts: int,
     -------
     OrbitTable
         Columns ``k``, ``t_s``, ``theta_rad``, ``theta_deg`` (wrapped), ``v_m_s``,
-        ``flight_s`` (the hop leaving each impact), ``event``.
+        ``flight_s`` (the hop ending at each impact; NaN at the start), ``event``.
     """
     from ..model.maps import iterate_orbit
 
