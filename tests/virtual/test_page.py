@@ -163,3 +163,80 @@ def test_a_mouse_that_never_moves_is_a_racket_at_rest_and_a_closed_page_a_left_o
     assert recordings == ["s1_virtual_t1.csv"]
     racket = pd.read_csv(out / "recordings" / recordings[0])["racket_x_m"].to_numpy()
     assert len(racket) > 60 and np.all(np.abs(racket) < 0.02)  # at rest, within a pixel
+
+
+#: what the page shows when it has lost its server (page.html's overlay)
+LOST = "connection to bounce lost"
+
+
+def shown_text(page) -> str:
+    """The page's text as it is shown (innerText leaves out what is hidden)."""
+    return page.evaluate("document.body.innerText") or ""
+
+
+def within(seconds: float, condition, what: str) -> float:
+    """Wait until ``condition()`` holds, at most ``seconds``; how long it took (s)."""
+    start = time.monotonic()
+    while not condition():
+        if time.monotonic() - start > seconds:
+            raise AssertionError(f"{what}: not within {seconds} s")
+        time.sleep(0.05)
+    return time.monotonic() - start
+
+
+def test_the_page_says_its_server_is_gone_and_clears_when_it_is_back(browser, tmp_path):
+    """A page whose server stalls or stops says so within about a second (it showed the last
+    frame, ball and all, as if the session were live) and draws no ball; when the server
+    answers again, or is back on the same port, the notice goes and the page is live again."""
+    from bounce_cli.virtual.display import Display, View
+
+    display = Display(View(low_m=-0.2, high_m=1.5), port=0)
+    display.start()
+    again = None
+    try:
+        display.show_status(phase="trial", trial=1, trials=2, score=3, duration_s=60.0)
+        display.publish(1, 0, 0.0, 0.0, 0.8, time.perf_counter())
+        page = browser(display.url)
+        within(10.0, lambda: page.evaluate("frame !== null && offset !== null"), "a frame")
+        live = page.screenshot(tmp_path / "live.png")
+        assert colour_share(live, BALL_RGB) > 1e-4 and LOST not in shown_text(page)
+        # a stall: the server's event loop blocked (the connection open, nothing comes)
+        display._loop.call_soon_threadsafe(time.sleep, 2.5)
+        took = within(2.0, lambda: LOST in shown_text(page), "the stall shown")
+        assert took > 0.5, took  # not at once: a second of silence is the sign
+        within(3.0, lambda: LOST not in shown_text(page), "the notice gone after the stall")
+        # the server stops (the session over or its process killed: the socket closes)
+        display.stop()
+        within(2.0, lambda: LOST in shown_text(page), "the lost connection shown")
+        text = shown_text(page)
+        assert "reconnecting" in text and "bounces 3" not in text, text
+        lost = page.screenshot(tmp_path / "lost.png")
+        # no ball, no racket (a drawn racket covers 1e-3 of the screen; the notice's light
+        # text has a few pixels of its colour)
+        assert colour_share(lost, BALL_RGB) < 1e-5 and colour_share(lost, RACKET_RGB) < 5e-4
+        # a server back on the same port: the page reconnects by itself, the notice goes
+        again = Display(View(low_m=-0.2, high_m=1.5), port=display.port)
+        again.start()
+        again.show_status(phase="waiting", trials=1, message="waiting for the set-up")
+        within(3.0, lambda: LOST not in shown_text(page)
+               and "waiting for the set-up" in shown_text(page), "the page live again")
+    finally:
+        display.stop()
+        if again is not None:
+            again.stop()
+
+
+def test_a_killed_session_does_not_leave_a_live_looking_page(browser, tmp_path):
+    """``bounce virtual`` killed in a countdown: the page stops counting down and says that
+    the connection is lost (it froze on 'get ready')."""
+    process, url, lines = start_session(tmp_path / "k", "trials=1", "trial_s=30",
+                                        "display.countdown_s=30")
+    try:
+        page = browser(url)
+        within(10.0, lambda: "get ready" in shown_text(page), "the countdown")
+        process.kill()
+        within(2.0, lambda: LOST in shown_text(page), "the lost connection shown")
+        assert "get ready" not in shown_text(page)
+    finally:
+        process.kill()
+        process.wait(10.0)
