@@ -1064,3 +1064,28 @@ def test_a_radius_whose_interval_lies_above_one_is_warned_of(tmp_path, cli):
     healthy = cli("acf", "--data", path, "--out", tmp_path / "h", "--quiet",
                   "--set", "data_analysis.model_sessions=0")
     assert healthy.exit_code == 0 and "lies above 1" not in healthy.stderr
+
+
+def test_trials_at_different_racket_periods_are_said_to_share_one_model(tmp_path, cli):
+    """Trials at racket periods 0.85 and 0.92 s (a design of target heights, simulate-study's
+    period_factors) analysed together: acf --data runs the model at the mean racket, which is
+    neither trial's, without a word (a data review). Said now, naming the spread and what to
+    do; trials at one period say nothing."""
+    fast = ModelParams(alpha=0.5, g=9.81, racket_amplitude=0.25, racket_period=0.85)
+    frames = []
+    for offset, (params, seed) in enumerate(((PAPER, 5), (fast, 6))):
+        frame = impacts_frame(simulate_impacts(params, 0.04, 0.05, 3, 150, seed=seed), params)
+        frame["trial"] = frame["trial"].astype(int) + 3 * offset
+        frames.append(frame)
+    path = tmp_path / "impacts.csv"
+    pd.concat(frames, ignore_index=True).to_csv(path, index=False)
+    result = cli("acf", "--data", path, "--out", tmp_path / "o", "--quiet",
+                 "--set", "data_analysis.model_sessions=0")
+    assert result.exit_code == 0, result.output
+    said = " ".join(result.stderr.split())
+    assert "the trials' racket periods range from 0.85 to 0.92 s" in said, said
+    assert "one model at their mean" in said
+    frames[0].to_csv(path, index=False)
+    one = cli("acf", "--data", path, "--out", tmp_path / "one", "--quiet",
+              "--set", "data_analysis.model_sessions=0")
+    assert one.exit_code == 0 and "racket periods range" not in one.stderr

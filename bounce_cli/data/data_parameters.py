@@ -303,6 +303,28 @@ def model_for_data(impacts, config, options, source) -> DataModel:
 #: parameters
 RACKET_COLUMNS = ("racket_amplitude_m", "racket_period_s")
 
+#: trial-mean racket periods spanning more than this fraction of their mean are different
+#: racket designs (target heights: 0.57-0.81 s in Fig. 7), not one racket's variation
+MIXED_RACKET_PERIODS = 0.05
+
+
+def mixed_racket_warning(impacts) -> str:
+    """A warning where the trials' mean racket periods span more than ``MIXED_RACKET_PERIODS``
+    of their mean: the model at the data's parameters (``model_at_data``) runs at one racket,
+    their mean, which is none of the trials' (eqs. 8-10 depend on the period through
+    a_r w^2); empty otherwise or without a period column."""
+    frame = impacts.frame
+    if "racket_period_s" not in frame.columns:
+        return ""
+    periods = frame.groupby("trial", sort=False)["racket_period_s"].mean().dropna()
+    if periods.size < 2 or not (np.ptp(periods) > MIXED_RACKET_PERIODS * periods.mean()):
+        return ""
+    return (f"data: {impacts.path}: the trials' racket periods range from "
+            f"{periods.min():.3g} to {periods.max():.3g} s ({np.ptp(periods) / periods.mean():.0%}"
+            f" of their mean): one model at their mean, {periods.mean():.3g} s, stands for them "
+            "all; analyse each racket design apart (a condition of its own in a study's "
+            "manifest)")
+
 
 def model_at_data(impacts, found: DataModel,
                   need: Literal["stable", "fixed point"] | None = "stable",

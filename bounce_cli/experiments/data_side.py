@@ -39,7 +39,8 @@ from ..analysis.data_stats import (
 from ..analysis.racket_inputs import INPUT_COEFFICIENTS, racket_input_jacobian
 from ..analysis.var_fit import (EIGEN_QUANTITIES, J_ENTRIES, MAX_PLAUSIBLE_RADIUS, Var1Fit,
                                  fit_var1)
-from ..data.data_parameters import DataModel, model_at_data, model_for_data
+from ..data.data_parameters import (DataModel, mixed_racket_warning, model_at_data,
+                                    model_for_data)
 from ..data.impacts import Impacts, ImpactsSource, read_impacts
 from .base import ExperimentResult, RunOptions
 from .plotting import (
@@ -319,6 +320,17 @@ def warn_if_still_relaxing(impacts: Impacts, first_settled: int, settle_key: str
                  f"the steady state), so the steady state holds the relaxation; {advice}")
 
 
+def one_racket_model(impacts, used: DataModel, options: RunOptions) -> ModelParams:
+    """``model_at_data`` (stable) for an analysis of the data's fluctuations (acf, impulse),
+    with a warning where its trials are at different racket designs
+    (``mixed_racket_warning``): one model at their mean stands for them all."""
+    params = model_at_data(impacts, used, record=options.record)
+    mixed = mixed_racket_warning(impacts)
+    if mixed:
+        options.warn(mixed)
+    return params
+
+
 def short_trials_warning(source: ImpactsSource | None, options: RunOptions):
     """``read_impacts``'s ``drop_short`` for a table handed over in memory (a study's unit,
     the Python API: a short trial is left out with a warning), None for a file given with
@@ -335,7 +347,7 @@ def acf_data_run(config, options, source: ImpactsSource | None = None
                            min_bounces_key="max_lag", drop_short=short_trials_warning(
                                source, options))
     used = model_for_data(impacts, config, options, source)
-    params = model_at_data(impacts, used, record=options.record)
+    params = one_racket_model(impacts, used, options)
     noise = measurement_noise(d, source, config.data)
     segments = stationary_segments(impacts, d.settle_after_perturbation, config.max_lag + 2)
     warn_if_still_relaxing(impacts, d.settle_after_perturbation + 1,
@@ -1177,7 +1189,7 @@ def impulse_data_run(config, options, source: ImpactsSource | None = None
         raise ConfigError(f"data: {impacts.path}: column perturbed: no perturbed impact, nothing "
                           "to align (bounce impulse --data needs perturbations)")
     used = model_for_data(impacts, config, options, source)
-    params = model_at_data(impacts, used, record=options.record)
+    params = one_racket_model(impacts, used, options)
     warn_if_still_relaxing(impacts, d.settle_after_perturbation,
                            "data_analysis.settle_after_perturbation", options)
     n = config.iterations
