@@ -33,6 +33,7 @@ from pydantic import Field, field_validator, model_validator
 from ..data.extraction import (ExtractionSettings, racket_cycles, sample_noise_m,
                                widened_windows)
 from ..data.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS, ball_apex
+from ..data.plausibility import HUMAN_RACKET_AMPLITUDE_M, racket_warnings
 from ..data.setup_table import SETUP_FILE, SetupQuantity, setup_frame
 from ..data.simulated_lab import LAB_MIN_HOP_S
 from ..data.study_manifest import names_a_folder
@@ -367,6 +368,7 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
     interrupted_by = 0
     short: list[tuple[int, float]] = []  # (trial, s) the source ended before trial_s
     without_impact: list[int] = []
+    implausible: str | None = None  # the racket no person's: said after its first trial
     live = display is not None or getattr(source, "live", False)  # in real time: say so
     options.progress.start(config.trials, "virtual")
     try:
@@ -405,6 +407,10 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
             frames[trial_name(config, n, "recordings")] = pd.DataFrame({
                 "trial": n, "t_s": record.t, "racket_x_m": record.racket,
                 "ball_x_m": record.ball})
+            implausible = (None if implausible is not None else
+                           racket_range_warning(record.racket, source.description, n))
+            if implausible:  # said once, as soon as a trial shows it
+                options.warn(implausible)
             table = impacts_frame(record, n, params.g, float(record.t[-1]))
             frames[trial_name(config, n, "events")] = pd.DataFrame(
                 {"trial": n, "t_s": [i.t_s for i in record.impacts],
@@ -500,6 +506,24 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
         summary.append(latency_summary(latency.to_dict("records")) + " (latency.csv)")
     return ExperimentResult(frames=frames, figures=figures, summary=summary,
                             exit_code=128 + interrupted_by if interrupted_by else 0)
+
+
+def racket_range_warning(racket: np.ndarray, description: str, trial: int) -> str:
+    """A warning where a trial's racket is no person's: it did not move (half its range below
+    ``HUMAN_RACKET_AMPLITUDE_M``'s least: a stream's wrong channel, a racket at rest), or half
+    its range is beyond what a person can move it by (``racket_warnings``: positions in mm
+    read as m); empty otherwise."""
+    x = np.asarray(racket, dtype=float)
+    x = x[np.isfinite(x)]
+    if x.size < 2:
+        return ""
+    half = 0.5 * float(np.ptp(x))
+    if half < HUMAN_RACKET_AMPLITUDE_M[0]:
+        return (f"racket ({description}): the racket moved by only {2000 * half:.2g} mm in "
+                f"trial {trial}: the wrong channel (lsl.channel), or a racket standing still?")
+    found = racket_warnings(half, math.nan, f"racket ({description}), trial {trial}: half "
+                            "its range", "")
+    return found[0] if found else ""
 
 
 #: the noise (m/s) in the ball's velocity after impact that the racket's sampled noise may add

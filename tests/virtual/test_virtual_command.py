@@ -444,3 +444,25 @@ def test_a_noisy_racket_stream_is_said_to_shake_the_ball(tmp_path, cli):
     assert "the racket's samples carry about 0.2 mm of noise" in said["noisy"], said["noisy"]
     assert "of noise in the ball's velocity after each impact" in said["noisy"]
     assert "filter" in said["noisy"]
+
+
+@pytest.mark.parametrize("scale, needle", [
+    (0.0, "the racket moved by only 0 mm in trial 1"),  # a constant channel
+    (1000.0, "millimetres (0.3 m) typed for metres?"),  # positions in mm read as m
+])
+def test_a_racket_that_cannot_be_a_person_s_is_said_after_its_trial(tmp_path, cli, scale,
+                                                                   needle):
+    """A stream's wrong channel (a constant) or positions in mm read as m: the session ran
+    on without a word (a review). After each trial the racket's range is checked against what
+    a person can do, once per session."""
+    sine = bounce_cli.run("virtual", set={**HEADLESS, "trials": 1, "trial_s": 8.0})
+    recording = sine.frames["recordings/s1_virtual_t1.csv"]
+    racket = recording["racket_x_m"]
+    recording = recording.assign(racket_x_m=racket.mean() + scale * (racket - racket.mean()))
+    recording.to_csv(tmp_path / "racket.csv", index=False)
+    result = cli("virtual", "--headless", "--racket", f"replay:{tmp_path / 'racket.csv'}",
+                 "--set", "trials=2", "--set", "trial_s=4", "--out", tmp_path / "o",
+                 "--quiet")
+    said = " ".join(result.stderr.split())
+    assert needle in said, said
+    assert said.count("what a person can do") + said.count("moved by only") == 1
