@@ -24,6 +24,7 @@ import signal
 import time
 from dataclasses import fields, replace
 from pathlib import Path
+from collections.abc import Iterable
 from typing import Literal
 
 import numpy as np
@@ -423,8 +424,8 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
             finished = n
             options.progress.advance(1)
             if live:
-                bounces = sum(not impact.stuck for impact in record.impacts)
-                options.inform(f"trial {n} of {config.trials} done: {bounces} bounces"
+                bounced = bounces(record.impacts)
+                options.inform(f"trial {n} of {config.trials} done: {bounced} bounces"
                                + (f", {len(record.gaps)} stream gap(s)" if record.gaps else ""))
             if display is not None:
                 display.show_status(best=max(display.status.best, display.status.score))
@@ -559,9 +560,18 @@ def racket_noise_warning(recordings: list[pd.DataFrame], alpha: float) -> str:
             "smoothing) before they stream")
 
 
+def bounces(impacts: Iterable[Impact]) -> int:
+    """The bounces among ``impacts`` as the subject's score counts them and the analyses see
+    them: impacts that left the ball off the racket, after a flight no shorter than the
+    extraction's ``sticking_hop_s`` (a chatter's micro-hops, 10-50 ms, are one contact to
+    ``bounce extract``; they counted one point each)."""
+    shortest = ExtractionSettings().sticking_hop_s
+    return sum(not i.stuck and not i.hop_s < shortest for i in impacts)
+
+
 def _screen(display: Display, config: VirtualConfig, trial: int):
     """Trial ``trial`` on the page: its countdown, then every racket sample's frame (the
-    score: the trial's bounces, impacts that left the ball off the racket)."""
+    score: the trial's ``bounces``)."""
     if config.display.countdown_s > 0.0:
         display.show_status(phase="countdown", trial=trial, score=0,
                             remaining_s=config.display.countdown_s)
@@ -571,7 +581,7 @@ def _screen(display: Display, config: VirtualConfig, trial: int):
 
     def on_sample(t: float, racket: float, ball: float, new: list[Impact]) -> None:
         if new:
-            display.status.score += sum(not impact.stuck for impact in new)
+            display.status.score += bounces(new)
         display.publish(trial, next(samples), t, racket, ball, time.perf_counter(),
                         impact=bool(new))
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import re
 import shlex
 import signal
@@ -466,3 +467,18 @@ def test_a_racket_that_cannot_be_a_person_s_is_said_after_its_trial(tmp_path, cl
     said = " ".join(result.stderr.split())
     assert needle in said, said
     assert said.count("what a person can do") + said.count("moved by only") == 1
+
+
+def test_the_score_counts_bounces_not_a_chatter_s_micro_hops():
+    """A chatter's hops of 10-50 ms counted one point each on the page and in 'trial n done:
+    N bounces', where bounce extract sees one contact (a review). Counted: impacts that left
+    the ball off the racket after a flight of at least sticking_hop_s (the first one too)."""
+    from bounce_cli.experiments.virtual import bounces
+    from bounce_cli.virtual.physics import Impact
+
+    def impact(hop_s: float, stuck: bool = False) -> Impact:
+        return Impact(0, 0.0, -4.0, 4.0, 0.0, 1.0, -9.0, 0.5, False, hop_s, stuck)
+
+    chatter = [impact(math.nan), impact(0.9), impact(0.03), impact(0.012), impact(0.011, True)]
+    assert bounces(chatter) == 2
+    assert bounces([impact(0.05), impact(0.049)]) == 1
