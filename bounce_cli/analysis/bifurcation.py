@@ -56,6 +56,16 @@ SWEEPABLE: dict[str, tuple[str, str]] = {
 }
 
 
+def parameter_column(parameter: str) -> str:
+    """The table column of a swept parameter, with its unit (``racket_amplitude_m``)."""
+    return SWEEPABLE[parameter][0]
+
+
+def column_parameter(column: str) -> str | None:
+    """The swept parameter a table column holds (``parameter_column``'s inverse), or None."""
+    return next((name for name, (col, _) in SWEEPABLE.items() if col == column), None)
+
+
 @dataclass(frozen=True)
 class ParameterArrays:
     """Model parameters per state: the attributes of ``ModelParams`` as arrays of the states'

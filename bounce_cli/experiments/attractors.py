@@ -30,7 +30,8 @@ from ..analysis.attractors import (
     find_attractors,
 )
 from ..analysis.basin_measures import basin_entropy, uncertainty_exponent
-from ..analysis.bifurcation import SWEEPABLE, parameter_point, period1_thresholds
+from ..analysis.bifurcation import (SWEEPABLE, column_parameter, parameter_column,
+                                    parameter_point, period1_thresholds)
 from ..model.params import MIN_HOP_S, phase_difference
 from ..runtime.config import ExperimentConfig, ModelBlock, StrictModel
 from .base import Experiment, ExperimentResult, RunOptions
@@ -210,6 +211,7 @@ def continue_fractions(config: AttractorsConfig, options: RunOptions) -> pd.Data
     independent tasks (``continuation_point``) on ``options.jobs`` workers; the branches are
     matched here, in the values' order, so the table does not depend on the workers."""
     c = config.continuation
+    column = parameter_column(c.parameter)  # with its unit: racket_amplitude_m
     values = np.linspace(c.start, c.stop, c.num)
     rows: list[dict] = []
     previous: list[tuple[int, Attractor]] = []
@@ -227,14 +229,14 @@ def continue_fractions(config: AttractorsConfig, options: RunOptions) -> pd.Data
                 current.append((match, a))
             branch_of = {a.index: b for b, a in current}
             for f in fractions:
-                rows.append({c.parameter: float(value), "label": f.label,
+                rows.append({column: float(value), "label": f.label,
                              "branch": branch_of.get(f.label, f.label),
                              "name": label_name(f.label, attractors), "fraction": f.fraction,
                              "low": f.low, "high": f.high})
             previous = current
             options.progress.advance(1)
-    return pd.DataFrame(rows, columns=[c.parameter, "label", "branch", "name", "fraction",
-                                       "low", "high"])
+    return pd.DataFrame(rows, columns=[column, "label", "branch", "name", "fraction", "low",
+                                       "high"])
 
 
 #: the model parameters each continued parameter changes (gamma: a_r = gamma g / w_r^2)
@@ -528,7 +530,10 @@ def _draw_continuation(table: pd.DataFrame, config: AttractorsConfig | None,
     each attractor in its colour of attractors.png (``known``) where it is there."""
     from .plotting import new_figure
 
-    parameter = next(c for c in table.columns if c in SWEEPABLE)
+    column = next(c for c in table.columns if column_parameter(c) is not None)
+    parameter = column_parameter(column)
+    assert parameter is not None
+    table = table.rename(columns={column: parameter})
     values = np.unique(table[parameter])
     table = table.assign(key=np.where(table["label"] < 0, table["name"],
                                       "b" + table["branch"].astype(str)))

@@ -25,7 +25,6 @@ from ..runtime.config import ConfigError, ExperimentConfig, StrictModel
 from ..memory import check_array_memory
 from ..model.params import MIN_HOP_S, ModelError, ModelParams
 from ..analysis.bifurcation import (
-    SWEEPABLE,
     FlipBracket,
     FlipLocation,
     SweepSettings,
@@ -33,6 +32,7 @@ from ..analysis.bifurcation import (
     period_doubling_candidates,
     iterate_sweep,
     locate_period_doublings,
+    parameter_column,
     parameter_point,
     period1_log_radius,
     period1_thresholds,
@@ -117,10 +117,6 @@ class BifurcationConfig(ExperimentConfig):
     iterate: IterateBlock = IterateBlock()
     flip: FlipBlock = FlipBlock()
     limits: LimitsBlock = LimitsBlock()
-
-
-def parameter_column(parameter: str) -> str:
-    return SWEEPABLE[parameter][0]
 
 
 def run(config: BifurcationConfig, options: RunOptions) -> ExperimentResult:

@@ -26,9 +26,9 @@ from ..runtime.config import ConfigError, ExperimentConfig, StrictModel
 from ..memory import check_array_memory
 from ..model.params import MIN_HOP_S, ModelError
 from ..analysis.bifurcation import (
-    SWEEPABLE,
     SweepSettings,
     iterate_sweep,
+    parameter_column,
     parameter_point,
     period1_thresholds,
     sweep_parameters,
@@ -134,10 +134,6 @@ class ContinuationConfig(ExperimentConfig):
     steps: StepBlock = StepBlock()
     find: FindBlock = FindBlock()
     diagram: DiagramBlock = DiagramBlock()
-
-
-def parameter_column(parameter: str) -> str:
-    return SWEEPABLE[parameter][0]
 
 
 def start_orbit(config: ContinuationConfig, index: int, start: StartBlock):

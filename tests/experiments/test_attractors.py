@@ -148,8 +148,11 @@ def test_the_continuation_figure_is_laid_out_for_every_parameter(parameter,
     # under the legend (a reviewer, at the bundled parameters)
     from bounce_cli.experiments.attractors import _draw_continuation
 
+    from bounce_cli.analysis.bifurcation import parameter_column
+
     values = np.linspace(0.4, 0.6, 3)
-    table = pd.DataFrame({parameter: np.repeat(values, 3), "label": [0, 1, -1] * 3,
+    table = pd.DataFrame({parameter_column(parameter): np.repeat(values, 3),
+                          "label": [0, 1, -1] * 3,
                           "name": ["period-1", "period-2", "sticking"] * 3,
                           "branch": [0, 1, -1] * 3, "fraction": [0.5, 0.3, 0.2] * 3})
     fig = _draw_continuation(table, None)
@@ -309,3 +312,18 @@ def test_each_cell_of_the_basin_image_is_centred_on_its_start():
     figure = attractors.draw({"basin.csv": frame, "fractions.csv": fractions,
                               "attractor_points.csv": points})["attractors.png"]
     assert figure.axes[0].images[0].get_extent() == pytest.approx((-60.0, 300.0, 0.0, 8.0))
+
+
+def test_the_continuation_table_names_its_parameter_with_its_unit():
+    """continuation.csv over the racket's amplitude had a column `racket_amplitude`, where
+    every other table (bifurcation, continuation) writes `racket_amplitude_m` (a model
+    review); the figure reads it back."""
+    result = bounce_cli.run("attractors", set={
+        **SMALL, "grid.theta0_deg.num": 20, "grid.v0_m_s.num": 20,
+        "continuation.parameter": "racket_amplitude", "continuation.start": 0.28,
+        "continuation.stop": 0.3, "continuation.num": 2,
+        "continuation.grid.theta0_deg.num": 12, "continuation.grid.v0_m_s.num": 12})
+    table = result.frames["continuation.csv"]
+    assert list(table.columns[:2]) == ["racket_amplitude_m", "label"]
+    assert sorted(set(table["racket_amplitude_m"])) == pytest.approx([0.28, 0.3])
+    assert "attractors_continuation.png" in result.figures
