@@ -28,6 +28,7 @@ from pydantic import Field, field_validator, model_validator
 from ..runtime.config import ConfigError, ExperimentConfig, StrictModel
 from ..model.impact import first_impact_phase
 from ..model.params import ModelError
+from ..data.plausibility import racket_warnings
 from ..data.extraction import (
     PLAUSIBLE_G_M_S2,
     ExtractionSettings,
@@ -154,6 +155,7 @@ class ExtractionBlock(StrictModel):
     max_gap_s: float = Field(DEFAULTS.max_gap_s, ge=0.0)
     acc_half_window_s: float = Field(DEFAULTS.acc_half_window_s, gt=0.0)
     acc_degree: int = Field(DEFAULTS.acc_degree, ge=2, le=8)
+    velocity_degree: int = Field(DEFAULTS.velocity_degree, ge=1, le=8)
     position_half_window_s: float = Field(DEFAULTS.position_half_window_s, gt=0.0)
     position_degree: int = Field(DEFAULTS.position_degree, ge=1, le=8)
     extremum_half_window_s: float = Field(DEFAULTS.extremum_half_window_s, gt=0.0)
@@ -285,7 +287,10 @@ def _extract_trials(trials: list[Trial], events, settings: ExtractionSettings, s
                                    None if ev is None else ev.alpha, settings, cache)
         except ModelError as exc:
             hint = NO_BOUNCE_HINT if str(exc).startswith("no bounce found") else ""
-            if hint and trial.ball is not None:
+            slip = racket_scale_hint(trial) if hint else ""
+            if slip:  # a unit slip first: its "noise" is the motion at the wrong scale
+                hint = slip + hint
+            elif hint and trial.ball is not None:
                 hint = noise_hint(trial, settings.contact_tolerance_m) + hint
             if hint and ev is not None:
                 hint += ("; and that the events' times are on the recording's clock (events "
@@ -336,6 +341,17 @@ def seeded_offset(trials: list[Trial], settings) -> float:
         return settings.ball_offset_m
     below = float(np.median(lows))
     return below if below < -settings.contact_tolerance_m else settings.ball_offset_m
+
+
+def racket_scale_hint(trial: Trial) -> str:
+    """Where no bounce was found and the racket moves more than a person can (half its range
+    beyond ``plausibility``'s: positions in mm read as m), that unit slip; empty otherwise."""
+    x = np.asarray(trial.racket, dtype=float)
+    x = x[np.isfinite(x)]
+    if x.size < 2:
+        return ""
+    found = racket_warnings(0.5 * float(np.ptp(x)), math.nan, "the racket's half range", "")
+    return f"; {found[0]}" if found else ""
 
 
 def noise_hint(trial: Trial, tolerance_m: float) -> str:
