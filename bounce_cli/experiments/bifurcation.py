@@ -346,7 +346,16 @@ def summary_lines(thresholds: pd.DataFrame, per_value: pd.DataFrame, column: str
                   locate: bool) -> list[str]:
     lines = []
     flips = thresholds[thresholds.threshold == "flip"]
-    if locate and flips[f"located_{column}"].isna().all():
+    low, high = float(per_value[column].min()), float(per_value[column].max())
+
+    def inside(row: dict) -> bool:  # eq. 14's flip (the continuation's) within the sweep
+        value = row[f"continuation_{column}"]
+        value = value if np.isfinite(value) else row[f"closed_form_{column}"]
+        return bool(np.isfinite(value) and low <= value <= high)
+
+    unlocated = [r for r in (row._asdict() for row in flips.itertuples(index=False))
+                 if inside(r) and not np.isfinite(r[f"located_{column}"])]
+    if locate and flips[f"located_{column}"].isna().all() and not unlocated:
         lines.append("flip not located: no period-1 <-> period-2 change of the sweep was "
                      "confirmed with flip.transient_impacts")
     for row in thresholds.itertuples(index=False):
@@ -360,6 +369,11 @@ def summary_lines(thresholds: pd.DataFrame, per_value: pd.DataFrame, column: str
                          f"{column} = {located:.6g}, eq. 14 {closed:.6g}, relative difference "
                          f"{row.relative_difference:+.2e}; continuation "
                          f"{rec[f'continuation_{column}']:.10g}")
+        elif locate and row.threshold == "flip" and inside(rec):
+            lines.append(f"flip of the period-1 orbit ({row.cycles} cycle(s) per hop): not "
+                         f"located (eq. 14: {column} = {closed:.6g}, inside the sweep): no "
+                         "period-1 -> period-2 change there was confirmed with "
+                         "flip.transient_impacts (the starts stuck or jumped to another orbit)")
     counts = per_value.attractors.str.split("+").explode().value_counts()
     lines.append("attractors found (values where each occurs): "
                  + ", ".join(f"{name} {n}" for name, n in counts.items()))

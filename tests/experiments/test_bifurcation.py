@@ -570,3 +570,27 @@ def test_the_figure_spans_the_sweep_not_the_thresholds_outside_it(tmp_path):
     for ax in fig.axes:
         low, high = ax.get_xlim()
         assert 1.37 <= low and high <= 1.83, (low, high)  # the sweep and 5 % margins
+
+
+def test_a_flip_inside_the_sweep_that_was_not_located_is_said():
+    """A sweep over a_r 0.03-0.12 m at alpha 0.7, tau 0.5 s located the two-cycle orbit's flip
+    and not the one-cycle orbit's, which lies inside the sweep at 0.0727 m: the summary named
+    the located one only, as if eq. 14's first flip were not there (a model review). A flip
+    outside the sweep stays unsaid."""
+    column = "racket_amplitude_m"
+    nan = math.nan
+    thresholds = pd.DataFrame({
+        "threshold": ["existence", "flip", "flip", "flip", "chaos_onset"],
+        "cycles": [1, 1, 2, 3, 0], "equation": ["eq. 8", "eq. 14", "eq. 14", "eq. 14", ""],
+        f"closed_form_{column}": [0.0344, 0.0727288, 0.0940636, 0.2, nan],
+        f"continuation_{column}": [0.0344, 0.0727288, 0.0940636, 0.2, nan],
+        f"located_{column}": [nan, nan, 0.0940488, nan, 0.117],
+        "relative_difference": [nan, nan, -1.57e-4, nan, nan]})
+    per_value = pd.DataFrame({column: np.linspace(0.03, 0.12, 10),
+                              "attractors": ["period1"] * 10})
+    lines = bifurcation_experiment.summary_lines(thresholds, per_value, column, True)
+    text = "\n".join(lines)
+    assert ("flip of the period-1 orbit (1 cycle(s) per hop): not located (eq. 14: "
+            "racket_amplitude_m = 0.0727288, inside the sweep)") in text, text
+    assert "(2 cycle(s) per hop): located racket_amplitude_m = 0.0940488" in text
+    assert "(3 cycle(s)" not in text and "flip not located:" not in text
