@@ -642,13 +642,20 @@ def unit_row(pooled: pd.DataFrame, frames: dict[str, pd.DataFrame], unit: Unit,
                                           float(rows["ci_high"].iloc[0]),
                                           str(rows["note"].iloc[0])))
     relax = frames.get(f"{unit.folder}/impulse/relaxation_data.csv")
+    missing = []  # directions the unit's perturbations do not have
     for direction in ("decrease", "increase"):
         value = math.nan
         if relax is not None:
             rows = relax[(relax["direction"] == direction) & (relax["source"] == "data")]
             if len(rows):
                 value = float(rows["relaxation_impacts"].iloc[0])
+            else:
+                missing.append(direction)
         out[f"relax_impacts_{direction}"] = value
+    out["relax_impacts_note"] = (
+        f"impulse --data not run: {(not_run or {}).get('impulse', '')}".rstrip(": ")
+        if relax is None else
+        "; ".join(f"{d}: no perturbation of that direction" for d in missing))
     fit = frames.get(f"{unit.folder}/control/fit.csv")
     for quantity, name in (("gain_K", "control_K"), ("rate_c", "control_c")):
         value = math.nan

@@ -1019,3 +1019,24 @@ def test_condensed_warnings_name_the_units_that_share_a_message():
     assert condensed_warnings(labels, [w[:1] for w in warnings[:4]] + [[]]) == [
         "4 units (s1/a, s2/a, s3/a and 1 more): impulse: not run: none"]
     assert condensed_warnings(["s1"], [["s1: x"]]) == ["s1: x"]
+
+
+def test_group_csv_says_why_a_unit_has_no_relaxation():
+    """group.csv's relax_impacts_* were NaN with no word where impulse did not run (no
+    perturbations) or a direction had no perturbation, beside radius notes that say why (a
+    data review): relax_impacts_note says it."""
+    from bounce_cli.data.study_manifest import Unit
+    from bounce_cli.experiments.study import unit_row
+
+    pooled = pd.DataFrame({"trial": [1, 1, 1], "theta_rad": [0.7, 0.75, 0.8],
+                           "v_m_s": [4.5, 4.4, 4.6]})
+    unit = Unit(key=("s1", "a"), grouping=("subject", "condition"))
+    why = "the unit's impacts hold no perturbed impact to align on"
+    row = unit_row(pooled, {}, unit, None, {"impulse": why})
+    assert np.isnan(row["relax_impacts_increase"])
+    assert row["relax_impacts_note"] == f"impulse --data not run: {why}"
+    relax = pd.DataFrame({"direction": ["decrease"], "source": ["data"],
+                          "relaxation_impacts": [6.0]})
+    row = unit_row(pooled, {"s1/a/impulse/relaxation_data.csv": relax}, unit, None, {})
+    assert row["relax_impacts_decrease"] == 6.0 and np.isnan(row["relax_impacts_increase"])
+    assert row["relax_impacts_note"] == "increase: no perturbation of that direction"
