@@ -208,10 +208,12 @@ def complex_boundaries_g(alpha):
     The regime is the AC between the two. The paper prints eq. 11 as
     -((1-alpha)/(1+alpha))^2 < AC < -1, the order that holds only for alpha < 0; for the
     physical 0 <= alpha < 1 it reads -1 < AC < -((1-alpha)/(1+alpha))^2 (c^2 = alpha^2 at
-    both, c^2 < alpha^2 between them).
+    both, c^2 < alpha^2 between them). Returned as (low, high) at every alpha: the
+    stability diagram's grid runs into alpha < 0 (pure algebra), where the order turns.
     """
     alpha = np.asarray(alpha, dtype=float)
-    return np.full_like(alpha, -1.0), -np.square((1.0 - alpha) / (1.0 + alpha))
+    other = -np.square((1.0 - alpha) / (1.0 + alpha))
+    return np.minimum(-1.0, other), np.maximum(-1.0, other)
 
 
 @dataclass(frozen=True)

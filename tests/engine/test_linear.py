@@ -67,6 +67,20 @@ def test_complex_regime_has_modulus_alpha_eq12():
                                rtol=1e-12)
 
 
+def test_complex_boundaries_are_low_then_high_on_the_whole_diagram():
+    """The stability diagram's grid runs from alpha -0.2 (pure algebra, eqs. 10-14): there
+    eq. 11's second boundary lies below -1, and boundaries.csv gave low above high (a model
+    review). Between them the eigenvalues are complex, outside real, at every alpha."""
+    alpha = np.array([-0.2, -0.1, 0.0, 0.3, 0.9])
+    lo, hi = complex_boundaries_g(alpha)
+    assert np.all(lo <= hi)
+    inner = (lo + hi) / 2.0
+    wide = alpha != 0.0  # at alpha 0 the regime is the single point AC = -1
+    assert np.all(is_complex_regime(alpha[wide], inner[wide]))
+    assert not np.any(is_complex_regime(alpha, lo - 0.05))
+    assert not np.any(is_complex_regime(alpha, hi + 0.05))
+
+
 def test_stability_boundaries_eq13_eq14():
     for alpha in np.linspace(0.0, 0.95, 20):
         flip = flip_boundary_g(alpha)

@@ -42,8 +42,12 @@ def test_boundaries_against_closed_forms(result):
     a = b.alpha.to_numpy()
     assert a.min() == pytest.approx(-0.2) and a.max() == pytest.approx(1.0)
     np.testing.assert_allclose(b.ac_flip_g, -2 * (1 + a**2) / (1 + a) ** 2)
-    np.testing.assert_allclose(b.ac_complex_high_g, -((1 - a) / (1 + a)) ** 2)
-    assert (b.ac_fold_g == 0).all() and (b.ac_complex_low_g == -1).all()
+    # eq. 11's two values, as (low, high) at every alpha (a review found low above high for
+    # alpha < 0, where the diagram's grid runs as algebra)
+    other = -((1 - a) / (1 + a)) ** 2
+    np.testing.assert_allclose(b.ac_complex_low_g, np.minimum(-1.0, other))
+    np.testing.assert_allclose(b.ac_complex_high_g, np.maximum(-1.0, other))
+    assert (b.ac_fold_g == 0).all() and (b.ac_complex_low_g <= b.ac_complex_high_g).all()
     # |lambda| = 1 on the flip and fold boundaries (eq. 14); c^2 = alpha^2 on eq. 11's
     inside = a < 1
     for col in ("ac_flip_g", "ac_fold_g"):
@@ -55,7 +59,7 @@ def test_boundaries_against_closed_forms(result):
     # eq. 11 as printed (-(..)^2 < AC < -1) holds only for alpha < 0: for alpha > 0 the
     # complex regime is -1 < AC < -((1-alpha)/(1+alpha))^2
     assert (b.ac_complex_high_g[a > 1e-9] > -1).all()
-    assert (b.ac_complex_high_g[a < -1e-9] < -1).all()
+    assert (b.ac_complex_low_g[a < -1e-9] < -1).all()
     mid = (b.ac_complex_low_g + b.ac_complex_high_g) / 2
     assert is_complex_regime(a, mid.to_numpy())[np.abs(a) > 1e-9].all()
 
