@@ -369,7 +369,7 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
     interrupted_by = 0
     short: list[tuple[int, float]] = []  # (trial, s) the source ended before trial_s
     without_impact: list[int] = []
-    implausible: str | None = None  # the racket no person's: said after its first trial
+    racket_said = False  # a racket no person's: said after the first trial that shows it
     live = display is not None or getattr(source, "live", False)  # in real time: say so
     options.progress.start(config.trials, "virtual")
     try:
@@ -408,10 +408,12 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
             frames[trial_name(config, n, "recordings")] = pd.DataFrame({
                 "trial": n, "t_s": record.t, "racket_x_m": record.racket,
                 "ball_x_m": record.ball})
-            implausible = (None if implausible is not None else
-                           racket_range_warning(record.racket, source.description, n))
-            if implausible:  # said once, as soon as a trial shows it
-                options.warn(implausible)
+            if not racket_said:  # said once, as soon as a trial shows it
+                implausible = racket_range_warning(record.racket, source.description, n,
+                                                   racket_keys(config.racket))
+                if implausible:
+                    options.warn(implausible)
+                    racket_said = True
             table = impacts_frame(record, n, params.g, float(record.t[-1]))
             frames[trial_name(config, n, "events")] = pd.DataFrame(
                 {"trial": n, "t_s": [i.t_s for i in record.impacts],
@@ -509,22 +511,33 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
                             exit_code=128 + interrupted_by if interrupted_by else 0)
 
 
-def racket_range_warning(racket: np.ndarray, description: str, trial: int) -> str:
+def racket_keys(racket: str) -> tuple[str, str] | None:
+    """The keys naming a racket source's channel and its unit (lsl, replay), else None."""
+    if racket.startswith("lsl"):
+        return "lsl.channel", "lsl.units"
+    if racket.startswith("replay"):
+        return "replay.columns.racket", "replay.units.length"
+    return None
+
+
+def racket_range_warning(racket: np.ndarray, description: str, trial: int,
+                         keys: tuple[str, str] | None = None) -> str:
     """A warning where a trial's racket is no person's: it did not move (half its range below
     ``HUMAN_RACKET_AMPLITUDE_M``'s least: a stream's wrong channel, a racket at rest), or half
     its range is beyond what a person can move it by (``racket_warnings``: positions in mm
-    read as m); empty otherwise."""
+    read as m); ``keys`` (channel, unit: ``racket_keys``) are named; empty otherwise."""
     x = np.asarray(racket, dtype=float)
     x = x[np.isfinite(x)]
     if x.size < 2:
         return ""
     half = 0.5 * float(np.ptp(x))
     if half < HUMAN_RACKET_AMPLITUDE_M[0]:
+        which = f"the wrong channel ({keys[0]}), or " if keys else ""
         return (f"racket ({description}): the racket moved by only {2000 * half:.2g} mm in "
-                f"trial {trial}: the wrong channel (lsl.channel), or a racket standing still?")
+                f"trial {trial}: {which}a racket standing still?")
     found = racket_warnings(half, math.nan, f"racket ({description}), trial {trial}: half "
                             "its range", "")
-    return found[0] if found else ""
+    return (found[0] + (f" (set {keys[1]})" if keys else "")) if found else ""
 
 
 #: the noise (m/s) in the ball's velocity after impact that the racket's sampled noise may add

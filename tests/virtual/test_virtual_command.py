@@ -448,8 +448,9 @@ def test_a_noisy_racket_stream_is_said_to_shake_the_ball(tmp_path, cli):
 
 
 @pytest.mark.parametrize("scale, needle", [
-    (0.0, "the racket moved by only 0 mm in trial 1"),  # a constant channel
-    (1000.0, "millimetres (0.3 m) typed for metres?"),  # positions in mm read as m
+    (0.0, "the racket moved by only 0 mm in trial 1: the wrong channel "
+          "(replay.columns.racket)"),  # a constant channel
+    (1000.0, "millimetres (0.3 m) typed for metres? (set replay.units.length)"),  # mm as m
 ])
 def test_a_racket_that_cannot_be_a_person_s_is_said_after_its_trial(tmp_path, cli, scale,
                                                                    needle):
@@ -462,7 +463,7 @@ def test_a_racket_that_cannot_be_a_person_s_is_said_after_its_trial(tmp_path, cl
     recording = recording.assign(racket_x_m=racket.mean() + scale * (racket - racket.mean()))
     recording.to_csv(tmp_path / "racket.csv", index=False)
     result = cli("virtual", "--headless", "--racket", f"replay:{tmp_path / 'racket.csv'}",
-                 "--set", "trials=2", "--set", "trial_s=4", "--out", tmp_path / "o",
+                 "--set", "trials=3", "--set", "trial_s=2.5", "--out", tmp_path / "o",
                  "--quiet")
     said = " ".join(result.stderr.split())
     assert needle in said, said
