@@ -324,11 +324,10 @@ def one_racket_model(impacts, used: DataModel, options: RunOptions) -> ModelPara
     """``model_at_data`` (stable) for an analysis of the data's fluctuations (acf, impulse),
     with a warning where its trials are at different racket designs
     (``mixed_racket_warning``): one model at their mean stands for them all."""
-    params = model_at_data(impacts, used, record=options.record)
     mixed = mixed_racket_warning(impacts)
-    if mixed:
+    if mixed:  # before the model: at the mean racket it may have no stable fixed point
         options.warn(mixed)
-    return params
+    return model_at_data(impacts, used, record=options.record)
 
 
 def short_trials_warning(source: ImpactsSource | None, options: RunOptions):
