@@ -1084,7 +1084,7 @@ def test_trials_at_different_racket_periods_are_said_to_share_one_model(tmp_path
     assert result.exit_code == 0, result.output
     said = " ".join(result.stderr.split())
     assert "the trials' racket periods range from 0.85 to 0.92 s" in said, said
-    assert "one model at their mean" in said
+    assert "one model at the impacts' mean, 0.885 s" in said
     frames[0].to_csv(path, index=False)
     one = cli("acf", "--data", path, "--out", tmp_path / "one", "--quiet",
               "--set", "data_analysis.model_sessions=0")

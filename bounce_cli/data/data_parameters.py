@@ -319,9 +319,10 @@ def mixed_racket_warning(impacts) -> str:
     periods = frame.groupby("trial", sort=False)["racket_period_s"].mean().dropna()
     if periods.size < 2 or not (np.ptp(periods) > MIXED_RACKET_PERIODS * periods.mean()):
         return ""
+    used = float(frame["racket_period_s"].mean())  # the model's: over all impacts
     return (f"data: {impacts.path}: the trials' racket periods range from "
             f"{periods.min():.3g} to {periods.max():.3g} s ({np.ptp(periods) / periods.mean():.0%}"
-            f" of their mean): one model at their mean, {periods.mean():.3g} s, stands for them "
+            f" of their mean): one model at the impacts' mean, {used:.3g} s, stands for them "
             "all; analyse each racket design apart (a condition of its own in a study's "
             "manifest)")
 
