@@ -54,6 +54,24 @@ class LineFit:
     r2: np.ndarray
 
 
+#: tau^2 spanning less than this fraction of its mean determines no slope of eq. 15 worth
+#: reporting (the paper's Fig. 7 spans about a factor 2)
+NARROW_TAU2 = 0.01
+
+
+def narrow_periods(tau_s) -> str:
+    """Why eq. 15's slope is not determined by trials at these racket periods (s): their
+    squared periods span less than ``NARROW_TAU2`` of their mean (one racket period, as a
+    virtual set-up's sine session); '' where they span enough."""
+    tau2 = np.square(np.asarray(tau_s, dtype=float))
+    spread = float(np.ptp(tau2) / np.mean(tau2)) if tau2.size else 0.0
+    if spread >= NARROW_TAU2:
+        return ""
+    return (f"the trials' squared racket periods span only {spread:.2%} of their mean, so "
+            "eq. 15's slope is not determined (fit trials at different racket periods, e.g. "
+            "different target heights)")
+
+
 def ols_line(x, y, confidence: float = 0.95) -> LineFit:
     """Ordinary least squares of y on x along the last axis, closed form.
 

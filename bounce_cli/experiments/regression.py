@@ -34,6 +34,7 @@ from ..model.params import ModelError, ModelParams, NoFixedPointError
 from ..analysis.regression import (
     eq15_amplitude,
     eq15_slope,
+    narrow_periods,
     ols_line,
     period_for_height,
     phase_from_slope,
@@ -180,10 +181,6 @@ def read_trials(path_text: str) -> pd.DataFrame:
 
 
 # -- fit ----------------------------------------------------------------------------------
-#: tau^2 spanning less than this fraction of its mean determines no slope worth reporting
-#: (the paper's Fig. 7 spans about a factor 2): refused when every condition is this narrow
-#: (a one-period design, e.g. the virtual set-up's), a warning when only some are
-NARROW_TAU2 = 0.01
 
 
 def fit_frame(trials: pd.DataFrame, config: RegressionConfig,
@@ -292,18 +289,16 @@ def run(config: RegressionConfig, options: RunOptions, source=None) -> Experimen
               else [("all", fitted)])
     narrow = {}  # condition -> the message saying its tau^2 spans nothing
     for condition, group in groups:
-        spread = float(np.ptp(group["tau2_s2"]) / group["tau2_s2"].mean())
-        if spread < NARROW_TAU2:
-            narrow[condition] = (
-                f"condition {condition!r}: the trials' squared racket periods span only "
-                f"{spread:.2%} of their mean, so eq. 15's slope is not determined (fit "
-                "trials at different racket periods, e.g. different target heights)")
+        why = narrow_periods(group["tau_s"])
+        if why:
+            narrow[condition] = f"condition {condition!r}: {why}"
     if narrow and len(narrow) == len(groups):  # no line anywhere: nothing to report
         raise TooFewObservationsError(f"{data_label or 'simulated trials'}: "
                                       + "; ".join(narrow.values()))
-    for message in narrow.values():  # the other conditions' lines stand
-        options.warn(message)
-    fit = fit_frame(trials, config, model)
+    for message in narrow.values():  # the other conditions' lines stand; not these
+        options.warn(f"{message}: not fitted (its trials are in trials.csv)")
+    fit = fit_frame(trials[~trials["condition"].isin(list(narrow))] if narrow else trials,
+                    config, model)
     figures = draw({"trials.csv": trials, "fit.csv": fit}) if options.figures else {}
     if data_label is not None:
         caption_figures(figures, None, f"data: {data_label}{at_model}")

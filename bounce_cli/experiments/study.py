@@ -881,7 +881,7 @@ def group_tables(frames: dict[str, pd.DataFrame], units: list[Unit],
         trials = trials.assign(condition=condition_of(trials))
         alpha_g = group.set_index(group["subject"].astype(str) + "/" + condition_of(group))
         rows = []
-        from ..analysis.regression import ols_line
+        from ..analysis.regression import narrow_periods, ols_line
 
         for condition, part in trials.groupby("condition", sort=True):
             key = part["subject"].astype(str) + "/" + str(condition)
@@ -889,6 +889,11 @@ def group_tables(frames: dict[str, pd.DataFrame], units: list[Unit],
             g = key.map(alpha_g["g_m_s2"]) if "g_m_s2" in alpha_g else pd.Series(math.nan)
             theta = np.radians(part["theta_deg"].to_numpy(float))
             row = {"condition": condition, "n": len(part), "subjects": part["subject"].nunique()}
+            narrow = narrow_periods(part["tau_s"])
+            if narrow:  # one racket period (a virtual set-up's sessions): no line to fit
+                row["note"] = f"not fitted: {narrow}"
+                rows.append(row)
+                continue
             try:
                 fit = ols_line(part["tau_s"].to_numpy(float) ** 2, part["a_r_m"].to_numpy(float),
                                conf)
@@ -1004,9 +1009,11 @@ def withheld_radii(group: pd.DataFrame, method: str) -> pd.Series:
 
 
 def _regression_line(r: dict) -> str | None:
-    """Fig. 7 of one condition (none where its fit has no slope)."""
+    """Fig. 7 of one condition (its note where its fit has no slope)."""
     if not ("slope" in r and isinstance(r["slope"], float) and math.isfinite(r["slope"])):
-        return None
+        note = r.get("note")
+        return (f"Fig. 7 ({r['condition']}, {r['n']} trials of {r['subjects']} subjects): "
+                f"{note}" if isinstance(note, str) and note else None)
     return (f"Fig. 7 ({r['condition']}, {r['n']} trials of {r['subjects']} "
             f"subjects): slope {r['slope']:.4f} m/s^2 [{r['slope_ci_low']:.4f}, "
             f"{r['slope_ci_high']:.4f}] vs eq. 15 {r['predicted_slope']:.4f}; "

@@ -345,6 +345,10 @@ def test_a_sine_racket_s_study_skips_the_line_through_equal_periods(tmp_path, cl
     said = " ".join(result.stderr.split())
     assert "regression: not run: " in said and "eq. 15's slope is not determined" in said
     assert pd.read_csv(tmp_path / "st" / "failures.csv").empty
+    # the pooled Fig. 7 neither: it printed a 'line' of R^2 0.98 through one period (a review)
+    pooled = pd.read_csv(tmp_path / "st" / "group_regression.csv").iloc[0]
+    assert "slope" not in pooled or np.isnan(pooled["slope"])
+    assert pooled["note"].startswith("not fitted: the trials' squared racket periods span only")
     # group.csv's radii are NaN (acf did not run: perturbations every fifth impact), and
     # their notes say why (they were empty, the reason only in the warnings)
     group = pd.read_csv(tmp_path / "st" / "group.csv")
