@@ -62,6 +62,23 @@ def test_fixed_point_json_without_a_fixed_point_says_so_in_json_and_exits_1(cli)
     assert cli("fixed-point", "--json", "--set", "model.nope=1").exit_code == 2
 
 
+def test_at_alpha_0_the_fixed_point_exists_where_the_racket_outruns_gravity(cli):
+    """alpha 0: the ball leaves with the racket's own velocity, so it separates only where the
+    racket decelerates faster than gravity (AC < -1 g). The answer hung on the last bit of a
+    zero relative velocity: 'no orbit' at 1.05, 1.1, 1.3 times eq. 8's least amplitude,
+    'exists' at 1.2 and 1.5 (a new-user review). Now AC decides, and the flight is then
+    checked from a velocity 1e-9 above the racket's."""
+    least = math.pi * 9.81 / (2 * math.pi / 0.92) ** 2
+    for factor in (1.05, 1.1, 1.2, 1.3, 1.5, 1.8, 3.0):
+        data = json.loads(cli("fixed-point", "--json", "--set", "model.alpha=0", "--set",
+                              f"model.racket_amplitude={factor * least}").stdout)
+        assert data["exists"] is True and data["ac_g"] < -1.0, (factor, data)
+    data = json.loads(cli("fixed-point", "--json", "--set", "model.alpha=0", "--set",
+                          f"model.racket_amplitude={1.01 * least}").stdout)
+    assert data["exists"] is False and "cannot leave the racket" in data["reason"]
+    assert "decelerates slower than gravity" in data["reason"]
+
+
 @pytest.mark.parametrize("alpha, amplitude_factor, needle", [
     (0.0, 1.01, "cannot leave the racket"),  # alpha 0: the ball leaves at the racket's speed
     (0.01, 1.0001, "meets the racket again after 0.0249 of a racket cycle"),

@@ -395,12 +395,23 @@ def check_period1_orbit(params: ModelParams) -> None:
         Where eq. 8 has no solution, or its point is no orbit of the map.
     """
     fp = params.fixed_point()
-    cycles = float(next_impact_phase(fp.theta_rad, fp.v_m_s, params)) / (2.0 * math.pi)
-    if abs(cycles - 1.0) <= PERIOD1_HOP_TOLERANCE:
-        return
     ac = params.racket_acceleration_g(fp.theta_rad)
     where = (f"eq. 8's fixed point (theta~ = {fp.theta_deg:.4g} deg) is no orbit of the map at "
              f"alpha={params.alpha:g}, a_r={params.racket_amplitude:g} m: ")
+    v = fp.v_m_s
+    if params.alpha == 0.0:
+        # the ball leaves with the racket's own velocity: whether it separates is the sign of
+        # the relative acceleration, -g (1 + AC), not the last bit of a zero relative velocity
+        if not ac < -1.0:
+            raise NoFixedPointError(
+                f"no period-1 fixed point: {where}the ball cannot leave the racket there: at "
+                f"alpha 0 it leaves with the racket's velocity, and the racket decelerates "
+                f"slower than gravity (AC = {ac:.3g} g > -1 g; a larger model.alpha or "
+                "model.racket_amplitude gives the ball its flight)")
+        v = v * (1.0 + 1e-9)  # separating: its flight checked from just above the racket's
+    cycles = float(next_impact_phase(fp.theta_rad, v, params)) / (2.0 * math.pi)
+    if abs(cycles - 1.0) <= PERIOD1_HOP_TOLERANCE:
+        return
     what = ("the ball cannot leave the racket there" if math.isnan(cycles) else
             f"leaving the racket there, the ball meets the racket again after {cycles:.3g} "
             "of a racket cycle, not one")
