@@ -387,7 +387,9 @@ def check_period1_orbit(params: ModelParams) -> None:
     Eq. 8 asks only that an impact one cycle later exists. Where the racket decelerates slower
     than gravity (AC > -1 g) and the impact is nearly dead (alpha near 0), the racket meets
     the ball again at once (alpha 0.01 at the least amplitude: after 0.025 of a cycle), or the
-    ball cannot leave it at all (alpha 0): no period-1 orbit, whatever eq. 10 says of it.
+    ball cannot leave it at all (alpha 0, where it leaves with the racket's velocity and
+    separates only where AC < -1 g: decided by AC, not by the rounding of a zero relative
+    velocity): no period-1 orbit, whatever eq. 10 says of it.
 
     Raises
     ------
