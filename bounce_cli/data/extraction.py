@@ -803,10 +803,11 @@ def _segment_fits(t, ball, long_gap, racket, lo: int, hi: int, t_after: float,
                   t_before: float, s: ExtractionSettings):
     """Fits of the samples [lo, hi) between two contacts (``ball``: measured samples, NaN
     elsewhere; ``long_gap``: samples in gaps too long to bridge): (fit after the first contact
-    or None, fit before the second or None, resting seconds, long gap inside)."""
+    or None, fit before the second or None, resting seconds, long gap of the ball's data
+    inside, long gap of the racket's data inside)."""
     seg = np.arange(max(lo, 0), min(hi, len(t)))
     if seg.size == 0:
-        return None, None, 0.0, False
+        return None, None, 0.0, False, False
     xb = ball[seg]
     gap = xb - s.ball_offset_m - racket[seg]
     with np.errstate(invalid="ignore"):
@@ -820,7 +821,8 @@ def _segment_fits(t, ball, long_gap, racket, lo: int, hi: int, t_after: float,
     # where the racket is not measured (a gap too long to bridge) no contact is seen, so the
     # ball's way down and up again was fitted as one flight (g measured 30 % low): it ends
     # the fits too
-    in_gap |= ~np.isfinite(racket[seg])
+    racket_gap = ~np.isfinite(racket[seg])
+    in_gap |= racket_gap
     rest_s = 0.0
     if resting.any():
         r = seg[resting]
@@ -838,7 +840,7 @@ def _segment_fits(t, ball, long_gap, racket, lo: int, hi: int, t_after: float,
     before = None
     if start < seg.size:
         before = fit_flight(t[seg[start:]], xb[start:], t_before, s.g, s.min_flight_samples)
-    return after, before, rest_s, has_gap
+    return after, before, rest_s, has_gap, bool(np.any(racket_gap))
 
 
 def guard_samples(s: ExtractionSettings, dt: float) -> int:
@@ -940,6 +942,9 @@ class _Impacts:
     apex_x: np.ndarray
     reason: list[str]
     next_unknown: np.ndarray
+    #: the flight after the impact crosses a long gap of the racket's data, where a contact
+    #: cannot be seen (the ball's data are there)
+    racket_gap: np.ndarray
     offsets: list[float] = field(default_factory=list)
     flights: list = field(default_factory=list)
 
@@ -958,7 +963,8 @@ class _Impacts:
             se_v=np.full(n, np.nan),
             met=contacts.exact.copy(),  # timed where the flights meet (or logged)
             apex_x=np.full(n, np.nan),  # ball height at the apex of the following flight
-            reason=[""] * n, next_unknown=np.zeros(n, dtype=bool))
+            reason=[""] * n, next_unknown=np.zeros(n, dtype=bool),
+            racket_gap=np.zeros(n, dtype=bool))
 
 
 def _racket_of(t, racket, s: ExtractionSettings) -> _Racket:
@@ -1029,7 +1035,7 @@ def _flights_around(t, racket: _Racket, ball: _Ball, contacts: _Contacts,
         hi = bounds[j + 1] - s.guard_samples
         t_after = ct[j - 1] if j > 0 else t[0]
         t_before = ct[j] if j < n else t[-1]
-        after, before, rest_s, has_gap = _segment_fits(
+        after, before, rest_s, has_gap, racket_gap = _segment_fits(
             t, ball.fit, ball.long_gap, racket.bridged, lo, hi, t_after, t_before, s)
         if rest_s == 0.0:  # a free flight: its curvature is g
             flight = after if after is not None else before
@@ -1041,6 +1047,7 @@ def _flights_around(t, racket: _Racket, ball: _Ball, contacts: _Contacts,
                 imp.reason[j - 1] = f"sticking: the ball rested on the racket for {rest_s:.3g} s"
             if has_gap:
                 imp.next_unknown[j - 1] = True
+            imp.racket_gap[j - 1] = racket_gap
         if j < n:
             befores[j] = before
     return imp, afters, befores
@@ -1148,16 +1155,26 @@ def _hops_and_gaps(t, racket: _Racket, ball: _Ball | None, contacts: _Contacts,
     k_index = contacts.k
     hop = np.append(np.diff(t_k), np.nan)
     hop[next_unknown] = np.nan
-    if ball is not None and not from_events and next_unknown.any():
+    racket_gap = imp.racket_gap
+    if ball is not None and not from_events and (next_unknown | racket_gap).any():
         # impacts inside a long gap of the ball data are lost: estimate how many from the
-        # typical hop, report them, and keep k counting them
+        # typical hop, report them, and keep k counting them; the same for a bounce hidden
+        # where the racket's data are missing (no contact seen there: the hop spans two)
         spans = np.diff(t_k)
-        known = spans[~next_unknown[:-1] & np.isfinite(spans)]
+        known = spans[~next_unknown[:-1] & ~racket_gap[:-1] & np.isfinite(spans)]
         typical = float(np.median(known)) if known.size else math.nan
         lost = np.zeros(n, dtype=int)
-        for j in np.flatnonzero(next_unknown[:-1]).tolist():
+        for j in np.flatnonzero((next_unknown | racket_gap)[:-1]).tolist():
             lost[j] = max(int(round(spans[j] / typical)) - 1, 0) if math.isfinite(typical) else 0
             lo, hi = np.searchsorted(t, [t_k[j], t_k[j + 1]])
+            if not next_unknown[j]:  # the racket's data missing, the ball's there
+                if lost[j]:
+                    hop[j] = math.nan
+                    gone = np.flatnonzero(~np.isfinite(racket.bridged[lo:hi])) + lo
+                    excluded.append((float(np.mean(t[gone])),
+                                     f"gap: {t[gone[-1]] - t[gone[0]]:.3g} s without racket "
+                                     f"data; about {lost[j]} impact(s) lost in it"))
+                continue
             missing = np.flatnonzero(~np.isfinite(ball.bridged[lo:hi])) + lo
             if missing.size:  # empty cells
                 at, span = float(np.mean(t[missing])), t[missing[-1]] - t[missing[0]]
