@@ -855,8 +855,8 @@ def test_a_labs_small_study_gets_an_interval_for_every_radius(tmp_path, cli_modu
     ols = paired[paired["estimate"] == "ols"]
     assert len(ols) == 2 and (ols["units"] == 3).all()
     assert np.isfinite(ols["ci_low"]).all() and (ols["ci_low"] < ols["ci_high"]).all()
-    for value in group.filter(regex=r"^radius_[a-z_0-9]+$").drop(
-            columns=group.filter(like="_note").columns).to_numpy().ravel():
+    radii = group.filter(regex=r"^radius_[a-z_0-9]+$")
+    for value in radii.drop(columns=radii.filter(like="_note").columns).to_numpy().ravel():
         assert math.isnan(value) or value <= 1.5
 
 
