@@ -444,9 +444,14 @@ JITTER_FRACTION = 0.05
 def clock_step(steps: np.ndarray) -> float:
     """The step of the clock behind sample intervals ``steps`` (> 0) that may skip samples:
     the median of the intervals no longer than 1.5 times their 10th percentile, so that rows
-    missing (intervals of 2, 3, ... steps, even as many as of one step) do not move it."""
+    missing (intervals of 2, 3, ... steps, even as many as of one step) do not move it, then
+    the total time over the total number of whole steps the intervals make."""
     shortest = float(np.percentile(steps, 10))
-    return float(np.median(steps[steps <= 1.5 * shortest]))
+    first = float(np.median(steps[steps <= 1.5 * shortest]))
+    # refined over every interval, each as its whole number of steps: jitter cut at the
+    # 1.5x line biased the first guess low (a 5 ms clock with 1 ms of jitter read 4.94 ms)
+    whole = np.maximum(np.round(steps / first), 1.0)
+    return float(np.sum(steps) / np.sum(whole))
 
 
 def jitter_warnings(trials: list[Trial], source: str) -> list[str]:
