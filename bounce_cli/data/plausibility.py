@@ -33,6 +33,14 @@ def _slip(value: float, span: tuple[float, float], slips, unit: str, symbol: str
     return (" or ".join(found) + f" typed for {unit}?") if found else "check the units"
 
 
+def racket_half_range_m(racket) -> float:
+    """Half the range of a racket's finite samples (m): its amplitude as a trace shows it, for
+    ``racket_warnings``; NaN with fewer than 2 samples."""
+    x = np.asarray(racket, dtype=float)
+    x = x[np.isfinite(x)]
+    return 0.5 * float(np.ptp(x)) if x.size >= 2 else math.nan
+
+
 def racket_warnings(amplitude_m, period_s, amplitude_where: str,
                     period_where: str) -> list[str]:
     """One warning per quantity outside what a person can do, naming the likely unit slip.

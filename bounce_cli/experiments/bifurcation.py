@@ -353,8 +353,8 @@ def summary_lines(thresholds: pd.DataFrame, per_value: pd.DataFrame, column: str
         value = value if np.isfinite(value) else row[f"closed_form_{column}"]
         return bool(np.isfinite(value) and low <= value <= high)
 
-    unlocated = [r for r in (row._asdict() for row in flips.itertuples(index=False))
-                 if inside(r) and not np.isfinite(r[f"located_{column}"])]
+    unlocated = any(inside(row._asdict()) for row in flips.itertuples(index=False)
+                    if not np.isfinite(getattr(row, f"located_{column}")))
     if locate and flips[f"located_{column}"].isna().all() and not unlocated:
         lines.append("flip not located: no period-1 <-> period-2 change of the sweep was "
                      "confirmed with flip.transient_impacts")

@@ -28,7 +28,7 @@ from pydantic import Field, field_validator, model_validator
 from ..runtime.config import ConfigError, ExperimentConfig, StrictModel
 from ..model.impact import first_impact_phase
 from ..model.params import ModelError
-from ..data.plausibility import racket_warnings
+from ..data.plausibility import racket_half_range_m, racket_warnings
 from ..data.extraction import (
     PLAUSIBLE_G_M_S2,
     ExtractionSettings,
@@ -346,11 +346,8 @@ def seeded_offset(trials: list[Trial], settings) -> float:
 def racket_scale_hint(trial: Trial) -> str:
     """Where no bounce was found and the racket moves more than a person can (half its range
     beyond ``plausibility``'s: positions in mm read as m), that unit slip; empty otherwise."""
-    x = np.asarray(trial.racket, dtype=float)
-    x = x[np.isfinite(x)]
-    if x.size < 2:
-        return ""
-    found = racket_warnings(0.5 * float(np.ptp(x)), math.nan, "the racket's half range", "")
+    found = racket_warnings(racket_half_range_m(trial.racket), math.nan,
+                            "the racket's half range", "")
     return f"; {found[0]}" if found else ""
 
 

@@ -594,6 +594,12 @@ def regression_trials(cfg: dict[str, Any], alpha: float, g: float, seed: int, un
     return with_squared_period(trials)
 
 
+def not_run_note(analysis: str, not_run: dict[str, str] | None) -> str:
+    """group.csv's note for a unit whose ``analysis`` gave no table: ``<analysis> --data not
+    run: <why>`` (``not_run``: analysis -> why)."""
+    return f"{analysis} --data not run: {(not_run or {}).get(analysis, '')}".rstrip(": ")
+
+
 def unit_row(pooled: pd.DataFrame, frames: dict[str, pd.DataFrame], unit: Unit,
              found: DataModel | None, not_run: dict[str, str] | None = None
              ) -> dict[str, Any]:
@@ -630,9 +636,7 @@ def unit_row(pooled: pd.DataFrame, frames: dict[str, pd.DataFrame], unit: Unit,
     for method in RADIUS_ESTIMATORS:
         for field in ("estimate", "ci_low", "ci_high"):
             out[f"radius_{method}" + ("" if field == "estimate" else f"_{field}")] = math.nan
-        out[f"radius_{method}_note"] = ("" if stab is not None else
-                                        f"acf --data not run: {(not_run or {}).get('acf', '')}"
-                                        .rstrip(": "))
+        out[f"radius_{method}_note"] = "" if stab is not None else not_run_note("acf", not_run)
         if stab is not None:
             rows = stab[(stab["quantity"] == "spectral_radius")
                         & stab["source"].astype(str).str.startswith(method)]
@@ -653,8 +657,7 @@ def unit_row(pooled: pd.DataFrame, frames: dict[str, pd.DataFrame], unit: Unit,
                 missing.append(direction)
         out[f"relax_impacts_{direction}"] = value
     out["relax_impacts_note"] = (
-        f"impulse --data not run: {(not_run or {}).get('impulse', '')}".rstrip(": ")
-        if relax is None else
+        not_run_note("impulse", not_run) if relax is None else
         "; ".join(f"{d}: no perturbation of that direction" for d in missing))
     fit = frames.get(f"{unit.folder}/control/fit.csv")
     for quantity, name in (("gain_K", "control_K"), ("rate_c", "control_c")):

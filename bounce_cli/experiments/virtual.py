@@ -34,7 +34,8 @@ from pydantic import Field, field_validator, model_validator
 from ..data.extraction import (ExtractionSettings, racket_cycles, sample_noise_m,
                                widened_windows)
 from ..data.impacts import EVENT_COLUMNS, MEASURED_COLUMNS, REQUIRED_COLUMNS, ball_apex
-from ..data.plausibility import HUMAN_RACKET_AMPLITUDE_M, racket_warnings
+from ..data.plausibility import (HUMAN_RACKET_AMPLITUDE_M, racket_half_range_m,
+                                 racket_warnings)
 from ..data.setup_table import SETUP_FILE, SetupQuantity, setup_frame
 from ..data.simulated_lab import LAB_MIN_HOP_S
 from ..data.study_manifest import names_a_folder
@@ -526,11 +527,9 @@ def racket_range_warning(racket: np.ndarray, description: str, trial: int,
     ``HUMAN_RACKET_AMPLITUDE_M``'s least: a stream's wrong channel, a racket at rest), or half
     its range is beyond what a person can move it by (``racket_warnings``: positions in mm
     read as m); ``keys`` (channel, unit: ``racket_keys``) are named; empty otherwise."""
-    x = np.asarray(racket, dtype=float)
-    x = x[np.isfinite(x)]
-    if x.size < 2:
+    half = racket_half_range_m(racket)
+    if not math.isfinite(half):
         return ""
-    half = 0.5 * float(np.ptp(x))
     if half < HUMAN_RACKET_AMPLITUDE_M[0]:
         which = f"the wrong channel ({keys[0]}), or " if keys else ""
         return (f"racket ({description}): the racket moved by only {2000 * half:.2g} mm in "
