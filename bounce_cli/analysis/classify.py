@@ -86,12 +86,17 @@ class Classification:
 
 def compiled_kernel_available() -> bool:
     """True when the compiled kernel (``model.compiled``, numba) can be used: the
-    environment variable ``BOUNCE_KERNEL`` is not ``numpy``, numba is installed and the
-    kernel's module imports (numba may refuse, e.g. with no writable cache directory: then
-    the numpy kernel runs, with the same results)."""
+    environment variable ``BOUNCE_KERNEL`` is not ``numpy``, numba is installed and either
+    the kernel's machine code loads without numba (``model.native``) or the kernel's module
+    imports (numba may refuse, e.g. with no writable cache directory: then the numpy kernel
+    runs, with the same results)."""
     if os.environ.get("BOUNCE_KERNEL", "auto").strip().lower() == "numpy":
         return False
-    return importlib.util.find_spec("numba") is not None and _compiled_module_imports()
+    if importlib.util.find_spec("numba") is None:
+        return False
+    from ..model import native
+
+    return native.classifier() is not None or _compiled_module_imports()
 
 
 @functools.lru_cache(maxsize=None)
@@ -104,12 +109,21 @@ def _compiled_module_imports() -> bool:
 
 
 def load_compiled_kernel() -> None:
-    """Import numba and load the compiled kernel (from numba's cache: about 0.35 s; the
-    first time ever, compile it: a few seconds), so that later calls start at once."""
-    if compiled_kernel_available():
-        from ..model.compiled import load
+    """Load the compiled kernel, so that later calls start at once: its machine code without
+    numba where it was saved (``model.native``: about 0.05 s), else numba and the kernel
+    from numba's cache (about 0.4 s; the first time ever, compiled: a few seconds), and
+    then its machine code saved for the next run (about a second, once)."""
+    if not compiled_kernel_available():
+        return
+    from ..model import native
 
-        load()
+    if native.classifier() is not None:
+        return
+    from ..model.compiled import load
+
+    load()
+    if os.environ.get("BOUNCE_KERNEL", "auto").strip().lower() == "auto":
+        native.build_classifier()
 
 
 def passive_map(params: ModelParams, *, require_fixed_point: bool = True) -> PassiveMap:

@@ -48,6 +48,11 @@ import numba
 import numpy as np
 from numba.core import codegen as numba_codegen, config as numba_config
 
+from .kernel_arrays import (  # noqa: F401  (the indices: globals of the loops below)
+    _A, _A_3, _ALPHA, _AW, _BOUND, _G, _G_ALPHA_W, _MIN_HOP, _N_CONSTANTS, _NEG_G_W2,
+    _NEG_G_WW, _TH_FP, _TOL, _TWO_A, _TWO_BOUND, _TWO_W_SQ, _V_COEF, _V_FP, _W, _W_SQ,
+    classify_scratch, flight_constants, solver_constants as _constants,
+)
 from .impact import LAST_STEP_LEVEL, POLISH_LIMIT, ROUNDING_LEVEL, STEP_FLOOR
 from .params import FixedPoint, ModelParams
 from .trig import sincos, sincos_of_float
@@ -84,41 +89,7 @@ _jit = numba.njit(cache=True, nogil=True, error_model="numpy")
 #: one block of arithmetic that LLVM vectorises)
 _inline = numba.njit(inline="always", error_model="numpy")
 
-# indices into the constants array (see _constants)
-(_A, _W, _G, _AW, _NEG_G_W2, _NEG_G_WW, _BOUND, _W_SQ, _TWO_W_SQ, _TWO_A, _TWO_BOUND,
- _A_3, _V_COEF, _ALPHA, _G_ALPHA_W, _V_FP, _TH_FP, _TOL, _MIN_HOP, _N_CONSTANTS) = range(20)
-
-
-@_jit
-def _flight_constants(a, w, g, c):
-    """The solver's constants at angular frequency w, each by the numpy code's expression
-    (for an array of frequencies: w**2 is w * w; ``_constants`` puts Python's pow back)."""
-    c[_A], c[_W], c[_G] = a, w, g
-    c[_AW] = a * w  # can_fly, racket_velocity: a * w * cos
-    c[_NEG_G_W2] = -g / (w * w)  # can_fly's curvature
-    c[_NEG_G_WW] = -g / (w * w)  # first step's curvature
-    c[_BOUND] = g / (w * w) + a
-    c[_W_SQ] = w * w
-    c[_TWO_W_SQ] = 2.0 * w * w
-    c[_TWO_A] = 2.0 * a
-    c[_TWO_BOUND] = 2.0 * (g / (w * w) + a)
-    c[_A_3] = a / 3.0
-
-
-def _constants(params: ModelParams, fp: FixedPoint, tolerance: float,
-               min_hop: float) -> np.ndarray:
-    """The scalars of the numpy code, each by the numpy code's own expression (Python floats:
-    ``-g / w**2`` is Python's pow, ``a * w * cos`` is ``(a * w) * cos``)."""
-    a, w, g, alpha = params.racket_amplitude, params.omega, params.g, params.alpha
-    c = np.empty(_N_CONSTANTS)
-    _flight_constants(a, w, g, c)
-    c[_NEG_G_W2] = -g / w**2  # can_fly's curvature: Python's pow, as the numpy code's scalar
-    c[_V_COEF] = (1.0 + alpha) * a * w  # eq. 5
-    c[_ALPHA] = alpha
-    c[_G_ALPHA_W] = g * alpha / w
-    c[_V_FP], c[_TH_FP] = fp.v_m_s, fp.theta_rad
-    c[_TOL], c[_MIN_HOP] = tolerance, min_hop
-    return c
+_flight_constants = _jit(flight_constants)
 
 
 #: ``trig.sincos`` of one float, inlined into the loops that call it
@@ -256,19 +227,19 @@ def _impact(th, vv, cos_th, sin_th, m, c, max_steps, hop, pos, S, D0, C, SN, V, 
 
 
 @_jit
-def _classify(theta0, v0, c, max_iterations, max_steps, outcome, iterations):
-    """``classify.classify_batch`` of flat arrays into ``outcome`` / ``iterations``."""
+def _classify(theta0, v0, c, max_iterations, max_steps, outcome, iterations, idx, work, pos):
+    """``classify.classify_batch`` of flat arrays into ``outcome`` / ``iterations``, with
+    the caller's scratch (``classify_scratch``): it allocates nothing, so that its machine
+    code needs no numba runtime (``model.native`` loads it without numba)."""
     n = theta0.size
     a, w = c[_A], c[_W]
-    idx = np.empty(n, np.int64)
     m = 0
     for i in range(n):  # can_fly at the unwrapped initial phase
         m = _launch(i, (v0[i] - c[_AW] * math.cos(theta0[i])) / w,
                     c[_NEG_G_W2] + a * math.sin(theta0[i]), idx, m, outcome, iterations)
-    work = np.empty((12, m))  # the states (5 rows) and the solver's scratch (7 rows)
+    # the states (5 rows) and the solver's scratch (7 rows)
     th, vv, cos_th, sin_th, hop = work[0], work[1], work[2], work[3], work[4]
     S, D0, C, SN, V, SH, CH = work[5], work[6], work[7], work[8], work[9], work[10], work[11]
-    pos = np.empty(m, np.int64)
     for j in range(m):
         th[j] = _wrap(theta0[idx[j]])
         vv[j] = v0[idx[j]]
@@ -301,12 +272,22 @@ def classify_arrays(theta0: np.ndarray, v0: np.ndarray, params: ModelParams, fp:
                     max_iterations: int, tolerance: float, min_hop_s: float,
                     max_steps: int) -> tuple[np.ndarray, np.ndarray]:
     """(outcome int8, iterations int16) of flat float arrays, as ``classify_batch``."""
-    outcome = np.empty(theta0.size, dtype=np.int8)
-    iterations = np.empty(theta0.size, dtype=np.int16)
-    _classify(np.ascontiguousarray(theta0, dtype=float), np.ascontiguousarray(v0, dtype=float),
-              _constants(params, fp, tolerance, min_hop_s), max_iterations, max_steps,
-              outcome, iterations)
+    theta0 = np.ascontiguousarray(theta0, dtype=float)
+    v0 = np.ascontiguousarray(v0, dtype=float)
+    outcome, iterations, scratch = classify_scratch(theta0.size)
+    _classify(theta0, v0, _constants(params, fp, tolerance, min_hop_s), max_iterations,
+              max_steps, outcome, iterations, *scratch)
     return outcome, iterations
+
+
+def classify_entry(theta0, v0, c, n, max_iterations, max_steps, outcome, iterations, idx,
+                   work, pos):
+    """``_classify`` over raw pointers to n points (``native._ENTRY_ARGS``): the function
+    ``model.native`` compiles with ``numba.cfunc`` and loads without numba."""
+    _classify(numba.carray(theta0, (n,)), numba.carray(v0, (n,)),
+              numba.carray(c, (_N_CONSTANTS,)), max_iterations, max_steps,
+              numba.carray(outcome, (n,)), numba.carray(iterations, (n,)),
+              numba.carray(idx, (n,)), numba.carray(work, (12, n)), numba.carray(pos, (n,)))
 
 
 # -- the controlled map (``model.control.ControlledMap``, ``switch: impact``) -----------------

@@ -210,9 +210,10 @@ class PassiveMap:
     compiled_kernel = True
 
     def compiled_classification(self, theta0, v0, settings, max_steps: int):
-        """(outcome, iterations) of flat arrays by the compiled kernel (``model.compiled``),
-        the classification's arithmetic bit for bit."""
-        from .compiled import classify_arrays
+        """(outcome, iterations) of flat arrays by the compiled kernel (``model.compiled``,
+        loaded without numba where it can be: ``model.native``), the classification's
+        arithmetic bit for bit."""
+        from .native import classify_arrays
 
         return classify_arrays(theta0, v0, self.params, self.target, settings.max_iterations,
                                settings.tolerance, settings.min_hop_s, max_steps)

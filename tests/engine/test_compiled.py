@@ -142,9 +142,11 @@ def test_an_impact_s_new_phase_is_np_mod_of_theta_plus_hop(params):
 
 
 def test_auto_uses_the_compiled_kernel_unless_turned_off(monkeypatch):
+    from bounce_cli.model import native
+
     calls = []
-    original = compiled.classify_arrays
-    monkeypatch.setattr(compiled, "classify_arrays",
+    original = native.classify_arrays  # the machine code without numba, or numba's dispatcher
+    monkeypatch.setattr(native, "classify_arrays",
                         lambda *args: calls.append(1) or original(*args))
     theta, v = np.array([0.5, 1.0]), np.array([5.0, 6.0])
     classify_batch(theta, v, PARAMETERS[0])
@@ -167,9 +169,12 @@ def test_without_numba_the_numpy_kernel_runs(monkeypatch):
 
 def test_a_compiled_module_that_does_not_import_falls_back_to_numpy(monkeypatch):
     """numba may refuse the kernel's module (no writable cache directory, say): the numpy
-    kernel then runs, with the same results."""
+    kernel then runs, with the same results (where no machine code was saved before)."""
     import builtins
 
+    from bounce_cli.model import native
+
+    monkeypatch.setattr(native, "classifier", lambda: None)
     classify_module._compiled_module_imports.cache_clear()
     real_import = builtins.__import__
 
@@ -182,7 +187,7 @@ def test_a_compiled_module_that_does_not_import_falls_back_to_numpy(monkeypatch)
     try:
         assert not classify_module.compiled_kernel_available()
     finally:
-        monkeypatch.undo()
+        monkeypatch.setattr(builtins, "__import__", real_import)
         classify_module._compiled_module_imports.cache_clear()
     assert classify_module.compiled_kernel_available()
 
