@@ -137,10 +137,12 @@ def runs(times: list[float]) -> str:
     return f"min {min(times):.2f} s of {len(times)} ({', '.join(f'{t:.2f}' for t in times)})"
 
 
-def end_to_end(sizes: list[int], jobs: int, repeat: int, numpy_kernel: bool) -> None:
+def end_to_end(sizes: list[int], jobs: int, repeat: int, numpy_kernel: bool,
+               numba_dispatcher: bool = False) -> None:
     """``bounce basin`` end to end with 1 and ``jobs`` jobs (and, with ``numpy_kernel``, with
-    BOUNCE_KERNEL=numpy) against the plain kernel alone, runs interleaved (so that a busy
-    spell of a shared machine hits all of them alike)."""
+    BOUNCE_KERNEL=numpy; with ``numba_dispatcher``, BOUNCE_KERNEL=numba) against the plain
+    kernel alone, runs interleaved (so that a busy spell of a shared machine hits all of
+    them alike)."""
     for m in sizes:
         if not compiled_kernel_available():
             kernel = "numpy (numba missing)"
@@ -153,6 +155,9 @@ def end_to_end(sizes: list[int], jobs: int, repeat: int, numpy_kernel: bool) -> 
         variants = [(f"--jobs 1, {kernel} kernel", 1, "auto")]
         if jobs > 1:
             variants.append((f"--jobs {jobs}, {kernel} kernel", jobs, "auto"))
+        if numba_dispatcher and kernel == "compiled (numba)":
+            variants.append((f"--jobs {jobs}, BOUNCE_KERNEL=numba (numba's dispatcher, "
+                             "the route before model.native)", jobs, "numba"))
         if numpy_kernel:
             variants.append((f"--jobs {jobs}, BOUNCE_KERNEL=numpy", jobs, "numpy"))
         for _ in range(repeat):
@@ -181,6 +186,9 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3, help="repeats of each end-to-end timing")
     ap.add_argument("--numpy-kernel", action="store_true",
                     help="also time bounce basin end to end with BOUNCE_KERNEL=numpy")
+    ap.add_argument("--numba-dispatcher", action="store_true",
+                    help="also time bounce basin end to end with BOUNCE_KERNEL=numba (the "
+                         "kernel through numba's dispatcher, not its saved machine code)")
     args = ap.parse_args()
 
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
@@ -221,7 +229,7 @@ def main() -> None:
               f"{per_point * n / t1:,.0f}x")
     if args.end_to_end or args.scaling:
         sizes = [int(x) for x in args.scaling.split(",")] if args.scaling else [args.size]
-        end_to_end(sizes, args.jobs, args.repeat, args.numpy_kernel)
+        end_to_end(sizes, args.jobs, args.repeat, args.numpy_kernel, args.numba_dispatcher)
     if args.memory_size:
         memory_run(args.memory_size, args.jobs, args.memory_format)
 
