@@ -12,7 +12,7 @@ import sys
 from typing import NoReturn
 
 from ..runtime.interrupts import (GC_THRESHOLDS, Interrupted, install, interrupt_behind,
-                                  report, uninstall)
+                                  lasting_imports, report, uninstall)
 from .stdout import WatchedStdout
 
 
@@ -42,7 +42,8 @@ def main() -> None:
         install()
         gc.set_threshold(*GC_THRESHOLDS)
         watched = sys.stdout = WatchedStdout(sys.stdout)
-        from .commands import app
+        with lasting_imports():
+            from .commands import app
 
         try:
             app(prog_name="bounce")

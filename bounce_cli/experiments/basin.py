@@ -45,6 +45,7 @@ from ..model.maps import ImpactMap
 from ..model.linear import is_stable, stability
 from ..model.params import ModelParams
 from ..runtime.figure_files import DeferredFigure
+from ..runtime.interrupts import lasting_imports
 from .plotting import cell_extent, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
@@ -279,11 +280,12 @@ def import_output_libraries() -> None:
     classifies in threads that do not hold the GIL, so that the import costs no wall time
     on a machine with a core to spare, and before the run directory forks the processes
     that draw the figures (each would import ``matplotlib.figure`` again: 0.1 s)."""
-    import matplotlib.backends.backend_agg  # noqa: F401
-    import matplotlib.figure  # noqa: F401
-    import pandas  # noqa: F401
+    with lasting_imports():
+        import matplotlib.backends.backend_agg  # noqa: F401
+        import matplotlib.figure  # noqa: F401
+        import pandas  # noqa: F401
 
-    from . import plotting  # noqa: F401
+        from . import plotting  # noqa: F401
 
 
 def format_bytes(n: float) -> str:
