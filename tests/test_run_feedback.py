@@ -180,11 +180,11 @@ def test_small_grids_run_in_process_large_ones_on_the_pool(monkeypatch):
 def test_the_compiled_kernel_classifies_large_grids_in_threads(monkeypatch):
     pytest.importorskip("numba")
     monkeypatch.setenv("BOUNCE_KERNEL", "auto")
-    from bounce_cli.model import compiled
+    from bounce_cli.model import native
 
     calls = []
-    original = compiled.classify_arrays
-    monkeypatch.setattr(compiled, "classify_arrays",
+    original = native.classify_arrays  # the machine code without numba, or numba's dispatcher
+    monkeypatch.setattr(native, "classify_arrays",
                         lambda *args: calls.append(1) or original(*args))
     started = []
     real = parallel.Threads.__enter__
