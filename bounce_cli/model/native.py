@@ -328,27 +328,25 @@ def _check_in_this_process(obj_path: str, meta_path: str) -> None:
 def build_classifier() -> bool:
     """Compile ``compiled.classify_entry`` with numba as a C-callable function, check its
     object code in a fresh process (module docstring) and save it for ``classifier``.
-    Returns whether it is saved; a failed check marks the key unusable (numba's dispatcher
-    runs). Needs numba; about a second, once per key."""
+    Returns whether it is saved. Where it cannot be used (not an ELF object, numba refusing
+    the function, a failed check) the key is marked unusable, so that later runs neither
+    try again nor pay for the compilation: numba's dispatcher runs. Needs numba; about a
+    second, once per key."""
     key = cache_key()
     if key is None or classifier() is not None:
         return False
-    from numba import cfunc, types
-
+    if any(_paths(directory, key)[2].exists() for directory in cache_dirs()):
+        return False  # marked unusable
+    try:
+        code, meta = _compile_entry(key)
+    except Exception as exc:  # numba refused: a later numba may not; its key is another
+        _mark_unusable(key, f"numba could not compile the entry: {type(exc).__name__}: {exc}")
+        return False
+    if meta is None:
+        _mark_unusable(key, "not a 64-bit little-endian ELF object (Linux only)")
+        return False
     from . import compiled
 
-    signature = types.void(*(types.CPointer(getattr(types, t)) if k == "p" else getattr(types, t)
-                             for k, t in _ENTRY_ARGS))
-    options: dict[str, Any] = {"nopython": True, "nogil": True, "error_model": "numpy"}
-    with compiled.numba_without_blas():
-        entry: Any = cfunc(signature, **options)(compiled.classify_entry)
-    library = entry._library  # numba's CodeLibrary
-    code = library.serialize_using_object_code()[2][0]
-    undefined = undefined_symbols(code)
-    if undefined is None:  # not a 64-bit little-endian ELF object: numba's dispatcher runs
-        return False
-    meta = {"key": key, "symbol": entry.native_name, "undefined": undefined,
-            "sha256": hashlib.sha256(code).hexdigest()}
     expected = _classify_check_grids(compiled.classify_arrays)
     for directory in cache_dirs():
         obj_path, meta_path, unusable = _paths(directory, key)
@@ -369,6 +367,37 @@ def build_classifier() -> bool:
         classifier.cache_clear()
         return True
     return False
+
+
+def _compile_entry(key: str) -> tuple[bytes, dict | None]:
+    """(object code, metadata) of ``compiled.classify_entry`` compiled by numba as a cfunc;
+    metadata None where the object is not ELF (``undefined_symbols``)."""
+    from numba import cfunc, types
+
+    from . import compiled
+
+    signature = types.void(*(types.CPointer(getattr(types, t)) if k == "p" else getattr(types, t)
+                             for k, t in _ENTRY_ARGS))
+    options: dict[str, Any] = {"nopython": True, "nogil": True, "error_model": "numpy"}
+    with compiled.numba_without_blas():
+        entry: Any = cfunc(signature, **options)(compiled.classify_entry)
+    code = entry._library.serialize_using_object_code()[2][0]  # numba's CodeLibrary
+    undefined = undefined_symbols(code)
+    if undefined is None:
+        return code, None
+    return code, {"key": key, "symbol": entry.native_name, "undefined": undefined,
+                  "sha256": hashlib.sha256(code).hexdigest()}
+
+
+def _mark_unusable(key: str, reason: str) -> None:
+    """Mark the key unusable in the first cache directory that can be written."""
+    for directory in cache_dirs():
+        try:
+            directory.mkdir(parents=True, exist_ok=True)
+            _paths(directory, key)[2].write_text(reason + "\n")
+            return
+        except OSError:
+            continue
 
 
 def _verify(obj_path: Path, meta_path: Path, expected: str) -> tuple[bool, str]:

@@ -148,3 +148,37 @@ def _without_kernel_choice():
     import os
 
     return {k: v for k, v in os.environ.items() if k != "BOUNCE_KERNEL"}
+
+
+def test_where_the_object_cannot_be_used_the_key_is_marked_and_never_compiled_again(
+        monkeypatch, tmp_path):
+    """Not ELF (macOS, Windows) or numba refusing the entry: marked unusable once, so that a
+    later run neither compiles it again (a second of every basin's start-up) nor fails."""
+    monkeypatch.setattr(native, "cache_dirs", lambda: [tmp_path])
+    monkeypatch.delenv("BOUNCE_KERNEL", raising=False)
+    native.classifier.cache_clear()
+    key = native.cache_key()
+    marker = native._paths(tmp_path, key)[2]
+    compiles = []
+
+    def not_elf(key):
+        compiles.append(key)
+        return b"\xcf\xfa\xed\xfe", None  # a Mach-O object's magic
+
+    monkeypatch.setattr(native, "_compile_entry", not_elf)
+    try:
+        assert not native.build_classifier()
+        assert "ELF" in marker.read_text()
+        assert not native.build_classifier()  # marked: not compiled again
+        assert len(compiles) == 1
+        marker.unlink()
+
+        def refusing(key):
+            raise RuntimeError("numba refused")
+
+        monkeypatch.setattr(native, "_compile_entry", refusing)
+        assert not native.build_classifier()
+        assert "numba refused" in marker.read_text()
+        assert native.classifier() is None
+    finally:
+        native.classifier.cache_clear()
