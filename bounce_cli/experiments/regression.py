@@ -327,9 +327,15 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     trials, fit = frames["trials.csv"], frames["fit.csv"]
     fig, axes = new_figure(1, 1, width=7, height=5.2)
     ax = axes[0, 0]
-    x_max = float(np.nanmax(trials["tau_s"] ** 2)) * 1.08
-    xs = np.linspace(0.0, x_max, 50)
     has_condition = "condition" in trials.columns
+    # the axis spans the trials drawn: a condition without a line (one racket period) is
+    # neither fitted nor drawn, and would stretch it over nothing
+    drawn = (trials[trials["condition"].astype(str).isin(fit["condition"].astype(str))]
+             if has_condition else trials)
+    if "lost" in drawn.columns:
+        drawn = drawn[~drawn["lost"].astype(bool)]
+    x_max = float(np.nanmax((drawn if len(drawn) else trials)["tau_s"] ** 2)) * 1.08
+    xs = np.linspace(0.0, x_max, 50)
     colors = ["k", "tab:blue", "tab:red", "tab:green", "tab:purple", "tab:orange"]
     # a marker of its own per condition, each larger than the one before: conditions whose
     # trial means coincide (one racket design for both) stay visible, one around the other

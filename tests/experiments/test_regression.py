@@ -159,6 +159,23 @@ def test_one_condition_at_one_period_beside_a_spread_one_warns(tmp_path, cli):
     assert len(pd.read_csv(tmp_path / "o" / "trials.csv")) == 12
 
 
+def test_the_figure_spans_the_fitted_conditions_trials_only():
+    """A condition at one period beside a spread one is not fitted and not drawn: the x-axis
+    spans the drawn trials (a review: an unfitted condition at tau 1.5 s stretched the axis
+    to 2.4 s^2 over an empty right two thirds)."""
+    from bounce_cli.experiments.regression import draw
+
+    wide = np.linspace(0.5, 0.85, 6)
+    trials = pd.DataFrame({"condition": ["wide"] * 6 + ["narrow"] * 6,
+                           "tau_s": np.concatenate([wide, np.full(6, 1.5)])})
+    trials["a_r_m"] = 0.5 * trials["tau_s"] ** 2
+    fit = pd.DataFrame({"condition": ["wide"], "n": [6], "slope": [0.5], "intercept": [0.0],
+                        "r2": [1.0], "predicted_slope": [0.5], "mean_theta_deg": [35.0]})
+    figure = draw({"trials.csv": trials, "fit.csv": fit})["regression.png"]
+    x_high = figure.axes[0].get_xlim()[1]
+    assert 0.85**2 < x_high < 0.85**2 * 1.1
+
+
 def eq15_trials(tmp_path, alpha=None, g=None, name="trials.csv"):
     """Trials on eq. 15's line at 35 deg for alpha 0.6, g 9.5 (far from the bundled config's
     0.5 and 9.81), with ``alpha`` / ``g`` columns when given."""
