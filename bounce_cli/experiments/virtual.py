@@ -492,11 +492,11 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
     if config.racket == "mouse" or config.racket.startswith("lsl"):  # a person's racket
         options.record[RECORDED_LIVE] = True  # a rerun into --out needs --force
     figures = draw(frames)
-    caption_figures(figures, params, f"{len(kept)} trials x {config.trial_s:g} s, "
-                    f"{source.description}, seed {config.seed}")
+    lengths = trial_lengths(list(kept), short, config.trial_s)
+    caption_figures(figures, params, f"{lengths}, {source.description}, seed {config.seed}")
     stuck = sum(bool(i.stuck) for i in every_impact)
     summary = [
-        f"{len(kept)} trial(s) x {config.trial_s:g} s ({source.description}"
+        f"{lengths} ({source.description}"
         + (f"; visual gain {config.visual_gain:g}: the ball meets that racket x "
            f"{config.visual_gain:g}" if config.visual_gain != 1.0 else "") + "): "
         f"{len(every_impact)} impacts ({sum(bool(i.perturbed) for i in every_impact)} perturbed"
@@ -510,6 +510,21 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
         summary.append(latency_summary(latency.to_dict("records")) + " (latency.csv)")
     return ExperimentResult(frames=frames, figures=figures, summary=summary,
                             exit_code=128 + interrupted_by if interrupted_by else 0)
+
+
+def trial_lengths(kept: list[int], short: list[tuple[int, float]], trial_s: float) -> str:
+    """"3 trial(s) x 40 s", or, where a replayed recording ended before ``trial_s`` (``short``:
+    (trial, seconds)), how long the kept trials were: "2 trial(s) of 20.0 s (trial_s 40 s;
+    the racket's recording ended)"."""
+    cut = {n: d for n, d in short if n in kept}
+    if not cut:
+        return f"{len(kept)} trial(s) x {trial_s:g} s"
+    lengths = [cut.get(n, trial_s) for n in kept]
+    low, high = f"{min(lengths):.1f}", f"{max(lengths):.1f}"
+    ended = ("the racket's recording ended" if len(cut) == len(kept)
+             else f"{len(cut)} ended with the racket's recording")
+    return (f"{len(kept)} trial(s) of {low if low == high else f'{low}-{high}'} s "
+            f"(trial_s {trial_s:g} s; {ended})")
 
 
 def racket_keys(racket: str) -> tuple[str, str] | None:

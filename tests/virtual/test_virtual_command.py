@@ -390,8 +390,12 @@ def test_trials_the_source_or_the_launch_cut_short_are_said(tmp_path):
     sine.frames["recordings/s1_virtual_t1.csv"].to_csv(path, index=False)
     with pytest.warns(UserWarning, match=r"trial_s = 12 s, but 2 trial\(s\) ended with their "
                       r"racket .* trial 1 after 8\.0 s, trial 2 after 8\.0 s"):
-        bounce_cli.run("virtual", set={**HEADLESS, "trials": 2, "trial_s": 12.0,
-                                       "racket": f"replay:{path}"})
+        cut = bounce_cli.run("virtual", set={**HEADLESS, "trials": 2, "trial_s": 12.0,
+                                             "racket": f"replay:{path}"})
+    # the summary and the figures' caption say how long the trials were, not trial_s alone
+    # (a review: "2 trial(s) x 40 s" beside the warning that both ended at 20 s)
+    assert cut.summary[0].startswith("2 trial(s) of 8.0 s (trial_s 12 s; the racket's "
+                                     "recording ended) ("), cut.summary[0]
     with pytest.warns(UserWarning, match=r"no impact in trial\(s\) 1, 2 within trial_s = 1\.01"):
         empty = bounce_cli.run("virtual", set={**HEADLESS, "trials": 2, "trial_s": 1.01})
     assert empty.frames["impacts.csv"].empty
