@@ -351,6 +351,9 @@ def run(config: VirtualConfig, options: RunOptions) -> ExperimentResult:
 #: a source's trial may end this much before ``trial_s`` (its last sample interval) without
 #: a warning that it was shorter
 SHORT_TRIAL_SLACK_S = 0.05
+#: the same for a live source (a page, a stream), whose first sample may come a few frames
+#: into the trial: shorter by more, its trial ended early (a stream that died)
+LIVE_SHORT_TRIAL_SLACK_S = 0.5
 
 
 def _session(config: VirtualConfig, options: RunOptions, source, display) -> ExperimentResult:
@@ -370,6 +373,7 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
     interrupted_by = 0
     short: list[tuple[int, float]] = []  # (trial, s) the source ended before trial_s
     without_impact: list[int] = []
+    left_out: list[int] = []  # live trials without a racket: run.json names them
     racket_said = False  # a racket no person's: said after the first trial that shows it
     live = display is not None or getattr(source, "live", False)  # in real time: say so
     options.progress.start(config.trials, "virtual")
@@ -399,11 +403,13 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
                 # session goes on without it
                 options.warn(f"trial {n}: fewer than 4 racket samples came ({source.description}"
                              "): it is left out")
+                left_out.append(n)
                 finished = n
                 options.progress.advance(1)
                 continue
-            if not live and record.t[-1] - record.t[0] < config.trial_s - SHORT_TRIAL_SLACK_S:
-                short.append((n, float(record.t[-1] - record.t[0])))
+            span = float(record.t[-1] - record.t[0])
+            if span < config.trial_s - (LIVE_SHORT_TRIAL_SLACK_S if live else SHORT_TRIAL_SLACK_S):
+                short.append((n, span))
             if not record.impacts:
                 without_impact.append(n)
             frames[trial_name(config, n, "recordings")] = pd.DataFrame({
@@ -453,7 +459,13 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
     if not impacts:
         raise ConfigError(f"racket: {source.description}: no trial had racket samples (was the "
                           "page open, the stream sending?)")
-    if short:  # a replayed recording's trials shorter than the protocol's
+    if left_out:  # the session completed, without these: said where a script reads it
+        options.record["trials_left_out"] = left_out
+        options.record["trials_left_out_reason"] = "fewer than 4 racket samples came"
+    if short:  # run.json says which trials were shorter than the protocol's, and by what
+        options.record["trials_shorter"] = [{"trial": n, "recorded_s": round(d, 3)}
+                                            for n, d in short if n in kept]
+    if short and not live:  # a replayed recording's trials (a live source warned itself)
         options.warn(f"trial_s = {config.trial_s:g} s, but {len(short)} trial(s) ended with "
                      f"their racket ({source.description}): "
                      + ", ".join(f"trial {n} after {d:.1f} s" for n, d in short[:5])
@@ -492,7 +504,9 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
     if config.racket == "mouse" or config.racket.startswith("lsl"):  # a person's racket
         options.record[RECORDED_LIVE] = True  # a rerun into --out needs --force
     figures = draw(frames)
-    lengths = trial_lengths(list(kept), short, config.trial_s)
+    lengths = trial_lengths(list(kept), short, config.trial_s,
+                            "the racket's samples stopped" if live
+                            else "the racket's recording ended")
     caption_figures(figures, params, f"{lengths}, {source.description}, seed {config.seed}")
     stuck = sum(bool(i.stuck) for i in every_impact)
     summary = [
@@ -512,17 +526,17 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
                             exit_code=128 + interrupted_by if interrupted_by else 0)
 
 
-def trial_lengths(kept: list[int], short: list[tuple[int, float]], trial_s: float) -> str:
-    """"3 trial(s) x 40 s", or, where a replayed recording ended before ``trial_s`` (``short``:
-    (trial, seconds)), how long the kept trials were: "2 trial(s) of 20.0 s (trial_s 40 s;
-    the racket's recording ended)"."""
+def trial_lengths(kept: list[int], short: list[tuple[int, float]], trial_s: float,
+                  why: str) -> str:
+    """"3 trial(s) x 40 s", or, where trials ended before ``trial_s`` (``short``: (trial,
+    seconds)), how long the kept trials were and ``why``: "2 trial(s) of 20.0 s (trial_s
+    40 s; the racket's recording ended)"."""
     cut = {n: d for n, d in short if n in kept}
     if not cut:
         return f"{len(kept)} trial(s) x {trial_s:g} s"
     lengths = [cut.get(n, trial_s) for n in kept]
     low, high = f"{min(lengths):.1f}", f"{max(lengths):.1f}"
-    ended = ("the racket's recording ended" if len(cut) == len(kept)
-             else f"{len(cut)} ended with the racket's recording")
+    ended = why if len(cut) == len(kept) else f"{len(cut)} of them: {why}"
     return (f"{len(kept)} trial(s) of {low if low == high else f'{low}-{high}'} s "
             f"(trial_s {trial_s:g} s; {ended})")
 

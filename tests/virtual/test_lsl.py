@@ -3,6 +3,7 @@ sender's timestamps), ``bounce virtual --racket lsl:<name>`` consuming it, bound
 
 from __future__ import annotations
 
+import json
 import math
 import threading
 import time
@@ -76,3 +77,25 @@ def test_no_such_stream_is_one_line(cli, user_error, tmp_path):
     user_error(cli("virtual", "--headless", "--racket", "lsl:no-such-stream-here", "--set",
                    "lsl.resolve_timeout_s=0.5", "--out", tmp_path / "x"), "no stream")
     assert not (tmp_path / "x").exists()
+
+
+def test_a_stream_that_dies_ends_its_trial_and_run_json_says_how_long_it_was(tmp_path):
+    """A stream silent for lsl.give_up_s ends the trial with a warning; the summary and
+    run.json say how long the trial was (a review: run.json said "completed" and nothing
+    else, the summary "1 trial(s) x 8 s")."""
+    name = f"bounce-test-{uuid.uuid4().hex[:8]}"
+    outlet, thread = publish(name, [(0.0, 3.0, 0.0)])  # 3 s, then silence
+    out = tmp_path / "died"
+    start = time.monotonic()
+    with pytest.warns(UserWarning, match=r"no samples for 1 s: trial 1 ends there"):
+        run = bounce_cli.run("virtual", set={
+            "display.headless": True, "trials": 1, "trial_s": 8.0, "lsl.channel": 1,
+            "lsl.give_up_s": 1.0, "racket": f"lsl:{name}"}, out=out)
+    assert time.monotonic() - start < 30.0
+    thread.join(5.0)
+    assert run.summary[0].startswith("1 trial(s) of 3.0 s (trial_s 8 s; the racket's samples "
+                                     "stopped)"), run.summary[0]
+    record = json.loads((out / "run.json").read_text())
+    assert record["status"] == "completed"
+    assert record["trials_shorter"] == [{"trial": 1, "recorded_s": pytest.approx(3.0, abs=0.01)}]
+    del outlet

@@ -3,6 +3,7 @@ drawing it, the latency log, a reload mid-session, the mouse as the racket."""
 
 from __future__ import annotations
 
+import json
 import re
 import subprocess
 import sys
@@ -159,6 +160,9 @@ def test_a_mouse_that_never_moves_is_a_racket_at_rest_and_a_closed_page_a_left_o
     text = "".join(lines)
     assert process.returncode == 0, text
     assert "trial 2: fewer than 4 racket samples came" in text
+    # run.json says so too, beside "completed" (a script reading it saw a complete session)
+    record = json.loads((out / "run.json").read_text())
+    assert record["status"] == "completed" and record["trials_left_out"] == [2]
     recordings = sorted(p.name for p in (out / "recordings").iterdir())
     assert recordings == ["s1_virtual_t1.csv"]
     racket = pd.read_csv(out / "recordings" / recordings[0])["racket_x_m"].to_numpy()
