@@ -39,7 +39,6 @@ import builtins
 import functools
 import importlib.util
 import math
-import os
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Iterator, Literal
 
@@ -90,12 +89,10 @@ def compiled_kernel_available() -> bool:
     the kernel's machine code loads without numba (``model.native``) or the kernel's module
     imports (numba may refuse, e.g. with no writable cache directory: then the numpy kernel
     runs, with the same results)."""
-    if os.environ.get("BOUNCE_KERNEL", "auto").strip().lower() == "numpy":
-        return False
-    if importlib.util.find_spec("numba") is None:
-        return False
     from ..model import native
 
+    if native.kernel_choice() == "numpy" or importlib.util.find_spec("numba") is None:
+        return False
     return native.classifier() is not None or _compiled_module_imports()
 
 
@@ -122,7 +119,7 @@ def load_compiled_kernel() -> None:
     from ..model.compiled import load
 
     load()
-    if os.environ.get("BOUNCE_KERNEL", "auto").strip().lower() == "auto":
+    if native.kernel_choice() == "auto":
         native.build_classifier()
 
 

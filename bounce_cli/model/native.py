@@ -22,11 +22,14 @@ What keeps a wrong piece of machine code from running:
   versions, Python's, the host's triple, CPU name and features, and every ``NUMBA_*``
   variable: code compiled for another CPU, or by another numba, is never loaded;
 - its SHA-256 is checked before it is loaded (a truncated or altered file is not);
-- every symbol it refers to (recorded when it is built) must resolve here, or it is not
-  loaded (an unresolved symbol would abort the process inside LLVM);
+- every symbol it refers to (read from the checked object's own symbol table) must resolve
+  here, or it is not loaded (LLVM would leave an unresolved one empty, and the first call
+  would crash);
 - before it is first used, a fresh Python process without numba loads it and classifies a
   test grid, and its outcomes and impact counts must equal numba's, bit for bit; otherwise
-  the key is marked unusable and numba's dispatcher runs, now and in later runs.
+  the key is marked unusable and numba's dispatcher runs, now and in later runs;
+- anything failing on the way (a broken llvmlite, a damaged file, no home directory) makes
+  ``classifier`` return None: numba's dispatcher or numpy runs, as without this module.
 
 ``BOUNCE_KERNEL=numba`` keeps to numba's dispatcher; ``BOUNCE_KERNEL=numpy`` to numpy.
 """
@@ -44,6 +47,7 @@ import struct
 import subprocess
 import sys
 import tempfile
+import threading
 from pathlib import Path
 from typing import Any, Callable
 
@@ -87,8 +91,13 @@ def cache_dirs() -> list[Path]:
     numba_cache = os.environ.get("NUMBA_CACHE_DIR")
     if numba_cache:
         return [Path(numba_cache) / "bounce"]
-    user = Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache") / "bounce"
-    return [Path(__file__).parent / "__pycache__", user]
+    found = [Path(__file__).parent / "__pycache__"]
+    try:  # a user without a home directory (a container's bare uid): the package's only
+        found.append(Path(os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache")
+                     / "bounce")
+    except RuntimeError:
+        pass
+    return found
 
 
 def cache_key() -> str | None:
@@ -104,6 +113,10 @@ def cache_key() -> str | None:
                  ll.get_host_cpu_features().flatten(),
                  repr(sorted((k, v) for k, v in os.environ.items() if k.startswith("NUMBA_")))):
         digest.update(part.encode() + b"\0")
+    # numba's settings may also come from this file in the working directory (numba.core.config)
+    settings_file = Path(".numba_config.yaml")
+    digest.update(settings_file.read_bytes() if settings_file.is_file() else b"")
+    digest.update(b"\0")
     here = Path(__file__).parent
     for path in [here / name for name in _KERNEL_SOURCES] + [
             numba_dir / "_version.py", llvmlite_dir / "_version.py"]:
@@ -225,10 +238,16 @@ class NativeClassifier:
 
 def _load_object(obj_path: Path, meta: dict) -> NativeClassifier | None:
     """The classifier from an object file and its metadata, or None (see the module)."""
+    if not (isinstance(meta.get("symbol"), str) and meta["symbol"].isascii()
+            and isinstance(meta.get("undefined"), list)):
+        return None
     code = obj_path.read_bytes()
     if hashlib.sha256(code).hexdigest() != meta.get("sha256"):
         return None
-    addresses = _symbol_addresses(list(meta["undefined"]))
+    undefined = undefined_symbols(code)  # from the checked bytes, not the metadata's word
+    if undefined is None or undefined != meta["undefined"]:
+        return None
+    addresses = _symbol_addresses(undefined)
     if addresses is None:
         return None
     import llvmlite.binding as ll
@@ -247,29 +266,59 @@ def _load_object(obj_path: Path, meta: dict) -> NativeClassifier | None:
     return NativeClassifier(address, engine) if address else None
 
 
-@functools.lru_cache(maxsize=None)
 def classifier() -> NativeClassifier | None:
     """The classifier's machine code saved by ``build_classifier``, loaded without numba, or
-    None (not built yet for this key, marked unusable, ``BOUNCE_KERNEL`` not ``auto``)."""
-    if os.environ.get("BOUNCE_KERNEL", "auto").strip().lower() != "auto":
+    None (not built yet for this key, marked unusable, ``BOUNCE_KERNEL`` not ``auto``, or
+    anything on the way failing: a broken llvmlite, a damaged file, no home directory; the
+    caller then runs numba's dispatcher or numpy, as without this module). Loaded once per
+    process, by whichever thread asks first."""
+    with _LOAD_LOCK:
+        return _classifier_once()
+
+
+_LOAD_LOCK = threading.Lock()
+
+
+@functools.lru_cache(maxsize=None)
+def _classifier_once() -> NativeClassifier | None:
+    if kernel_choice() != "auto":
         return None
-    key = cache_key()
-    if key is None:
-        return None
-    for directory in cache_dirs():
-        obj_path, meta_path, unusable = _paths(directory, key)
-        if unusable.exists():
+    try:
+        key = cache_key()
+        if key is None:
             return None
-        try:
-            meta = json.loads(meta_path.read_text())
-        except (OSError, ValueError):
-            continue
-        if meta.get("key") == key:
-            try:
-                return _load_object(obj_path, meta)
-            except (OSError, KeyError, TypeError, RuntimeError):  # a damaged metadata file
+        for directory in cache_dirs():
+            obj_path, meta_path, unusable = _paths(directory, key)
+            if unusable.exists():
                 return None
+            try:
+                meta = json.loads(meta_path.read_text())
+                loaded = (_load_object(obj_path, meta)
+                          if isinstance(meta, dict) and meta.get("key") == key else None)
+            except Exception:  # a damaged file here: the next directory may hold a good one
+                loaded = None
+            if loaded is not None:
+                return loaded
+    except Exception:
+        return None
     return None
+
+
+#: ``BOUNCE_KERNEL``'s values: the basin kernel's route
+KERNEL_CHOICES = ("auto", "numba", "numpy")
+
+
+def kernel_choice() -> str:
+    """``BOUNCE_KERNEL``: "auto" (unset or empty: the saved machine code, else numba's
+    dispatcher, else numpy), "numba" (numba's dispatcher) or "numpy" (numpy's code); any
+    other value is a ConfigError."""
+    value = os.environ.get("BOUNCE_KERNEL", "").strip().lower() or "auto"
+    if value not in KERNEL_CHOICES:
+        from ..errors import ConfigError
+
+        raise ConfigError(f"environment variable BOUNCE_KERNEL={os.environ['BOUNCE_KERNEL']!r}: "
+                          f"expected one of {', '.join(KERNEL_CHOICES)}")
+    return value
 
 
 def classify_arrays(theta0: np.ndarray, v0: np.ndarray, params: ModelParams, fp: FixedPoint,
@@ -329,44 +378,81 @@ def build_classifier() -> bool:
     """Compile ``compiled.classify_entry`` with numba as a C-callable function, check its
     object code in a fresh process (module docstring) and save it for ``classifier``.
     Returns whether it is saved. Where it cannot be used (not an ELF object, numba refusing
-    the function, a failed check) the key is marked unusable, so that later runs neither
-    try again nor pay for the compilation: numba's dispatcher runs. Needs numba; about a
-    second, once per key."""
-    key = cache_key()
+    the function, a failed check) the key is marked unusable (``classify-<key>.unusable``
+    in the cache directory, with the reason; delete it to try again), so that later runs
+    neither try again nor pay for the compilation: numba's dispatcher runs. Where no cache
+    directory can be written nothing is compiled. Never raises: this only saves time. Needs
+    numba; about a second, once per key."""
+    try:
+        return _build(cache_key())
+    except Exception:
+        return False
+
+
+def _build(key: str | None) -> bool:
     if key is None or classifier() is not None:
         return False
     if any(_paths(directory, key)[2].exists() for directory in cache_dirs()):
         return False  # marked unusable
+    directory = _writable_cache_dir()
+    if directory is None:
+        return False
+    obj_path, meta_path, unusable = _paths(directory, key)
     try:
         code, meta = _compile_entry(key)
     except Exception as exc:  # numba refused: a later numba may not; its key is another
-        _mark_unusable(key, f"numba could not compile the entry: {type(exc).__name__}: {exc}")
+        unusable.write_text(f"numba could not compile the entry: {type(exc).__name__}: {exc}\n")
         return False
     if meta is None:
-        _mark_unusable(key, "not a 64-bit little-endian ELF object (Linux only)")
+        unusable.write_text("not a 64-bit little-endian ELF object (Linux only)\n")
         return False
     from . import compiled
 
     expected = _classify_check_grids(compiled.classify_arrays)
+    _remove_stale_staging(directory)
+    with tempfile.TemporaryDirectory(dir=directory, prefix=_STAGING) as staging:
+        tmp_obj, tmp_meta = Path(staging) / "k.o", Path(staging) / "k.json"
+        tmp_obj.write_bytes(code)
+        tmp_meta.write_text(json.dumps(meta))
+        ok, reason = _verify(tmp_obj, tmp_meta, expected)
+        if ok is None:  # the check could not run here (another bounce_cli): try next time
+            return False
+        if not ok:
+            unusable.write_text(reason + "\n")
+            return False
+        os.replace(tmp_obj, obj_path)
+        os.replace(tmp_meta, meta_path)  # last: the object is complete before it
+    _classifier_once.cache_clear()
+    return True
+
+
+#: the prefix of a build's temporary folder in the cache directory
+_STAGING = "classify-staging-"
+
+
+def _writable_cache_dir() -> Path | None:
+    """The first cache directory this process can write (created if missing), or None."""
     for directory in cache_dirs():
-        obj_path, meta_path, unusable = _paths(directory, key)
         try:
             directory.mkdir(parents=True, exist_ok=True)
-            with tempfile.TemporaryDirectory(dir=directory) as staging:
-                tmp_obj, tmp_meta = Path(staging) / "k.o", Path(staging) / "k.json"
-                tmp_obj.write_bytes(code)
-                tmp_meta.write_text(json.dumps(meta))
-                ok, reason = _verify(tmp_obj, tmp_meta, expected)
-                if not ok:
-                    unusable.write_text(reason + "\n")
-                    return False
-                os.replace(tmp_obj, obj_path)
-                os.replace(tmp_meta, meta_path)  # last: the object is complete before it
+            with tempfile.TemporaryFile(dir=directory):
+                return directory
         except OSError:
-            continue  # not writable: the next directory
-        classifier.cache_clear()
-        return True
-    return False
+            continue
+    return None
+
+
+def _remove_stale_staging(directory: Path) -> None:
+    """Temporary folders of builds killed an hour or more ago (SIGKILL leaves them)."""
+    import shutil
+    import time
+
+    for folder in directory.glob(_STAGING + "*"):
+        try:
+            if time.time() - folder.stat().st_mtime > 3600:
+                shutil.rmtree(folder, ignore_errors=True)
+        except OSError:
+            pass
 
 
 def _compile_entry(key: str) -> tuple[bytes, dict | None]:
@@ -389,31 +475,32 @@ def _compile_entry(key: str) -> tuple[bytes, dict | None]:
                   "sha256": hashlib.sha256(code).hexdigest()}
 
 
-def _mark_unusable(key: str, reason: str) -> None:
-    """Mark the key unusable in the first cache directory that can be written."""
-    for directory in cache_dirs():
-        try:
-            directory.mkdir(parents=True, exist_ok=True)
-            _paths(directory, key)[2].write_text(reason + "\n")
-            return
-        except OSError:
-            continue
+#: the check's child: isolated (``-I``: neither the working directory nor PYTHONPATH on its
+#: path, which could hold another bounce_cli or shadow the standard library), with this
+#: bounce_cli's folder added where the installation does not hold it already
+_CHECK = ("import sys\n"
+          "root = sys.argv[1]\n"
+          "if root not in sys.path:\n"
+          "    sys.path.insert(0, root)\n"
+          "from bounce_cli.model import native\n"
+          "print(native.__file__)\n"
+          "native._check_in_this_process(sys.argv[2], sys.argv[3])\n")
 
 
-def _verify(obj_path: Path, meta_path: Path, expected: str) -> tuple[bool, str]:
-    """(passed, reason) of the object's check in a fresh Python process."""
-    command = [sys.executable, "-c",
-               "import sys; from bounce_cli.model.native import _check_in_this_process; "
-               "_check_in_this_process(sys.argv[1], sys.argv[2])", str(obj_path), str(meta_path)]
-    env = {k: v for k, v in os.environ.items() if k != "PYTHONSTARTUP"}
-    package_root = str(Path(__file__).resolve().parents[2])  # this bounce_cli, not another
-    env["PYTHONPATH"] = os.pathsep.join(filter(None, [package_root, env.get("PYTHONPATH")]))
+def _verify(obj_path: Path, meta_path: Path, expected: str) -> tuple[bool | None, str]:
+    """(passed, reason) of the object's check in a fresh Python process; passed is None
+    where the child imported another bounce_cli than this one (nothing is decided)."""
+    root = str(Path(__file__).resolve().parents[2])
+    command = [sys.executable, "-I", "-c", _CHECK, root, str(obj_path), str(meta_path)]
     try:
-        done = subprocess.run(command, capture_output=True, text=True, timeout=120, env=env)
+        done = subprocess.run(command, capture_output=True, text=True, timeout=120)
     except subprocess.TimeoutExpired:
         return False, "the check timed out"
     if done.returncode != 0:
         return False, f"the check failed (exit {done.returncode}): {done.stderr.strip()[-300:]}"
-    if done.stdout.strip() != expected:
+    where, _, result = done.stdout.strip().partition("\n")
+    if Path(where).resolve() != Path(__file__).resolve():
+        return None, f"the check imported {where}"
+    if result.strip() != expected:
         return False, "the check's outcomes differ from numba's"
     return True, ""
