@@ -47,6 +47,14 @@ def built(tmp_path_factory):
     return loaded, folder, obj, meta, unusable
 
 
+def _fresh_load() -> bool:
+    native._classifier_once.cache_clear()
+    try:
+        return native.classifier() is not None
+    finally:
+        native._classifier_once.cache_clear()
+
+
 @pytest.mark.parametrize("params", PARAMETERS, ids=["fig4", "dead", "large", "slow"])
 def test_the_machine_code_classifies_as_numba_and_numpy(built, params):
     loaded = built[0]
@@ -83,14 +91,7 @@ def test_a_changed_file_another_key_or_a_mark_keeps_the_object_from_loading(buil
     monkeypatch.setattr(native, "cache_dirs", lambda: [tmp_path])
     monkeypatch.delenv("BOUNCE_KERNEL", raising=False)
     copy_obj, copy_meta, copy_unusable = native._paths(tmp_path, native.cache_key())
-
-    def loads() -> bool:
-        native._classifier_once.cache_clear()
-        try:
-            return native.classifier() is not None
-        finally:
-            native._classifier_once.cache_clear()
-
+    loads = _fresh_load
     copy_obj.write_bytes(obj.read_bytes())
     copy_meta.write_text(meta.read_text())
     assert loads()
@@ -181,14 +182,6 @@ def test_where_the_object_cannot_be_used_the_key_is_marked_and_never_compiled_ag
         assert not native.build_classifier()
         assert "numba refused" in marker.read_text()
         assert native.classifier() is None
-    finally:
-        native._classifier_once.cache_clear()
-
-
-def _fresh_load() -> bool:
-    native._classifier_once.cache_clear()
-    try:
-        return native.classifier() is not None
     finally:
         native._classifier_once.cache_clear()
 
