@@ -502,3 +502,38 @@ def test_the_group_impulse_figure_shows_the_racket_in_ms_and_mm():
     assert period.get_ylabel().endswith("(ms)") and amplitude.get_ylabel().endswith("(mm)")
     assert period.get_ylim()[1] > 100.0  # 115.5 ms
     assert amplitude.get_ylim() == pytest.approx((-0.99, 1.01), abs=0.02)  # +-1 mm floor
+
+
+@pytest.mark.parametrize("case", ["codes", "counts", "one_count", "negative", "wide"])
+def test_cell_colours_are_the_colormap_s_bytes(case):
+    """``plotting.cell_colours`` colours integer cells through a table: the same bytes as
+    the colormap of the whole grid (basin.png's codes through a BoundaryNorm, including
+    pandas' -1; basin_iterations.png's counts through a Normalize, masked cells after)."""
+    from matplotlib import colormaps
+    from matplotlib.cm import ScalarMappable
+    from matplotlib.colors import BoundaryNorm, ListedColormap, Normalize
+
+    from bounce_cli.experiments.plotting import cell_colours
+
+    rng = np.random.default_rng(4)
+    if case in ("codes", "negative"):
+        cmap = ListedColormap(["white", "0.6", "black", "red", "tab:blue", "tab:green"])
+        norm = BoundaryNorm(np.arange(7) - 0.5, cmap.N)
+        values = rng.integers(-1 if case == "negative" else 0, 6, (300, 200)).astype(np.int8)
+        expected = cmap(norm(values), bytes=True)
+        got = cell_colours(values, lambda v: cmap(norm(v), bytes=True))
+    else:
+        high = {"counts": 200, "one_count": 7, "wide": 100_000}[case]
+        values = (np.full((300, 200), 7) if case == "one_count"
+                  else rng.integers(0, high, (300, 200))).astype(np.int64)
+        mask = rng.random(values.shape) < 0.2
+        low, top = float(values[~mask].min()), float(values[~mask].max())
+        one = low == top
+        scale = ScalarMappable(Normalize(low - 0.5 * one, top + 0.5 * one),
+                               colormaps["viridis"])
+        expected = scale.to_rgba(np.ma.masked_array(values.astype(float), mask=mask),
+                                 bytes=True)
+        got = cell_colours(values, lambda v: scale.to_rgba(v.astype(float), bytes=True))
+        got[mask] = scale.to_rgba(np.ma.masked_array([0.0], mask=[True]), bytes=True)[0]
+    assert got.dtype == expected.dtype
+    np.testing.assert_array_equal(got, expected)

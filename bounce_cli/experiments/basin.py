@@ -46,7 +46,7 @@ from ..model.linear import is_stable, stability
 from ..model.params import ModelParams
 from ..runtime.figure_files import DeferredFigure
 from ..runtime.interrupts import lasting_imports
-from .plotting import cell_extent, publication_style
+from .plotting import cell_colours, cell_extent, publication_style
 from .base import Experiment, ExperimentResult, RunOptions
 
 if TYPE_CHECKING:
@@ -481,8 +481,8 @@ def _outcome_figure(grid: _Grid, codes, markers: pd.DataFrame, shown: list[str],
     norm = BoundaryNorm(np.arange(len(EXACT_OUTCOMES) + 1) - 0.5, cmap.N)
     # the cells' colours as bytes (the pixels the colormap gives, cmap(norm(code))): the
     # renderer then resamples bytes, not an array of floats (0.06 s less a figure)
-    ax.imshow(cmap(norm(image), bytes=True), origin="lower", extent=extent, aspect="auto",
-              interpolation="nearest")
+    ax.imshow(cell_colours(image, lambda codes: cmap(norm(codes), bytes=True)), origin="lower",
+              extent=extent, aspect="auto", interpolation="nearest")
     _draw_markers(ax, markers, extent)
     handles = [Patch(facecolor=OUTCOME_COLOURS[o], edgecolor="0.3", label=labels[o])
                for o in shown if not (exact and o == "sticking")]
@@ -506,19 +506,20 @@ def _iterations_figure(grid: _Grid, codes, basin: pd.DataFrame, markers: pd.Data
 
     extent = grid.extent
     iters = grid.image(basin["iterations"].to_numpy())
-    below = grid.image(codes == OUTCOMES.index("below_racket"))
+    below = grid.image(codes == OUTCOMES.index("below_racket")).astype(bool)
     fig2, axes2 = new_figure(width=7.5, height=6.2)
     ax2 = axes2[0, 0]
-    shaded = np.ma.masked_array(iters.astype(float), mask=below.astype(bool))
     # as bytes, as above: the colour bar's mappable (of the same colormap and range) stands
-    # for the image; masked cells (below the racket) transparent, the axes' black behind
-    counts = shaded.compressed()
+    # for the image; the cells below the racket transparent (the colormap's colour of a
+    # masked value), the axes' black behind
+    counts = iters[~below]
     low, high = (float(counts.min()), float(counts.max())) if counts.size else (0.0, 0.0)
     # one count everywhere (or none: every start below the racket): the bar spans that
     # count +- 1/2, its middle colour (as imshow draws a constant image), one tick
     one = low == high
     scale = ScalarMappable(Normalize(low - 0.5 * one, high + 0.5 * one), colormaps["viridis"])
-    cells = scale.to_rgba(shaded, bytes=True)
+    cells = cell_colours(iters, lambda n: scale.to_rgba(n.astype(float), bytes=True))
+    cells[below] = scale.to_rgba(np.ma.masked_array([0.0], mask=[True]), bytes=True)[0]
     ax2.imshow(cells, origin="lower", extent=extent, aspect="auto", interpolation="nearest")
     ax2.set_facecolor("black")
     bar = fig2.colorbar(scale, ax=ax2, label="impacts until classified")

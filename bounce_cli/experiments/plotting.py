@@ -203,6 +203,31 @@ def cell_extent(x, y) -> tuple[float, float, float, float]:
     return (float(x[0]) - hx, float(x[-1]) + hx, float(y[0]) - hy, float(y[-1]) + hy)
 
 
+#: at most this many distinct integers are coloured through a table (``cell_colours``)
+CELL_COLOUR_TABLE_MAX = 1 << 16
+
+
+def cell_colours(values: np.ndarray, colour: Callable[[np.ndarray], np.ndarray]) -> np.ndarray:
+    """``colour(values)`` (the RGBA bytes of each cell, e.g. a colormap of a norm) of an
+    integer array, through a table of the colours of ``values``' range: a colormap and a norm
+    map each value on its own, so the table gives the same bytes, without the float arrays
+    of the whole grid (a 1000 x 1000 basin figure: 0.02-0.05 s less a figure). Values
+    spanning more than ``CELL_COLOUR_TABLE_MAX`` are coloured directly."""
+    values = np.asarray(values)
+    if values.size == 0 or values.dtype.kind not in "iu":
+        return colour(values)
+    low, high = int(values.min()), int(values.max())
+    if high - low >= CELL_COLOUR_TABLE_MAX:
+        return colour(values)
+    table = colour(np.arange(low, high + 1).astype(values.dtype))
+    index = np.subtract(values, low, dtype=np.intp) if low else values
+    if table.dtype != np.uint8 or table.shape[-1] != 4:
+        return table[index]
+    # each cell's four bytes as one 32-bit word: one gather instead of four (10 x faster)
+    words = np.ascontiguousarray(table).view(np.uint32).ravel()
+    return words[index].view(np.uint8).reshape(*values.shape, 4)
+
+
 def centred_deg(theta_deg):
     """Phases in degrees mapped to [-180, 180): means and plots of phases near 0 stay
     meaningful (the table keeps [0, 360))."""
