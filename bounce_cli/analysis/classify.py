@@ -119,8 +119,7 @@ def load_compiled_kernel() -> None:
     from ..model.compiled import load
 
     load()
-    if native.kernel_choice() == "auto":
-        native.build_classifier()
+    native.build_classifier()
 
 
 def passive_map(params: ModelParams, *, require_fixed_point: bool = True) -> PassiveMap:

@@ -462,9 +462,10 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
     if left_out:  # the session completed, without these: said where a script reads it
         options.record["trials_left_out"] = left_out
         options.record["trials_left_out_reason"] = "fewer than 4 racket samples came"
+    short = [(n, d) for n, d in short if n in kept]  # an interrupted trial is not kept
     if short:  # run.json says which trials were shorter than the protocol's, and by what
         options.record["trials_shorter"] = [{"trial": n, "recorded_s": round(d, 3)}
-                                            for n, d in short if n in kept]
+                                            for n, d in short]
     if short and not live:  # a replayed recording's trials (a live source warned itself)
         options.warn(f"trial_s = {config.trial_s:g} s, but {len(short)} trial(s) ended with "
                      f"their racket ({source.description}): "
@@ -528,10 +529,10 @@ def _session(config: VirtualConfig, options: RunOptions, source, display) -> Exp
 
 def trial_lengths(kept: list[int], short: list[tuple[int, float]], trial_s: float,
                   why: str) -> str:
-    """"3 trial(s) x 40 s", or, where trials ended before ``trial_s`` (``short``: (trial,
-    seconds)), how long the kept trials were and ``why``: "2 trial(s) of 20.0 s (trial_s
+    """"3 trial(s) x 40 s", or, where kept trials ended before ``trial_s`` (``short``:
+    (trial, seconds)), how long they were and ``why``: "2 trial(s) of 20.0 s (trial_s
     40 s; the racket's recording ended)"."""
-    cut = {n: d for n, d in short if n in kept}
+    cut = dict(short)
     if not cut:
         return f"{len(kept)} trial(s) x {trial_s:g} s"
     lengths = [cut.get(n, trial_s) for n in kept]

@@ -51,7 +51,7 @@ from numba.core import codegen as numba_codegen, config as numba_config
 from .kernel_arrays import (  # noqa: F401  (the indices: globals of the loops below)
     _A, _A_3, _ALPHA, _AW, _BOUND, _G, _G_ALPHA_W, _MIN_HOP, _N_CONSTANTS, _NEG_G_W2,
     _NEG_G_WW, _TH_FP, _TOL, _TWO_A, _TWO_BOUND, _TWO_W_SQ, _V_COEF, _V_FP, _W, _W_SQ,
-    classify_scratch, flight_constants, solver_constants as _constants,
+    classify_scratch, flight_constants, kernel_inputs, solver_constants as _constants,
 )
 from .impact import LAST_STEP_LEVEL, POLISH_LIMIT, ROUNDING_LEVEL, STEP_FLOOR
 from .params import FixedPoint, ModelParams
@@ -272,11 +272,9 @@ def classify_arrays(theta0: np.ndarray, v0: np.ndarray, params: ModelParams, fp:
                     max_iterations: int, tolerance: float, min_hop_s: float,
                     max_steps: int) -> tuple[np.ndarray, np.ndarray]:
     """(outcome int8, iterations int16) of flat float arrays, as ``classify_batch``."""
-    theta0 = np.ascontiguousarray(theta0, dtype=float)
-    v0 = np.ascontiguousarray(v0, dtype=float)
+    theta0, v0, constants = kernel_inputs(theta0, v0, params, fp, tolerance, min_hop_s)
     outcome, iterations, scratch = classify_scratch(theta0.size)
-    _classify(theta0, v0, _constants(params, fp, tolerance, min_hop_s), max_iterations,
-              max_steps, outcome, iterations, *scratch)
+    _classify(theta0, v0, constants, max_iterations, max_steps, outcome, iterations, *scratch)
     return outcome, iterations
 
 

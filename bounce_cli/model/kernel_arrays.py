@@ -74,3 +74,11 @@ def classify_scratch(n: int) -> tuple[np.ndarray, np.ndarray, tuple[np.ndarray, 
     rows beyond the points that fly are never written."""
     return (np.empty(n, np.int8), np.empty(n, np.int16),
             (np.empty(n, np.int64), np.empty((12, n)), np.empty(n, np.int64)))
+
+
+def kernel_inputs(theta0, v0, params: ModelParams, fp: FixedPoint, tolerance: float,
+                  min_hop: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``compiled._classify``'s inputs: the starts as contiguous float64 arrays and the
+    constants (``solver_constants``)."""
+    return (np.ascontiguousarray(theta0, dtype=float), np.ascontiguousarray(v0, dtype=float),
+            solver_constants(params, fp, tolerance, min_hop))

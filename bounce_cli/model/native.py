@@ -53,7 +53,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from .kernel_arrays import classify_scratch, solver_constants
+from .kernel_arrays import classify_scratch, kernel_inputs, solver_constants
 from .params import FixedPoint, ModelParams
 
 #: the entry's arguments (``compiled.classify_entry``): (ctypes type, numba type name)
@@ -288,19 +288,26 @@ def _classifier_once() -> NativeClassifier | None:
         if key is None:
             return None
         for directory in cache_dirs():
-            obj_path, meta_path, unusable = _paths(directory, key)
-            if unusable.exists():
+            if _paths(directory, key)[2].exists():  # marked unusable
                 return None
-            try:
-                meta = json.loads(meta_path.read_text())
-                loaded = (_load_object(obj_path, meta)
-                          if isinstance(meta, dict) and meta.get("key") == key else None)
-            except Exception:  # a damaged file here: the next directory may hold a good one
-                loaded = None
+            loaded = _load_from(directory, key)
             if loaded is not None:
                 return loaded
     except Exception:
-        return None
+        pass
+    return None
+
+
+def _load_from(directory: Path, key: str) -> NativeClassifier | None:
+    """The classifier saved in one cache directory for ``key``, or None (none there, or a
+    damaged file: the next directory may hold a good one)."""
+    obj_path, meta_path, _ = _paths(directory, key)
+    try:
+        meta = json.loads(meta_path.read_text())
+        if isinstance(meta, dict) and meta.get("key") == key:
+            return _load_object(obj_path, meta)
+    except Exception:
+        pass
     return None
 
 
@@ -333,9 +340,8 @@ def classify_arrays(theta0: np.ndarray, v0: np.ndarray, params: ModelParams, fp:
 
         return by_numba(theta0, v0, params, fp, max_iterations, tolerance, min_hop_s,
                         max_steps)
-    return native(np.ascontiguousarray(theta0, dtype=float),
-                  np.ascontiguousarray(v0, dtype=float),
-                  solver_constants(params, fp, tolerance, min_hop_s), max_iterations, max_steps)
+    return native(*kernel_inputs(theta0, v0, params, fp, tolerance, min_hop_s),
+                  max_iterations, max_steps)
 
 
 def _check_grid(model: tuple[float, float, float, float]):
@@ -390,7 +396,7 @@ def build_classifier() -> bool:
 
 
 def _build(key: str | None) -> bool:
-    if key is None or classifier() is not None:
+    if key is None or kernel_choice() != "auto" or classifier() is not None:
         return False
     if any(_paths(directory, key)[2].exists() for directory in cache_dirs()):
         return False  # marked unusable
