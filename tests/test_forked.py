@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from bounce_cli.runtime.forked import ForkedCall, split_work
+from bounce_cli.runtime.forked import ForkedCall, ForkedLanes, split_work
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="fork: Linux")
 
@@ -74,3 +74,105 @@ def test_a_signal_during_the_fork_stops_the_child_before_start_raises(tmp_path, 
     assert call.pid == 0  # killed and reaped
     time.sleep(0.8)
     assert not late.exists()
+
+
+# -- ForkedLanes: tasks taken from a shared queue by forked lanes, results in task order ----
+def _square_where(i: int) -> tuple[int, int]:
+    import time
+
+    time.sleep(0.05)  # long enough for both lanes to take tasks
+    return i * i, os.getpid()
+
+
+def _no_children_left() -> bool:
+    try:
+        os.waitpid(-1, os.WNOHANG)
+    except ChildProcessError:
+        return True
+    return False
+
+
+def test_lanes_yield_every_result_in_task_order_from_two_other_processes():
+    with ForkedLanes(list(range(8)), _square_where, 2) as results:
+        out = list(results)
+    assert [square for square, _ in out] == [i * i for i in range(8)]
+    pids = {pid for _, pid in out}
+    assert len(pids) == 2 and os.getpid() not in pids  # both lanes worked, none here
+    assert _no_children_left()
+
+
+def test_one_lane_or_one_task_runs_here_in_order():
+    for tasks, lanes in (([3, 4], 1), ([5], 2)):
+        with ForkedLanes(tasks, _square_where, lanes) as results:
+            out = list(results)
+        assert [s for s, _ in out] == [t * t for t in tasks]
+        assert {pid for _, pid in out} == {os.getpid()}
+
+
+def test_a_task_s_exception_comes_in_its_turn_and_the_lanes_are_reaped():
+    def run(i):
+        if i == 2:
+            raise OSError(28, "No space left on device")
+        return _square_where(i)[0]
+
+    seen = []
+    with pytest.raises(OSError, match="No space left") as info:
+        with ForkedLanes(list(range(6)), run, 2) as results:
+            for value in results:
+                seen.append(value)
+    assert seen == [0, 1] and info.value.errno == 28
+    assert _no_children_left()
+
+
+def test_a_lane_that_dies_names_its_task():
+    def run(i):
+        if i == 1:
+            os._exit(3)
+        return i
+
+    with pytest.raises(OSError, match="the process running task 1 died"):
+        with ForkedLanes([0, 1, 2], run, 2) as results:
+            list(results)
+    assert _no_children_left()
+
+
+def test_leaving_early_stops_a_running_lane_whose_clean_up_runs(tmp_path):
+    """SIGTERM reaches the lane as bounce's Interrupted: its ``finally`` (a run's staged
+    files removed) runs before it exits, well within LANE_GRACE_S."""
+    import time
+
+    def run(i):
+        if i == 0:
+            return "quick"
+        try:
+            time.sleep(30)
+        finally:
+            (tmp_path / f"cleaned-{i}").write_text("yes")
+        return "never"
+
+    started = time.monotonic()
+    with ForkedLanes([0, 1, 2], run, 2) as results:
+        assert next(results) == "quick"
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and not _lane_sleeping():
+            time.sleep(0.02)
+    took = time.monotonic() - started
+    assert _no_children_left()
+    assert took < 5, f"{took:.1f} s to stop the lanes"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cleaned-1", "cleaned-2"]
+
+
+def _lane_sleeping() -> bool:
+    """Both lanes are in their tasks' sleep (state S with this process as parent)."""
+    import glob
+
+    lanes = []
+    for stat in glob.glob("/proc/[0-9]*/stat"):
+        try:
+            text = open(stat).read()
+        except OSError:
+            continue
+        fields = text[text.rindex(")") + 2:].split()
+        if int(fields[1]) == os.getpid():
+            lanes.append(fields[0])
+    return len(lanes) == 2 and all(state == "S" for state in lanes)

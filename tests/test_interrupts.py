@@ -312,6 +312,38 @@ def test_interrupt_while_threads_classify(tmp_path, previous_run, signum):
     assert not [p for p in tmp_path.rglob("*") if p.name.endswith(".tmp")], "temporary files"
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_interrupt_while_reproduce_runs_two_experiments_side_by_side(tmp_path, signum):
+    """`bounce reproduce --jobs 2` runs its experiments in two forked lanes: a terminal's
+    Ctrl-C reaches all three processes, ``kill`` only the parent, which passes it on. Either
+    way: the one line, 130 / 143 within the deadline, no process left, nothing staged left,
+    and none of the folders the run made."""
+    out = tmp_path / "new" / "results"
+    proc = subprocess.Popen(
+        bounce("reproduce", "bifurcation", "continuation", "control", "--jobs", "2",
+               "--out", str(out)),
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    watch = ProcessWatch(proc.pid)
+    lanes = lambda: [pid for pid in list(watch.seen) if stat_fields(pid)]  # noqa: E731
+    try:  # both lanes computing (their imports take about half a second of CPU)
+        wait_for(lambda: len(lanes()) >= 2 and all(cpu_seconds(pid) >= 1.0
+                                                   for pid in lanes()), 30, "two lanes")
+    except AssertionError:
+        os.killpg(proc.pid, signal.SIGKILL)
+        raise
+    assert proc.poll() is None, "finished before the interrupt: the moment was missed"
+    err, took = interrupt(proc, signum, "two lanes computing")
+    time.sleep(0.05)
+    watch.stop()
+    assert proc.returncode == 128 + signum, err
+    assert took < stop_deadline(), f"took {took:.2f} s to stop (load {os.getloadavg()[0]:.1f})"
+    assert [line for line in err.splitlines() if line.strip()] == ["bounce: interrupted"], err
+    assert watch.alive() == [], "processes left running"
+    assert not [p for p in tmp_path.rglob("*") if p.name.endswith(".tmp")], "temporary files"
+    assert not (tmp_path / "new").exists(), "the run left the output folders it created"
+
+
 #: a signal the moment bounce's handlers are in place (what the "imports" moment above hits
 #: now and then on a busy machine): at the end of ``install`` itself, at the garbage
 #: collector's settings, at the watched standard output

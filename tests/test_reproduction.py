@@ -335,3 +335,30 @@ def test_the_crosscheck_fit_at_the_rounding_floor_is_compared_within_its_stated_
     assert table_drift("other", "crosscheck.csv", nehalem, committed)  # the full tolerance
     off = committed.assign(radius_fd_jacobian=committed.radius_fd_jacobian * (1 + 1e-5))
     assert table_drift("stability", "crosscheck.csv", off, committed)
+
+
+def test_reproduce_runs_experiments_side_by_side_and_reports_them_in_order(tmp_path):
+    """--jobs 2: two lanes (runtime.forked.ForkedLanes) take the experiments, and each
+    experiment's lines (its header, summary, files written, status) come in the registry's
+    order, whichever lane finished first. An experiment that fails is reported in its turn
+    with its one line, and the run stops with its status."""
+    results = tmp_path / "results"
+    order = ["trajectory", "learning"]  # the registry's order
+    result = runner.invoke(app, ["reproduce", *reversed(order), "--jobs", "2",
+                                 "--out", str(results)])
+    assert result.exit_code == 0, result.output
+    assert [line.split(":")[0] for line in result.stdout.splitlines()
+            if line.split(":")[0] in order] == order
+    said = result.stderr
+    assert [line for line in said.splitlines() if line.startswith("bounce ")] == [
+        f"bounce {name}" for name in order]
+    assert said.index("bounce trajectory") < said.index(f"to {results}/trajectory/") \
+        < said.index("bounce learning") < said.index(f"to {results}/learning/")
+    assert (results / "README.md").is_file()
+
+    shutil.rmtree(results / "learning")
+    (results / "learning").write_text("in the way")  # learning cannot be written
+    result = runner.invoke(app, ["reproduce", *order, "--jobs", "2", "--out", str(results)])
+    assert result.exit_code == 2
+    assert "bounce: error: --out" in result.stderr and "learning" in result.stderr
+    assert [line.split(":")[0] for line in result.stdout.splitlines()] == ["trajectory"]

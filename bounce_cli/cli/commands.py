@@ -9,6 +9,8 @@ commands' some 900 annotations is compiled and evaluated anew (about 0.03 s of e
 start-up); written as objects they are made once, when the module is imported.
 """
 
+import contextlib
+import functools
 import inspect
 import json
 import math
@@ -67,6 +69,7 @@ def run_experiment(
     figure_formats: tuple[str, ...] = ("png",),
     dpi: int = FIGURE_DPI,
     agrees=None,
+    show_progress: bool = True,
 ) -> dict[str, str]:
     """``bounce <name>``: the run through ``execute`` (each figure once in each of
     ``figure_formats``, PNGs at ``dpi``), then its summary and the files written on stderr.
@@ -86,7 +89,8 @@ def run_experiment(
         done = execute(entry, config, overrides, out=out, force=force,
                        jobs=jobs or os.cpu_count() or 1, scheduler=scheduler, resume=resume,
                        figure_formats=figure_formats, dpi=dpi,
-                       progress=None if quiet else make_progress(), warn=warn, inform=inform,
+                       progress=make_progress() if show_progress and not quiet else None,
+                       warn=warn, inform=inform,
                        agrees=agrees)
     except BounceError as exc:
         fail(str(exc))
@@ -292,29 +296,53 @@ def reproduce_command(
     A table that agrees with the one in OUT within the reproduction tolerance is left as it
     is, and an experiment's figures are redrawn only when one of its tables changed beyond
     it (or a figure is missing); each experiment is reported identical, within tolerance or
-    changed (with the files).
+    changed (with the files). With --jobs N (default every core) N experiments run at a
+    time, each in a process of its own (Linux; elsewhere one after another); their lines
+    come in the order above.
     """
     from ..reproduction.claims import markdown_table, verify
     from ..runtime.artifacts import write_text_atomic
     from ..experiments.registry import reproduced
-    from ..reproduction.reproduce import experiment_status, gallery_markdown, tables_agree
+    from ..reproduction.reproduce import experiment_status, gallery_markdown
+    from ..runtime.forked import ForkedLanes
 
     known = [entry.name for entry in reproduced()]
     unknown = [name for name in names or [] if name not in known]
     if unknown:
         fail(f"reproduce {unknown[0]}: no such reproduced experiment (one of: "
              f"{', '.join(known)})")
-    for entry in reproduced():
-        if names and entry.name not in names:
-            continue
-        if not quiet:
-            stderr.print(f"[bold]bounce {entry.name}[/bold]")
-        comparison = run_experiment(
-            entry, config=None, overrides=[], out=out / entry.name, quiet=quiet, force=force,
-            print_config=False, jobs=jobs,
-            agrees=None if force_regen else tables_agree(entry.name))
-        if not quiet:
-            print(f"{entry.name}: {experiment_status(comparison)}", flush=True)
+    chosen = [entry for entry in reproduced() if not names or entry.name in names]
+    workers = jobs or os.cpu_count() or 1
+    lanes = min(workers, len(chosen))
+    run = functools.partial(reproduce_one, out=out, quiet=quiet, force=force,
+                            force_regen=force_regen, jobs=max(1, workers // max(lanes, 1)))
+    made = [folder for folder in (out, *out.absolute().parents) if not folder.exists()]
+    progress = None if quiet else make_progress()
+    try:
+        with ForkedLanes(chosen, run, lanes) as reports:
+            if progress is not None:  # after the fork: the lanes have no live display
+                progress.start(len(chosen), "bounce reproduce")
+            for entry, (printed, said, code, comparison) in zip(chosen, reports):
+                if progress is not None:
+                    progress.advance(1)
+                if not quiet:
+                    stderr.print(f"[bold]bounce {entry.name}[/bold]")
+                sys.stderr.write(said)
+                sys.stderr.flush()
+                sys.stdout.write(printed)
+                if code:
+                    raise typer.Exit(code)
+                if not quiet:
+                    print(f"{entry.name}: {experiment_status(comparison)}", flush=True)
+    except BaseException:
+        # each lane removed the folders its experiment made, but not the ones two shared
+        for folder in made:  # the deepest first; one that holds something stays
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        raise
+    finally:
+        if progress is not None:
+            progress.stop()
     verdicts = verify(out)
     gallery, text = out / "README.md", gallery_markdown(out, markdown_table(verdicts))
     same = gallery.is_file() and gallery.read_text(encoding="utf-8") == text
@@ -323,6 +351,31 @@ def reproduce_command(
     if not quiet:
         stderr.print(f"{'unchanged' if same else 'wrote'} {gallery}", highlight=False)
         print_verdicts(verdicts)
+
+
+def reproduce_one(entry: Entry, *, out: Path, quiet: bool, force: bool, force_regen: bool,
+                  jobs: int) -> tuple[str, str, int, dict[str, str]]:
+    """One experiment of ``bounce reproduce``, run as its own command would into
+    OUT/<name>/ with its output captured (a lane's, shown by the parent in the experiments'
+    order): what it printed on stdout and on stderr, its exit status (0, or the failure's,
+    whose one line is in the stderr text) and its comparison with the files there."""
+    import io
+
+    import click
+
+    from ..reproduction.reproduce import tables_agree
+
+    printed, said = io.StringIO(), io.StringIO()
+    code, comparison = 0, {}
+    with contextlib.redirect_stdout(printed), contextlib.redirect_stderr(said):
+        try:
+            comparison = run_experiment(
+                entry, config=None, overrides=[], out=out / entry.name, quiet=quiet,
+                force=force, print_config=False, jobs=jobs, show_progress=False,
+                agrees=None if force_regen else tables_agree(entry.name))
+        except (typer.Exit, click.exceptions.Exit) as exc:  # fail(): its line is in `said`
+            code = exc.exit_code
+    return printed.getvalue(), said.getvalue(), code, comparison
 
 
 def print_verdicts(verdicts) -> None:

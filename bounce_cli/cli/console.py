@@ -11,8 +11,8 @@ import os
 import sys
 from typing import NoReturn
 
-from ..runtime.interrupts import (GC_THRESHOLDS, Interrupted, install, interrupt_behind,
-                                  lasting_imports, report, uninstall)
+from ..runtime.interrupts import (GC_THRESHOLDS, Interrupted, exit_now, install,
+                                  interrupt_behind, lasting_imports, report, uninstall)
 from .stdout import WatchedStdout
 
 
@@ -75,10 +75,4 @@ def _leave_interrupted(exc: Interrupted) -> NoReturn:
     threads' tiles cancelled or waited for); the interpreter's teardown after an interrupt
     can meet a library interrupted half way through its import, which once aborted the
     process (SIGABRT instead of 143): leave without it."""
-    code = report(exc)
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except (OSError, ValueError):
-            pass
-    os._exit(code)
+    exit_now(report(exc))

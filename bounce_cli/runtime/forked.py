@@ -14,9 +14,10 @@ from __future__ import annotations
 
 import os
 import sys
-from typing import Any, Callable
+import typing
+from typing import Any, Callable, Iterator, Sequence
 
-from .interrupts import deferred
+from .interrupts import deferred, exit_now
 
 
 def can_fork() -> bool:
@@ -133,3 +134,172 @@ def split_work(items: list, run: Callable[[list], dict]) -> dict:
     finally:
         child.kill()
     return {**mine, **theirs}
+
+
+#: seconds a lane is given to clean up after SIGTERM (its run's staged files removed) before
+#: it is killed
+LANE_GRACE_S = 10.0
+
+
+class ForkedLanes:
+    """``run(task)`` for every task, each run in one of ``lanes`` forked children (*lanes*)
+    that take the next task from a shared queue as they become free, while this process
+    only waits and reorders: ``with ForkedLanes(tasks, run, lanes) as results`` forks the
+    lanes, and ``results`` yields each task's result in task order, as soon as every
+    earlier task's is in. For independent work of about one core each whose results are
+    small (an experiment: its files written by the lane, its report returned). A lane has
+    every module and object this process had when the block began (copy-on-write): start a
+    live display only inside the block.
+
+    Where :func:`can_fork` is false, or with one lane or one task, the tasks run here, one
+    after another, as ``results`` is read. Each result must pickle; an exception a task
+    raises is raised here, in task order. Signals: a lane keeps this process's handlers
+    (:mod:`.interrupts`), so a terminal's Ctrl-C, which reaches every process of the group,
+    stops each where it is, its clean-up done. When the block is left with lanes still
+    running (a task failed, an interrupt, the caller stopped reading), they are sent
+    SIGTERM, given ``LANE_GRACE_S`` seconds to clean up, then killed; every one is reaped.
+    """
+
+    def __init__(self, tasks: Sequence[Any], run: Callable[[Any], Any], lanes: int) -> None:
+        self.tasks, self.run = list(tasks), run
+        self.lanes = min(lanes, len(self.tasks)) if can_fork() else 1
+        self._children: dict[Any, int] = {}  # a lane's result pipe -> its pid
+
+    def __enter__(self) -> Iterator[Any]:
+        if self.lanes < 2:
+            return (self.run(task) for task in self.tasks)
+        import struct
+        from multiprocessing.connection import Connection
+
+        queue_read, queue_write = os.pipe()
+        try:
+            # every task's index, then end of input: a lane's read of 4 bytes takes one
+            # index whole (a pipe's reads are serialised), the next free lane the next one
+            os.write(queue_write, b"".join(struct.pack("<I", i)
+                                           for i in range(len(self.tasks))))
+            os.close(queue_write)
+            for stream in (sys.stdout, sys.stderr):  # not written twice by a lane
+                stream.flush()
+            parent = os.getpid()
+            for _ in range(self.lanes):
+                read_end, write_end = os.pipe()
+                with deferred():
+                    pid = os.fork()
+                    if pid == 0:
+                        os.close(read_end)
+                        _lane(self.tasks, self.run, queue_read, write_end, parent)
+                    os.close(write_end)
+                    self._children[Connection(read_end, writable=False)] = pid
+        except BaseException:
+            self._stop()
+            raise
+        finally:
+            os.close(queue_read)
+        return self._results()
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self._stop()
+
+    def _results(self) -> Iterator[Any]:
+        import pickle
+        from multiprocessing.connection import Connection, wait
+
+        running: dict[int, int] = {}  # a lane's pid -> the task it took
+        done: dict[int, tuple[bool, Any]] = {}
+        for next_out in range(len(self.tasks)):
+            while next_out not in done:
+                if not self._children:
+                    raise OSError(f"the lanes ended before task {next_out} was reported")
+                for ready in wait(list(self._children)):
+                    conn = typing.cast(Connection, ready)
+                    pid = self._children[conn]
+                    try:
+                        kind, index, *value = pickle.loads(conn.recv_bytes())
+                    except (EOFError, OSError):
+                        conn.close()
+                        del self._children[conn]
+                        _, status = os.waitpid(pid, 0)
+                        if pid in running:
+                            raise OSError(f"the process running task {running[pid]} died "
+                                          f"(wait status {status})") from None
+                        continue
+                    if kind == "started":
+                        running[pid] = index
+                    else:
+                        running.pop(pid, None)
+                        done[index] = (value[0], value[1])
+            ok, value = done.pop(next_out)
+            if not ok:
+                raise value
+            yield value
+
+    def _stop(self) -> None:
+        """SIGTERM to every lane still running, ``LANE_GRACE_S`` for their clean-up, then
+        SIGKILL; every one reaped."""
+        import signal
+        import time
+
+        pids = list(self._children.values())
+        for conn in self._children:
+            conn.close()
+        self._children.clear()
+        for pid in pids:
+            try:
+                os.kill(pid, signal.SIGTERM)
+            except OSError:
+                pass
+        deadline = time.monotonic() + LANE_GRACE_S
+        for pid in pids:
+            while True:
+                try:
+                    reaped, _ = os.waitpid(pid, os.WNOHANG)
+                except ChildProcessError:
+                    break
+                if reaped:
+                    break
+                if time.monotonic() > deadline:
+                    try:
+                        os.kill(pid, signal.SIGKILL)
+                        os.waitpid(pid, 0)
+                    except OSError:
+                        pass
+                    break
+                time.sleep(0.02)
+
+
+def _lane(tasks: Sequence[Any], run: Callable[[Any], Any], queue: int, results: int,
+          parent: int) -> None:
+    """A lane's loop: take an index, say so, run the task, send the result; at the end of
+    the queue, exit. Never returns (``os._exit``: none of the parent's clean-up)."""
+    import pickle
+    import struct
+    from multiprocessing.connection import Connection
+
+    code = 0
+    try:
+        from .interrupts import forked_child
+        from .parallel import _die_with_parent
+
+        forked_child()
+        _die_with_parent(parent)
+        out = Connection(results, readable=False)
+        while True:
+            taken = os.read(queue, 4)
+            if len(taken) < 4:
+                break
+            (index,) = struct.unpack("<I", taken)
+            out.send_bytes(pickle.dumps(("started", index)))
+            try:
+                reply = (True, run(tasks[index]))
+            except Exception as exc:
+                reply = (False, exc)
+            try:
+                data = pickle.dumps(("done", index, *reply))
+            except Exception:  # an exception (or result) that does not pickle
+                data = pickle.dumps(("done", index, False, RuntimeError(
+                    f"{type(reply[1]).__name__}: {reply[1]}")))
+            out.send_bytes(data)
+    except BaseException as exc:  # an interrupt (its clean-up done on the way), a lost pipe
+        code = getattr(exc, "exit_code", 1)
+    finally:
+        exit_now(code)

@@ -20,7 +20,7 @@ import contextlib
 import gc
 import signal
 import sys
-from typing import Any, Iterator
+from typing import Any, Iterator, NoReturn
 
 #: the signals a terminal, ``kill`` or a batch scheduler sends to stop a program
 SIGNALS = tuple(
@@ -72,6 +72,31 @@ def uninstall() -> None:
     traceback after the run's files were written)."""
     for signum in SIGNALS:
         signal.signal(signum, signal.SIG_DFL)
+
+
+def forked_child() -> None:
+    """In a child forked inside :func:`deferred` (its copy of this module's state holds the
+    parent's deferral, which the child never leaves): the handlers installed afresh and a
+    signal the child was sent meanwhile raised now."""
+    pending = _state["pending"]
+    install()
+    if pending is not None:
+        _state["raised"] = True
+        raise Interrupted(pending)
+
+
+def exit_now(code: int) -> NoReturn:
+    """Flush stdout and stderr (as far as they still can be) and end the process at once
+    with ``code``: no interpreter teardown, no clean-up of a parent's that a forked child
+    inherited."""
+    import os
+
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(code)
 
 
 def installed() -> bool:
