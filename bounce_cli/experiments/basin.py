@@ -279,13 +279,19 @@ def import_output_libraries() -> None:
     ``matplotlib.figure`` with its axes, about 0.6 s): done while the compiled kernel
     classifies in threads that do not hold the GIL, so that the import costs no wall time
     on a machine with a core to spare, and before the run directory forks the processes
-    that draw the figures (each would import ``matplotlib.figure`` again: 0.1 s)."""
+    that draw the figures (each would import ``matplotlib.figure`` again: 0.1 s). The
+    mathtext parser's grammar (the axis labels' ``$\\theta_0$``), which matplotlib builds at
+    its first use and keeps for the process, is built here too: 0.03 s once instead of in
+    each figure's process (about 0.09 s less CPU time in a 1000 x 1000 run)."""
     with lasting_imports():
         import matplotlib.backends.backend_agg  # noqa: F401
         import matplotlib.figure  # noqa: F401
         import pandas  # noqa: F401
+        from matplotlib.mathtext import MathTextParser
 
         from . import plotting  # noqa: F401
+
+        MathTextParser("agg").parse(r"$\theta_0$")
 
 
 def format_bytes(n: float) -> str:

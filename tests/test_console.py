@@ -1,0 +1,66 @@
+"""cli/console.py: the console script's way out (atexit handlers run, then an immediate
+exit with the command's status, except where a thread still runs) and the one command typer
+builds when the command line names it."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+
+def console(prelude: str, *args: str) -> subprocess.CompletedProcess:
+    """The console script in a fresh interpreter, ``prelude`` run before it."""
+    code = (f"import sys\n{prelude}\nsys.argv = ['bounce', *{list(args)!r}]\n"
+            "from bounce_cli.cli.console import main\nmain()\n")
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120)
+
+
+ATEXIT = ("import atexit\n"
+          "atexit.register(lambda: print('atexit handler ran', file=sys.stderr, flush=True))")
+
+
+@pytest.mark.parametrize(("args", "status"), [(("--version",), 0),
+                                              (("fixed-point", "--set", "model.alpha=7"), 2),
+                                              (("no-such-command",), 2)])
+def test_the_atexit_handlers_run_and_the_status_is_the_command_s(args, status):
+    done = console(ATEXIT, *args)
+    assert done.returncode == status, done.stderr
+    assert done.stderr.rstrip().endswith("atexit handler ran"), done.stderr
+    assert "Traceback" not in done.stderr
+
+
+def test_a_thread_still_running_is_waited_for_as_by_the_interpreter():
+    """A thread that is not a daemon (a library's, still at work when the command returns):
+    the interpreter's own exit, which waits for it, not the immediate one."""
+    prelude = ("import threading, time\n"
+               "def late():\n"
+               "    time.sleep(1.0)\n"
+               "    print('the thread finished', flush=True)\n"
+               "threading.Thread(target=late).start()")
+    done = console(prelude, "--version")
+    assert done.returncode == 0, done.stderr
+    from bounce_cli import __version__
+
+    assert done.stdout.splitlines() == [f"bounce {__version__}", "the thread finished"]
+
+
+def test_only_the_command_named_first_is_registered_while_the_app_runs():
+    from bounce_cli.cli.commands import app
+    from bounce_cli.cli.console import only_the_command_named
+
+    every = list(app.registered_commands)
+    with only_the_command_named(app, ["basin", "--quiet"]):
+        assert [c.name for c in app.registered_commands] == ["basin"]
+    assert app.registered_commands == every
+    for args in ([], ["--help"], ["basn"], ["--version", "basin"]):
+        with only_the_command_named(app, args):
+            assert app.registered_commands == every, args
+
+
+def test_a_misspelt_command_is_still_named_its_neighbour():
+    done = console("", "basn")
+    assert done.returncode == 2
+    assert "No such command 'basn'. Did you mean 'basin'?" in done.stderr
