@@ -64,3 +64,29 @@ def test_a_misspelt_command_is_still_named_its_neighbour():
     done = console("", "basn")
     assert done.returncode == 2
     assert "No such command 'basn'. Did you mean 'basin'?" in done.stderr
+
+
+@pytest.mark.parametrize(("given", "seen"), [({}, "16"),
+                                             ({"OPENBLAS_THREAD_TIMEOUT": "20"}, "20"),
+                                             ({"GOTO_THREAD_TIMEOUT": "12"}, "None")])
+def test_openblas_idle_threads_sleep_soon_unless_the_user_says_otherwise(given, seen):
+    """BLAS_THREAD_TIMEOUT: set before numpy is imported, where the user set neither name."""
+    import os
+
+    prelude = ("import atexit, os\n"
+               "atexit.register(lambda: print(os.environ.get('OPENBLAS_THREAD_TIMEOUT')))")
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("OPENBLAS_THREAD_TIMEOUT", "GOTO_THREAD_TIMEOUT")} | given
+    code = (f"import sys\n{prelude}\nsys.argv = ['bounce', 'fixed-point']\n"
+            "from bounce_cli.cli.console import main\nmain()\n")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=120, env=env)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines()[-1] == seen
+
+
+def test_numpy_is_not_imported_before_the_console_script_sets_the_timeout():
+    code = "import sys, bounce_cli.cli.console\nprint('numpy' in sys.modules)"
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60)
+    assert done.stdout.strip() == "False", done.stderr
