@@ -746,3 +746,31 @@ def test_a_rerun_that_keeps_its_figures_never_draws_them(tmp_path):
     again.add_figure("f.png", DeferredFigure(lambda: calls.append(1) or line_figure(1.0)))
     again.commit(agrees=lambda *args: True)
     assert again.comparison["f.png"] == "kept" and calls == []
+
+
+def test_the_git_commit_is_looked_up_once_in_the_background_and_after_a_fork(monkeypatch):
+    """git_commit: the thread started with a run's directory gives what git says; a child
+    forked while it looked up (a lane, a writer) looks it up itself, not a None."""
+    import os
+    import time
+
+    from bounce_cli.runtime.forked import ForkedCall, can_fork
+
+    calls = []
+
+    def slow_git():
+        calls.append(os.getpid())
+        time.sleep(0.3)
+        return "0123abcd"
+
+    monkeypatch.setattr(artifacts, "_git_rev_parse", slow_git)
+    lookup = artifacts._GitCommit()
+    lookup.start()
+    if can_fork():
+        assert ForkedCall(lookup).start().wait() == "0123abcd"  # forked mid-look-up
+    assert lookup() == "0123abcd" and lookup() == "0123abcd"
+    assert calls.count(os.getpid()) == 1  # once in this process
+
+
+def test_the_background_git_commit_is_what_git_says():
+    assert artifacts.git_commit() == artifacts._git_rev_parse()
