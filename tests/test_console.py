@@ -90,3 +90,31 @@ def test_numpy_is_not_imported_before_the_console_script_sets_the_timeout():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           timeout=60)
     assert done.stdout.strip() == "False", done.stderr
+
+
+HEAP_OR_MAPPING = """
+import ctypes, sys
+from bounce_cli.runtime.process import keep_freed_memory
+kept = keep_freed_memory()
+block = bytearray(8 * 1024 * 1024)  # above glibc's default 128 kB: a mapping of its own
+address = ctypes.addressof((ctypes.c_char * len(block)).from_buffer(block))
+heap = [line.split()[0] for line in open("/proc/self/maps") if line.rstrip().endswith("[heap]")]
+low, high = (int(x, 16) for x in heap[0].split("-"))
+print(kept, low <= address < high)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="glibc's mallopt: Linux")
+@pytest.mark.parametrize(("given", "seen"), [({}, "True True"),
+                                             ({"MALLOC_MMAP_THRESHOLD_": "131072"},
+                                              "False False")])
+def test_arrays_of_a_few_mb_come_from_the_heap_unless_the_user_set_malloc(given, seen):
+    """keep_freed_memory: an 8 MB block lies in the heap (memory that is reused, not
+    unmapped at its free), where the user did not set the allocator's thresholds."""
+    import os
+
+    env = {k: v for k, v in os.environ.items()
+           if not k.startswith("MALLOC_") and k != "GLIBC_TUNABLES"} | given
+    done = subprocess.run([sys.executable, "-c", HEAP_OR_MAPPING], capture_output=True,
+                          text=True, timeout=60, env=env)
+    assert done.stdout.strip() == seen, done.stderr

@@ -14,6 +14,7 @@ from typing import Iterator, NoReturn
 
 from ..runtime.interrupts import (GC_THRESHOLDS, Interrupted, exit_now, install,
                                   interrupt_behind, lasting_imports, report, uninstall)
+from ..runtime.process import tune
 from .stdout import WatchedStdout
 
 
@@ -35,20 +36,11 @@ def _report_stdout_failure(failure: OSError) -> int:
     return 2
 
 
-#: OpenBLAS's idle worker threads spin for 2^28 CPU cycles (about 0.1 s) before they sleep:
-#: at numpy's import, one core's tenth of a second for each thread but the first, for
-#: nothing (0.09 s of CPU on 2 cores; a 16-core machine's 15 threads 1.5 s). 2^16 cycles
-#: (some 20 microseconds) still keep a burst of calls warm. Set only where neither it nor
-#: its older name is set; no result depends on it (the threads' number and the work's split
-#: are unchanged). bounce's worker processes inherit it.
-BLAS_THREAD_TIMEOUT = {"OPENBLAS_THREAD_TIMEOUT": "16"}
-
-
 def main() -> None:
-    """The ``bounce`` console script: :func:`run` (handlers first, then the CLI's imports and
-    the command), then out with its exit status (:func:`leave`)."""
-    if not {"OPENBLAS_THREAD_TIMEOUT", "GOTO_THREAD_TIMEOUT"} & set(os.environ):
-        os.environ.update(BLAS_THREAD_TIMEOUT)
+    """The ``bounce`` console script: the process's settings (:func:`runtime.process.tune`),
+    :func:`run` (handlers first, then the CLI's imports and the command), then out with its
+    exit status (:func:`leave`)."""
+    tune()  # before numpy is imported
     try:
         run()
     except SystemExit as exc:

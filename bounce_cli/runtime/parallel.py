@@ -512,6 +512,9 @@ def _serve(parent_pid: int) -> None:
     import signal
 
     from .interrupts import GC_THRESHOLDS
+    from .process import keep_freed_memory
+
+    keep_freed_memory()  # the environment's settings came with the parent's (tune)
 
     gc.set_threshold(*GC_THRESHOLDS)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
