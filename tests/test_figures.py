@@ -472,6 +472,10 @@ def test_fig2_draws_rounding_level_impacts_flat_without_an_offset_label():
     frames = {"recordings/s1_virtual_t1.csv": samples, "impacts.csv": flat}
     title = draw_virtual(frames)["virtual.png"].get_suptitle()
     assert title.count("trial 1") == 1, title
+    assert "virtual set-up: the first 10 bounces" in title  # 10 impacts in the samples
+    short = {**frames, "impacts.csv": flat.head(8)}
+    title = draw_virtual(short)["virtual.png"].get_suptitle()
+    assert "virtual set-up: the trial's 8 bounces" in title and "first 10" not in title
 
 
 def test_one_unit_s_radii_sit_beside_its_tick():

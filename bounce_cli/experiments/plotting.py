@@ -244,7 +244,9 @@ FIG2_MIN_SPAN = {"v_m_s": 0.01, "theta_deg": 0.5}
 def draw_fig2(samples: pd.DataFrame, impacts: pd.DataFrame, title: str, bounces: int = 10):
     """Fig. 2: continuous trajectories on top; v_k and theta_k of the same bounces below, each
     with its sample mean dashed. Shows the first trial of ``samples``, its impacts within the
-    samples' time span (at most ``bounces``); perturbed impacts (if marked) in red."""
+    samples' time span (at most ``bounces``); perturbed impacts (if marked) in red. ``{shown}``
+    in ``title`` says which: "the first 10 bounces", or "the trial's 8 bounces" where it has
+    fewer."""
     label = samples["trial"].iloc[0]
     s = samples[samples["trial"].astype(str) == str(label)]
     t0, t1 = float(s["t_s"].min()), float(s["t_s"].max())
@@ -286,6 +288,9 @@ def draw_fig2(samples: pd.DataFrame, impacts: pd.DataFrame, title: str, bounces:
         for ti in t:
             ax_x.axvline(ti, color="0.85", lw=0.6, zorder=0)
     ax_th.set_xlabel("time $t$ (s)")
-    fig.suptitle(f"Fig. 2: {title}\ntrial {label}; dashed: sample means of the bounces shown",
-                 fontsize=10)
+    n = len(imp)
+    shown = (f"the first {n} bounces" if n == bounces and n > 1 else
+             f"the trial's {n} bounce{'s' if n != 1 else ''}")
+    fig.suptitle(f"Fig. 2: {title.format(shown=shown)}\ntrial {label}; dashed: sample means "
+                 "of the bounces shown", fontsize=10)
     return fig

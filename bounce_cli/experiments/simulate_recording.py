@@ -169,7 +169,7 @@ def draw(frames: dict[str, pd.DataFrame]) -> dict:
     """Fig. 2's layout for the first trial's first 10 bounces, from the exact impacts
     (perturbed ones marked)."""
     fig = draw_fig2(frames["recording.csv"], frames["truth.csv"],
-                    "simulated session (truth.csv), the first 10 bounces")
+                    "simulated session (truth.csv), {shown}")
     return {"recording.png": fig}
 
 

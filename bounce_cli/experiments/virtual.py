@@ -632,12 +632,13 @@ def _screen(display: Display, config: VirtualConfig, trial: int):
 
 @publication_style
 def draw(frames: dict[str, pd.DataFrame]) -> dict:
-    """Fig. 2's layout for the first trial's first 10 bounces (perturbed ones in red)."""
+    """Fig. 2's layout for the first trial's first 10 bounces, or all of them where it has
+    fewer (perturbed ones in red)."""
     first = sorted(name for name in frames if name.startswith("recordings/"))
     if not first:
         return {}
     fig = draw_fig2(frames[first[0]], frames["impacts.csv"],
-                    "virtual set-up: the first 10 bounces")
+                    "virtual set-up: {shown}")
     return {"virtual.png": fig}
 
 

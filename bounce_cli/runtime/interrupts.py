@@ -43,7 +43,7 @@ class Interrupted(BaseException):
         return 128 + self.signum
 
 
-_state: dict[str, Any] = {"deferring": 0, "pending": None, "raised": False}
+_state: dict[str, Any] = {"deferring": 0, "pending": None, "raised": False, "signum": None}
 
 
 def _handler(signum: int, frame) -> None:
@@ -52,7 +52,7 @@ def _handler(signum: int, frame) -> None:
     if _state["deferring"]:
         _state["pending"] = _state["pending"] or signum
         return
-    _state["raised"] = True
+    _state["raised"], _state["signum"] = True, signum
     raise Interrupted(signum)
 
 
@@ -60,7 +60,7 @@ def install() -> None:
     """Route SIGINT, SIGTERM and SIGHUP to :class:`Interrupted` (main thread only). The state
     is reset first: a signal may arrive the moment a handler is in place (the caller's
     ``try`` around this call then takes it)."""
-    _state.update(deferring=0, pending=None, raised=False)
+    _state.update(deferring=0, pending=None, raised=False, signum=None)
     for signum in SIGNALS:
         signal.signal(signum, _handler)
 
@@ -114,7 +114,7 @@ def deferred() -> Iterator[None]:
         pending = _state["pending"]
         if pending is not None and not _state["deferring"] and not _state["raised"]:
             _state["pending"] = None
-            _state["raised"] = True
+            _state["raised"], _state["signum"] = True, pending
             raise Interrupted(pending)
 
 
@@ -159,7 +159,13 @@ def lasting_imports() -> Iterator[None]:
     tracks frozen afterwards (``gc.freeze``: never traversed again), then the collector as
     it was. Each collection in an import traverses every young object, none of which is
     garbage: a 1000 x 1000 basin's two (the CLI's imports, pandas') took about 0.03 s each,
-    one of them on start-up's single core."""
+    one of them on start-up's single core.
+
+    An interrupt raised in one of the imports and taken by the importing library for a
+    failed import (a C extension interrupted as it initialised raises ImportError, which
+    some libraries answer with a fallback) is raised again when the block ends: the run
+    would otherwise go on, deaf to every later signal (only the first one raises)."""
+    raised_before = _state["raised"]
     enabled = gc.isenabled()
     gc.disable()
     try:
@@ -168,3 +174,5 @@ def lasting_imports() -> Iterator[None]:
         gc.freeze()
         if enabled:
             gc.enable()
+    if _state["raised"] and not raised_before:
+        raise Interrupted(_state["signum"])
