@@ -1144,6 +1144,13 @@ def _impacts_from_racket(t, racket: _Racket, contacts: _Contacts,
     return imp
 
 
+def _lost_in_gap(lost: int) -> str:
+    """excluded.csv's words for the impacts a long gap hid: "about 2 impact(s) lost in it",
+    or, for a gap within one flight (its hop about the typical one), that none was."""
+    return (f"about {lost} impact(s) lost in it" if lost else
+            "no impact lost in it (a gap within one flight: its hop is unknown)")
+
+
 def _hops_and_gaps(t, racket: _Racket, ball: _Ball | None, contacts: _Contacts,
                    imp: _Impacts, from_events: bool, s: ExtractionSettings,
                    excluded: list[tuple[float, str]]):
@@ -1173,7 +1180,7 @@ def _hops_and_gaps(t, racket: _Racket, ball: _Ball | None, contacts: _Contacts,
                     gone = np.flatnonzero(~np.isfinite(racket.bridged[lo:hi])) + lo
                     excluded.append((float(np.mean(t[gone])),
                                      f"gap: {t[gone[-1]] - t[gone[0]]:.3g} s without racket "
-                                     f"data; about {lost[j]} impact(s) lost in it"))
+                                     f"data; {_lost_in_gap(lost[j])}"))
                 continue
             missing = np.flatnonzero(~np.isfinite(ball.bridged[lo:hi])) + lo
             if missing.size:  # empty cells
@@ -1183,7 +1190,7 @@ def _hops_and_gaps(t, racket: _Racket, ball: _Ball | None, contacts: _Contacts,
                 after = t[min(i + 1, len(t) - 1)]
                 at, span = 0.5 * (t[i] + after), after - t[i]
             excluded.append((float(at), f"gap: {span:.3g} s without ball data; "
-                             f"about {lost[j]} impact(s) lost in it"))
+                             f"{_lost_in_gap(lost[j])}"))
         k_index = k_index + np.concatenate([[0], np.cumsum(lost)[:-1]])
     for j in range(n):
         if not reason[j] and math.isfinite(hop[j]) and hop[j] < s.sticking_hop_s:

@@ -956,6 +956,24 @@ def test_a_contact_that_cannot_be_located_is_listed_at_its_time_and_k_skips_it()
     assert all(math.isfinite(tt) for tt, _ in result.excluded)
 
 
+def test_a_long_ball_gap_within_one_flight_says_no_impact_was_lost():
+    """A 0.15 s gap of the ball data in the middle of one flight (longer than max_gap_s, so
+    the hop after the impact before it is unknown) hides no impact: excluded.csv says so (it
+    said "about 0 impact(s) lost in it"), and k does not skip."""
+    truth, (t, racket, ball) = session(FAULT_SESSION)[0]
+    rows = truth_rows(truth)
+    mid = 0.5 * (rows["t_s"][4] + rows["t_s"][5])
+    gapped = ball.copy()
+    gapped[(t > mid - 0.075) & (t < mid + 0.075)] = np.nan
+    result = extract_trial(t, racket, gapped, s=ExtractionSettings())
+    gaps = [(tt, r) for tt, r in result.excluded if r.startswith("gap:")]
+    assert len(gaps) == 1 and abs(gaps[0][0] - mid) < 0.02, result.excluded
+    assert gaps[0][1].endswith("no impact lost in it (a gap within one flight: its hop is "
+                               "unknown)"), gaps
+    idx = match_impacts(rows["t_s"], result.impacts["t_s"])
+    np.testing.assert_array_equal(result.impacts["k"], idx)
+
+
 # -- the set-up measured from the data (issue 24) -------------------------------------------
 def test_pooled_gravity_is_the_curvature_of_the_flights():
     """Flights of known g with their own positions and velocities and 0.5 mm noise: the pooled
