@@ -774,3 +774,36 @@ def test_the_git_commit_is_looked_up_once_in_the_background_and_after_a_fork(mon
 
 def test_the_background_git_commit_is_what_git_says():
     assert artifacts.git_commit() == artifacts._git_rev_parse()
+
+
+def test_runs_beside_each_other_share_the_folders_they_both_make(tmp_path):
+    """bounce reproduce's lanes make their experiments' folders in one new results folder at
+    the same moment: the one that loses the race to make it uses it (it failed with "File
+    exists" once in 25 fresh reproduce runs), and only the winner records it as its own."""
+    import multiprocessing
+
+    context = multiprocessing.get_context("fork")
+    for trial in range(20):
+        root = tmp_path / f"t{trial}" / "results"
+        barrier, answers = context.Barrier(2), context.Queue()
+        workers = [context.Process(target=_make_run_directory, args=(root / f"e{i}", barrier,
+                                                                      answers))
+                   for i in range(2)]
+        for worker in workers:
+            worker.start()
+        for worker in workers:
+            worker.join(30)
+        made = sorted(answers.get(timeout=5) for _ in workers)
+        assert all(not str(m).startswith("error") for m in made), made
+        assert sum(root in folders for folders in made) == 1  # one of them made it
+
+
+def _make_run_directory(out, barrier, answers):
+    barrier.wait()
+    try:
+        run = RunDirectory(out, command="x", resolved_config={}, overrides=[],
+                           config_path=None)
+        answers.put(run.created)
+        run.release()
+    except Exception as exc:  # noqa: BLE001 - sent to the test
+        answers.put(f"error {exc!r}")

@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from bounce_cli.runtime.forked import ForkedCall, ForkedLanes, split_work
+from bounce_cli.runtime.forked import ForkedCall, ForkedLanes, LaneDied, split_work
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="fork: Linux")
 
@@ -130,10 +130,29 @@ def test_a_lane_that_dies_names_its_task():
             os._exit(3)
         return i
 
-    with pytest.raises(OSError, match="the process running task 1 died"):
-        with ForkedLanes([0, 1, 2], run, 2) as results:
+    with pytest.raises(LaneDied, match="the process running number 1 exited with status 3"):
+        with ForkedLanes([0, 1, 2], run, 2, describe=lambda task: f"number {task}") as results:
             list(results)
     assert _no_children_left()
+
+
+def test_a_task_s_exception_carries_the_lane_s_traceback():
+    """The exception comes back without its traceback (it does not pickle): its text is the
+    cause, so that a bug in a lane can be found."""
+    def run(i):
+        if i == 1:
+            return failing_deep_inside(i)
+        return i
+
+    with pytest.raises(ZeroDivisionError) as info:
+        with ForkedLanes([0, 1, 2], run, 2) as results:
+            list(results)
+    cause = str(info.value.__cause__)
+    assert "in the lane that ran it" in cause and "failing_deep_inside" in cause
+
+
+def failing_deep_inside(i):
+    return i / 0
 
 
 def test_leaving_early_stops_a_running_lane_whose_clean_up_runs(tmp_path):

@@ -344,6 +344,37 @@ def test_interrupt_while_reproduce_runs_two_experiments_side_by_side(tmp_path, s
     assert not (tmp_path / "new").exists(), "the run left the output folders it created"
 
 
+@pytest.mark.slow
+def test_a_reproduce_lane_killed_outright_is_one_line_naming_its_experiment(tmp_path):
+    """SIGKILL to one lane (the out-of-memory killer): no clean-up can run in it; the run
+    stops the other lane and ends with one line naming the experiment, exit 2."""
+    proc = subprocess.Popen(
+        bounce("reproduce", "bifurcation", "continuation", "--jobs", "2",
+               "--out", str(tmp_path / "results")),
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    watch = ProcessWatch(proc.pid)
+    lanes = lambda: [pid for pid in list(watch.seen) if stat_fields(pid)]  # noqa: E731
+    try:
+        wait_for(lambda: len(lanes()) >= 2 and all(cpu_seconds(pid) >= 1.0
+                                                   for pid in lanes()), 30, "two lanes")
+    except AssertionError:
+        os.killpg(proc.pid, signal.SIGKILL)
+        raise
+    os.kill(lanes()[0], signal.SIGKILL)
+    try:
+        _, err = proc.communicate(timeout=20)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        raise AssertionError("still running 20 s after a lane was killed") from None
+    watch.stop()
+    assert proc.returncode == 2, err
+    lines = [line for line in err.splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith(
+        "bounce: error: reproduce: the process running experiment "), err
+    assert "was killed by signal 9" in lines[0]
+    assert watch.alive() == [], "processes left running"
+
+
 #: a signal the moment bounce's handlers are in place (what the "imports" moment above hits
 #: now and then on a busy machine): at the end of ``install`` itself, at the garbage
 #: collector's settings, at the watched standard output

@@ -362,3 +362,16 @@ def test_reproduce_runs_experiments_side_by_side_and_reports_them_in_order(tmp_p
     assert result.exit_code == 2
     assert "bounce: error: --out" in result.stderr and "learning" in result.stderr
     assert [line.split(":")[0] for line in result.stdout.splitlines()] == ["trajectory"]
+
+
+def test_reproduce_needs_no_click_package(tmp_path, monkeypatch):
+    """typer >= 0.20 vendors click: a fresh `pip install .` has no `click` package, and
+    reproduce's `import click` ended every run with a traceback (the test extra's Dask
+    brings click along, so the suite had not seen it)."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "click", None)  # `import click` raises ImportError
+    result = runner.invoke(app, ["reproduce", "trajectory", "--jobs", "1",
+                                 "--out", str(tmp_path / "r")])
+    assert result.exit_code == 0, result.output
+    assert "trajectory: new" in result.stdout

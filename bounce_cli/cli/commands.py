@@ -304,7 +304,7 @@ def reproduce_command(
     from ..runtime.artifacts import write_text_atomic
     from ..experiments.registry import reproduced
     from ..reproduction.reproduce import experiment_status, gallery_markdown
-    from ..runtime.forked import ForkedLanes
+    from ..runtime.forked import ForkedLanes, LaneDied
 
     known = [entry.name for entry in reproduced()]
     unknown = [name for name in names or [] if name not in known]
@@ -319,7 +319,7 @@ def reproduce_command(
     made = [folder for folder in (out, *out.absolute().parents) if not folder.exists()]
     progress = None if quiet else make_progress()
     try:
-        with ForkedLanes(chosen, run, lanes) as reports:
+        with ForkedLanes(chosen, run, lanes, describe=lambda e: f"experiment {e.name}") as reports:
             if progress is not None:  # after the fork: the lanes have no live display
                 progress.start(len(chosen), "bounce reproduce")
             for entry, (printed, said, code, comparison) in zip(chosen, reports):
@@ -334,11 +334,13 @@ def reproduce_command(
                     raise typer.Exit(code)
                 if not quiet:
                     print(f"{entry.name}: {experiment_status(comparison)}", flush=True)
-    except BaseException:
+    except BaseException as exc:
         # each lane removed the folders its experiment made, but not the ones two shared
         for folder in made:  # the deepest first; one that holds something stays
             with contextlib.suppress(OSError):
                 folder.rmdir()
+        if isinstance(exc, LaneDied):
+            fail(f"reproduce: {exc}")
         raise
     finally:
         if progress is not None:
@@ -361,8 +363,6 @@ def reproduce_one(entry: Entry, *, out: Path, quiet: bool, force: bool, force_re
     whose one line is in the stderr text) and its comparison with the files there."""
     import io
 
-    import click
-
     from ..reproduction.reproduce import tables_agree
 
     printed, said = io.StringIO(), io.StringIO()
@@ -373,7 +373,7 @@ def reproduce_one(entry: Entry, *, out: Path, quiet: bool, force: bool, force_re
                 entry, config=None, overrides=[], out=out / entry.name, quiet=quiet,
                 force=force, print_config=False, jobs=jobs, show_progress=False,
                 agrees=None if force_regen else tables_agree(entry.name))
-        except (typer.Exit, click.exceptions.Exit) as exc:  # fail(): its line is in `said`
+        except typer.Exit as exc:  # fail(): its line is in `said`
             code = exc.exit_code
     return printed.getvalue(), said.getvalue(), code, comparison
 

@@ -1145,10 +1145,11 @@ def _impacts_from_racket(t, racket: _Racket, contacts: _Contacts,
 
 
 def _lost_in_gap(lost: int) -> str:
-    """excluded.csv's words for the impacts a long gap hid: "about 2 impact(s) lost in it",
-    or, for a gap within one flight (its hop about the typical one), that none was."""
+    """excluded.csv's words for the impacts a long gap hid, estimated from the time between
+    the impacts on either side in typical hops: "about 2 impact(s) lost in it", or, where
+    that time is about one hop, that none was."""
     return (f"about {lost} impact(s) lost in it" if lost else
-            "no impact lost in it (a gap within one flight: its hop is unknown)")
+            "probably no impact lost in it (the time across it is about one typical hop)")
 
 
 def _hops_and_gaps(t, racket: _Racket, ball: _Ball | None, contacts: _Contacts,

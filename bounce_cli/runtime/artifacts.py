@@ -460,11 +460,8 @@ class RunDirectory:
         hold results of a different resolved config (unless force)."""
         if self.out_dir.exists() and not self.out_dir.is_dir():
             raise OutputDirError(f"--out {self.out_dir}: exists and is not a directory")
-        missing = [d for d in (self.out_dir, *self.out_dir.parents) if not d.exists()]
         try:
-            for folder in reversed(missing):
-                folder.mkdir()
-                self.created.append(folder)
+            self._make_folders()
             with staging(self.out_dir / ".write-test") as probe:
                 probe.unlink()
         except BaseException as exc:
@@ -493,6 +490,27 @@ class RunDirectory:
                 f"--out {self.out_dir}: holds a session recorded live (bounce "
                 f"{previous.get('command', '?')}, {previous.get('racket_source', 'a person')}): "
                 "a rerun would replace it; choose another --out, or use --force to replace it")
+
+    def _make_folders(self, attempts: int = 3) -> None:
+        """The directory and its missing parents, each recorded in ``created`` only where this
+        run made it: another run beside this one (``bounce reproduce``'s lanes, which share
+        the results folder) may make a folder between our look and our mkdir, or remove one
+        it made (its clean-up after an error) before we made ours inside it."""
+        for attempt in range(attempts):
+            missing = [d for d in (self.out_dir, *self.out_dir.parents) if not d.exists()]
+            try:
+                for folder in reversed(missing):
+                    try:
+                        folder.mkdir()
+                    except FileExistsError:
+                        if not folder.is_dir():
+                            raise
+                        continue  # made meanwhile by another run: not ours to remove
+                    self.created.append(folder)
+                return
+            except FileNotFoundError:  # a parent removed meanwhile: look again
+                if attempt == attempts - 1:
+                    raise
 
     def release(self) -> None:
         """The run is over: the directory's lock is released (``commit`` does it)."""

@@ -141,6 +141,11 @@ def split_work(items: list, run: Callable[[list], dict]) -> dict:
 LANE_GRACE_S = 10.0
 
 
+class LaneDied(OSError):
+    """A lane ended without reporting the task it had taken (killed: SIGKILL, the
+    out-of-memory killer)."""
+
+
 class ForkedLanes:
     """``run(task)`` for every task, each run in one of ``lanes`` forked children (*lanes*)
     that take the next task from a shared queue as they become free, while this process
@@ -160,8 +165,9 @@ class ForkedLanes:
     SIGTERM, given ``LANE_GRACE_S`` seconds to clean up, then killed; every one is reaped.
     """
 
-    def __init__(self, tasks: Sequence[Any], run: Callable[[Any], Any], lanes: int) -> None:
-        self.tasks, self.run = list(tasks), run
+    def __init__(self, tasks: Sequence[Any], run: Callable[[Any], Any], lanes: int, *,
+                 describe: Callable[[Any], str] = lambda task: f"task {task!r}") -> None:
+        self.tasks, self.run, self.describe = list(tasks), run, describe
         self.lanes = min(lanes, len(self.tasks)) if can_fork() else 1
         self._children: dict[Any, int] = {}  # a lane's result pipe -> its pid
 
@@ -220,8 +226,13 @@ class ForkedLanes:
                         del self._children[conn]
                         _, status = os.waitpid(pid, 0)
                         if pid in running:
-                            raise OSError(f"the process running task {running[pid]} died "
-                                          f"(wait status {status})") from None
+                            how = (f"was killed by signal {os.WTERMSIG(status)}"
+                                   if os.WIFSIGNALED(status) else
+                                   f"exited with status {os.waitstatus_to_exitcode(status)}")
+                            raise LaneDied(
+                                f"the process running {self.describe(self.tasks[running[pid]])}"
+                                f" {how} (out of memory?); its staged files are removed by "
+                                "the next run there") from None
                         continue
                     if kind == "started":
                         running[pid] = index
@@ -230,7 +241,8 @@ class ForkedLanes:
                         done[index] = (value[0], value[1])
             ok, value = done.pop(next_out)
             if not ok:
-                raise value
+                error, where = value
+                raise error from RuntimeError(f"in the lane that ran it:\n{where}")
             yield value
 
     def _stop(self) -> None:
@@ -273,6 +285,7 @@ def _lane(tasks: Sequence[Any], run: Callable[[Any], Any], queue: int, results: 
     the queue, exit. Never returns (``os._exit``: none of the parent's clean-up)."""
     import pickle
     import struct
+    import traceback
     from multiprocessing.connection import Connection
 
     code = 0
@@ -290,14 +303,14 @@ def _lane(tasks: Sequence[Any], run: Callable[[Any], Any], queue: int, results: 
             (index,) = struct.unpack("<I", taken)
             out.send_bytes(pickle.dumps(("started", index)))
             try:
-                reply = (True, run(tasks[index]))
-            except Exception as exc:
-                reply = (False, exc)
+                reply: tuple[bool, Any] = (True, run(tasks[index]))
+            except Exception as exc:  # with its traceback's text (a traceback does not pickle)
+                reply = (False, (exc, traceback.format_exc()))
             try:
                 data = pickle.dumps(("done", index, *reply))
             except Exception:  # an exception (or result) that does not pickle
-                data = pickle.dumps(("done", index, False, RuntimeError(
-                    f"{type(reply[1]).__name__}: {reply[1]}")))
+                data = pickle.dumps(("done", index, False, (RuntimeError(
+                    f"{type(reply[1]).__name__}: {reply[1]}"), traceback.format_exc())))
             out.send_bytes(data)
     except BaseException as exc:  # an interrupt (its clean-up done on the way), a lost pipe
         code = getattr(exc, "exit_code", 1)
