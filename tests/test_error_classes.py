@@ -25,6 +25,9 @@ NOT_BOUNCE_ERRORS = {
     "bounce_cli.runtime.interrupts.Interrupted",
     # a worker's traceback: a bug report, not a user error
     "bounce_cli.runtime.parallel.WorkerError",
+    # a forked lane killed outright (the out-of-memory killer): an OSError of the machine,
+    # which `bounce reproduce` reports as one line naming the experiment
+    "bounce_cli.runtime.forked.LaneDied",
     "bounce_cli.runtime.config.DuplicateKeyError",  # a yaml.YAMLError, turned into a ConfigError
 }
 ERROR_CLASSES = [getattr(errors, name) for name in errors.__all__]
