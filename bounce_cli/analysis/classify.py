@@ -37,7 +37,6 @@ from __future__ import annotations
 
 import builtins
 import functools
-import importlib.util
 import math
 from dataclasses import dataclass
 from typing import Any, Callable, Iterable, Iterator, Literal
@@ -91,7 +90,7 @@ def compiled_kernel_available() -> bool:
     runs, with the same results)."""
     from ..model import native
 
-    if native.kernel_choice() == "numpy" or importlib.util.find_spec("numba") is None:
+    if native.kernel_choice() == "numpy" or not native.numba_installed():
         return False
     return native.classifier() is not None or _compiled_module_imports()
 

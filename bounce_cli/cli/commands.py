@@ -315,7 +315,7 @@ def reproduce_command(
     workers = jobs or os.cpu_count() or 1
     lanes = min(workers, len(chosen))
     run = functools.partial(reproduce_one, out=out, quiet=quiet, force=force,
-                            force_regen=force_regen, jobs=max(1, workers // max(lanes, 1)))
+                            force_regen=force_regen, jobs=max(1, workers // lanes))
     made = [folder for folder in (out, *out.absolute().parents) if not folder.exists()]
     progress = None if quiet else make_progress()
     try:

@@ -58,7 +58,6 @@ three streams gave).
 from __future__ import annotations
 
 import functools
-import importlib.util
 import math
 import os
 from dataclasses import dataclass, field
@@ -450,7 +449,9 @@ def compiled_lab_available() -> bool:
 
 @functools.lru_cache(maxsize=None)
 def _compiled_lab_imports() -> bool:
-    if importlib.util.find_spec("numba") is None:
+    from ..model.native import numba_installed
+
+    if not numba_installed():
         return False
     try:
         from . import compiled_lab  # noqa: F401

@@ -263,11 +263,7 @@ def classify_map_grid(theta0, v0, impact_map: ImpactMap, settings: ClassifySetti
         classify = functools.partial(
             classify_grid, theta0, v0, impact_map, settings,
             map=executor.map, workers=executor.workers, on_tile_done=on_tile_done,
-            # decided here, once: a tile asking again would look numba up (find_spec), which
-            # takes the import lock that this thread's imports hold meanwhile (and that an
-            # interrupt in the middle of one of them once left held: the tiles waited for
-            # ever)
-            kernel="compiled" if threads else "numpy",
+            kernel="compiled" if threads else "numpy",  # decided here, once
         )
         if threads:  # numba's start-up first: it would contend with the imports
             load_compiled_kernel()

@@ -315,6 +315,15 @@ def _load_from(directory: Path, key: str) -> NativeClassifier | None:
 KERNEL_CHOICES = ("auto", "numba", "numpy")
 
 
+@functools.lru_cache(maxsize=None)
+def numba_installed() -> bool:
+    """numba is installed (found without importing it), looked up once per process:
+    ``find_spec`` takes the import lock, which a kernel's tile in a thread must never wait
+    for (the main thread imports meanwhile, and an interrupt in one of its imports once left
+    the lock held: the tiles waited for ever)."""
+    return importlib.util.find_spec("numba") is not None
+
+
 def kernel_choice() -> str:
     """``BOUNCE_KERNEL``: "auto" (unset or empty: the saved machine code, else numba's
     dispatcher, else numpy), "numba" (numba's dispatcher) or "numpy" (numpy's code); any

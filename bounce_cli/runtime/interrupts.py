@@ -81,7 +81,7 @@ def forked_child() -> None:
     pending = _state["pending"]
     install()
     if pending is not None:
-        _state["raised"] = True
+        _state["raised"], _state["signum"] = True, pending
         raise Interrupted(pending)
 
 

@@ -157,7 +157,11 @@ def test_auto_uses_the_compiled_kernel_unless_turned_off(monkeypatch):
     assert calls == [1]
 
 
-def test_without_numba_the_numpy_kernel_runs(monkeypatch):
+def test_without_numba_the_numpy_kernel_runs(monkeypatch, request):
+    from bounce_cli.model import native
+
+    native.numba_installed.cache_clear()  # looked up once per process: again, without it
+    request.addfinalizer(native.numba_installed.cache_clear)
     real_find_spec = importlib.util.find_spec
     monkeypatch.setattr(importlib.util, "find_spec",
                         lambda name, *a: None if name == "numba" else real_find_spec(name, *a))
